@@ -1,0 +1,60 @@
+# lmrefine: `make demo` and `make test` work on a fresh Debian 12 machine as
+# root: they install the Debian packages they need, configure and build.
+
+PYTHON    ?= /usr/bin/python3
+BUILD_DIR ?= build
+ASAN_DIR  ?= build-asan
+JOBS      ?= $(shell nproc)
+DEMO_OUT  ?= demo_out
+
+# Everything comes from Debian 12 packages.
+DEBIAN_PACKAGES := cmake g++ make pkg-config pybind11-dev libembree-dev \
+	libopenimageio-dev libglm-dev python3-dev python3-numpy python3-pytest \
+	python3-pywt python3-matplotlib blender
+
+.PHONY: all deps build install test test-native test-asan bench demo clean
+
+all: build
+
+# Installs only what is missing, so repeated runs cost a dpkg query.
+deps:
+	@missing=$$(for p in $(DEBIAN_PACKAGES); do \
+		dpkg-query -W -f='$${Status}\n' $$p 2>/dev/null | grep -q '^install ok installed' || echo $$p; done); \
+	if [ -n "$$missing" ]; then \
+		echo "Installing Debian packages:" $$missing; \
+		if [ "$$(id -u)" != 0 ]; then echo "error: run as root (or install: $$missing)"; exit 1; fi; \
+		apt-get update -q && DEBIAN_FRONTEND=noninteractive apt-get install -y -q --no-install-recommends $$missing; \
+	fi
+
+$(BUILD_DIR)/CMakeCache.txt: | deps
+	cmake -S . -B $(BUILD_DIR) -DCMAKE_BUILD_TYPE=Release -DPython_EXECUTABLE=$(PYTHON)
+
+build: deps $(BUILD_DIR)/CMakeCache.txt
+	cmake --build $(BUILD_DIR) -j $(JOBS)
+
+install: build
+	cmake --install $(BUILD_DIR)
+
+test: build
+	PYTHONPATH=python $(PYTHON) -m pytest tests -q
+
+# The native tests under AddressSanitizer + UndefinedBehaviorSanitizer. The
+# sanitized module is built into its own folder so it never replaces the
+# release one; libasan must be preloaded into the (unsanitized) Python.
+test-asan: deps
+	cmake -S . -B $(ASAN_DIR) -DCMAKE_BUILD_TYPE=RelWithDebInfo -DLMREFINE_SANITIZE=ON \
+		-DPython_EXECUTABLE=$(PYTHON) -DLMREFINE_MODULE_DIR=$(CURDIR)/$(ASAN_DIR)/package/lmrefine
+	cmake --build $(ASAN_DIR) -j $(JOBS)
+	cp python/lmrefine/*.py $(ASAN_DIR)/package/lmrefine/
+	LD_PRELOAD=$$($(CXX) -print-file-name=libasan.so) ASAN_OPTIONS=detect_leaks=0 \
+		UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 PYTHONPATH=$(ASAN_DIR)/package \
+		$(PYTHON) -m pytest tests -q -m "not blender and not slow" -p no:cacheprovider
+
+bench: build
+	PYTHONPATH=python $(PYTHON) bench/run.py
+
+demo: build
+	PYTHONPATH=python $(PYTHON) -m lmrefine demo --out $(DEMO_OUT)
+
+clean:
+	rm -rf $(BUILD_DIR) $(ASAN_DIR) $(DEMO_OUT) python/lmrefine/_native*.so

@@ -1,0 +1,38 @@
+// lmrefine._native: the private extension module; the lmrefine package
+// re-exports it. One bind_* function per concept, each in py_<concept>.cpp.
+#include <pybind11/pybind11.h>
+
+#include "lmrefine/error.h"
+
+namespace py = pybind11;
+
+namespace lmrefine::bindings {
+void bind_image_io(py::module_& m);
+void bind_coverage(py::module_& m);
+}  // namespace lmrefine::bindings
+
+PYBIND11_MODULE(_native, m) {
+    m.doc() = "lmrefine native core (C++17): wavelets, automaton, warp, baker, image I/O";
+    m.attr("__version__") = LMREFINE_VERSION;
+
+    static py::exception<lmrefine::Cancelled> cancelled(m, "CancelledError");
+    cancelled.doc() = "A long call was cancelled (its progress callback returned False).";
+    py::register_exception_translator([](std::exception_ptr p) {
+        try {
+            if (p) std::rethrow_exception(p);
+        } catch (const lmrefine::Cancelled& e) {
+            PyErr_SetString(cancelled.ptr(), "cancelled by the progress callback");
+        } catch (const lmrefine::InvalidArgument& e) {
+            PyErr_SetString(PyExc_ValueError, e.what());
+        } catch (const lmrefine::IoError& e) {
+            PyErr_SetString(PyExc_OSError, e.what());
+        } catch (const lmrefine::ResourceError& e) {
+            PyErr_SetString(PyExc_MemoryError, e.what());
+        } catch (const lmrefine::Error& e) {
+            PyErr_SetString(PyExc_RuntimeError, e.what());
+        }
+    });
+
+    lmrefine::bindings::bind_image_io(m);
+    lmrefine::bindings::bind_coverage(m);
+}

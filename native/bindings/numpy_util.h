@@ -1,0 +1,54 @@
+// Checks numpy arrays where they enter and hands results back without copies.
+#pragma once
+
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+
+#include <initializer_list>
+#include <memory>
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace lmrefine::py_util {
+
+namespace py = pybind11;
+
+using FloatArray = py::array_t<float, py::array::c_style>;
+using IndexArray = py::array_t<int32_t, py::array::c_style>;
+
+std::string shape_string(const py::array& array);
+std::string dtype_name(const py::array& array);
+
+// Image-sized arrays: float32 required, so no hidden copy of a large image is
+// made (a non-contiguous float32 view is made contiguous, which copies).
+// ndim must be one of `ndims`; no dimension may be zero.
+FloatArray require_float32(const py::handle& object, const char* name,
+                           std::initializer_list<int> ndims);
+
+// Geometry arrays (UVs, positions, normals): any real dtype, converted to
+// float32 (they are small next to a lightmap). Shape (N, columns).
+FloatArray require_points(const py::handle& object, const char* name, int columns,
+                          bool allow_empty = false);
+
+// Index arrays: any integer dtype, converted to int32 with a range check.
+// Shape (N, columns).
+IndexArray require_indices(const py::handle& object, const char* name, int columns,
+                           bool allow_empty = false);
+
+// A lightmap resolution: an int (square) or (height, width); both > 0.
+// Returns (height, width).
+std::pair<int, int> parse_resolution(const py::handle& resolution);
+
+// Moves a vector into a numpy array of the given shape without copying; the
+// array owns the storage through a capsule.
+template <class T>
+py::array_t<T> to_numpy(std::vector<T>&& data, std::vector<py::ssize_t> shape) {
+    auto owner = std::make_unique<std::vector<T>>(std::move(data));
+    T* pointer = owner->data();
+    py::capsule capsule(owner.get(), [](void* p) { delete static_cast<std::vector<T>*>(p); });
+    owner.release();
+    return py::array_t<T>(std::move(shape), pointer, capsule);
+}
+
+}  // namespace lmrefine::py_util

@@ -1,0 +1,48 @@
+// Bridges lmrefine::Progress to Python: a callable progress(fraction, stage)
+// that may return False to cancel, plus Ctrl-C. Long calls run with the GIL
+// released; the GIL is taken only to report.
+#pragma once
+
+#include <pybind11/pybind11.h>
+
+#include <optional>
+#include <utility>
+
+#include "lmrefine/error.h"
+#include "lmrefine/progress.h"
+
+namespace lmrefine::py_util {
+
+namespace py = pybind11;
+
+class PythonProgress {
+public:
+    // `callback` may be None; Ctrl-C is honoured either way.
+    explicit PythonProgress(py::object callback);
+
+    Progress& progress() { return progress_; }
+
+    // Runs `work(progress)` with the GIL released. If it was cancelled
+    // because the callback raised or Ctrl-C arrived, that Python exception
+    // is raised; if the callback returned False, lmrefine.CancelledError.
+    template <class Work>
+    auto run(Work&& work) {
+        try {
+            py::gil_scoped_release release;
+            return work(progress_);
+        } catch (const Cancelled&) {
+            rethrow_python_error();
+            throw;
+        }
+    }
+
+private:
+    bool report(double fraction, const std::string& stage);
+    void rethrow_python_error();
+
+    py::object callback_;
+    std::optional<py::error_already_set> error_;
+    Progress progress_;
+};
+
+}  // namespace lmrefine::py_util

@@ -1,0 +1,49 @@
+#include <pybind11/pybind11.h>
+
+#include "lmrefine/coverage.h"
+#include "lmrefine/error.h"
+#include "numpy_util.h"
+
+namespace py = pybind11;
+
+namespace lmrefine::bindings {
+namespace {
+
+py::array_t<bool> coverage(const py::handle& uvs_in, const py::handle& triangles_in, const py::handle& resolution) {
+    auto uvs = py_util::require_points(uvs_in, "uvs", 2);
+    auto triangles = py_util::require_indices(triangles_in, "triangles", 3, /*allow_empty=*/true);
+    const auto [height, width] = py_util::parse_resolution(resolution);
+    UvLayout layout{uvs.data(), uvs.shape(0), triangles.data(), triangles.shape(0)};
+    std::vector<uint8_t> mask;
+    {
+        py::gil_scoped_release release;
+        mask = coverage_mask(layout, width, height);
+    }
+    // bool and uint8 share a layout; numpy reads the bytes as bool without a copy.
+    auto bytes = py_util::to_numpy(std::move(mask), {height, width});
+    return bytes.attr("view")(py::dtype::of<bool>()).cast<py::array_t<bool>>();
+}
+
+}  // namespace
+
+void bind_coverage(py::module_& m) {
+    m.def("coverage_mask", &coverage, py::arg("uvs"), py::arg("triangles"), py::arg("resolution"),
+          R"doc(Rasterize a UV layout: which lightmap texels some chart covers.
+
+Args:
+    uvs (numpy.ndarray): (N, 2) per-corner UVs (any real dtype; used as float32).
+    triangles (numpy.ndarray): (T, 3) integer indices into ``uvs``.
+    resolution (int | tuple[int, int]): lightmap size, square or (height, width).
+
+Returns:
+    numpy.ndarray: bool of shape (H, W), row 0 at the top (v = 1); True where
+    a triangle overlaps the texel with positive area (conservative: thin
+    triangles are not lost). Use it as the ``mask`` of gradient_map; never
+    derive coverage from a baked image's alpha.
+
+Raises:
+    ValueError: bad shapes, indices out of range, NaN UVs, resolution <= 0.
+)doc");
+}
+
+}  // namespace lmrefine::bindings

@@ -1,0 +1,38 @@
+"""lmrefine: sharper baked lightmaps from the same texels.
+
+Bake a lightmap, find where light changes fast with a wavelet gradient map,
+deform the lightmap UV layout with a cellular automaton so those places get
+more texels, and bake again. numpy in, numpy out; the heavy lifting is in the
+native extension ``lmrefine._native``, re-exported here.
+
+Array conventions (shared by every function):
+
+* Lightmaps are float32 arrays (H, W) or (H, W, C), row 0 at the top of the
+  image (v = 1), linear light. Texel (i, j) covers u in [j/W, (j+1)/W],
+  v in [1-(i+1)/H, 1-i/H].
+* UV layouts are per-corner UVs (N, 2) and triangles (T, 3) of indices.
+"""
+
+try:
+    from . import _native
+except ImportError as error:  # pragma: no cover - depends on the build state
+    raise ImportError(
+        "lmrefine's native extension is not built or does not match this Python "
+        f"({error}). Run `make build` in the lmrefine checkout (or `make install`)."
+    ) from error
+
+from ._native import (  # noqa: F401  (re-exports)
+    CancelledError,
+    coverage_mask,
+    read_image,
+    write_image,
+)
+
+__version__ = _native.__version__
+
+__all__ = [
+    "CancelledError",
+    "coverage_mask",
+    "read_image",
+    "write_image",
+]
