@@ -41,3 +41,14 @@ def test_rectangular_resolution_and_int64_indices():
 def test_bad_layouts_raise(uvs, tris, res, match):
     with pytest.raises(ValueError, match=match):
         lmrefine.coverage_mask(uvs, tris, res)
+
+
+def test_find_charts_joins_per_corner_copies_and_separates_islands():
+    # Two quads, each stored with per-corner UVs (no shared indices), apart.
+    a_uvs, a_tris = quad(0.1, 0.1, 0.4, 0.4)
+    b_uvs, b_tris = quad(0.6, 0.6, 0.9, 0.9)
+    uvs = np.concatenate([a_uvs[[0, 1, 2]], a_uvs[[0, 2, 3]], b_uvs[[0, 1, 2]], b_uvs[[0, 2, 3]]])
+    tris = np.arange(12, dtype=np.int32).reshape(4, 3)
+    charts = lmrefine.find_charts(uvs, tris)
+    assert charts.dtype == np.int32
+    assert charts.tolist() == [0, 0, 1, 1]

@@ -9,6 +9,7 @@ namespace py = pybind11;
 namespace lmrefine::bindings {
 void bind_image_io(py::module_& m);
 void bind_coverage(py::module_& m);
+void bind_chart(py::module_& m);
 }  // namespace lmrefine::bindings
 
 PYBIND11_MODULE(_native, m) {
@@ -35,4 +36,5 @@ PYBIND11_MODULE(_native, m) {
 
     lmrefine::bindings::bind_image_io(m);
     lmrefine::bindings::bind_coverage(m);
+    lmrefine::bindings::bind_chart(m);
 }

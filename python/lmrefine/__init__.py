@@ -24,6 +24,7 @@ except ImportError as error:  # pragma: no cover - depends on the build state
 from ._native import (  # noqa: F401  (re-exports)
     CancelledError,
     coverage_mask,
+    find_charts,
     read_image,
     write_image,
 )
@@ -33,6 +34,7 @@ __version__ = _native.__version__
 __all__ = [
     "CancelledError",
     "coverage_mask",
+    "find_charts",
     "read_image",
     "write_image",
 ]

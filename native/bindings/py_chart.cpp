@@ -1,0 +1,38 @@
+#include <pybind11/pybind11.h>
+
+#include "lmrefine/chart.h"
+#include "numpy_util.h"
+
+namespace py = pybind11;
+
+namespace lmrefine::bindings {
+
+void bind_chart(py::module_& m) {
+    m.def(
+        "find_charts",
+        [](const py::handle& uvs_in, const py::handle& triangles_in) {
+            auto uvs = py_util::require_points(uvs_in, "uvs", 2);
+            auto triangles = py_util::require_indices(triangles_in, "triangles", 3, /*allow_empty=*/true);
+            UvLayout layout{uvs.data(), uvs.shape(0), triangles.data(), triangles.shape(0)};
+            validate_layout(layout);
+            Charts charts = find_charts(layout);
+            return py_util::to_numpy(std::move(charts.triangle_chart), {py::ssize_t(layout.triangle_count)});
+        },
+        py::arg("uvs"), py::arg("triangles"),
+        R"doc(Split a UV layout into charts (connected UV islands).
+
+Args:
+    uvs (numpy.ndarray): (N, 2) per-corner UVs.
+    triangles (numpy.ndarray): (T, 3) integer indices into ``uvs``.
+
+Returns:
+    numpy.ndarray: int32 of shape (T,), the chart of each triangle, numbered
+    0.. in order of first appearance. Triangles are in one chart when they
+    share a UV index or a corner with a bit-identical UV.
+
+Raises:
+    ValueError: bad shapes, indices out of range, NaN UVs.
+)doc");
+}
+
+}  // namespace lmrefine::bindings
