@@ -2,7 +2,6 @@
 
 #include <optional>
 #include <string>
-#include <vector>
 
 #include "lmrefine/error.h"
 #include "lmrefine/gradient_map.h"
@@ -43,13 +42,15 @@ py::array_t<float> compute(const py::handle& image_in, const py::handle& mask_in
     }
     // bool and uint8 share a layout.
     const uint8_t* mask_data = mask ? reinterpret_cast<const uint8_t*>(mask->data()) : nullptr;
-    std::vector<float> out(size_t(height * width * 4));
+    // numpy's own buffer, left uninitialized: gradient_map writes every value.
+    py::array_t<float> out({py::ssize_t(height), py::ssize_t(width), py::ssize_t(4)});
+    float* out_data = out.mutable_data();
     py_util::PythonProgress progress(callback);
     progress.run([&](Progress& p) {
-        gradient_map(image.data(), height, width, channels, mask_data, wavelet, out.data(), &p);
+        gradient_map(image.data(), height, width, channels, mask_data, wavelet, out_data, &p);
         return 0;
     });
-    return py_util::to_numpy(std::move(out), {height, width, 4});
+    return out;
 }
 
 }  // namespace

@@ -68,15 +68,17 @@ py::tuple dwt_2d(const py::handle& image_in, const std::string& wavelet_name, co
     const BoundaryMode mode = parse_boundary_mode(mode_name);
     auto image = py_util::require_float32(image_in, "image", {2});
     const int64_t height = image.shape(0), width = image.shape(1);
-    const int64_t hh = height / 2, hw = width / 2;
-    std::vector<float> ll(size_t(hh * hw)), lh(ll.size()), hl(ll.size()), hhb(ll.size());
+    const py::ssize_t hh = height / 2, hw = width / 2;
+    // numpy's own buffers, left uninitialized: dwt2 writes every value
+    // (and checks the sizes before it starts).
+    py::array_t<float> ll({hh, hw}), lh({hh, hw}), hl({hh, hw}), hhb({hh, hw});
+    float *pll = ll.mutable_data(), *plh = lh.mutable_data(), *phl = hl.mutable_data(), *phh = hhb.mutable_data();
     py_util::PythonProgress progress(callback);
     progress.run([&](Progress& p) {
-        dwt2(image.data(), height, width, wavelet, mode, ll.data(), lh.data(), hl.data(), hhb.data(), &p);
+        dwt2(image.data(), height, width, wavelet, mode, pll, plh, phl, phh, &p);
         return 0;
     });
-    return py::make_tuple(py_util::to_numpy(std::move(ll), {hh, hw}), py_util::to_numpy(std::move(lh), {hh, hw}),
-                          py_util::to_numpy(std::move(hl), {hh, hw}), py_util::to_numpy(std::move(hhb), {hh, hw}));
+    return py::make_tuple(ll, lh, hl, hhb);
 }
 
 py::array_t<float> idwt_2d(const py::handle& coeffs, const std::string& wavelet_name, const std::string& mode_name,
@@ -84,15 +86,15 @@ py::array_t<float> idwt_2d(const py::handle& coeffs, const std::string& wavelet_
     const Wavelet wavelet = parse_wavelet(wavelet_name);
     const BoundaryMode mode = parse_boundary_mode(mode_name);
     auto bands = unpack_bands(coeffs, 4, "(LL, LH, HL, HH)", {2});
-    const int64_t hh = bands[0].shape(0), hw = bands[0].shape(1);
-    std::vector<float> image(size_t(4 * hh * hw));
+    const py::ssize_t hh = bands[0].shape(0), hw = bands[0].shape(1);
+    py::array_t<float> image({2 * hh, 2 * hw});  // uninitialized: idwt2 writes every value
+    float* out = image.mutable_data();
     py_util::PythonProgress progress(callback);
     progress.run([&](Progress& p) {
-        idwt2(bands[0].data(), bands[1].data(), bands[2].data(), bands[3].data(), hh, hw, wavelet, mode,
-              image.data(), &p);
+        idwt2(bands[0].data(), bands[1].data(), bands[2].data(), bands[3].data(), hh, hw, wavelet, mode, out, &p);
         return 0;
     });
-    return py_util::to_numpy(std::move(image), {2 * hh, 2 * hw});
+    return image;
 }
 
 }  // namespace

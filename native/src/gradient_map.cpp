@@ -14,10 +14,6 @@
 namespace lmrefine {
 namespace {
 
-// Columns handled per task of the vertical pass (their results are written
-// back texel-row by texel-row, so the writes stay local).
-constexpr int64_t kColumnBlock = 16;
-
 struct LineFilter {
     std::vector<float> taps;  // the detail filter, float32
     int centre = 0;           // c: the forward value at i reads x[i - c .. i - c + L)
@@ -107,37 +103,104 @@ void filter_line(const LineFilter& f, const float* x, const uint8_t* covered, in
     }
 }
 
-// Luminance of every covered texel (uncovered ones are set to 0 and never
-// read); counts non-finite covered texels and covered ones.
-struct LuminanceScan {
+// Along y for one texel row: rows i - pad .. i + pad are read row by row,
+// so the loop runs along memory over every column at once. Texels whose
+// stencil leaves their column's run of covered texels (or the image) are
+// redone one by one with the run's extension; the arithmetic is the same as
+// filter_line's, so the two directions agree bit for bit.
+struct RowScratch {
+    LineScratch line;
+    std::vector<float> forward, backward, segment;
+    std::vector<uint8_t> inside;
+};
+
+void filter_columns_at_row(const LineFilter& f, const float* lum, const uint8_t* mask, int64_t height,
+                           int64_t width, int64_t i, float* out_row, RowScratch& s) {
+    const int length = int(f.taps.size()), c = f.centre, pad = f.pad;
+    const bool rows_exist = i - pad >= 0 && i + pad < height;
+    s.inside.assign(width, rows_exist ? 1 : 0);
+    if (rows_exist && mask) {
+        for (int o = -pad; o <= pad; ++o) {
+            const uint8_t* m = mask + (i + o) * width;
+            for (int64_t j = 0; j < width; ++j) s.inside[j] &= m[j] ? 1 : 0;
+        }
+    }
+    s.forward.assign(width, 0.0f);
+    s.backward.assign(width, 0.0f);
+    float* af = s.forward.data();
+    float* ab = s.backward.data();
+    const float* centre = lum + i * width;
+    for (int k = 0; k < length; ++k) {
+        const float g = f.taps[k];
+        const float* xf = lum + std::clamp<int64_t>(i - c + k, 0, height - 1) * width;
+        const float* xb = lum + std::clamp<int64_t>(i + c - k, 0, height - 1) * width;
+        for (int64_t j = 0; j < width; ++j) {
+            af[j] += g * (xf[j] - centre[j]);
+            ab[j] += g * (xb[j] - centre[j]);
+        }
+    }
+    for (int64_t j = 0; j < width; ++j) {
+        out_row[4 * j] = std::abs(af[j]);
+        out_row[4 * j + 2] = std::abs(ab[j]);
+    }
+    for (int64_t j = 0; j < width; ++j) {
+        if (s.inside[j]) continue;
+        auto covered = [&](int64_t row) { return !mask || mask[row * width + j]; };
+        if (!covered(i)) {
+            out_row[4 * j] = out_row[4 * j + 2] = 0.0f;
+            continue;
+        }
+        // The run through texel i, clipped to the rows the stencil can reach
+        // (a reflection about a real end never lands past the clip).
+        int64_t lo = i, hi = i;
+        while (lo > 0 && lo > i - pad && covered(lo - 1)) --lo;
+        while (hi < height - 1 && hi < i + pad && covered(hi + 1)) ++hi;
+        s.segment.resize(hi - lo + 1);
+        for (int64_t r = lo; r <= hi; ++r) s.segment[r - lo] = lum[r * width + j];
+        const int64_t n = hi - lo + 1, t = i - lo;
+        const float xi = s.segment[t];
+        float sf = 0.0f, sb = 0.0f;
+        for (int k = 0; k < length; ++k) {
+            const float g = f.taps[k];
+            sf += g * (float(antireflect(s.segment.data(), n, t - c + k)) - xi);
+            sb += g * (float(antireflect(s.segment.data(), n, t + c - k)) - xi);
+        }
+        out_row[4 * j] = std::abs(sf);
+        out_row[4 * j + 2] = std::abs(sb);
+    }
+}
+
+// Checks the covered texels (all finite, at least one) and, for RGB(A),
+// writes their luminance (uncovered ones are set to 0 and never read).
+struct CoverageScan {
     int64_t covered = 0, bad = 0, first_bad = std::numeric_limits<int64_t>::max();
 };
 
-LuminanceScan luminance(const float* image, int64_t height, int64_t width, int channels, const uint8_t* mask,
-                        float* lum, Progress* progress) {
-    LuminanceScan total;
+CoverageScan scan_and_luminance(const float* image, int64_t height, int64_t width, int channels,
+                                const uint8_t* mask, float* lum, Progress* progress) {
+    CoverageScan total;
     std::mutex merge;
     parallel_for(
         height, 16,
         [&](int64_t begin, int64_t end) {
-            LuminanceScan part;
+            CoverageScan part;
             for (int64_t i = begin; i < end; ++i) {
                 for (int64_t j = 0; j < width; ++j) {
                     const int64_t t = i * width + j;
                     if (mask && !mask[t]) {
-                        lum[t] = 0.0f;
+                        if (lum) lum[t] = 0.0f;
                         continue;
                     }
                     const float* p = image + t * channels;
-                    const float y = channels == 1 ? p[0] : kLumaR * p[0] + kLumaG * p[1] + kLumaB * p[2];
-                    ++part.covered;
                     // A finite RGB can overflow to Inf in the weighted sum;
                     // that is reported as non-finite too.
+                    const float y = channels == 1 ? p[0] : kLumaR * p[0] + kLumaG * p[1] + kLumaB * p[2];
+                    ++part.covered;
                     if (!std::isfinite(y)) {
                         ++part.bad;
                         part.first_bad = std::min(part.first_bad, t);
                     }
-                    lum[t] = y;
+                    if (lum) lum[t] = y;
                 }
             }
             std::lock_guard<std::mutex> lock(merge);
@@ -149,23 +212,6 @@ LuminanceScan luminance(const float* image, int64_t height, int64_t width, int c
     return total;
 }
 
-template <class T>
-void transpose(const T* in, int64_t height, int64_t width, T* out) {
-    constexpr int64_t kTile = 32;
-    const int64_t tiles_i = (height + kTile - 1) / kTile;
-    parallel_for(tiles_i, 1, [&](int64_t begin, int64_t end) {
-        for (int64_t ti = begin; ti < end; ++ti) {
-            const int64_t i0 = ti * kTile, i1 = std::min(height, i0 + kTile);
-            for (int64_t j0 = 0; j0 < width; j0 += kTile) {
-                const int64_t j1 = std::min(width, j0 + kTile);
-                for (int64_t i = i0; i < i1; ++i) {
-                    for (int64_t j = j0; j < j1; ++j) out[j * height + i] = in[i * width + j];
-                }
-            }
-        }
-    });
-}
-
 }  // namespace
 
 void gradient_map(const float* image, int64_t height, int64_t width, int channels, const uint8_t* mask,
@@ -175,12 +221,15 @@ void gradient_map(const float* image, int64_t height, int64_t width, int channel
                      "the image must have 1, 3 or 4 channels (luminance, RGB or RGBA), got " +
                          std::to_string(channels));
     const LineFilter filter = make_line_filter(wavelet);
-    const int64_t blocks = (width + kColumnBlock - 1) / kColumnBlock;
-    // Units: luminance rows, filtered rows, blocks of filtered columns.
-    if (progress) progress->begin("gradient map", uint64_t(2 * height + blocks));
+    // Units: scanned rows, then filtered rows.
+    if (progress) progress->begin("gradient map", uint64_t(2 * height));
 
-    std::vector<float> lum(size_t(height * width));
-    const LuminanceScan scan = luminance(image, height, width, channels, mask, lum.data(), progress);
+    // A single channel is read in place (only covered texels are ever used);
+    // RGB(A) is reduced to luminance once.
+    std::vector<float> luminance;
+    if (channels != 1) luminance.resize(size_t(height * width));
+    const CoverageScan scan =
+        scan_and_luminance(image, height, width, channels, mask, channels == 1 ? nullptr : luminance.data(), progress);
     if (progress) progress->check();
     if (scan.covered == 0) {
         LMREFINE_THROW(InvalidArgument,
@@ -195,50 +244,18 @@ void gradient_map(const float* image, int64_t height, int64_t width, int channel
                            std::to_string(scan.first_bad % width) +
                            "; fix the bake, or replace them (numpy.nan_to_num) or leave them out of the mask");
     }
+    const float* lum = channels == 1 ? image : luminance.data();
 
-    // Along x (g, a): rows as they are.
+    // Every output row is written once: g, a along the row, r, b down the columns.
     parallel_for(
-        height, 8,
+        height, 4,
         [&](int64_t begin, int64_t end) {
-            LineScratch scratch;
+            RowScratch scratch;
             for (int64_t i = begin; i < end; ++i) {
                 float* row = out + i * width * 4;
-                filter_line(filter, lum.data() + i * width, mask ? mask + i * width : nullptr, width, row + 1,
-                            row + 3, 4, scratch);
-            }
-        },
-        progress);
-    if (progress) progress->check();
-
-    // Along y (r, b): columns become rows of the transposed image, so the
-    // same run-aware line filter reads contiguous memory.
-    std::vector<float> lum_t(lum.size());
-    transpose(lum.data(), height, width, lum_t.data());
-    lum = {};
-    std::vector<uint8_t> mask_t;
-    if (mask) {
-        mask_t.resize(size_t(height * width));
-        transpose(mask, height, width, mask_t.data());
-    }
-    parallel_for(
-        blocks, 1,
-        [&](int64_t begin, int64_t end) {
-            LineScratch scratch;
-            std::vector<float> fwd(size_t(kColumnBlock * height)), bwd(size_t(kColumnBlock * height));
-            for (int64_t block = begin; block < end; ++block) {
-                const int64_t j0 = block * kColumnBlock, j1 = std::min(width, j0 + kColumnBlock);
-                for (int64_t j = j0; j < j1; ++j) {
-                    filter_line(filter, lum_t.data() + j * height, mask ? mask_t.data() + j * height : nullptr,
-                                height, fwd.data() + (j - j0) * height, bwd.data() + (j - j0) * height, 1,
-                                scratch);
-                }
-                for (int64_t i = 0; i < height; ++i) {
-                    float* texel = out + (i * width + j0) * 4;
-                    for (int64_t j = j0; j < j1; ++j, texel += 4) {
-                        texel[0] = fwd[(j - j0) * height + i];
-                        texel[2] = bwd[(j - j0) * height + i];
-                    }
-                }
+                filter_line(filter, lum + i * width, mask ? mask + i * width : nullptr, width, row + 1, row + 3, 4,
+                            scratch.line);
+                filter_columns_at_row(filter, lum, mask, height, width, i, row, scratch);
             }
         },
         progress);

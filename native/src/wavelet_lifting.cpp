@@ -34,14 +34,15 @@ void step_single_lane(const LiftingStep& step, BoundaryMode mode, float* dst, co
         const int64_t k = step.offset + j;
         for (int64_t n = first; n < last; ++n) acc[n] += c * src[n + k];
     }
-    for (int64_t n = 0; n < count; ++n) {
-        if (n >= first && n < last) continue;
+    auto edge = [&](int64_t n) {
         float sum = 0.0f;
         for (int j = 0; j < step.count; ++j) {
             sum += float(step.coeffs[j]) * src[fold_index(n + step.offset + j, count, src_odd, mode)];
         }
         acc[n] = sum;
-    }
+    };
+    for (int64_t n = 0; n < first; ++n) edge(n);
+    for (int64_t n = last; n < count; ++n) edge(n);
     for (int64_t n = 0; n < count; ++n) dst[n] += sign * acc[n];
 }
 
@@ -51,6 +52,7 @@ void step_lanes(const LiftingStep& step, BoundaryMode mode, float* dst, const fl
     acc.resize(lanes);
     float* a = acc.data();
     for (int64_t n = 0; n < count; ++n) {
+        // Same order of float operations as step_single_lane: 0 + c0 x0 + c1 x1 ...
         std::fill(a, a + lanes, 0.0f);
         for (int j = 0; j < step.count; ++j) {
             const float c = float(step.coeffs[j]);
@@ -63,6 +65,10 @@ void step_lanes(const LiftingStep& step, BoundaryMode mode, float* dst, const fl
 }
 
 void scale(float* band, int64_t count, int64_t stride, int64_t lanes, float factor) {
+    if (stride == lanes) {  // contiguous: one loop the compiler vectorizes
+        for (int64_t i = 0; i < count * lanes; ++i) band[i] *= factor;
+        return;
+    }
     for (int64_t n = 0; n < count; ++n) {
         float* p = band + n * stride;
         for (int64_t l = 0; l < lanes; ++l) p[l] *= factor;

@@ -15,9 +15,11 @@
 namespace lmrefine {
 namespace {
 
-// Columns handled together by one task of the column pass: wide enough to
-// vectorize, narrow enough that the rows of a task stay in cache.
-constexpr int64_t kStripLanes = 64;
+// Columns handled together by one task of the column pass. A strip of both
+// bands is copied into a contiguous buffer and every lifting step runs on it
+// there: read in place, rows a power of two apart would all fall into the
+// same few cache sets, and the strip would not stay in cache between steps.
+constexpr int64_t kStripLanes = 32;
 
 void require_even_size(int64_t height, int64_t width) {
     LMREFINE_REQUIRE(height >= 2 && width >= 2 && height % 2 == 0 && width % 2 == 0,
@@ -43,13 +45,24 @@ void column_pass(const LiftingScheme& scheme, BoundaryMode mode, const std::vect
     parallel_for(
         int64_t(strips.size()), 1,
         [&](int64_t begin, int64_t end) {
-            std::vector<float> scratch;
+            // Per thread, so a strip does not pay for a fresh (page-faulting) buffer.
+            thread_local std::vector<float> scratch, s, d;
+            s.resize(size_t(count * kStripLanes));
+            d.resize(s.size());
             for (int64_t t = begin; t < end; ++t) {
                 const ColumnPair& pair = pairs[strips[t].first];
                 const int64_t lane = strips[t].second;
                 const int64_t lanes = std::min(kStripLanes, pair.lanes - lane);
-                lifting::lift(scheme, mode, pair.s + lane, pair.d + lane, count, pair.stride, lanes, inverse,
-                              scratch);
+                const size_t bytes = sizeof(float) * size_t(lanes);
+                for (int64_t n = 0; n < count; ++n) {
+                    std::memcpy(&s[n * lanes], pair.s + n * pair.stride + lane, bytes);
+                    std::memcpy(&d[n * lanes], pair.d + n * pair.stride + lane, bytes);
+                }
+                lifting::lift(scheme, mode, s.data(), d.data(), count, lanes, lanes, inverse, scratch);
+                for (int64_t n = 0; n < count; ++n) {
+                    std::memcpy(pair.s + n * pair.stride + lane, &s[n * lanes], bytes);
+                    std::memcpy(pair.d + n * pair.stride + lane, &d[n * lanes], bytes);
+                }
             }
         },
         progress);
