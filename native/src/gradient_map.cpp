@@ -54,7 +54,7 @@ struct LineScratch {
     std::vector<float> extended, forward, backward;
 };
 
-// Filters one line (a row, or a column stored as a row) of `n` texels:
+// Filters one row of `n` texels along x:
 // writes |forward| and |backward| detail to fwd[i * step], bwd[i * step],
 // 0 where the line is not covered.
 void filter_line(const LineFilter& f, const float* x, const uint8_t* covered, int64_t n, float* fwd, float* bwd,
