@@ -23,17 +23,23 @@ except ImportError as error:  # pragma: no cover - depends on the build state
 
 from ._native import (  # noqa: F401  (re-exports)
     CancelledError,
+    Scene,
     coverage_mask,
     find_charts,
     read_image,
     write_image,
 )
+from .baker import BakeResult, bake, evaluate  # noqa: F401  (re-exports)
 
 __version__ = _native.__version__
 
 __all__ = [
+    "BakeResult",
     "CancelledError",
+    "Scene",
+    "bake",
     "coverage_mask",
+    "evaluate",
     "find_charts",
     "read_image",
     "write_image",
