@@ -21,6 +21,34 @@ float luminance(const float* c) { return 0.2126f * c[0] + 0.7152f * c[1] + 0.072
 
 glm::vec3 load3(const float* p, int64_t i) { return {p[3 * i], p[3 * i + 1], p[3 * i + 2]}; }
 
+// A per-texel variance from a few samples is itself noisy (zero when all
+// samples agreed by chance), so the colour weight uses it blurred over the
+// 3x3 covered neighbourhood (as SVGF does).
+std::vector<float> blurred_variance(const std::vector<float>& variance, const DenoiseGuides& g) {
+    std::vector<float> out(variance.size(), 0.0f);
+    const float kernel[2] = {0.5f, 0.25f};
+    for (int row = 0; row < g.height; ++row) {
+        for (int col = 0; col < g.width; ++col) {
+            const int64_t p = int64_t(row) * g.width + col;
+            if (!g.covered[p]) continue;
+            float sum = 0.0f, weights = 0.0f;
+            for (int dy = -1; dy <= 1; ++dy) {
+                for (int dx = -1; dx <= 1; ++dx) {
+                    const int r = row + dy, c = col + dx;
+                    if (r < 0 || r >= g.height || c < 0 || c >= g.width) continue;
+                    const int64_t q = int64_t(r) * g.width + c;
+                    if (!g.covered[q]) continue;
+                    const float w = kernel[std::abs(dx)] * kernel[std::abs(dy)];
+                    sum += w * variance[q];
+                    weights += w;
+                }
+            }
+            out[p] = sum / weights;
+        }
+    }
+    return out;
+}
+
 }  // namespace
 
 void denoise(float* rgba, float* variance, const DenoiseGuides& g, int iterations) {
@@ -30,6 +58,7 @@ void denoise(float* rgba, float* variance, const DenoiseGuides& g, int iteration
     const float kernel[3] = {3.0f / 8.0f, 1.0f / 4.0f, 1.0f / 16.0f};  // B3 spline, taps 0, +-1, +-2
     for (int level = 0; level < iterations; ++level) {
         const int step = 1 << level;
+        const std::vector<float> var_guide = blurred_variance(var_in, g);
         for (int row = 0; row < g.height; ++row) {
             for (int col = 0; col < g.width; ++col) {
                 const int64_t p = int64_t(row) * g.width + col;
@@ -37,7 +66,7 @@ void denoise(float* rgba, float* variance, const DenoiseGuides& g, int iteration
                 const glm::vec3 xp = load3(g.position, p), np = load3(g.normal, p);
                 const float lp = luminance(&color_in[4 * p]);
                 // Noise scale of a colour difference between p and a neighbour.
-                const float sigma = kColorSigma * std::sqrt(std::max(var_in[p], 0.0f)) + 1e-6f * (1.0f + std::abs(lp));
+                const float sigma = kColorSigma * std::sqrt(std::max(var_guide[p], 0.0f)) + 1e-6f * (1.0f + std::abs(lp));
                 const float plane_scale = 1.0f / (kPlaneSigma * std::max(g.texel_size[p], 1e-20f) * step);
                 float sum[3] = {0, 0, 0}, weights = 0.0f, var_sum = 0.0f;
                 for (int dy = -2; dy <= 2; ++dy) {
