@@ -74,3 +74,28 @@ def sample_box_inside(count, rng, half=1.0):
     normals = np.zeros((count, 3))
     normals[np.arange(count), axis] = -side
     return points, normals
+
+
+def mesh_spec(positions, triangles, uvs=None, base_color=(0.8, 0.8, 0.8), receiver=True):
+    """One mesh of a scene spec: plain lists, so the same spec is read by
+    lmrefine (scene_from_spec) and by Blender (tests/blender/cycles_bake.py)."""
+    return dict(positions=np.asarray(positions, float).tolist(), triangles=np.asarray(triangles, int).tolist(),
+                uvs=None if uvs is None else np.asarray(uvs, float).tolist(), base_color=list(base_color),
+                receiver=receiver)
+
+
+def scene_from_spec(spec):
+    """An lmrefine.Scene from a spec (meshes, lights, world)."""
+    import lmrefine
+
+    scene = lmrefine.Scene()
+    for mesh in spec["meshes"]:
+        scene.add_mesh(np.array(mesh["positions"]), np.array(mesh["triangles"]),
+                       uvs=None if mesh["uvs"] is None else np.array(mesh["uvs"]),
+                       base_color=mesh["base_color"], receiver=mesh["receiver"])
+    for light in spec.get("lights", []):
+        light = dict(light)
+        scene.add_light(light.pop("kind"), **light)
+    if spec.get("world"):
+        scene.set_world(spec["world"])
+    return scene

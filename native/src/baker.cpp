@@ -155,7 +155,7 @@ void bake_transport(const Scene& scene, const Integrator& integrator, const Texe
             PixelSums sums;
             glm::dvec3 position(0.0), normal(0.0);
             for (int s = 0; s < options.samples; ++s) {
-                const Sampler sampler(key, uint32_t(s));
+                const Sampler sampler(key, uint32_t(s), uint32_t(options.samples));
                 const glm::vec2 u = sampler.get(0);
                 float size = 0.0f;
                 const SurfacePoint point =
@@ -342,7 +342,7 @@ EvaluateResult evaluate(const Scene& scene, const float* points, const float* no
             for (int64_t i = begin; i < end; ++i) {
                 glm::dvec3 sum(0.0);
                 for (int s = 0; s < options.samples; ++s) {
-                    const Sampler sampler(hash_combine(key, uint64_t(i)), uint32_t(s));
+                    const Sampler sampler(hash_combine(key, uint64_t(i)), uint32_t(s), uint32_t(options.samples));
                     sum += glm::dvec3(estimate(integrator, tr, surface[size_t(i)], sampler, local_rays));
                 }
                 for (int ch = 0; ch < 3; ++ch) transport[tr][size_t(3 * i + ch)] = float(sum[ch] / options.samples);

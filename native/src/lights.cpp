@@ -90,7 +90,8 @@ bool sample_point_light(const Light& light, const glm::vec3& point, const glm::v
     s.distance = distance;
     const float cos_light = std::max(0.0f, glm::dot(axis, -s.direction));
     float factor = light.energy / (4.0f * kPi * kPi) * cos_light / (distance * distance);
-    if (light.kind == LightKind::Spot) factor *= spot_attenuation(light, axis);
+    // Cycles attenuates along the sampled ray, so a spot's radius softens its cone's edge.
+    if (light.kind == LightKind::Spot) factor *= spot_attenuation(light, -s.direction);
     s.value = light.color * factor;
     return factor > 0.0f;
 }

@@ -20,9 +20,10 @@ import numpy as np
 from mathutils import Vector
 
 # Cycles' own bake types for our passes (colour pass off, as lmrefine bakes).
+# Blender 3.4 returns ~0 for DIFFUSE with pass_filter {'INDIRECT'} alone
+# (measured), so "indirect" is baked as combined minus direct.
 BAKE_TYPES = {
     "direct": dict(type="DIFFUSE", pass_filter={"DIRECT"}),
-    "indirect": dict(type="DIFFUSE", pass_filter={"INDIRECT"}),
     "combined": dict(type="DIFFUSE", pass_filter={"DIRECT", "INDIRECT"}),
     "ao": dict(type="AO"),
 }
@@ -101,6 +102,16 @@ def set_world(scene, color, ao_distance):
     scene.world = world
 
 
+def bake_pixels(image, name):
+    """Bakes the selected object into its image; (R, R, 4) rows top-down."""
+    bpy.ops.object.bake(margin=0, use_clear=True, **BAKE_TYPES[name])
+    size = image.size[0]
+    pixels = np.empty(size * size * 4, dtype=np.float32)
+    image.pixels.foreach_get(pixels)
+    # Blender's pixels are bottom-up; lmrefine's arrays are top-down.
+    return pixels.reshape(size, size, 4)[::-1].copy()
+
+
 def bake_job(job, out):
     scene = reset()
     resolution = job["resolution"]
@@ -122,11 +133,12 @@ def bake_job(job, out):
             bpy.ops.object.select_all(action="DESELECT")
             obj.select_set(True)
             bpy.context.view_layer.objects.active = obj
-            bpy.ops.object.bake(margin=0, use_clear=True, **BAKE_TYPES[name])
-            pixels = np.empty(resolution * resolution * 4, dtype=np.float32)
-            image.pixels.foreach_get(pixels)
-            # Blender's pixels are bottom-up; lmrefine's arrays are top-down.
-            out[f"{job['name']}/{index}/{name}"] = pixels.reshape(resolution, resolution, 4)[::-1].copy()
+            if name == "indirect":
+                pixels = bake_pixels(image, "combined")
+                pixels[..., :3] -= bake_pixels(image, "direct")[..., :3]
+            else:
+                pixels = bake_pixels(image, name)
+            out[f"{job['name']}/{index}/{name}"] = pixels
         out[f"{job['name']}/seconds/{name}"] = np.float64(time.perf_counter() - started)
 
 
