@@ -148,22 +148,23 @@ void bake_transport(const Scene& scene, const Integrator& integrator, const Texe
     }
     parallel_for(count, kTexelsPerChunk, [&](int64_t begin, int64_t end) {
         uint64_t local_rays = 0;
+        TexelGeometry geometry;
+        SampleSequence sequence;
         for (int64_t k = begin; k < end; ++k) {
             const int64_t texel = table.texels[size_t(k)];
             const int row = int(texel / table.width), col = int(texel % table.width);
-            const uint64_t key = hash_combine(map_key, uint64_t(texel));
+            geometry.load(scene, table, k);
+            sequence.reset(hash_combine(map_key, uint64_t(texel)), uint32_t(options.samples),
+                           integrator.dimension_count());
             PixelSums sums;
             glm::dvec3 position(0.0), normal(0.0);
             for (int s = 0; s < options.samples; ++s) {
-                const Sampler sampler(key, uint32_t(s), uint32_t(options.samples));
+                const Sampler sampler(sequence, uint32_t(s));
                 const glm::vec2 u = sampler.get(0);
-                float size = 0.0f;
-                const SurfacePoint point =
-                    texel_surface_point(scene, table, k, col + double(u.x), row + double(u.y), guides && s == 0 ? &size : nullptr);
+                const SurfacePoint point = geometry.at(col + double(u.x), row + double(u.y));
                 if (guides) {
                     position += glm::dvec3(point.position);
                     normal += glm::dvec3(point.shading_normal);
-                    if (s == 0) out.texel_size[size_t(k)] = size;
                 }
                 sums.add(estimate(integrator, transport, point, sampler, local_rays));
             }
@@ -172,6 +173,7 @@ void bake_transport(const Scene& scene, const Integrator& integrator, const Texe
             color[size_t(4 * k + 3)] = 1.0f;
             variance[size_t(k)] = sums.mean_variance(options.samples);
             if (guides) {
+                out.texel_size[size_t(k)] = geometry.texel_size();
                 const glm::dvec3 p = position / double(options.samples);
                 const double length = glm::length(normal);
                 const glm::dvec3 n = length > 0.0 ? normal / length : glm::dvec3(0, 0, 1);
@@ -339,10 +341,12 @@ EvaluateResult evaluate(const Scene& scene, const float* points, const float* no
         progress.begin(std::string("evaluating ") + kTransportNames[tr], uint64_t(count));
         parallel_for(count, kTexelsPerChunk, [&](int64_t begin, int64_t end) {
             uint64_t local_rays = 0;
+            SampleSequence sequence;
             for (int64_t i = begin; i < end; ++i) {
                 glm::dvec3 sum(0.0);
+                sequence.reset(hash_combine(key, uint64_t(i)), uint32_t(options.samples), integrator.dimension_count());
                 for (int s = 0; s < options.samples; ++s) {
-                    const Sampler sampler(hash_combine(key, uint64_t(i)), uint32_t(s), uint32_t(options.samples));
+                    const Sampler sampler(sequence, uint32_t(s));
                     sum += glm::dvec3(estimate(integrator, tr, surface[size_t(i)], sampler, local_rays));
                 }
                 for (int ch = 0; ch < 3; ++ch) transport[tr][size_t(3 * i + ch)] = float(sum[ch] / options.samples);

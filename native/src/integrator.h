@@ -40,6 +40,8 @@ public:
 
     // Dimension 0 is left to the caller (the sample position in the texel).
     static constexpr uint32_t kFirstDimension = 1;
+    // How many sample dimensions the passes use.
+    uint32_t dimension_count() const { return dimension(settings_.bounces + 1, 0); }
 
 private:
     // A ray start off the surface on the side `direction` leaves by, so the

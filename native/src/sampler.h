@@ -3,13 +3,13 @@
 // which thread ran it. Each 2-D dimension is the R2 low-discrepancy sequence
 // (Roberts 2018) shifted by a per-key, per-dimension random rotation
 // (Cranley-Patterson), so every sample count is well stratified; and each
-// dimension visits the samples in its own random order (Kensler's
-// permutation), so dimensions are not correlated with each other (the same
+// dimension visits the samples in its own random order (permute), so dimensions are not correlated with each other (the same
 // sequence in every dimension would make, e.g., the bounce direction a
 // function of the light sample).
 #pragma once
 
 #include <cstdint>
+#include <vector>
 
 #include <glm/vec2.hpp>
 
@@ -24,8 +24,11 @@ inline uint64_t mix64(uint64_t x) {  // splitmix64 finalizer
 
 inline uint64_t hash_combine(uint64_t a, uint64_t b) { return mix64(a ^ mix64(b)); }
 
-// A random bijection of [0, count) picked by `seed` (Kensler 2013,
-// "Correlated Multi-Jittered Sampling").
+// A random bijection of [0, count) picked by `seed`: invertible steps on the
+// smallest power-of-two domain (xor, odd multiply, xorshift), walked until
+// the value falls inside [0, count) (the construction of Kensler 2013,
+// "Correlated Multi-Jittered Sampling", with fewer rounds: it only has to
+// decorrelate dimensions, and it runs once per sample and dimension).
 inline uint32_t permute(uint32_t i, uint32_t count, uint32_t seed) {
     uint32_t w = count - 1;
     w |= w >> 1;
@@ -36,47 +39,56 @@ inline uint32_t permute(uint32_t i, uint32_t count, uint32_t seed) {
     do {
         i ^= seed;
         i *= 0xe170893d;
-        i ^= seed >> 16;
         i ^= (i & w) >> 4;
-        i ^= seed >> 8;
+        i ^= seed >> 16;
         i *= 0x0929eb3f;
-        i ^= seed >> 23;
-        i ^= (i & w) >> 1;
-        i *= 1 | seed >> 27;
-        i *= 0x6935fa69;
-        i ^= (i & w) >> 11;
-        i *= 0x74dcb303;
-        i ^= (i & w) >> 2;
-        i *= 0x9e501cc3;
-        i ^= (i & w) >> 2;
-        i *= 0xc860a3df;
         i &= w;
-        i ^= i >> 5;
+        i ^= i >> 3;
     } while (i >= count);
-    return (i + seed) % count;
+    return i;
 }
 
-class Sampler {
+// The `count` samples of one texel or point: per-dimension rotations and
+// permutation seeds, hashed once (not once per sample).
+class SampleSequence {
 public:
-    // Sample `sample` of `count` for the texel or point identified by `key`.
-    Sampler(uint64_t key, uint32_t sample, uint32_t count) : key_(key), sample_(sample), count_(count) {}
+    void reset(uint64_t key, uint32_t count, uint32_t dimensions) {
+        count_ = count;
+        states_.resize(dimensions);
+        for (uint32_t d = 0; d < dimensions; ++d) {
+            const uint64_t h = hash_combine(key, d);
+            states_[d] = {uint32_t(h), uint32_t(h >> 32), uint32_t(h >> 16) ^ uint32_t(h >> 48)};
+        }
+    }
 
-    // A point in [0, 1)^2 for this sample in the given dimension.
-    glm::vec2 get(uint32_t dimension) const {
-        constexpr double a1 = 0.75487766624669276, a2 = 0.56984029099805327;  // 1/g, 1/g^2 (plastic number g)
-        const uint64_t h = hash_combine(key_, dimension);
-        const double r1 = double(h >> 40) * 0x1p-24, r2 = double(h & 0xFFFFFF) * 0x1p-24;
-        const uint32_t index = dimension == 0 ? sample_ : permute(sample_, count_, uint32_t(h >> 24));
-        double x = r1 + a1 * index, y = r2 + a2 * index;
-        x -= double(int64_t(x));
-        y -= double(int64_t(y));
-        // float(x) may round up to 1.0; keep samples in [0, 1).
-        return {float(x < 0.99999994 ? x : 0.99999994), float(y < 0.99999994 ? y : 0.99999994)};
+    // A point in [0, 1)^2 for `sample` in `dimension` (< dimensions).
+    glm::vec2 get(uint32_t sample, uint32_t dimension) const {
+        // R2 in 0.32 fixed point: exact wrap-around, no floating-point fraction.
+        constexpr uint32_t a1 = 3242174889u, a2 = 2447445414u;  // 2^32 / g, 2^32 / g^2 (plastic number g)
+        const State& s = states_[dimension];
+        // Dimension 0 (the position in the texel) keeps the sequence's order.
+        const uint32_t index = dimension == 0 ? sample : permute(sample, count_, s.permutation);
+        const uint32_t x = s.r1 + a1 * index, y = s.r2 + a2 * index;
+        return {float(x >> 8) * 0x1p-24f, float(y >> 8) * 0x1p-24f};  // 24 bits: exact floats < 1
     }
 
 private:
-    uint64_t key_;
-    uint32_t sample_, count_;
+    struct State {
+        uint32_t r1, r2, permutation;
+    };
+    std::vector<State> states_;
+    uint32_t count_ = 1;
+};
+
+// One sample of a sequence.
+class Sampler {
+public:
+    Sampler(const SampleSequence& sequence, uint32_t sample) : sequence_(sequence), sample_(sample) {}
+    glm::vec2 get(uint32_t dimension) const { return sequence_.get(sample_, dimension); }
+
+private:
+    const SampleSequence& sequence_;
+    uint32_t sample_;
 };
 
 }  // namespace lmrefine

@@ -24,15 +24,6 @@ glm::dvec2 nearest_on_segment(const glm::dvec2& p, const glm::dvec2& a, const gl
     return a + ab * t;
 }
 
-// Barycentrics of p in triangle (a, b, c); the triangle is not degenerate in UV
-// (rasterization skipped those).
-glm::dvec3 barycentric(const glm::dvec2& p, const glm::dvec2& a, const glm::dvec2& b, const glm::dvec2& c) {
-    const glm::dvec2 e1 = b - a, e2 = c - a, d = p - a;
-    const double det = e1.x * e2.y - e1.y * e2.x;
-    const double u = (d.x * e2.y - d.y * e2.x) / det, v = (e1.x * d.y - e1.y * d.x) / det;
-    return {1.0 - u - v, u, v};
-}
-
 }  // namespace
 
 TexelTable build_texel_table(const Scene& scene, const std::vector<int>& meshes, int width, int height) {
@@ -78,67 +69,76 @@ TexelTable build_texel_table(const Scene& scene, const std::vector<int>& meshes,
     return table;
 }
 
-SurfacePoint texel_surface_point(const Scene& scene, const TexelTable& table, int64_t k, double px, double py,
-                                 float* texel_size) {
-    const glm::dvec2 p(px, py);
-    int64_t best = -1;
-    double best_distance = std::numeric_limits<double>::infinity();
-    glm::dvec3 best_weights(1.0 / 3.0);
-    glm::dvec2 corner[3];
-    for (int64_t c = table.offsets[size_t(k)]; c < table.offsets[size_t(k) + 1]; ++c) {
-        const Mesh& mesh = scene.meshes()[size_t(table.candidate_mesh[size_t(c)])];
-        const int64_t t = table.candidate_triangle[size_t(c)];
-        for (int i = 0; i < 3; ++i) {
-            const glm::vec2& uv = mesh.uvs[size_t(3 * t + i)];
-            corner[i] = uv_to_pixel(glm::dvec2(uv), table.width, table.height);
+void TexelGeometry::load(const Scene& scene, const TexelTable& table, int64_t k) {
+    candidates_.clear();
+    for (int64_t i = table.offsets[size_t(k)]; i < table.offsets[size_t(k) + 1]; ++i) {
+        const Mesh& mesh = scene.meshes()[size_t(table.candidate_mesh[size_t(i)])];
+        const int64_t t = table.candidate_triangle[size_t(i)];
+        Candidate c;
+        for (int j = 0; j < 3; ++j) {
+            c.corner[j] = uv_to_pixel(glm::dvec2(mesh.uvs[size_t(3 * t + j)]), table.width, table.height);
+            c.position[j] = mesh.positions[size_t(mesh.triangles[size_t(3 * t + j)])];
         }
-        glm::dvec3 w = barycentric(p, corner[0], corner[1], corner[2]);
-        double distance = 0.0;
-        if (w.x < 0.0 || w.y < 0.0 || w.z < 0.0) {
-            glm::dvec2 nearest = nearest_on_segment(p, corner[0], corner[1]);
-            for (int e = 1; e < 3; ++e) {
-                const glm::dvec2 q = nearest_on_segment(p, corner[e], corner[(e + 1) % 3]);
-                if (glm::dot(q - p, q - p) < glm::dot(nearest - p, nearest - p)) nearest = q;
-            }
-            distance = glm::length(nearest - p);
-            w = glm::clamp(barycentric(nearest, corner[0], corner[1], corner[2]), 0.0, 1.0);
-            w /= (w.x + w.y + w.z);
+        // Rasterization skipped triangles of zero UV area, so det != 0.
+        const glm::dvec2 e1 = c.corner[1] - c.corner[0], e2 = c.corner[2] - c.corner[0];
+        const double inv = 1.0 / (e1.x * e2.y - e1.y * e2.x);
+        const double u_x = e2.y * inv, u_y = -e2.x * inv, v_x = -e1.y * inv, v_y = e1.x * inv;
+        const double u_0 = -(u_x * c.corner[0].x + u_y * c.corner[0].y), v_0 = -(v_x * c.corner[0].x + v_y * c.corner[0].y);
+        c.wx = {-u_x - v_x, u_x, v_x};
+        c.wy = {-u_y - v_y, u_y, v_y};
+        c.w0 = {1.0 - u_0 - v_0, u_0, v_0};
+        const glm::vec3 cross = glm::cross(c.position[1] - c.position[0], c.position[2] - c.position[0]);
+        c.geometric_normal = glm::normalize(cross);
+        c.smooth = !mesh.normals.empty();
+        for (int j = 0; j < 3; ++j) c.normal[j] = c.smooth ? mesh.normals[size_t(3 * t + j)] : c.geometric_normal;
+        if (candidates_.empty()) {
+            texel_size_ = float(std::sqrt(0.5 * double(glm::length(cross)) * std::abs(inv)));
         }
-        if (distance < best_distance) {
-            best_distance = distance;
-            best = c;
-            best_weights = w;
-            if (distance == 0.0) break;
-        }
+        candidates_.push_back(c);
     }
-    const Mesh& mesh = scene.meshes()[size_t(table.candidate_mesh[size_t(best)])];
-    const int64_t t = table.candidate_triangle[size_t(best)];
-    const int32_t* v = &mesh.triangles[size_t(3 * t)];
-    const glm::vec3 w(best_weights);
-    const glm::vec3 &a = mesh.positions[v[0]], &b = mesh.positions[v[1]], &c = mesh.positions[v[2]];
+}
+
+SurfacePoint TexelGeometry::point_on(const Candidate& c, const glm::dvec3& weights) const {
+    const glm::vec3 w(weights);
     SurfacePoint point;
-    point.position = a * w.x + b * w.y + c * w.z;
-    const glm::vec3 cross = glm::cross(b - a, c - a);
-    glm::vec3 ng = glm::normalize(cross);
-    glm::vec3 ns = ng;
-    if (!mesh.normals.empty()) {
-        const glm::vec3* n = &mesh.normals[size_t(3 * t)];
-        const glm::vec3 interpolated = n[0] * w.x + n[1] * w.y + n[2] * w.z;
-        if (glm::length(interpolated) > 0.0f) {
-            ns = glm::normalize(interpolated);
+    point.position = c.position[0] * w.x + c.position[1] * w.y + c.position[2] * w.z;
+    point.geometric_normal = c.geometric_normal;
+    point.shading_normal = c.geometric_normal;
+    if (c.smooth) {
+        const glm::vec3 n = c.normal[0] * w.x + c.normal[1] * w.y + c.normal[2] * w.z;
+        const float length = glm::length(n);
+        if (length > 0.0f) {
+            point.shading_normal = n / length;
             // The given normals say which side is the front; the winding may disagree.
-            if (glm::dot(ns, ng) < 0.0f) ng = -ng;
+            if (glm::dot(point.shading_normal, point.geometric_normal) < 0.0f) point.geometric_normal = -point.geometric_normal;
         }
-    }
-    point.geometric_normal = ng;
-    point.shading_normal = ns;
-    if (texel_size) {
-        for (int i = 0; i < 3; ++i) corner[i] = uv_to_pixel(glm::dvec2(mesh.uvs[size_t(3 * t + i)]), table.width, table.height);
-        const glm::dvec2 e1 = corner[1] - corner[0], e2 = corner[2] - corner[0];
-        const double pixel_area = std::abs(e1.x * e2.y - e1.y * e2.x);
-        *texel_size = float(std::sqrt(0.5 * double(glm::length(cross)) / std::max(pixel_area, 1e-30)));
     }
     return point;
+}
+
+SurfacePoint TexelGeometry::at(double px, double py) const {
+    for (const Candidate& c : candidates_) {
+        const glm::dvec3 w = c.wx * px + c.wy * py + c.w0;
+        if (w.x >= 0.0 && w.y >= 0.0 && w.z >= 0.0) return point_on(c, w);
+    }
+    // Outside every candidate: clamp onto the nearest one.
+    const glm::dvec2 p(px, py);
+    const Candidate* best = &candidates_.front();
+    glm::dvec2 best_point = p;
+    double best_distance = std::numeric_limits<double>::infinity();
+    for (const Candidate& c : candidates_) {
+        for (int e = 0; e < 3; ++e) {
+            const glm::dvec2 q = nearest_on_segment(p, c.corner[e], c.corner[(e + 1) % 3]);
+            const double distance = glm::dot(q - p, q - p);
+            if (distance < best_distance) {
+                best_distance = distance;
+                best = &c;
+                best_point = q;
+            }
+        }
+    }
+    glm::dvec3 w = glm::clamp(best->wx * best_point.x + best->wy * best_point.y + best->w0, 0.0, 1.0);
+    return point_on(*best, w / (w.x + w.y + w.z));
 }
 
 }  // namespace lmrefine

@@ -5,6 +5,9 @@
 #include <cstdint>
 #include <vector>
 
+#include <glm/vec2.hpp>
+#include <glm/vec3.hpp>
+
 #include "integrator.h"
 
 namespace lmrefine {
@@ -24,11 +27,30 @@ struct TexelTable {
 // `meshes` at width x height, skipping zero-area triangles.
 TexelTable build_texel_table(const Scene& scene, const std::vector<int>& meshes, int width, int height);
 
-// The surface point under `pixel` (continuous pixel coordinates inside texel
-// `k`): the candidate triangle that contains it, or else the nearest one with
+// The surfaces behind one texel, prepared once so that each sample costs a
+// few multiply-adds: sample positions (continuous pixel coordinates) map to
+// the candidate triangle that contains them, or else to the nearest one with
 // the point clamped onto it (a texel that a chart covers only partly).
-// Also returns the world-space edge length of a texel there.
-SurfacePoint texel_surface_point(const Scene& scene, const TexelTable& table, int64_t k, double px, double py,
-                                 float* texel_size = nullptr);
+class TexelGeometry {
+public:
+    void load(const Scene& scene, const TexelTable& table, int64_t k);
+    SurfacePoint at(double px, double py) const;
+    // World-space edge length of a texel on the first candidate triangle.
+    float texel_size() const { return texel_size_; }
+
+private:
+    struct Candidate {
+        glm::dvec3 wx, wy, w0;  // barycentrics = wx * px + wy * py + w0
+        glm::dvec2 corner[3];   // pixel space
+        glm::vec3 position[3];
+        glm::vec3 normal[3];    // shading normals (the geometric one if flat)
+        glm::vec3 geometric_normal;
+        bool smooth;
+    };
+    SurfacePoint point_on(const Candidate& c, const glm::dvec3& weights) const;
+
+    std::vector<Candidate> candidates_;
+    float texel_size_ = 0.0f;
+};
 
 }  // namespace lmrefine
