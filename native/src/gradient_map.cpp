@@ -20,8 +20,12 @@ struct LineFilter {
     int pad = 0;              // samples of extension needed past each end of a run
 };
 
+// The longest detail filter (D20).
+constexpr int kMaxTaps = 20;
+
 LineFilter make_line_filter(Wavelet wavelet) {
     const DetailFilter detail = detail_filter(wavelet);
+    LMREFINE_REQUIRE(int(detail.taps.size()) <= kMaxTaps, "detail filter longer than kMaxTaps");
     LineFilter f;
     f.taps.assign(detail.taps.begin(), detail.taps.end());
     const int length = int(f.taps.size());
@@ -50,6 +54,49 @@ double antireflect(const float* x, int64_t n, int64_t j) {
     return offset + sign * x[j];
 }
 
+// The stencil sums of `count` texels, forward and backward:
+//   fwd[t] = |sum_k g[k] (forward[k][t] - centre[t])|, likewise backward.
+// The taps sum to zero, so sums over differences equal the detail, and the
+// differences make a flat run exactly 0 and keep HDR offsets out. A length
+// known at compile time unrolls the taps so the loop over texels vectorizes
+// with the sums in registers; kLength = 0 takes the length at run time.
+// Both directions go through here, so they agree bit for bit.
+template <int kLength>
+void stencil_sums(const float* taps, int length, const float* const* forward, const float* const* backward,
+                  const float* centre, int64_t count, float* __restrict fwd, float* __restrict bwd) {
+    const int taps_count = kLength ? kLength : length;
+    const float* sources[2][kMaxTaps];
+    for (int k = 0; k < taps_count; ++k) {
+        sources[0][k] = forward[k];
+        sources[1][k] = backward[k];
+    }
+    for (int64_t t = 0; t < count; ++t) {
+        const float x = centre[t];
+        float sf = 0.0f, sb = 0.0f;
+        for (int k = 0; k < taps_count; ++k) {
+            sf += taps[k] * (sources[0][k][t] - x);
+            sb += taps[k] * (sources[1][k][t] - x);
+        }
+        fwd[t] = std::abs(sf);
+        bwd[t] = std::abs(sb);
+    }
+}
+
+void stencil(const LineFilter& f, const float* const* forward, const float* const* backward, const float* centre,
+             int64_t count, float* fwd, float* bwd) {
+    const float* g = f.taps.data();
+    const int n = int(f.taps.size());
+    switch (n) {
+        case 2: return stencil_sums<2>(g, n, forward, backward, centre, count, fwd, bwd);
+        case 3: return stencil_sums<3>(g, n, forward, backward, centre, count, fwd, bwd);
+        case 4: return stencil_sums<4>(g, n, forward, backward, centre, count, fwd, bwd);
+        case 7: return stencil_sums<7>(g, n, forward, backward, centre, count, fwd, bwd);
+        case 12: return stencil_sums<12>(g, n, forward, backward, centre, count, fwd, bwd);
+        case 20: return stencil_sums<20>(g, n, forward, backward, centre, count, fwd, bwd);
+        default: return stencil_sums<0>(g, n, forward, backward, centre, count, fwd, bwd);
+    }
+}
+
 // Filters one row of `n` texels along x: writes |forward| and |backward|
 // detail to fwd[0..n), bwd[0..n), 0 where the row is not covered.
 // `extended` is scratch space.
@@ -75,25 +122,13 @@ void filter_line(const LineFilter& f, const float* x, const uint8_t* covered, in
         std::copy(r, r + run, e);
         for (int64_t j = run; j < run + pad; ++j) e[j] = float(antireflect(r, run, j));
 
-        // The taps sum to zero, so sum g[k] (x[k] - x[i]) equals the detail;
-        // differences make a flat run exactly 0 and keep HDR offsets out.
-        float* af = fwd + i;
-        float* ab = bwd + i;
-        std::fill(af, af + run, 0.0f);
-        std::fill(ab, ab + run, 0.0f);
+        const float* forward[kMaxTaps];
+        const float* backward[kMaxTaps];
         for (int k = 0; k < length; ++k) {
-            const float g = f.taps[k];
-            const float* ef = e - c + k;
-            const float* eb = e + c - k;
-            for (int64_t t = 0; t < run; ++t) {
-                af[t] += g * (ef[t] - e[t]);
-                ab[t] += g * (eb[t] - e[t]);
-            }
+            forward[k] = e - c + k;
+            backward[k] = e + c - k;
         }
-        for (int64_t t = 0; t < run; ++t) {
-            af[t] = std::abs(af[t]);
-            ab[t] = std::abs(ab[t]);
-        }
+        stencil(f, forward, backward, e, run, fwd + i, bwd + i);
         i = end;
     }
 }
@@ -116,15 +151,16 @@ void filter_column_texel(const LineFilter& f, const float* lum, const uint8_t* m
     segment.resize(hi - lo + 1);
     for (int64_t r = lo; r <= hi; ++r) segment[r - lo] = lum[r * width + j];
     const int64_t n = hi - lo + 1, t = i - lo;
-    const float xi = segment[t];
-    float sf = 0.0f, sb = 0.0f;
+    float values[2][kMaxTaps];
+    const float* forward[kMaxTaps];
+    const float* backward[kMaxTaps];
     for (int k = 0; k < length; ++k) {
-        const float g = f.taps[k];
-        sf += g * (float(antireflect(segment.data(), n, t - c + k)) - xi);
-        sb += g * (float(antireflect(segment.data(), n, t + c - k)) - xi);
+        values[0][k] = float(antireflect(segment.data(), n, t - c + k));
+        values[1][k] = float(antireflect(segment.data(), n, t + c - k));
+        forward[k] = &values[0][k];
+        backward[k] = &values[1][k];
     }
-    *fwd = std::abs(sf);
-    *bwd = std::abs(sb);
+    stencil(f, forward, backward, &segment[t], 1, fwd, bwd);
 }
 
 struct RowScratch {
@@ -139,22 +175,15 @@ struct RowScratch {
 void filter_columns_at_row(const LineFilter& f, const float* lum, const uint8_t* mask, int64_t height,
                            int64_t width, int64_t i, float* fwd, float* bwd, RowScratch& s) {
     const int length = int(f.taps.size()), c = f.centre, pad = f.pad;
-    std::fill(fwd, fwd + width, 0.0f);
-    std::fill(bwd, bwd + width, 0.0f);
-    const float* centre = lum + i * width;
+    // Rows past the image are clamped only to stay in memory: the texels
+    // that read them are redone below.
+    const float* forward[kMaxTaps];
+    const float* backward[kMaxTaps];
     for (int k = 0; k < length; ++k) {
-        const float g = f.taps[k];
-        const float* xf = lum + std::clamp<int64_t>(i - c + k, 0, height - 1) * width;
-        const float* xb = lum + std::clamp<int64_t>(i + c - k, 0, height - 1) * width;
-        for (int64_t j = 0; j < width; ++j) {
-            fwd[j] += g * (xf[j] - centre[j]);
-            bwd[j] += g * (xb[j] - centre[j]);
-        }
+        forward[k] = lum + std::clamp<int64_t>(i - c + k, 0, height - 1) * width;
+        backward[k] = lum + std::clamp<int64_t>(i + c - k, 0, height - 1) * width;
     }
-    for (int64_t j = 0; j < width; ++j) {
-        fwd[j] = std::abs(fwd[j]);
-        bwd[j] = std::abs(bwd[j]);
-    }
+    stencil(f, forward, backward, lum + i * width, width, fwd, bwd);
 
     const bool rows_exist = i - pad >= 0 && i + pad < height;
     if (rows_exist && !mask) return;  // every stencil is inside the image and covered
