@@ -74,9 +74,9 @@ struct PixelSums {
     }
 };
 
-void bake_transport(const Scene& scene, const Integrator& integrator, const TexelTable& table, int transport,
-                    const BakeOptions& options, uint64_t map_key, MapAccumulator& out, std::atomic<uint64_t>& rays,
-                    Progress& progress) {
+void bake_transport(const Scene& scene, const RayTracer& tracer, const Integrator& integrator,
+                    const TexelTable& table, int transport, const BakeOptions& options, uint64_t map_key,
+                    MapAccumulator& out, std::atomic<uint64_t>& rays, Progress& progress) {
     const int64_t count = int64_t(table.texels.size());
     auto& color = out.transport[transport];
     auto& variance = out.variance[transport];
@@ -92,14 +92,16 @@ void bake_transport(const Scene& scene, const Integrator& integrator, const Texe
         uint64_t local_rays = 0;
         TexelGeometry geometry;
         SampleSequence sequence;
+        ShadowBatch batch;
+        std::vector<glm::vec3> sample_values(size_t(options.samples));
         for (int64_t k = begin; k < end; ++k) {
             const int64_t texel = table.texels[size_t(k)];
             const int row = int(texel / table.width), col = int(texel % table.width);
             geometry.load(scene, table, k);
             sequence.reset(hash_combine(map_key, uint64_t(texel)), uint32_t(options.samples),
-                           integrator.dimension_count());
-            PixelSums sums;
+                           integrator.dimension_count(transport == kIndirect));
             glm::dvec3 position(0.0), normal(0.0);
+            batch.clear();
             for (int s = 0; s < options.samples; ++s) {
                 const Sampler sampler(sequence, uint32_t(s));
                 const glm::vec2 u = sampler.get(0);
@@ -108,8 +110,27 @@ void bake_transport(const Scene& scene, const Integrator& integrator, const Texe
                     position += glm::dvec3(point.position);
                     normal += glm::dvec3(point.shading_normal);
                 }
-                sums.add(estimate(integrator, transport, point, sampler, local_rays));
+                // Shadow rays are gathered over the texel and traced together;
+                // indirect paths depend on their hits and are traced as they go.
+                if (transport == kDirect) {
+                    integrator.direct_rays(point, sampler, uint32_t(s), batch);
+                } else if (transport == kAo) {
+                    integrator.ao_rays(point, sampler, uint32_t(s), batch);
+                } else {
+                    sample_values[size_t(s)] = integrator.indirect(point, sampler, local_rays);
+                }
             }
+            if (transport != kIndirect) {
+                std::fill(sample_values.begin(), sample_values.end(), glm::vec3(0.0f));
+                batch.blocked.resize(batch.rays.size());
+                tracer.occluded(batch.rays.data(), batch.rays.size(), batch.blocked.data());
+                local_rays += batch.rays.size();
+                for (size_t r = 0; r < batch.rays.size(); ++r) {
+                    if (!batch.blocked[r]) sample_values[batch.samples[r]] += batch.values[r];
+                }
+            }
+            PixelSums sums;
+            for (const glm::vec3& value : sample_values) sums.add(value);
             const glm::vec3 mean = sums.mean(options.samples);
             for (int ch = 0; ch < 3; ++ch) color[size_t(4 * k + ch)] = mean[ch];
             color[size_t(4 * k + 3)] = 1.0f;
@@ -211,7 +232,8 @@ BakeResult bake(const Scene& scene, const BakeOptions& options, Progress& progre
             if (!needed(options.passes, tr)) continue;
             const auto pass_started = Clock::now();
             progress.begin(std::string("baking ") + kTransportNames[tr] + where, table.texels.size());
-            bake_transport(scene, integrator, table, tr, options, hash_combine(map_key, uint64_t(tr)), acc, rays, progress);
+            bake_transport(scene, tracer, integrator, table, tr, options, hash_combine(map_key, uint64_t(tr)), acc,
+                           rays, progress);
             progress.finish();
             transport_seconds[tr] += seconds_since(pass_started);
         }
