@@ -6,7 +6,9 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <string>
+#include <vector>
 
 #include <glm/geometric.hpp>
 
