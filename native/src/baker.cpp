@@ -68,6 +68,12 @@ struct PixelSums {
         lum += l;
         lum2 += l * l;
     }
+    void add(const glm::vec3& value, int64_t times) {  // `times` samples of `value`
+        sum += glm::dvec3(value) * double(times);
+        const double l = luminance(value);
+        lum += l * double(times);
+        lum2 += l * l * double(times);
+    }
     glm::vec3 mean(int n) const { return glm::vec3(sum / double(n)); }
     float mean_variance(int n) const {
         if (n < 2) return 0.0f;
@@ -95,6 +101,8 @@ void bake_transport(const Scene& scene, const RayTracer& tracer, const Integrato
         TexelGeometry geometry;
         SampleSequence sequence;
         ShadowBatch batch;
+        std::vector<Ray> ao_rays(size_t(options.samples));
+        std::vector<uint8_t> ao_blocked(size_t(options.samples));
         std::vector<glm::vec3> sample_values(size_t(options.samples));
         for (int64_t k = begin; k < end; ++k) {
             const int64_t texel = table.texels[size_t(k)];
@@ -104,6 +112,7 @@ void bake_transport(const Scene& scene, const RayTracer& tracer, const Integrato
                            integrator.dimension_count(transport == kIndirect));
             glm::dvec3 position(0.0), normal(0.0);
             batch.clear();
+            size_t ao_count = 0;
             for (int s = 0; s < options.samples; ++s) {
                 const Sampler sampler(sequence, uint32_t(s));
                 const glm::vec2 u = sampler.get(0);
@@ -117,22 +126,30 @@ void bake_transport(const Scene& scene, const RayTracer& tracer, const Integrato
                 if (transport == kDirect) {
                     integrator.direct_rays(point, sampler, uint32_t(s), batch);
                 } else if (transport == kAo) {
-                    integrator.ao_rays(point, sampler, uint32_t(s), batch);
+                    ao_count += integrator.ao_ray(point, sampler, ao_rays[ao_count]);
                 } else {
                     sample_values[size_t(s)] = integrator.indirect(point, sampler, local_rays);
                 }
             }
-            if (transport != kIndirect) {
-                std::fill(sample_values.begin(), sample_values.end(), glm::vec3(0.0f));
-                batch.blocked.resize(batch.rays.size());
-                tracer.occluded(batch.rays.data(), batch.rays.size(), batch.blocked.data());
-                local_rays += batch.rays.size();
-                for (size_t r = 0; r < batch.rays.size(); ++r) {
-                    if (!batch.blocked[r]) sample_values[batch.samples[r]] += batch.values[r];
-                }
-            }
             PixelSums sums;
-            for (const glm::vec3& value : sample_values) sums.add(value);
+            if (transport == kAo) {
+                tracer.occluded(ao_rays.data(), ao_count, ao_blocked.data());
+                local_rays += ao_count;
+                int64_t open = 0;
+                for (size_t r = 0; r < ao_count; ++r) open += !ao_blocked[r];
+                sums.add(glm::vec3(1.0f), open);
+            } else {
+                if (transport == kDirect) {
+                    std::fill(sample_values.begin(), sample_values.end(), glm::vec3(0.0f));
+                    batch.blocked.resize(batch.rays.size());
+                    tracer.occluded(batch.rays.data(), batch.rays.size(), batch.blocked.data());
+                    local_rays += batch.rays.size();
+                    for (size_t r = 0; r < batch.rays.size(); ++r) {
+                        if (!batch.blocked[r]) sample_values[batch.samples[r]] += batch.values[r];
+                    }
+                }
+                for (const glm::vec3& value : sample_values) sums.add(value);
+            }
             const glm::vec3 mean = sums.mean(options.samples);
             for (int ch = 0; ch < 3; ++ch) color[size_t(4 * k + ch)] = mean[ch];
             color[size_t(4 * k + 3)] = 1.0f;

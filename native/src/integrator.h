@@ -59,10 +59,13 @@ public:
     // Cosine-weighted fraction of the hemisphere open up to ao_distance.
     float ambient_occlusion(const SurfacePoint& point, const Sampler& sampler, uint64_t& rays) const;
     // The same two estimates as shadow rays of sample `sample`, appended to
-    // `batch` to be traced later: direct() and ambient_occlusion() equal the
-    // sum of the values of a sample's unoccluded rays.
+    // `batch` (or `ray`) to be traced later: direct() and ambient_occlusion()
+    // equal the sum of the values of a sample's unoccluded rays.
     void direct_rays(const SurfacePoint& point, const Sampler& sampler, uint32_t sample, ShadowBatch& batch) const;
-    void ao_rays(const SurfacePoint& point, const Sampler& sampler, uint32_t sample, ShadowBatch& batch) const;
+    // AO's ray is worth 1 when unoccluded: no value or sample to record.
+    bool ao_ray(const SurfacePoint& point, const Sampler& sampler, Ray& ray) const {
+        return hemisphere_ray(point, sampler, 0, settings_.ao_distance, ray);
+    }
     // Light that reached the point after 1..bounces diffuse reflections,
     // each scaled by the base colour where it reflected.
     glm::vec3 indirect(const SurfacePoint& point, const Sampler& sampler, uint64_t& rays) const;
