@@ -105,14 +105,52 @@ bool RayTracer::occluded(const glm::vec3& origin, const glm::vec3& direction, fl
     return ray.tfar < 0.0f;  // Embree sets tfar to -inf on a hit
 }
 
-void RayTracer::occluded(const Ray* rays, size_t count, uint8_t* blocked) const {
+namespace {
+
+// Packets of 8 (AVX2's width): a texel's rays start close together, and
+// Embree traverses a packet's shared nodes once. Measured (CPU time per AO
+// ray, 1 thread): rtcOccluded1 loop 159-165 ns, rtcOccluded1M 130,
+// packets of 4 148, of 8 118-123, of 16 118.
+template <int N> struct Packet;
+template <> struct Packet<8> {
+    using Rays = RTCRay8;
+    static void occluded(const int* valid, RTCScene scene, RTCIntersectContext* context, Rays* rays) {
+        rtcOccluded8(valid, scene, context, rays);
+    }
+};
+template <int N>
+void occluded_packets(RTCScene scene, const Ray* rays, size_t count, uint8_t* blocked) {
     RTCIntersectContext context;
     rtcInitIntersectContext(&context);
-    for (size_t i = 0; i < count; ++i) {
-        RTCRay ray = make_ray(rays[i].origin, rays[i].direction, rays[i].tfar);
-        rtcOccluded1(impl_->scene, &context, &ray);
-        blocked[i] = ray.tfar < 0.0f;
+    alignas(64) typename Packet<N>::Rays packet;
+    alignas(64) int valid[N];
+    for (size_t begin = 0; begin < count; begin += N) {
+        for (int j = 0; j < N; ++j) {
+            const bool live = begin + size_t(j) < count;
+            const Ray& r = rays[live ? begin + size_t(j) : begin];
+            valid[j] = live ? -1 : 0;
+            packet.org_x[j] = r.origin.x;
+            packet.org_y[j] = r.origin.y;
+            packet.org_z[j] = r.origin.z;
+            packet.dir_x[j] = r.direction.x;
+            packet.dir_y[j] = r.direction.y;
+            packet.dir_z[j] = r.direction.z;
+            packet.tnear[j] = 0.0f;
+            packet.tfar[j] = r.tfar;
+            packet.time[j] = 0.0f;
+            packet.mask[j] = 0xFFFFFFFFu;
+            packet.id[j] = 0;
+            packet.flags[j] = 0;
+        }
+        Packet<N>::occluded(valid, scene, &context, &packet);
+        for (int j = 0; j < N && begin + size_t(j) < count; ++j) blocked[begin + size_t(j)] = packet.tfar[j] < 0.0f;
     }
+}
+
+}  // namespace
+
+void RayTracer::occluded(const Ray* rays, size_t count, uint8_t* blocked) const {
+    occluded_packets<8>(impl_->scene, rays, count, blocked);
 }
 
 bool RayTracer::intersect(const glm::vec3& origin, const glm::vec3& direction, float tfar, Hit& hit) const {

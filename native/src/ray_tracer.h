@@ -33,8 +33,8 @@ public:
 
     // True if anything lies along origin + t * direction, t in (0, tfar).
     bool occluded(const glm::vec3& origin, const glm::vec3& direction, float tfar) const;
-    // blocked[i] = occluded(rays[i]): a tight loop, so Embree's code and data
-    // stay in cache over a texel's rays.
+    // blocked[i] = occluded(rays[i]), traced in packets of 8: pass rays that
+    // start close together and are in a sensible order (a texel's rays).
     void occluded(const Ray* rays, size_t count, uint8_t* blocked) const;
     // The closest hit along the ray, if any.
     bool intersect(const glm::vec3& origin, const glm::vec3& direction, float tfar, Hit& hit) const;
