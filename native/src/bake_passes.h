@@ -49,6 +49,11 @@ inline glm::vec3 estimate(const Integrator& integrator, int transport, const Sur
     }
 }
 
+// Sample dimensions a transport uses (each costs hashing per texel or point).
+inline uint32_t dimension_count(const Integrator& integrator, int transport) {
+    return transport == kAo ? Integrator::kAoDimensions : integrator.dimension_count(transport == kIndirect);
+}
+
 // Throws InvalidArgument for bad options or a scene with nothing to light;
 // `texels`: also the lightmap options (resolution, dilation, receivers).
 void validate_bake_options(const Scene& scene, const BakeOptions& options, bool texels);

@@ -109,7 +109,7 @@ void bake_transport(const Scene& scene, const RayTracer& tracer, const Integrato
             const int row = int(texel / table.width), col = int(texel % table.width);
             geometry.load(scene, table, k);
             sequence.reset(hash_combine(map_key, uint64_t(texel)), uint32_t(options.samples),
-                           integrator.dimension_count(transport == kIndirect));
+                           dimension_count(integrator, transport));
             glm::dvec3 position(0.0), normal(0.0);
             batch.clear();
             size_t ao_count = 0;

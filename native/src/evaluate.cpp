@@ -50,7 +50,7 @@ EvaluateResult evaluate(const Scene& scene, const float* points, const float* no
             for (int64_t i = begin; i < end; ++i) {
                 glm::dvec3 sum(0.0);
                 sequence.reset(hash_combine(key, uint64_t(i)), uint32_t(options.samples),
-                               integrator.dimension_count(tr == kIndirect));
+                               dimension_count(integrator, tr));
                 for (int s = 0; s < options.samples; ++s) {
                     const Sampler sampler(sequence, uint32_t(s));
                     sum += glm::dvec3(estimate(integrator, tr, surface[size_t(i)], sampler, local_rays));

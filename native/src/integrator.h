@@ -75,6 +75,8 @@ public:
     // How many sample dimensions a transport uses: direct light and AO only
     // those of the baked point; indirect light those of every bounce.
     uint32_t dimension_count(bool bounces) const { return dimension(bounces ? settings_.bounces + 1 : 1, 0); }
+    // AO uses the sample position and the hemisphere direction only.
+    static constexpr uint32_t kAoDimensions = kFirstDimension + 1;
 
 private:
     // A ray start off the surface on the side `direction` leaves by, so the
