@@ -101,23 +101,42 @@ def baseline_rays(kind, count, rng):
     return np.concatenate([origins, directions, tfar[:, None]], 1).astype(np.float32)
 
 
+def cpu_seconds(call):
+    """CPU time of all of this process's threads over call() (less sensitive
+    than wall time to other processes loading the machine), and its result."""
+    started = time.process_time()
+    result = call()
+    return time.process_time() - started, result
+
+
 def ray_throughput(scene):
+    """Rays per second, wall (the stats) and per CPU second. CPU: the bake's
+    CPU time minus that of building the same BVH (the bare loop over 1 ray),
+    against the bare loop's CPU time per ray (the same subtraction)."""
     rows = []
     rng = np.random.default_rng(0)
     for name in ("direct", "ao"):
         # Best of REPEATS for both, interleaved.
         ours = bare = 0.0
+        ours_cpu = bare_cpu = 0.0
         for _ in range(REPEATS):
-            result = lmrefine.bake(scene, RESOLUTION, passes=name, samples=32, ao_distance=AO_DISTANCE, dilation=0)
+            cpu, result = cpu_seconds(lambda: lmrefine.bake(scene, RESOLUTION, passes=name, samples=32,
+                                                            ao_distance=AO_DISTANCE, dilation=0))
             ours = max(ours, result.stats["rays_per_second"])
             rays = baseline_rays(name, int(result.stats["rays"]), rng)
-            bare = max(bare, len(rays) / lmrefine._native._bench_occluded_loop(scene, rays)[0])
-        rows.append((name, ours, bare))
+            build, _ = cpu_seconds(lambda: lmrefine._native._bench_occluded_loop(scene, rays[:1]))
+            loop_cpu, (seconds, _) = cpu_seconds(lambda: lmrefine._native._bench_occluded_loop(scene, rays))
+            bare = max(bare, len(rays) / seconds)
+            ours_cpu = max(ours_cpu, len(rays) / max(cpu - build, 1e-9))
+            bare_cpu = max(bare_cpu, len(rays) / max(loop_cpu - build, 1e-9))
+        rows.append((name, ours, bare, ours_cpu, bare_cpu))
     print(f"rays per second at {RESOLUTION}^2, 32 samples per texel, best of {REPEATS} "
           "(target: baker >= 70% of the bare loop)")
-    print(f"  {'pass':8} {'baker Mray/s':>13} {'bare rtcOccluded1 Mray/s':>25} {'ratio':>7}")
-    for name, ours, bare in rows:
-        print(f"  {name:8} {ours / 1e6:13.2f} {bare / 1e6:25.2f} {ours / bare:7.2f}")
+    print(f"  {'pass':8} {'baker Mray/s':>13} {'bare rtcOccluded1 Mray/s':>25} {'ratio':>7}"
+          f" {'per CPU s: baker':>17} {'bare':>6} {'ratio':>6}")
+    for name, ours, bare, ours_cpu, bare_cpu in rows:
+        print(f"  {name:8} {ours / 1e6:13.2f} {bare / 1e6:25.2f} {ours / bare:7.2f}"
+              f" {ours_cpu / 1e6:17.2f} {bare_cpu / 1e6:6.2f} {ours_cpu / bare_cpu:6.2f}")
 
 
 def relative_rmse(image, reference):
@@ -127,15 +146,19 @@ def relative_rmse(image, reference):
 def our_curve(scene, name, samples):
     reference = lmrefine.bake(scene, RESOLUTION, passes=name, samples=1024, seed=99, ao_distance=AO_DISTANCE,
                               dilation=0)[0]
-    curve = []
+    curve, cpu_curve = [], []
     for n in samples:
-        best = float("inf")
+        best = best_cpu = float("inf")
         for _ in range(REPEATS):
             started = time.perf_counter()
-            image = lmrefine.bake(scene, RESOLUTION, passes=name, samples=n, ao_distance=AO_DISTANCE, dilation=0)[0]
+            cpu, result = cpu_seconds(lambda: lmrefine.bake(scene, RESOLUTION, passes=name, samples=n,
+                                                            ao_distance=AO_DISTANCE, dilation=0))
             best = min(best, time.perf_counter() - started)
-        curve.append((n, best, relative_rmse(image, reference)))
-    return curve
+            best_cpu = min(best_cpu, cpu)
+        error = relative_rmse(result[0], reference)
+        curve.append((n, best, error))
+        cpu_curve.append((n, best_cpu, error))
+    return curve, cpu_curve
 
 
 def cycles_curves(spec, samples):
@@ -161,6 +184,7 @@ def cycles_curves(spec, samples):
     for name in ("direct", "ao"):
         reference = out[f"s1024r0/0/{name}"]
         curves[name] = [(n, min(float(out[f"s{n}r{r}/seconds/{name}"]) for r in range(REPEATS)),
+                         min(float(out[f"s{n}r{r}/cpu_seconds/{name}"]) for r in range(REPEATS)),
                          relative_rmse(out[f"s{n}r0/0/{name}"], reference)) for n in samples]
     return curves
 
@@ -181,16 +205,20 @@ def time_to_error_against_cycles(scene, spec):
     cycles = cycles_curves(spec, cycles_samples)
     print(f"\ntime to the same error against each one's 1024-sample reference, {RESOLUTION}^2, "
           f"whole bake calls (BVH build included for both), best of {REPEATS} (target: >= 3x)")
-    print(f"  {'pass':8} {'Cycles spp':>10} {'error':>7} {'Cycles s':>9} {'lmrefine s':>11} {'speedup':>8}")
+    print("  wall: seconds; CPU: CPU seconds of all threads (Cycles': Blender's process), less sensitive to load")
+    print(f"  {'pass':8} {'Cycles spp':>10} {'error':>7} {'Cycles s':>9} {'lmrefine s':>11} {'speedup':>8}"
+          f" {'Cycles CPU':>11} {'lmrefine CPU':>13} {'speedup':>8}")
     print("  (<=: lmrefine's fewest samples already beat that error; the speedup is then a lower bound)")
     for name in ("direct", "ao"):
-        ours = our_curve(scene, name, (1, 2, 4, 8, 16, 32, 64, 128))
-        for n, seconds, error in cycles[name]:
+        ours, ours_cpu = our_curve(scene, name, (1, 2, 4, 8, 16, 32, 64, 128))
+        for n, seconds, cpu, error in cycles[name]:
             mine, bound = time_to_error(ours, error)
+            mine_cpu, _ = time_to_error(ours_cpu, error)
             mark = "<=" if bound else "  "
-            print(f"  {name:8} {n:10d} {error:7.3f} {seconds:9.3f} {mark}{mine:9.3f} {mark}{seconds / mine:6.1f}x")
-        print(f"  ({name}: lmrefine samples, seconds, error: "
-              + ", ".join(f"{n}: {t:.3f} s {e:.3f}" for n, t, e in ours) + ")")
+            print(f"  {name:8} {n:10d} {error:7.3f} {seconds:9.3f} {mark}{mine:9.3f} {mark}{seconds / mine:6.1f}x"
+                  f" {cpu:11.3f} {mark}{mine_cpu:11.3f} {mark}{cpu / mine_cpu:6.1f}x")
+        print(f"  ({name}: lmrefine samples, seconds, CPU seconds, error: "
+              + ", ".join(f"{n}: {t:.3f} s {c:.3f} {e:.3f}" for (n, t, e), (_, c, _) in zip(ours, ours_cpu)) + ")")
 
 
 def main():

@@ -9,7 +9,8 @@ jobs.json holds a list of jobs, each one scene in the same terms as
 lmrefine.Scene (meshes with per-corner UVs, lights with Blender's property
 names, world colour) plus the bake settings. Every job is baked in one Blender
 process; out.npz holds "<job>/<mesh>/<pass>" -> float32 (R, R, 4), rows top
-down like lmrefine's arrays, and "<job>/seconds/<pass>" -> bake time.
+down like lmrefine's arrays, and "<job>/seconds/<pass>" -> bake time
+("<job>/cpu_seconds/<pass>": CPU time of all of Blender's threads).
 """
 import json
 import sys
@@ -128,7 +129,7 @@ def bake_job(job, out):
     for index, spec in enumerate(job.get("lights", [])):
         add_light(scene, index, spec)
     for name in job["passes"]:
-        started = time.perf_counter()
+        started, cpu_started = time.perf_counter(), time.process_time()
         for index, obj, image in receivers:
             bpy.ops.object.select_all(action="DESELECT")
             obj.select_set(True)
@@ -140,6 +141,7 @@ def bake_job(job, out):
                 pixels = bake_pixels(image, name)
             out[f"{job['name']}/{index}/{name}"] = pixels
         out[f"{job['name']}/seconds/{name}"] = np.float64(time.perf_counter() - started)
+        out[f"{job['name']}/cpu_seconds/{name}"] = np.float64(time.process_time() - cpu_started)
 
 
 def main():
