@@ -23,18 +23,24 @@ inline uint64_t mix64(uint64_t x) {  // splitmix64 finalizer
 
 inline uint64_t hash_combine(uint64_t a, uint64_t b) { return mix64(a ^ mix64(b)); }
 
+// The smallest 2^k - 1 >= count - 1 (count >= 1).
+inline uint32_t power_of_two_mask(uint32_t count) {
+    uint32_t mask = count - 1;
+    mask |= mask >> 1;
+    mask |= mask >> 2;
+    mask |= mask >> 4;
+    mask |= mask >> 8;
+    mask |= mask >> 16;
+    return mask;
+}
+
 // A random bijection of [0, count) picked by `seed`: invertible steps on the
 // smallest power-of-two domain (xor, odd multiply, xorshift), walked until
 // the value falls inside [0, count) (the construction of Kensler 2013,
 // "Correlated Multi-Jittered Sampling", with fewer rounds: it only has to
 // decorrelate dimensions, and it runs once per sample and dimension).
 inline uint32_t permute(uint32_t i, uint32_t count, uint32_t seed) {
-    uint32_t w = count - 1;
-    w |= w >> 1;
-    w |= w >> 2;
-    w |= w >> 4;
-    w |= w >> 8;
-    w |= w >> 16;
+    const uint32_t w = power_of_two_mask(count);
     do {
         i ^= seed;
         i *= 0xe170893d;
@@ -142,12 +148,7 @@ class SampleSequence {
 public:
     void reset(uint64_t key, uint32_t count, uint32_t dimensions) {
         // Shuffled indices stay below the next power of two >= count.
-        uint32_t mask = count - 1;
-        mask |= mask >> 1;
-        mask |= mask >> 2;
-        mask |= mask >> 4;
-        mask |= mask >> 8;
-        mask |= mask >> 16;
+        const uint32_t mask = power_of_two_mask(count);
         if (points_.empty() || mask != mask_) {  // the unscrambled points, shared by all texels
             mask_ = mask;
             points_.resize(4 * (size_t(mask) + 1));
