@@ -234,7 +234,7 @@ def room():
     add_light("Sun", "SUN", sun_at, aim(sun_at, (-1.0, 0.2, 0.0)), energy=5.0, angle=math.radians(0.5))
     add_light("CeilingLamp", "POINT", (0.8, 0.3, 2.4), energy=150.0, shadow_soft_size=0.15)
     set_world((0.3, 0.4, 0.55))
-    return {"passes": ["direct", "indirect"]}
+    return {"passes": ["combined"]}  # direct + indirect
 
 
 def fence_and_tree():
@@ -439,7 +439,7 @@ def export(path, info):
 
 def main():
     args = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
-    out_dir = args[0] if args else os.path.dirname(os.path.abspath(__file__))
+    out_dir = os.path.abspath(args[0] if args else os.path.dirname(os.path.abspath(__file__)))
     names = args[1:] or list(SCENES)
     for name in names:
         if name not in SCENES:
