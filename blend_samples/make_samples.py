@@ -266,7 +266,7 @@ def fence_and_tree():
                      bm.verts.new(centre - b)]
             bm.faces.new(verts)
     make_object("Tree", tree, (0.25, 0.45, 0.2), receiver=False)
-    add_light("Sun", "SUN", (0, 0, 10), (math.radians(40), 0.0, math.radians(200)), energy=4.0, angle=math.radians(0.8))
+    add_light("Sun", "SUN", (0, 0, 10), (math.radians(55), 0.0, math.radians(20)), energy=4.0, angle=math.radians(0.8))
     set_world((0.05, 0.07, 0.1))
     return {"passes": ["direct"]}
 
