@@ -38,7 +38,7 @@ import sys
 import bmesh
 import bpy
 import numpy as np
-from mathutils import Matrix, Vector
+from mathutils import Vector
 
 # Target edge length of receiver cells, metres.
 CELL = 0.3
@@ -48,7 +48,6 @@ CELL = 0.3
 # each box by 1/DIV on every side, DIV = int(100 / Margin)). Smart UV Project
 # makes few large charts, fine from 256^2 on.
 LIGHTMAP_PACK_MARGIN = 0.2  # the operator's "Margin" (percent): DIV = 500
-SMART_ISLAND_MARGIN = 0.006  # Smart UV Project's island margin (fraction of the atlas)
 MIN_RESOLUTION = {"lightmap": 512, "smart": 256}
 
 
@@ -268,7 +267,7 @@ def fence_and_tree():
     make_object("Tree", tree, (0.25, 0.45, 0.2), receiver=False)
     add_light("Sun", "SUN", (0, 0, 10), (math.radians(55), 0.0, math.radians(20)), energy=4.0, angle=math.radians(0.8))
     set_world((0.05, 0.07, 0.1))
-    return {"passes": ["direct"]}
+    return {"passes": ["direct"], "smart_margin": 0.035}
 
 
 def game_level():
@@ -321,7 +320,13 @@ def select_only(objects):
     bpy.context.view_layer.objects.active = objects[0]
 
 
-def unwrap(objects):
+# Smart UV Project's island margin is relative to the islands' sizes: this
+# gives gutters of 3 to 5 texels at 256^2; scenes with few large islands set
+# their own ("smart_margin") to keep at least 2.
+SMART_ISLAND_MARGIN = 0.02
+
+
+def unwrap(objects, smart_margin=SMART_ISLAND_MARGIN):
     """Two shared atlases over all receivers: "Lightmap" (Lightmap Pack) and
     "LightmapSmart" (Smart UV Project)."""
     for obj in objects:
@@ -336,7 +341,7 @@ def unwrap(objects):
         obj.data.uv_layers.active = obj.data.uv_layers["LightmapSmart"]
     bpy.ops.object.mode_set(mode="EDIT")  # multi-object edit: one shared atlas
     bpy.ops.mesh.select_all(action="SELECT")
-    bpy.ops.uv.smart_project(angle_limit=math.radians(66), island_margin=SMART_ISLAND_MARGIN,
+    bpy.ops.uv.smart_project(angle_limit=math.radians(66), island_margin=smart_margin,
                              area_weight=0.0, correct_aspect=True, scale_to_bounds=False)
     bpy.ops.object.mode_set(mode="OBJECT")
     for obj in objects:
@@ -447,7 +452,7 @@ def main():
         bpy.ops.wm.read_factory_settings(use_empty=True)
         bpy.context.preferences.filepaths.save_version = 0  # no .blend1 backups
         info = SCENES[name]()
-        unwrap(receivers())
+        unwrap(receivers(), info.get("smart_margin", SMART_ISLAND_MARGIN))
         blend = os.path.join(out_dir, name + ".blend")
         bpy.ops.wm.save_as_mainfile(filepath=blend, compress=True)
         triangles, blockers = export(os.path.join(out_dir, name + ".npz"), info)
