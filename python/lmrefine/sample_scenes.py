@@ -90,6 +90,17 @@ class SampleScene:
             scene.set_world(tuple(self.world))
         return scene
 
+    def save(self, path):
+        """Write the scene as an .npz that load_sample reads (the format
+        blend_samples/make_samples.py writes)."""
+        meta = {"name": self.name, "description": self.description, "objects": list(self.objects),
+                "lights": list(self.lights), "world": [float(c) for c in self.world], "passes": list(self.passes)}
+        np.savez_compressed(
+            path, positions=self.positions, triangles=self.triangles, normals=self.normals,
+            base_color=self.base_color, object_id=self.object_id, occluder_positions=self.occluder_positions,
+            occluder_triangles=self.occluder_triangles, meta=np.array(json.dumps(meta)),
+            **{UV_VARIANTS[variant]: uvs for variant, uvs in self.uvs.items()})
+
     def triangle_areas(self):
         """(T,) world-space area of every receiver triangle."""
         p = self.positions[self.triangles]
