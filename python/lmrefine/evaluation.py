@@ -240,6 +240,9 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
     result["notes"] = [] if gain else _diagnose(result, context)
     if not gain and not result["notes"]:
         result["notes"].append("no cause found among tessellation, chart size and refiner limits")
+    if result["rmse_refined"] > result["rmse_baseline"]:
+        result["notes"].append("the error over all points grew: the texels taken from flat areas cost more there "
+                               "than the transitions gained")
     stages.seconds["metrics"] = time.perf_counter() - start
 
     if out_dir is not None:

@@ -189,6 +189,7 @@ def scene_markdown(result):
     ]
     if r["gain"]:
         lines.append(f"**Gain**: transition-point RMSE {_change(r['transition_rmse_baseline'], r['transition_rmse_refined'])}.")
+        lines += [f"- {note}" for note in r["notes"]]
     else:
         lines.append("**No gain on this scene.** Why:")
         lines += [f"- {note}" for note in r["notes"]]
