@@ -89,9 +89,12 @@ def test_the_pipeline_reports_every_figure_with_sensible_values(tmp_path):
     # search places the refined map where its error says.
     assert report["transition_widening"] > 1.05
     ratio, status = report["equal_error_resolution_ratio"], report["equal_error_status"]
+    # The baseline is limited by resolution here, not noise: a ratio exists.
     assert status in ("within", "below", "above") and ratio > 0
     if report["rmse_refined"] < report["rmse_baseline"]:
         assert ratio > 1
+    # The ground truth is much less noisy than the errors it measures.
+    assert 0 <= report["truth_noise_rmse"] < 0.2 * report["rmse_baseline"]
     for stage in ("bake baseline", "refine", "bake refined", "ground truth", "bake resolution sweep", "metrics",
                   "pictures"):
         assert report["timings"][stage] >= 0

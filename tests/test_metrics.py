@@ -144,5 +144,18 @@ def test_equal_error_search_finds_a_known_crossing():
     # Noisy, non-monotone baseline: the first crossing counts.
     ratio, status = metrics.equal_error_resolution(multipliers, [8, 5, 6, 2, 1], 5.5)
     assert status == "within" and 1.0 < ratio < 1.5
+    # A baseline whose error hardly falls with resolution (noise-limited): no answer.
+    ratio, status = metrics.equal_error_resolution(multipliers, [0.22, 0.22, 0.215, 0.21, 0.205], 0.2)
+    assert status == "flat" and np.isnan(ratio)
     with pytest.raises(ValueError, match="ascending"):
         metrics.equal_error_resolution([2, 1], [1, 2], 1.5)
+
+
+def test_truth_noise_is_the_noise_of_the_mean_of_two_estimates(rng):
+    truth = rng.random((200000, 3))
+    first = truth + rng.normal(0, 0.1, truth.shape)
+    second = truth + rng.normal(0, 0.1, truth.shape)
+    # Each estimate has noise 0.1; their mean has 0.1 / sqrt(2).
+    assert metrics.truth_noise(first, second) == pytest.approx(0.1 / np.sqrt(2), rel=0.01)
+    measured = metrics.error_stats((first + second) / 2, truth)["rmse"]
+    assert metrics.truth_noise(first, second) == pytest.approx(measured, rel=0.01)

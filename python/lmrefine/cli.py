@@ -68,7 +68,8 @@ def evaluation_options(args):
         refine_options["passes"] = args.refine_passes
     return EvaluationOptions(resolution=args.resolution, samples=args.samples, truth_samples=args.truth_samples,
                              points=args.points, seed=args.seed, multipliers=args.multipliers,
-                             padding=args.padding, denoise=args.denoise, refine_options=refine_options)
+                             padding=args.padding, denoise=args.denoise, bake_pass=args.bake_pass,
+                             refine_options=refine_options)
 
 
 def load_scenes(names):
@@ -95,8 +96,9 @@ def run_evaluate(args):
         bar.close()
     print(summary_table(summary))
     for scene in summary["scenes"]:
-        if not scene["gain"]:
-            print(f"\n{scene['scene']} ({scene['variant']}): no gain: " + "; ".join(scene["notes"]))
+        if scene["notes"]:
+            verdict = "gain, but" if scene["gain"] else "no gain"
+            print(f"\n{scene['scene']} ({scene['variant']}): {verdict}: " + "; ".join(scene["notes"]))
     print(f"\nwrote {args.out}/report.md, report.json and one folder of pictures per scene")
     return summary
 
@@ -135,6 +137,8 @@ def add_evaluation_arguments(parser, resolution, points):
     parser.add_argument("--strength", type=float, help="refine_uvs strength (default: refine_uvs' own)")
     parser.add_argument("--refine-passes", type=int, help="refine_uvs passes (default: refine_uvs' own)")
     parser.add_argument("--denoise", action="store_true", help="denoise every bake (edge-aware)")
+    parser.add_argument("--pass", dest="bake_pass", choices=("direct", "ao", "indirect", "combined"),
+                        help="light to bake and compare (default: the scene's own: direct, combined for the room)")
 
 
 def _demo_scenes(args):

@@ -35,6 +35,7 @@ class EvaluationOptions:
     multipliers: tuple = DEFAULT_MULTIPLIERS
     padding: float = 2.0              # gutter the refined layout must keep, texels
     denoise: bool = False
+    bake_pass: str = None             # None: the scene's own pass (direct, or combined for the room)
     refine_options: dict = field(default_factory=dict)   # passed to refine_uvs (strength, passes, ...)
 
     def check(self):
@@ -71,13 +72,15 @@ class _Stages:
 
 def _bake_map(sample, uvs, resolution, options, progress):
     scene = sample.to_scene(uvs)
-    passes = _single_pass(sample)
+    passes = _single_pass(sample, options)
     result = bake(scene, resolution, passes=passes, samples=options.samples, seed=options.seed,
                   progress=progress, denoise=options.denoise)
     return np.ascontiguousarray(result[0][..., :3])
 
 
-def _single_pass(sample):
+def _single_pass(sample, options):
+    if options.bake_pass:
+        return options.bake_pass
     if len(sample.passes) != 1:
         raise ValueError(f"scene '{sample.name}' asks for passes {sample.passes}; the evaluation compares one "
                          "lightmap: use 'combined' for direct + indirect")
@@ -134,7 +137,7 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
     label = f"{sample.name}/{options.variant}"
     stages = _Stages(label, progress)
     resolution = int(options.resolution)
-    passes = _single_pass(sample)
+    passes = _single_pass(sample, options)
     uvs, triangles = sample.layout(options.variant)
 
     baseline = stages.run("bake baseline", lambda p: _bake_map(sample, uvs, resolution, options, p))
@@ -163,10 +166,17 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
     def truth_at(p):
         every_point = np.concatenate([points.points, stencil_points])
         every_normal = np.concatenate([points.normals, stencil_normals])
-        return evaluate_light(scene, every_point, every_normal, passes=passes, samples=options.truth_samples,
-                              seed=options.seed + 1, progress=p)
-    every_truth = stages.run("ground truth", truth_at).astype(np.float64)
-    truth, neighbour_truth = every_truth[:len(points)], every_truth[len(points):]
+        first = evaluate_light(scene, every_point, every_normal, passes=passes, samples=options.truth_samples,
+                               seed=options.seed + 1, progress=p)
+        # A second, independent estimate at the points: the truth is their
+        # mean, and their difference measures the truth's own noise.
+        second = evaluate_light(scene, points.points, points.normals, passes=passes,
+                                samples=options.truth_samples, seed=options.seed + 2, progress=p)
+        return first.astype(np.float64), second.astype(np.float64)
+    every_truth, second_truth = stages.run("ground truth", truth_at)
+    truth = (every_truth[:len(points)] + second_truth) / 2
+    neighbour_truth = every_truth[len(points):]
+    truth_noise = metrics.truth_noise(every_truth[:len(points)], second_truth)
     gradient = metrics.surface_gradient(truth, neighbour_truth, distances)
     transitions = metrics.transition_mask(gradient)
 
@@ -219,6 +229,7 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
     result["transition_widening_linear"] = (math.sqrt(result["transition_widening"])
                                             if math.isfinite(result["transition_widening"]) else float("nan"))
     result["truth_mean"] = float(truth.mean())
+    result["truth_noise_rmse"] = truth_noise
     object_ids = sample.object_id[points.triangle]
     result["objects"] = []
     for index, name in enumerate(sample.objects):
@@ -240,6 +251,13 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
     result["notes"] = [] if gain else _diagnose(result, context)
     if not gain and not result["notes"]:
         result["notes"].append("no cause found among tessellation, chart size and refiner limits")
+    if result["equal_error_status"] == "flat":
+        sweep_rmse = [s["rmse"] for s in result["resolution_sweep"]]
+        result["notes"].append(
+            f"noise-limited: the uniform baseline's error hardly falls with resolution ({sweep_rmse[0]:.4g} at "
+            f"{resolution}, {sweep_rmse[-1]:.4g} at {result['resolution_sweep'][-1]['resolution']}), so there is no "
+            f"equal-error resolution; bake with more --samples or --denoise (ground-truth noise: {truth_noise:.3g}, "
+            "raise --truth-samples if that is close to the errors)")
     if result["rmse_refined"] > result["rmse_baseline"]:
         result["notes"].append("the error over all points grew: the texels taken from flat areas cost more there "
                                "than the transitions gained")

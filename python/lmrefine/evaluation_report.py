@@ -150,6 +150,8 @@ def equal_error_text(ratio, status):
         return "n/a"
     if status == "above":
         return f">= {ratio:.2f}x (better than the baseline at the largest resolution tested)"
+    if status == "flat":
+        return "undefined (the baseline's error hardly falls with resolution: noise-limited)"
     if status == "below":
         return f"{ratio:.2f}x (below 1: worse than the baseline at the same resolution)"
     return f"{ratio:.2f}x"
@@ -163,8 +165,9 @@ def scene_markdown(result):
         r.get("description", ""),
         "",
         f"Pass `{r['pass']}`, {r['bake_samples']} bake samples per texel, ground truth from "
-        f"{r['truth_samples']} samples at {r['points']} surface points ({r['transition_points']} transition points: "
-        f"top decile of the surface gradient, step {r['gradient_step_m'] * 1000:.1f} mm).",
+        f"{r['truth_samples']} samples (twice) at {r['points']} surface points ({r['transition_points']} transition "
+        f"points: top decile of the surface gradient, step {r['gradient_step_m'] * 1000:.1f} mm); the ground truth's "
+        f"own noise is {_number(r['truth_noise_rmse'], 3)} RMS.",
         "",
         "| | baseline | refined | change |",
         "|---|---|---|---|",
@@ -230,6 +233,8 @@ def summary_table(summary):
         ratio = r["equal_error_resolution_ratio"]
         ratio_text = "n/a" if ratio is None else {"above": ">=", "below": ""}.get(r["equal_error_status"], "") + \
             f"{ratio:.2f}x"
+        if r["equal_error_status"] == "flat":
+            ratio_text = "noise-limited"
         lines.append(
             f"| {r['scene']} | {r['variant']} | {r['resolution']} | {_number(r['rmse_baseline'])} -> "
             f"{_number(r['rmse_refined'])} ({_change(r['rmse_baseline'], r['rmse_refined'])}) | "
@@ -252,6 +257,8 @@ def write_summary(out_dir, summary):
     for r in summary["scenes"]:
         if not r["gain"]:
             lines.append(f"- **{r['scene']} ({r['variant']}) shows no gain**: " + "; ".join(r["notes"]) + ".")
+        elif r["notes"]:
+            lines.append(f"- {r['scene']} ({r['variant']}): " + "; ".join(r["notes"]) + ".")
     lines += ["", "Per scene: " + ", ".join(f"[{r['scene']}_{r['variant']}]({r['scene']}_{r['variant']}/report.md)"
                                             for r in summary["scenes"]), ""]
     with open(os.path.join(out_dir, "report.md"), "w") as handle:

@@ -24,7 +24,11 @@ Definitions (docs/evaluation.md gives the reasoning):
   in area; its square root is the widening of an edge in texels).
 * **Equal-error resolution**: the resolution (as a multiple of R) at which the
   uniform baseline's error equals the refined map's error at R, interpolated
-  linearly in error against log-resolution (:func:`equal_error_resolution`).
+  linearly in error against log-resolution (:func:`equal_error_resolution`);
+  undefined when the baseline's error hardly falls with resolution (noise).
+* **Ground-truth noise**: the truth is the mean of two independent
+  evaluations; half the RMS of their difference is its own noise
+  (:func:`truth_noise`).
 """
 
 from dataclasses import dataclass
@@ -123,6 +127,13 @@ def error_stats(values, truth, where=None):
     return {"rmse": float(np.sqrt(np.mean(difference ** 2))), "mae": float(np.mean(np.abs(difference)))}
 
 
+def truth_noise(first, second):
+    """RMS noise of the mean of two independent, equally noisy estimates
+    (P, C) of the same values: half the RMS of their difference."""
+    difference = np.asarray(first, np.float64) - np.asarray(second, np.float64)
+    return float(np.sqrt(np.mean(difference ** 2)) / 2) if difference.size else float("nan")
+
+
 def luminance(rgb):
     return np.asarray(rgb, np.float64)[:, :3] @ LUMINANCE.astype(np.float64)
 
@@ -209,7 +220,7 @@ def transition_widening(density_baseline, density_refined, point_triangle, trans
     return float(selected.mean()) if selected.size else float("nan")
 
 
-def equal_error_resolution(multipliers, errors, target):
+def equal_error_resolution(multipliers, errors, target, min_drop=0.1):
     """Where does the uniform baseline's error, measured at resolutions
     R x `multipliers` (ascending, the first one 1), reach `target` (the
     refined map's error at R)? Linear interpolation of error against
@@ -219,7 +230,9 @@ def equal_error_resolution(multipliers, errors, target):
     "below" (the refined map is worse than the baseline at R: ratio < 1,
     extrapolated along the first segment, at least multipliers[0] / 4) or
     "above" (better than the baseline at the largest multiplier: ratio is
-    that multiplier, a lower bound)."""
+    that multiplier, a lower bound). When the baseline's error drops by less
+    than `min_drop` (a fraction) over the whole range, resolution is not what
+    limits it (noise is): (NaN, "flat")."""
     m = np.asarray(multipliers, np.float64)
     e = np.asarray(errors, np.float64)
     if m.ndim != 1 or m.shape != e.shape or len(m) < 2 or np.any(np.diff(m) <= 0) or m[0] <= 0:
@@ -227,6 +240,8 @@ def equal_error_resolution(multipliers, errors, target):
     if not np.isfinite(target) or not np.isfinite(e).all():
         return float("nan"), "undefined"
     log_m = np.log(m)
+    if e[-1] > (1.0 - min_drop) * e[0]:
+        return float("nan"), "flat"
     if target > e[0]:
         slope = (e[1] - e[0]) / (log_m[1] - log_m[0])
         if slope >= 0:
