@@ -2,7 +2,6 @@
 ground truth, metrics, report), and its CLI."""
 
 import json
-import math
 
 import numpy as np
 import pytest

@@ -8,7 +8,6 @@ Used by ``python3 -m lmrefine evaluate`` and ``demo``; the metrics are defined
 in :mod:`lmrefine.metrics` and docs/evaluation.md.
 """
 
-import json
 import math
 import os
 import time
@@ -115,12 +114,13 @@ def _diagnose(result, context):
     widening = result["transition_widening"]
     if widening is not None and widening < 1.25:
         notes.append(f"transition points gained little texel density (widening {widening:.2f}x)")
-    if context["texels_per_transition_triangle"] > 16:
+    small_charts = context["chart_texels_at_transitions"] < 100
+    if context["texels_per_transition_triangle"] > 16 and not small_charts:
         notes.append(f"coarse tessellation: a triangle under a transition covers "
                      f"{context['texels_per_transition_triangle']:.0f} texels (median), and the texel density "
                      "is constant inside a triangle, so texels cannot gather at an edge that crosses it "
                      "(method.md section 5): subdivide the receivers")
-    if context["chart_texels_at_transitions"] < 100:
+    if small_charts:
         notes.append(f"small charts: the charts under transitions cover {context['chart_texels_at_transitions']:.0f} "
                      "texels (median) and the gutters between charts keep their width, so texels can hardly move "
                      "towards an edge (Lightmap Pack makes one chart per face): use a layout with larger charts "
