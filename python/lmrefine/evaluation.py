@@ -107,8 +107,9 @@ def _diagnose(result, context):
     notes = []
     report = context["refine_report"]
     if report.get("backoff", 1.0) < 1.0:
-        notes.append(f"the refiner kept only {report['backoff'] * 100:.0f}% of the full deformation "
-                     f"(limited by {', '.join(report.get('limited_by', [])) or 'nothing reported'})")
+        where = (f" over {report['backoff_area'] * 100:.0f}% of the grid" if "backoff_area" in report else "")
+        notes.append(f"the refiner backed off{where}, down to {report['backoff'] * 100:.0f}% of the full "
+                     f"deformation (limited by {', '.join(report.get('limited_by', [])) or 'nothing reported'})")
     elif report.get("limited_by"):
         notes.append(f"the refiner was limited by {', '.join(report['limited_by'])}")
     widening = result["transition_widening"]

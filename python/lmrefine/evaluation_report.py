@@ -157,6 +157,15 @@ def equal_error_text(ratio, status):
     return f"{ratio:.2f}x"
 
 
+def _backoff_text(refine):
+    kept = refine.get("backoff", 1.0)
+    if kept >= 1.0:
+        return "kept its full deformation everywhere"
+    area = refine.get("backoff_area")
+    where = f" over {area * 100:.0f}% of the grid" if area is not None else ""
+    return f"backed off{where}, down to {kept * 100:.0f}% of the full deformation"
+
+
 def scene_markdown(result):
     r = result
     lines = [
@@ -185,8 +194,7 @@ def scene_markdown(result):
         f"map): **{equal_error_text(r['equal_error_resolution_ratio'], r['equal_error_status'])}** over all points, "
         f"{equal_error_text(r['transition_equal_error_resolution_ratio'], r['transition_equal_error_status'])} "
         "on transition points.",
-        f"- Refiner: strength used {_number(r['refine'].get('strength_used'), 3)}, kept "
-        f"{_number(100 * r['refine'].get('backoff', 1.0), 3)}% of the full deformation, limited by: "
+        f"- Refiner: {_backoff_text(r['refine'])}, limited by: "
         f"{', '.join(r['refine'].get('limited_by') or []) or 'nothing'}.",
         "",
     ]
