@@ -23,18 +23,30 @@ except ImportError as error:  # pragma: no cover - depends on the build state
 
 from ._native import (  # noqa: F401  (re-exports)
     CancelledError,
+    check_layout,
     coverage_mask,
     find_charts,
+    grid_cell_areas,
     read_image,
+    run_automaton,
+    warp_uvs,
     write_image,
 )
+from .refine import RefineResult, identity_grid, refine_uvs  # noqa: F401
 
 __version__ = _native.__version__
 
 __all__ = [
     "CancelledError",
+    "RefineResult",
+    "check_layout",
     "coverage_mask",
     "find_charts",
+    "grid_cell_areas",
+    "identity_grid",
     "read_image",
+    "refine_uvs",
+    "run_automaton",
+    "warp_uvs",
     "write_image",
 ]
