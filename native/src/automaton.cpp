@@ -23,6 +23,8 @@ using automaton_detail::Level;
 // Coarsen until the grid is at most this many cells across: a level that
 // small converges in a few dozen steps.
 constexpr int kCoarsestCells = 8;
+// A level whose nodes all moved less than this (in its cells) in a step has settled.
+constexpr double kSettledMove = 1e-3;
 
 int level_count(int width, int height, bool coarse_to_fine) {
     int levels = 1;
@@ -165,17 +167,17 @@ void run_level(Level& level, const AutomatonOptions& options, bool ring, LevelSt
     stats.converged = false;
     for (int s = 0; s < options.max_steps; ++s) {
         if (progress) progress->check();
-        stats.max_difference = automaton_detail::step(level, options);
-        if (stats.max_difference < options.delta) {
-            // The state before this step already met delta: undo nothing (the
-            // step only moved it closer) but stop here.
-            stats.converged = true;
-        }
+        const automaton_detail::StepStats step = automaton_detail::step(level, options);
+        stats.max_difference = step.difference;
+        stats.converged = step.difference < options.delta;
+        // Settled: guards hold the remaining differences and nodes have
+        // stopped moving; more steps would only let diffusion creep on.
+        stats.settled = !stats.converged && step.moved < kSettledMove;
         ++stats.steps;
         ++total_steps;
         if (options.check_invariants) automaton_detail::check_invariants(level, total_steps);
         if (progress) progress->advance();
-        if (stats.converged) break;
+        if (stats.converged || stats.settled) break;
     }
 }
 

@@ -55,9 +55,13 @@ struct Level {
 // energies and uncovered areas already in `level` (grid and energy set).
 void prepare_level(Level& level, const AutomatonOptions& options, bool ring);
 
-// One synchronous step; returns the largest neighbour density difference
-// (relative to the reference density) before the step.
-double step(Level& level, const AutomatonOptions& options);
+struct StepStats {
+    double difference;  // largest neighbour density difference / reference density, before the step
+    double moved;       // largest node move made, in cells of this level
+};
+
+// One synchronous step.
+StepStats step(Level& level, const AutomatonOptions& options);
 
 // Throws lmrefine::Error naming the first broken invariant (tests, debugging).
 void check_invariants(const Level& level, int step_index);

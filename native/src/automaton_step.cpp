@@ -155,7 +155,7 @@ void prepare_level(Level& level, const AutomatonOptions& options, bool ring) {
     level.row_difference.assign(size_t(rows + 1), 0.0);
 }
 
-double step(Level& level, const AutomatonOptions& options) {
+StepStats step(Level& level, const AutomatonOptions& options) {
     const int rows = level.rows(), cols = level.cols(), channels = level.channels;
     const Facing face = facing(channels);
     const std::vector<glm::dvec2>& nodes = level.grid.nodes;
@@ -339,9 +339,23 @@ double step(Level& level, const AutomatonOptions& options) {
         }
     }
 
+    // The largest node move actually made, in cell sizes of this level.
+    const double block = level.grid.xs[1] - level.grid.xs[0];
+    parallel_for(rows + 1, kRowGrain, [&](int64_t begin, int64_t end) {
+        for (int i = int(begin); i < int(end); ++i) {
+            double largest = 0.0;
+            for (int j = 0; j <= cols; ++j) {
+                const glm::dvec2 d = level.next_nodes[level.node(i, j)] - nodes[level.node(i, j)];
+                largest = std::max(largest, glm::dot(d, d));
+            }
+            level.row_difference[size_t(i)] = largest;
+        }
+    });
+    const double moved = std::sqrt(*std::max_element(level.row_difference.begin(), level.row_difference.end()));
+
     level.grid.nodes.swap(level.next_nodes);
     level.energy.swap(level.next_energy);
-    return difference;
+    return {difference, moved / block};
 }
 
 void check_invariants(const Level& level, int step_index) {
