@@ -40,7 +40,8 @@ struct Level {
 
     // Scratch, rebuilt every step.
     std::vector<double> area, safe_radius, quality;
-    std::vector<double> diffusion_density, pressure_density;  // cells * channels
+    std::vector<double> diffusion_density;  // cells * channels
+    std::vector<double> pressure_density;   // cells * axes: one, or y and x for four channels
     std::vector<double> push_v, flux_v;  // rows * (cols + 1): edge left of cell (i, j); > 0 pushes right
     std::vector<double> push_h, flux_h;  // (rows + 1) * cols: edge above cell (i, j); > 0 pushes down
     std::vector<double> row_difference;  // per row of edges, the largest density difference

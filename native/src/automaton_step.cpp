@@ -147,7 +147,7 @@ void prepare_level(Level& level, const AutomatonOptions& options, bool ring) {
     level.safe_radius.resize(cells);
     level.quality.resize(cells);
     level.diffusion_density.resize(cells * channels);
-    level.pressure_density.resize(cells * channels);
+    level.pressure_density.resize(cells * (channels == 4 ? 2 : 1));
     level.push_v.assign(size_t(rows) * (cols + 1), 0.0);
     level.flux_v.assign(size_t(rows) * (cols + 1), 0.0);
     level.push_h.assign(size_t(rows + 1) * cols, 0.0);
@@ -158,6 +158,7 @@ void prepare_level(Level& level, const AutomatonOptions& options, bool ring) {
 StepStats step(Level& level, const AutomatonOptions& options) {
     const int rows = level.rows(), cols = level.cols(), channels = level.channels;
     const Facing face = facing(channels);
+    const int axes = channels == 4 ? 2 : 1;  // pressure: y (and x) axis
     const std::vector<glm::dvec2>& nodes = level.grid.nodes;
 
     // 1. Cell state: area, how far its corners may move, densities.
@@ -172,11 +173,20 @@ StepStats step(Level& level, const AutomatonOptions& options) {
                 level.area[c] = a;
                 level.safe_radius[c] = now.radius;
                 level.quality[c] = now.quality2;
+                const bool material = level.kind[c] == CellKind::Material;
                 for (int k = 0; k < channels; ++k) {
-                    const double e = level.energy[c * channels + k];
-                    const double virtual_energy = level.reference_density[k] * level.uncovered_area[c];
-                    level.diffusion_density[c * channels + k] = level.kind[c] == CellKind::Material ? e / a : 0.0;
-                    level.pressure_density[c * channels + k] = (e + virtual_energy) / a;
+                    level.diffusion_density[c * channels + k] = material ? level.energy[c * channels + k] / a : 0.0;
+                }
+                // Pressure per axis: a cell's springs along an axis push both
+                // its edges across that axis (four channels: y from r + b,
+                // x from g + a). Uncovered texels weigh as the mean density.
+                for (int axis = 0; axis < axes; ++axis) {
+                    double e = 0.0, reference = 0.0;
+                    for (int k = axis; k < channels; k += axes) {
+                        e += level.energy[c * channels + k];
+                        reference += level.reference_density[k];
+                    }
+                    level.pressure_density[c * axes + axis] = (e + reference * level.uncovered_area[c]) / a;
                 }
             }
         }
@@ -185,8 +195,8 @@ StepStats step(Level& level, const AutomatonOptions& options) {
     // 2. Edges: energy flux (only between covered cells, from the denser to
     // the less dense; the border and the gutter are adiabatic) and the push
     // that moves the edge towards the less dense cell.
-    auto edge = [&](size_t a, int ka, size_t b, int kb, double& push_out, double& flux_out) {
-        const double pa = level.pressure_density[a * channels + ka], pb = level.pressure_density[b * channels + kb];
+    auto edge = [&](size_t a, int ka, size_t b, int kb, int axis, double& push_out, double& flux_out) {
+        const double pa = level.pressure_density[a * axes + axis], pb = level.pressure_density[b * axes + axis];
         push_out = push(pa, pb);
         flux_out = 0.0;
         double difference = 0.0;
@@ -194,7 +204,8 @@ StepStats step(Level& level, const AutomatonOptions& options) {
             const double da = level.diffusion_density[a * channels + ka];
             const double db = level.diffusion_density[b * channels + kb];
             flux_out = options.diffusion * std::min(level.area[a], level.area[b]) * (da - db);
-            const double reference = level.reference_density[ka];
+            double reference = 0.0;
+            for (int k = axis; k < channels; k += axes) reference += level.reference_density[k];
             if (reference > 0) difference = std::abs(pa - pb) / reference;
         }
         return difference;
@@ -206,13 +217,13 @@ StepStats step(Level& level, const AutomatonOptions& options) {
                 for (int j = 1; j < cols; ++j) {
                     const size_t e = size_t(i) * (cols + 1) + j;
                     largest = std::max(largest, edge(level.cell(i, j - 1), face.right, level.cell(i, j), face.left,
-                                                     level.push_v[e], level.flux_v[e]));
+                                                     axes - 1, level.push_v[e], level.flux_v[e]));
                 }
             }
             if (i > 0 && i < rows) {
                 for (int j = 0; j < cols; ++j) {
                     const size_t e = size_t(i) * cols + j;
-                    largest = std::max(largest, edge(level.cell(i - 1, j), face.down, level.cell(i, j), face.up,
+                    largest = std::max(largest, edge(level.cell(i - 1, j), face.down, level.cell(i, j), face.up, 0,
                                                      level.push_h[e], level.flux_h[e]));
                 }
             }
