@@ -32,11 +32,12 @@ double quad_area(const glm::dvec2 q[4]) { return 0.5 * (cross(q[2] - q[0], q[3] 
 
 struct Shape {
     double area;
-    // The largest distance r every corner may move (all at once, in any
-    // direction) with each corner's cross product c keeping at least half
-    // its value: with edges a, b at the corner, c changes by at most
-    // 2r(|a| + |b|) + 4r^2, which r = c / (8 (|a| + |b|)) keeps below c / 2
-    // (c <= |a||b| <= (|a| + |b|)^2 / 4); |a| + |b| <= sqrt(2 (|a|^2 + |b|^2)).
+    // How far a corner may move in one step: c / (2 (|a| + |b|)) with c the
+    // cross product of the edges a, b at a corner (bounded through
+    // |a| + |b| <= sqrt(2 (|a|^2 + |b|^2))); a quarter cell for a square.
+    // Moves this size can still spoil a cell when all its corners move
+    // against it; step 4 puts those moves back, so validity never rests on
+    // the radius, which only keeps such reverts rare.
     double radius;
     // How well shaped, squared and signed (negative if inverted): the
     // smallest sin^2 of the corner angles, or 16 (shortest / longest edge)^2
@@ -56,7 +57,7 @@ Shape shape(const glm::dvec2 q[4]) {
         const int p = (k + 3) % 4;
         const double c = cross(e[p], e[k]);  // at corner k, between its two edges
         if (!(c > 0)) return {quad_area(q), 0.0, -1.0};
-        r2 = std::min(r2, c * c / (128 * (l2[p] + l2[k])));
+        r2 = std::min(r2, c * c / (8 * (l2[p] + l2[k])));
         sin2 = std::min(sin2, c * c / (l2[p] * l2[k]));
     }
     const double shortest = std::min({l2[0], l2[1], l2[2], l2[3]});
@@ -91,6 +92,11 @@ void prepare_level(Level& level, const AutomatonOptions& options, bool ring) {
     level.min_area.resize(cells);
     level.max_area.resize(cells);
     std::array<double, 4> energy{}, covered_area{};
+    // Coarse levels keep a margin inside the bounds: cells interpolated from
+    // a coarse cell differ in size, and the finest level must start inside.
+    const bool coarse = level.grid.xs[1] - level.grid.xs[0] > 1;
+    const double lowest = coarse ? std::min(1.0, options.min_area * 1.25) : options.min_area;
+    const double highest = coarse ? std::max(1.0, options.max_area * 0.8) : options.max_area;
     for (int i = 0; i < rows; ++i) {
         for (int j = 0; j < cols; ++j) {
             const size_t c = level.cell(i, j);
@@ -108,8 +114,8 @@ void prepare_level(Level& level, const AutomatonOptions& options, bool ring) {
                 level.min_area[c] = a0;  // gutter texels shift but are never compressed
                 level.max_area[c] = std::numeric_limits<double>::infinity();
             } else {
-                level.min_area[c] = std::max(options.min_area * a0, level.rigid_area[c]);
-                level.max_area[c] = options.max_area * a0;
+                level.min_area[c] = std::max(lowest * a0, level.rigid_area[c]);
+                level.max_area[c] = highest * a0;
                 for (int k = 0; k < channels; ++k) {
                     energy[k] += level.energy[c * channels + k];
                     covered_area[k] += a0 - level.uncovered_area[c];
@@ -289,13 +295,13 @@ StepStats step(Level& level, const AutomatonOptions& options) {
     });
 
     // 4. Shape bounds: a cell may not leave [min_area, max_area], get a corner
-    // sharper or an edge shorter than kMinQuality allows, or (a cell of rigid
-    // texels only) get thinner than its original width or height; nor move
-    // further out of a bound it already breaks (cells interpolated from a
-    // coarser level may). Cells that would are frozen by putting their
-    // corners back. Any mix of moved and unmoved corners keeps every cell
-    // convex (step 3's radius holds for any subset of moves), so repeating
-    // until nothing breaks a bound ends in a valid state. The first round
+    // sharper or an edge shorter than kMinQuality allows (which includes
+    // turning concave or inside out), or (a cell of rigid texels only) get
+    // thinner than its original width or height; nor move further out of a
+    // bound it already breaks (cells interpolated from a coarser level may).
+    // Cells that would are frozen by putting their corners back. A cell all
+    // of whose corners are back is in its previous, valid state, so
+    // repeating until nothing breaks a bound ends in a valid state. The first round
     // checks every cell in parallel; later rounds only the cells around the
     // corners just put back (rounds are whole sets, so the order within a
     // round does not matter).

@@ -149,7 +149,7 @@ def _failures(report, original, padding):
 
 def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gradient=None, strength=6.0,
                max_magnification=8.0, min_shrink=0.25, delta=0.02, passes=1, border="same",
-               directional=False, wavelet="d4", diffusion=0.05, max_steps=16, progress=None):
+               directional=False, wavelet="d4", diffusion=0.05, max_steps=8, progress=None):
     """Refine a lightmap UV layout: more texels where light changes fast.
 
     Args:

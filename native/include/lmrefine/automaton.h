@@ -35,7 +35,7 @@ struct AutomatonOptions {
     double diffusion = 0.05;     // energy moved per step per unit density difference, (0, 0.25]
     double rate = 0.5;           // node move per step, in cell sizes, at the largest density contrast
     double delta = 0.02;         // stop when every neighbour density difference / mean density < delta
-    int max_steps = 16;          // step cap per pyramid level (and per extra pass)
+    int max_steps = 8;           // step cap per pyramid level (and per extra pass)
     double min_area = 0.25;      // a covered cell never shrinks below this times its original area
     double max_area = 8.0;       // ... nor grows above this
     BorderMode border = BorderMode::Same;
