@@ -10,7 +10,12 @@ namespace lmrefine {
 namespace {
 
 // Index of the interval [v[k], v[k+1]] that holds x (clamped to the ends).
+// Grids are nearly always evenly spaced (all but the last interval), so the
+// index is guessed from the first spacing and searched for only if wrong.
 int interval(const std::vector<double>& v, double x) {
+    const int last = int(v.size()) - 2;
+    const int guess = std::clamp(int((x - v[0]) / (v[1] - v[0])), 0, last);
+    if ((v[guess] <= x || guess == 0) && (x <= v[guess + 1] || guess == last)) return guess;
     const auto it = std::upper_bound(v.begin() + 1, v.end() - 1, x);
     return int(it - v.begin()) - 1;
 }
