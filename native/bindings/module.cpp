@@ -13,6 +13,8 @@ void bind_chart(py::module_& m);
 void bind_automaton(py::module_& m);
 void bind_warp(py::module_& m);
 void bind_layout_check(py::module_& m);
+void bind_wavelet(py::module_& m);
+void bind_gradient_map(py::module_& m);
 }  // namespace lmrefine::bindings
 
 PYBIND11_MODULE(_native, m) {
@@ -43,4 +45,6 @@ PYBIND11_MODULE(_native, m) {
     lmrefine::bindings::bind_automaton(m);
     lmrefine::bindings::bind_warp(m);
     lmrefine::bindings::bind_layout_check(m);
+    lmrefine::bindings::bind_wavelet(m);
+    lmrefine::bindings::bind_gradient_map(m);
 }

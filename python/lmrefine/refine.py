@@ -77,7 +77,7 @@ def _layout(uvs, triangles):
     return uvs, np.ascontiguousarray(triangles, dtype=np.int32)
 
 
-def _gradient(lightmap, gradient, mask, shape, wavelet):
+def _gradient(lightmap, gradient, mask, shape, wavelet, progress):
     if gradient is not None:
         gradient = np.asarray(gradient)
         if gradient.dtype != np.float32 or gradient.shape != shape + (4,):
@@ -92,7 +92,12 @@ def _gradient(lightmap, gradient, mask, shape, wavelet):
     if lightmap.shape[:2] != shape:
         raise ValueError(f"the lightmap is {lightmap.shape[0]}x{lightmap.shape[1]} but the resolution is "
                          f"{shape[0]}x{shape[1]}; refine at the resolution the lightmap was baked at")
-    return _native.gradient_map(lightmap, mask, wavelet=wavelet)
+    if lightmap.dtype != np.float32:
+        raise ValueError(f"the lightmap must be float32, got {lightmap.dtype}; convert it with "
+                         f"lightmap.astype(numpy.float32)")
+    if not mask.any():
+        return np.zeros(shape + (4,), np.float32)  # nothing covered: nothing to refine
+    return _native.gradient_map(lightmap, mask, wavelet=wavelet, progress=progress)
 
 
 def _energy(gradient, mask, strength, directional):
@@ -208,7 +213,7 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
             raise ValueError(f"mask must have shape {shape} (the resolution), got {mask.shape}")
         mask = mask.astype(bool)
 
-    gradient = _gradient(lightmap, gradient, mask, shape, wavelet)
+    gradient = _gradient(lightmap, gradient, mask, shape, wavelet, progress)
     energy, scalar_energy = _energy(gradient, mask, float(strength), directional)
     run = _native.run_automaton(energy, mask, diffusion=diffusion, delta=delta, max_steps=max_steps,
                                 min_shrink=min_shrink, max_magnification=max_magnification, border=border,
