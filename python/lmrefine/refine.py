@@ -190,7 +190,8 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
         deformation kept), limited_by (list of what held the result back:
         'flipped', 'overlapping', 'gutter', 'degenerate', 'step_cap',
         'max_magnification', 'min_shrink'; empty if nothing), passes,
-        border, seconds, original_check and check (check_layout reports).
+        border, seconds (timings: setup, gradient_map, automaton,
+        warp_and_check), original_check and check (check_layout reports).
 
     Raises:
         ValueError: bad shapes, indices out of range, NaN UVs, UVs outside
@@ -213,13 +214,19 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
             raise ValueError(f"mask must have shape {shape} (the resolution), got {mask.shape}")
         mask = mask.astype(bool)
 
+    timings = {"setup": time.perf_counter() - start}
+    clock = time.perf_counter()
     gradient = _gradient(lightmap, gradient, mask, shape, wavelet, progress)
     energy, scalar_energy = _energy(gradient, mask, float(strength), directional)
+    timings["gradient_map"] = time.perf_counter() - clock
+    clock = time.perf_counter()
     run = _native.run_automaton(energy, mask, diffusion=diffusion, delta=delta, max_steps=max_steps,
                                 min_shrink=min_shrink, max_magnification=max_magnification, border=border,
                                 passes=int(passes), progress=progress)
     identity = identity_grid(shape)
     full = run["grid"]
+    timings["automaton"] = time.perf_counter() - clock
+    clock = time.perf_counter()
 
     original = _native.check_layout(uvs, triangles, shape, padding)
     limited_by = []
@@ -252,6 +259,7 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
                     lo, grid, new_uvs, check = mid, g, u, c
             kept = lo
 
+    timings["warp_and_check"] = time.perf_counter() - clock
     areas = _native.grid_cell_areas(grid)
     covered_areas = areas[mask] if mask.any() else np.ones(1, np.float32)
     if covered_areas.max() >= max_magnification * 0.999:
@@ -273,6 +281,7 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
         "passes": int(passes),
         "border": border,
         "seconds": time.perf_counter() - start,
+        "timings": timings,
         "original_check": original,
         "check": check,
     }
