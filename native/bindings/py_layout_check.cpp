@@ -10,7 +10,7 @@ namespace lmrefine::bindings {
 namespace {
 
 py::dict check(const py::handle& uvs_in, const py::handle& triangles_in, const py::handle& resolution,
-               double padding, const py::handle& reference_in) {
+               double padding, const py::handle& reference_in, bool failing_charts) {
     auto uvs = py_util::require_points(uvs_in, "uvs", 2);
     auto triangles = py_util::require_indices(triangles_in, "triangles", 3, /*allow_empty=*/true);
     const auto [height, width] = py_util::parse_resolution(resolution);
@@ -26,7 +26,8 @@ py::dict check(const py::handle& uvs_in, const py::handle& triangles_in, const p
     LayoutReport r;
     {
         py::gil_scoped_release release;
-        r = check_layout(layout, width, height, padding, reference_in.is_none() ? nullptr : reference.data());
+        r = check_layout(layout, width, height, padding, reference_in.is_none() ? nullptr : reference.data(),
+                         failing_charts);
     }
     py::dict out;
     out["flipped"] = r.flipped;
@@ -36,6 +37,10 @@ py::dict check(const py::handle& uvs_in, const py::handle& triangles_in, const p
     out["min_gutter_texels"] = r.min_gutter_texels;
     out["charts"] = r.charts;
     out["valid"] = r.valid;
+    if (failing_charts) {
+        const py::ssize_t n = py::ssize_t(r.failing_charts.size());
+        out["failing_charts"] = py_util::to_numpy(std::move(r.failing_charts), {n});
+    }
     return out;
 }
 
@@ -44,6 +49,7 @@ py::dict check(const py::handle& uvs_in, const py::handle& triangles_in, const p
 void bind_layout_check(py::module_& m) {
     m.def("check_layout", &check, py::arg("uvs"), py::arg("triangles"), py::arg("resolution"),
           py::arg("padding") = 2.0, py::kw_only(), py::arg("reference_uvs") = py::none(),
+          py::arg("failing_charts") = false,
           R"doc(Check a UV layout for use as a lightmap layout at a resolution.
 
 Args:

@@ -137,11 +137,13 @@ std::vector<Edge> boundary_edges(const UvLayout& layout, const Charts& charts, i
 // Smallest distance between edges of different charts. Edges go into square
 // buckets `radius` wide, each widened by radius / 2: two edges closer than
 // `radius` share the bucket of their closest points' midpoint, so a result
-// below `radius` is exact; otherwise the radius doubles.
-double min_gutter(const std::vector<Edge>& edges, int width, int height) {
+// below `radius` is exact; otherwise the radius doubles. With `close`, every
+// chart closer than `threshold` to another is marked in it.
+double min_gutter(const std::vector<Edge>& edges, int width, int height, double threshold,
+                  std::vector<uint8_t>* close) {
     double best = std::numeric_limits<double>::infinity();
     const double limit = 2.0 * std::max(width, height);
-    for (double radius = 4.0;; radius *= 2) {
+    for (double radius = std::max(4.0, 2 * threshold);; radius *= 2) {
         const int bx = int(std::ceil(width / radius)) + 2, by = int(std::ceil(height / radius)) + 2;
         std::vector<std::vector<int32_t>> buckets(size_t(bx) * by);
         for (size_t k = 0; k < edges.size(); ++k) {
@@ -166,8 +168,11 @@ double min_gutter(const std::vector<Edge>& edges, int width, int height) {
                                                 std::min(e.a.x, e.b.x) - std::max(f.a.x, f.b.x)});
                     const double gy = std::max({0.0, std::min(f.a.y, f.b.y) - std::max(e.a.y, e.b.y),
                                                 std::min(e.a.y, e.b.y) - std::max(f.a.y, f.b.y)});
-                    if (gx >= best || gy >= best) continue;
-                    best = std::min(best, segment_distance(e.a, e.b, f.a, f.b));
+                    const double cutoff = close ? std::max(best, threshold) : best;
+                    if (gx >= cutoff || gy >= cutoff) continue;
+                    const double d = segment_distance(e.a, e.b, f.a, f.b);
+                    best = std::min(best, d);
+                    if (close && d < threshold) (*close)[size_t(e.chart)] = (*close)[size_t(f.chart)] = 1;
                 }
             }
         }
@@ -178,7 +183,7 @@ double min_gutter(const std::vector<Edge>& edges, int width, int height) {
 }  // namespace
 
 LayoutReport check_layout(const UvLayout& layout, int width, int height, double padding,
-                          const float* reference_uvs) {
+                          const float* reference_uvs, bool list_failing_charts) {
     LMREFINE_REQUIRE(width > 0 && height > 0, "resolution must be positive, got " + std::to_string(height) +
                                                   "x" + std::to_string(width));
     LMREFINE_REQUIRE(padding >= 0, "padding must be >= 0 texels");
@@ -199,10 +204,16 @@ LayoutReport check_layout(const UvLayout& layout, int width, int height, double 
     // Orientation and degeneracy.
     const size_t T = size_t(layout.triangle_count);
     std::vector<int8_t> sign(T);
+    std::vector<uint8_t> failing(size_t(charts.count), 0);
     std::vector<int64_t> chart_balance(size_t(charts.count), 0);
     for (size_t t = 0; t < T; ++t) {
         sign[t] = int8_t(orientation(pixel_triangle(layout, layout.uvs, int64_t(t), width, height)));
-        if (sign[t] == 0) ++report.degenerate;
+        if (sign[t] == 0) {
+            ++report.degenerate;
+            const bool was_degenerate =
+                reference_uvs && orientation(pixel_triangle(layout, reference_uvs, int64_t(t), width, height)) == 0;
+            if (!was_degenerate) failing[size_t(charts.triangle_chart[t])] = 1;
+        }
         chart_balance[size_t(charts.triangle_chart[t])] += sign[t];
     }
     for (size_t t = 0; t < T; ++t) {
@@ -215,7 +226,10 @@ LayoutReport check_layout(const UvLayout& layout, int width, int height, double 
             // Ties count the chart as counter-clockwise in UV (clockwise in pixel space, y down).
             expected = chart_balance[size_t(charts.triangle_chart[t])] >= 0 ? 1 : -1;
         }
-        if (sign[t] != expected) ++report.flipped;
+        if (sign[t] != expected) {
+            ++report.flipped;
+            failing[size_t(charts.triangle_chart[t])] = 1;
+        }
     }
 
     // Overlap: first mark texels reached by more than one chart, then test
@@ -253,10 +267,20 @@ LayoutReport check_layout(const UvLayout& layout, int width, int height, double 
         }
         begin = end;
     }
-    for (uint8_t o : overlapping) report.overlapping += o;
+    for (size_t t = 0; t < T; ++t) {
+        report.overlapping += overlapping[t];
+        if (overlapping[t]) failing[size_t(charts.triangle_chart[t])] = 1;
+    }
 
-    report.min_gutter_texels = charts.count < 2 ? std::numeric_limits<double>::infinity()
-                                                : min_gutter(boundary_edges(layout, charts, width, height), width, height);
+    report.min_gutter_texels =
+        charts.count < 2 ? std::numeric_limits<double>::infinity()
+                         : min_gutter(boundary_edges(layout, charts, width, height), width, height, padding,
+                                      list_failing_charts ? &failing : nullptr);
+    if (list_failing_charts) {
+        for (int32_t c = 0; c < charts.count; ++c) {
+            if (failing[size_t(c)]) report.failing_charts.push_back(c);
+        }
+    }
     report.valid = report.flipped == 0 && report.degenerate == 0 && report.overlapping == 0 &&
                    report.out_of_bounds == 0 && report.min_gutter_texels >= padding - 1e-6;
     return report;

@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import _native
+from . import _native, backoff
 
 BORDER_MODES = ("same", "border_rule", "extra_ring")
 
@@ -19,9 +19,6 @@ BORDER_MODES = ("same", "border_rule", "extra_ring")
 # at least a quarter of its maximum (so plain noise is not blown up to 1).
 _SCALE_PERCENTILE = 99.0
 _SCALE_MIN_FRACTION_OF_MAX = 0.25
-# Bisection steps when the full warp is not valid: the strength used is then
-# known to 1/2^6 of the full one.
-_BACKOFF_STEPS = 6
 
 
 @dataclass
@@ -120,38 +117,6 @@ def identity_grid(resolution):
     return np.stack(np.broadcast_arrays(u[None, :], v[:, None]), axis=-1).astype(np.float32)
 
 
-def _blend(grid, identity, t):
-    return (identity + np.float32(t) * (grid - identity)).astype(np.float32)
-
-
-def _grid_valid(grid):
-    """Every cell a convex, non-inverted quadrilateral (in UV space, v up)."""
-    q = [grid[:-1, :-1], grid[:-1, 1:], grid[1:, 1:], grid[1:, :-1]]
-    for k in range(4):
-        a = q[(k + 1) % 4] - q[k]
-        b = q[(k + 3) % 4] - q[k]
-        if not ((a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]) < 0).all():
-            return False
-    return True
-
-
-def _failures(report, original, padding):
-    """What makes `report` worse than allowed, relative to the original layout."""
-    failed = []
-    if report["flipped"]:
-        failed.append("flipped")
-    if report["degenerate"] > original["degenerate"]:
-        failed.append("degenerate")
-    if report["overlapping"] > original["overlapping"]:
-        failed.append("overlapping")
-    if report["out_of_bounds"]:
-        failed.append("out_of_bounds")
-    # float32 UVs carry about 1e-4 texel of rounding at 4k.
-    if report["min_gutter_texels"] < min(padding, original["min_gutter_texels"]) - 1e-4:
-        failed.append("gutter")
-    return failed
-
-
 def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gradient=None, strength=6.0,
                max_magnification=8.0, min_shrink=0.25, delta=0.02, passes=1, border="same",
                directional=False, wavelet="d4", diffusion=0.05, max_steps=8, progress=None):
@@ -186,10 +151,13 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
         transition_widening (mean texel-density ratio over covered texels in
         the top decile of gradient energy), density_min, density_max (over
         covered texels), triangle_density (T,) new / old UV area, steps,
-        levels, converged, strength_used, backoff (the fraction of the full
-        deformation kept), limited_by (list of what held the result back:
-        'flipped', 'overlapping', 'gutter', 'degenerate', 'step_cap',
-        'max_magnification', 'min_shrink'; empty if nothing), passes,
+        levels, converged, backoff (the smallest fraction of the full
+        deformation kept anywhere; 1.0 = none backed off), backoff_area
+        (fraction of grid nodes that backed off), strength_used (strength x
+        backoff), limited_by (list of what held the result back: 'flipped',
+        'overlapping', 'gutter', 'degenerate', 'grid' (a blend made a cell
+        invalid), 'step_cap', 'max_magnification', 'min_shrink'; empty if
+        nothing), passes,
         border, seconds (timings: setup, gradient_map, automaton,
         warp_and_check), original_check and check (check_layout reports).
 
@@ -233,31 +201,11 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
     if not run["converged"]:
         limited_by.append("step_cap")
 
-    def attempt(t):
-        grid = _blend(full, identity, t)
-        if not _grid_valid(grid):
-            return grid, None, ["flipped"], None
-        new_uvs = _native.warp_uvs(uvs, grid)
-        check = _native.check_layout(new_uvs, triangles, shape, padding, reference_uvs=uvs)
-        return grid, new_uvs, _failures(check, original, padding), check
-
     if np.array_equal(full, identity):
-        grid, new_uvs, check, kept = identity, uvs.copy(), original, 0.0
+        grid, new_uvs, check, kept = identity, uvs.copy(), original, np.ones(identity.shape[:2], np.float32)
     else:
-        grid, new_uvs, failed, check = attempt(1.0)
-        kept = 1.0
-        if failed:
-            limited_by.extend(failed)
-            lo, hi = 0.0, 1.0
-            grid, new_uvs, check = identity, uvs.copy(), original
-            for _ in range(_BACKOFF_STEPS):
-                mid = 0.5 * (lo + hi)
-                g, u, f, c = attempt(mid)
-                if f:
-                    hi = mid
-                else:
-                    lo, grid, new_uvs, check = mid, g, u, c
-            kept = lo
+        grid, new_uvs, check, kept, failed = backoff.accept(full, identity, uvs, triangles, shape, padding, original)
+        limited_by += failed
 
     timings["warp_and_check"] = time.perf_counter() - clock
     areas = _native.grid_cell_areas(grid)
@@ -275,8 +223,9 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
         "steps": int(run["steps"]),
         "levels": run["levels"],
         "converged": bool(run["converged"]),
-        "strength_used": float(strength) * kept,
-        "backoff": kept,
+        "strength_used": float(strength) * float(kept.min()) if kept.size else 0.0,
+        "backoff": float(kept.min()),
+        "backoff_area": float((kept < 1).mean()),
         "limited_by": limited_by,
         "passes": int(passes),
         "border": border,

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <cstdint>
+#include <vector>
 
 #include "lmrefine/coverage.h"
 
@@ -17,6 +18,9 @@ struct LayoutReport {
     double min_gutter_texels = 0;  // smallest distance between two charts; +inf for fewer than two charts
     int32_t charts = 0;
     bool valid = false;  // nothing flipped, degenerate, overlapping or out of bounds, gutter >= padding
+    // Charts with a flipped, overlapping or (newly) degenerate triangle, or
+    // closer than `padding` to another chart; sorted. Only filled on request.
+    std::vector<int32_t> failing_charts;
 };
 
 // Orientation: with `reference_uvs` (the original layout, same shape as
@@ -27,6 +31,6 @@ struct LayoutReport {
 // for an intersection of positive area. The gutter is the exact smallest
 // distance, in texels, between boundary edges of different charts.
 LayoutReport check_layout(const UvLayout& layout, int width, int height, double padding,
-                          const float* reference_uvs = nullptr);
+                          const float* reference_uvs = nullptr, bool list_failing_charts = false);
 
 }  // namespace lmrefine
