@@ -100,3 +100,13 @@ def test_bad_input_raises_value_errors():
         lmrefine.check_layout(uvs[:, :1], tris, R)
     with pytest.raises(ValueError, match="reference_uvs"):
         lmrefine.check_layout(uvs, tris, R, reference_uvs=uvs[:-1])
+
+
+def test_failing_charts_names_the_charts_to_fix():
+    uvs, tris = merge(square(0.1, 0.1, 0.2), square(0.3 + 1 / R, 0.1, 0.2),  # 1 texel apart
+                      square(0.7, 0.7, 0.2), square(0.75, 0.75, 0.1))        # overlapping
+    report = lmrefine.check_layout(uvs, tris, R, padding=2, failing_charts=True)
+    np.testing.assert_array_equal(report["failing_charts"], [0, 1, 2, 3])
+    report = lmrefine.check_layout(uvs, tris, R, padding=0.5, failing_charts=True)
+    np.testing.assert_array_equal(report["failing_charts"], [2, 3])
+    assert "failing_charts" not in lmrefine.check_layout(uvs, tris, R)

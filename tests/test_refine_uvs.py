@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 
 import lmrefine
-from layouts import finite_difference_gradient, lightmap_pack, plane, shadow_edge_lightmap, smart_uv
+from layouts import (finite_difference_gradient, grid_chart, lightmap_pack, merge, plane, shadow_edge_lightmap,
+                     smart_uv)
 
 R = 128
 
@@ -164,3 +165,29 @@ def test_bad_input_raises_value_errors():
         refine(None, uvs, tris, 64, gradient=gradient, border="mirror")
     with pytest.raises(ValueError, match="strength"):
         refine(None, uvs, tris, 64, gradient=gradient, strength=-1)
+
+
+def test_a_tight_spot_backs_off_only_around_itself():
+    from lmrefine import backoff
+    resolution = 64
+    gap = 2.5 / resolution
+    uvs, tris = merge(grid_chart(4, (0.1, 0.4), (0.3, 0.6)), grid_chart(4, (0.3 + gap, 0.4), (0.5, 0.6)),
+                      grid_chart(4, (0.7, 0.7), (0.9, 0.9)))
+    identity = lmrefine.identity_grid(resolution)
+    # Two smooth bumps of node displacement (in texels, along +u): one just
+    # left of the gap pushes chart 0 into it; one inside chart 2 harms nothing.
+    y, x = np.mgrid[0:resolution + 1, 0:resolution + 1].astype(np.float64)
+    def bump(cx, cy):
+        return 3.0 * np.exp(-((x - cx) ** 2 + (y - cy) ** 2) / (2 * 4.0 ** 2))
+    shift = bump(0.3 * resolution - 3, 0.5 * resolution) + bump(0.8 * resolution, 0.2 * resolution)
+    full = identity.copy()
+    full[..., 0] += (shift / resolution).astype(np.float32)
+    original = lmrefine.check_layout(uvs, tris, resolution, 2)
+    assert lmrefine.check_layout(lmrefine.warp_uvs(uvs, full), tris, resolution, 2)["min_gutter_texels"] < 2
+    grid, new_uvs, check, kept, limited_by = backoff.accept(full, identity, uvs, tris, (resolution, resolution),
+                                                            2, original)
+    assert check["valid"] and limited_by == ["gutter"]
+    assert kept[int(0.5 * resolution), int(0.3 * resolution)] < 1  # backed off at the gap ...
+    assert kept[int(0.2 * resolution), int(0.8 * resolution)] == 1  # ... not around chart 2
+    np.testing.assert_array_equal(new_uvs, lmrefine.warp_uvs(uvs, grid))
+    assert not np.array_equal(new_uvs[-len(uvs) // 3:], uvs[-len(uvs) // 3:])
