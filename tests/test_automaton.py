@@ -145,3 +145,15 @@ def test_bad_arguments_raise_value_errors():
         lmrefine.run_automaton(energy, diffusion=0.5)
     with pytest.raises(ValueError, match="channel"):
         lmrefine.run_automaton(np.ones((4, 4, 3), np.float32))
+
+
+def test_result_does_not_depend_on_the_thread_count(rng, monkeypatch):
+    energy = (rng.random((70, 90)) ** 3).astype(np.float32)
+    mask = rng.random((70, 90)) < 0.9
+    runs = []
+    for threads in ("1", "2", "5"):
+        monkeypatch.setenv("LMREFINE_THREADS", threads)
+        runs.append(lmrefine.run_automaton(energy, mask))
+    for other in runs[1:]:
+        np.testing.assert_array_equal(runs[0]["grid"], other["grid"])
+        np.testing.assert_array_equal(runs[0]["energy"], other["energy"])

@@ -309,13 +309,14 @@ StepStats step(Level& level, const AutomatonOptions& options) {
         const size_t c = level.cell(i, j);
         glm::dvec2 q[4];
         corners(level, level.next_nodes, i, j, q);
+        glm::dvec2 old[4];
+        corners(level, nodes, i, j, old);
+        if (q[0] == old[0] && q[1] == old[1] && q[2] == old[2] && q[3] == old[3]) return false;  // unchanged
         const Shape now = shape(q);
         const double a = now.area, before = level.area[c];
         if ((a < level.min_area[c] && a < before) || (a > level.max_area[c] && a > before)) return true;
         if (now.quality2 < kMinQuality * kMinQuality && now.quality2 < level.quality[c]) return true;
         if (level.rigid_area[c] < level.original_area[c]) return false;
-        glm::dvec2 old[4];
-        corners(level, nodes, i, j, old);
         const glm::dvec2 thin = thickness(q, a), was = thickness(old, before);
         const double w0 = level.grid.xs[j + 1] - level.grid.xs[j];
         const double h0 = level.grid.ys[i + 1] - level.grid.ys[i];

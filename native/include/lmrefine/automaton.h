@@ -6,9 +6,9 @@
 //
 // Steps are synchronous (every cell reads the previous state, writes a second
 // buffer), so the result does not depend on visiting order or thread count.
-// Guards hold after every step: every cell a convex quadrilateral with
-// positive area, no negative energy, total energy conserved, every node
-// inside the grid's rectangle. To converge in a number of steps that does not
+// Guards hold after every step: every cell a well-shaped convex
+// quadrilateral (no sharp corner, no collapsed edge), no negative energy,
+// total energy conserved, every node inside the grid's rectangle. To converge in a number of steps that does not
 // grow with the resolution, the automaton runs coarse-to-fine on a pyramid of
 // grids (cells of 2^k x 2^k texels), each level starting from the one above.
 #pragma once
@@ -32,8 +32,8 @@ enum class BorderMode {
 };
 
 struct AutomatonOptions {
-    double diffusion = 0.05;     // energy moved per step per unit density difference, (0, 0.25]
-    double rate = 0.5;           // node move per step, in cell sizes, at the largest density contrast
+    double diffusion = 0.05;     // energy moved per step per unit density difference, [0, 0.25]
+    double rate = 0.5;           // node move per step, in cell sizes, at full contrast (capped at 1/4)
     double delta = 0.02;         // stop when every neighbour density difference / mean density < delta
     int max_steps = 8;           // step cap per pyramid level (and per extra pass)
     double min_area = 0.25;      // a covered cell never shrinks below this times its original area
