@@ -191,3 +191,15 @@ def test_a_tight_spot_backs_off_only_around_itself():
     assert kept[int(0.2 * resolution), int(0.8 * resolution)] == 1  # ... not around chart 2
     np.testing.assert_array_equal(new_uvs, lmrefine.warp_uvs(uvs, grid))
     assert not np.array_equal(new_uvs[-len(uvs) // 3:], uvs[-len(uvs) // 3:])
+
+
+@pytest.mark.parametrize("shape", [(48, 96), (100, 37)])
+def test_rectangular_lightmaps(shape):
+    uvs, tris = plane(32)
+    mask = lmrefine.coverage_mask(uvs, tris, shape)
+    lightmap = np.zeros(shape, np.float32)
+    lightmap[:, shape[1] // 2:] = 1.0
+    result = lmrefine.refine_uvs(None, uvs, tris, shape, gradient=finite_difference_gradient(lightmap, mask))
+    assert result.grid.shape == (shape[0] + 1, shape[1] + 1, 2)
+    assert result.report["transition_widening"] > 2.0
+    assert_valid(result, uvs, tris, shape, 2)
