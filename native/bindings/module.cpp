@@ -15,6 +15,8 @@ void bind_warp(py::module_& m);
 void bind_layout_check(py::module_& m);
 void bind_wavelet(py::module_& m);
 void bind_gradient_map(py::module_& m);
+void bind_scene(py::module_& m);
+void bind_baker(py::module_& m);
 }  // namespace lmrefine::bindings
 
 PYBIND11_MODULE(_native, m) {
@@ -47,4 +49,6 @@ PYBIND11_MODULE(_native, m) {
     lmrefine::bindings::bind_layout_check(m);
     lmrefine::bindings::bind_wavelet(m);
     lmrefine::bindings::bind_gradient_map(m);
+    lmrefine::bindings::bind_scene(m);
+    lmrefine::bindings::bind_baker(m);
 }
