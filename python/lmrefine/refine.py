@@ -98,15 +98,17 @@ def _gradient(lightmap, gradient, mask, shape, wavelet, progress):
 
 
 def _energy(gradient, mask, strength, directional):
-    """Energy in [1 / (1 + strength), 1]: 1 where light changes fastest."""
-    raw = gradient if directional else gradient.sum(axis=2)
+    """Energy in [1 / (1 + strength), 1]: 1 where light changes fastest.
+    Returns (energy, the gradient energy per texel: the channel sum)."""
+    total = gradient.sum(axis=2)
+    raw = gradient if directional else total
     covered = raw[mask]
     scale = 0.0
     if covered.size:
         scale = max(float(np.percentile(covered, _SCALE_PERCENTILE)),
                     _SCALE_MIN_FRACTION_OF_MAX * float(covered.max()))
     normalized = np.clip(raw / scale, 0, 1) if scale > 0 else np.zeros_like(raw)
-    return ((1 + strength * normalized) / (1 + strength)).astype(np.float32), raw if raw.ndim == 2 else raw.sum(2)
+    return ((1 + strength * normalized) / (1 + strength)).astype(np.float32), total
 
 
 def identity_grid(resolution):
@@ -223,7 +225,7 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
         "steps": int(run["steps"]),
         "levels": run["levels"],
         "converged": bool(run["converged"]),
-        "strength_used": float(strength) * float(kept.min()) if kept.size else 0.0,
+        "strength_used": float(strength) * float(kept.min()),
         "backoff": float(kept.min()),
         "backoff_area": float((kept < 1).mean()),
         "limited_by": limited_by,
