@@ -20,19 +20,17 @@ namespace {
 
 using automaton_detail::Level;
 
-// Coarsen until the grid is at most this many cells across: a level that
-// small converges in a few dozen steps.
+// Coarsen until the grid is at most this many cells across: room moves
+// across a level that small within its few steps.
 constexpr int kCoarsestCells = 8;
 // A level whose nodes all moved less than this (in its cells) in a step has settled.
 constexpr double kSettledMove = 1e-3;
 
+// Levels until the coarsest is at most kCoarsestCells cells across.
 int level_count(int width, int height, bool coarse_to_fine) {
+    if (!coarse_to_fine) return 1;
     int levels = 1;
-    if (!coarse_to_fine) return levels;
-    while (std::max((width + (1 << (levels - 1)) - 1) >> (levels - 1),
-                    (height + (1 << (levels - 1)) - 1) >> (levels - 1)) > kCoarsestCells) {
-        ++levels;
-    }
+    for (int block = 1; (std::max(width, height) + block - 1) / block > kCoarsestCells; block *= 2) ++levels;
     return levels;
 }
 
