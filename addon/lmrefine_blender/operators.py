@@ -1,0 +1,228 @@
+"""Operators: Refine Lightmap UVs, and removing the material preview it adds.
+
+Run from the UI, the refinement is modal: native work runs on a worker thread
+while a timer polls it, Blender's progress indicator moves and Esc cancels.
+Run from a script (EXEC_DEFAULT), it blocks. Either way a failed or cancelled
+run is rolled back through the job's journal, and a successful one is a
+single undo step (bl_options UNDO; the modal run pushes it when it finishes).
+"""
+
+import threading
+import time
+
+import bpy
+
+from . import pipeline
+from .journal import Journal
+
+
+def _report_outcome(operator, context, outcome, seconds):
+    summary = outcome.summary()
+    result = context.scene.lmrefine.result
+    result.valid = True
+    result.objects = ", ".join(outcome.objects)
+    result.transition_widening = summary["transition_widening"]
+    result.density_min = summary["density_min"]
+    result.density_max = summary["density_max"]
+    result.limited_by = summary["limited_by"]
+    result.timings = "  ".join(f"{stage} {value:.2f}s" for stage, value in outcome.timings.items())
+    result.message = (f"Refined {len(outcome.objects)} object(s) in {seconds:.1f}s: transitions widened "
+                      f"{summary['transition_widening']:.2f}x, texel density "
+                      f"{summary['density_min']:.2f}x to {summary['density_max']:.2f}x")
+    operator.report({'INFO'}, result.message)
+
+
+def _rollback(operator, journal):
+    try:
+        journal.rollback()
+    except Exception as error:  # the scene may be half-reverted: say so loudly
+        operator.report({'ERROR'}, f"Could not fully revert the scene ({error}): use Edit > Undo")
+
+
+def _failure_message(error):
+    if isinstance(error, pipeline.UserError):
+        return str(error)
+    if isinstance(error, ValueError):  # lmrefine's own messages name the problem and the fix
+        return f"lmrefine: {error}"
+    return f"Refinement failed ({type(error).__name__}: {error}); the scene was left unchanged"
+
+
+def _is_cancel(error):
+    if isinstance(error, (pipeline.Cancelled, KeyboardInterrupt)):
+        return True
+    return type(error).__name__ == "CancelledError" and type(error).__module__.startswith("lmrefine")
+
+
+class LMREFINE_OT_refine_uvs(bpy.types.Operator):
+    """Refine the lightmap UV map of the selected meshes so light/shadow edges get more texels, then bake"""
+
+    bl_idname = "object.lmrefine_refine_uvs"
+    bl_label = "Refine Lightmap UVs"
+    bl_options = {'REGISTER', 'UNDO'}
+
+    @classmethod
+    def poll(cls, context):
+        # Problems (wrong mode, nothing selected, ...) are reported by the operator with the fix,
+        # rather than a greyed-out button that does not say why.
+        return context.scene is not None and hasattr(context.scene, "lmrefine")
+
+    def _prepare(self, context):
+        options = pipeline.settings_snapshot(context.scene.lmrefine)
+        targets = pipeline.validate(context, list(context.selected_objects), options)
+        return options, targets
+
+    # ------------------------------------------------------------ blocking
+
+    def execute(self, context):
+        started = time.perf_counter()
+        try:
+            options, targets = self._prepare(context)
+        except pipeline.UserError as error:
+            self.report({'ERROR'}, str(error))
+            return {'CANCELLED'}
+        journal = Journal()
+        wm = context.window_manager
+        wm.progress_begin(0.0, 1.0)
+        try:
+            job = pipeline.run(context, targets, options, journal, should_stop=lambda: False)
+            outcome = pipeline.run_blocking(job, progress=lambda fraction, label: wm.progress_update(fraction))
+        except BaseException as error:
+            _rollback(self, journal)
+            if _is_cancel(error):
+                self.report({'WARNING'}, "Cancelled: the scene was left unchanged")
+                return {'CANCELLED'}
+            self.report({'ERROR'}, _failure_message(error))
+            return {'CANCELLED'}
+        finally:
+            wm.progress_end()
+        journal.commit()
+        _report_outcome(self, context, outcome, time.perf_counter() - started)
+        return {'FINISHED'}
+
+    # --------------------------------------------------------------- modal
+
+    def invoke(self, context, event):
+        self._started = time.perf_counter()
+        try:
+            options, targets = self._prepare(context)
+        except pipeline.UserError as error:
+            self.report({'ERROR'}, str(error))
+            return {'CANCELLED'}
+        self._journal = Journal()
+        self._cancel = threading.Event()
+        self._job = pipeline.run(context, targets, options, self._journal, should_stop=self._cancel.is_set)
+        self._send = None  # what to send into the job next: ("value", v) or ("error", e)
+        self._thread = None
+        self._work = None
+        self._fraction = 0.0
+        self._label = "Starting"
+        wm = context.window_manager
+        wm.progress_begin(0.0, 1.0)
+        self._timer = wm.event_timer_add(0.1, window=context.window)
+        wm.modal_handler_add(self)
+        self._status(context)
+        return {'RUNNING_MODAL'}
+
+    def modal(self, context, event):
+        if event.type == 'ESC' and event.value == 'PRESS':
+            self._cancel.set()
+            self._label = "Cancelling"
+            self._status(context)
+        if event.type != 'TIMER':
+            return {'RUNNING_MODAL'}  # the scene must not change under the job
+        if self._thread is not None:
+            if self._thread.is_alive():
+                context.window_manager.progress_update(self._fraction)
+                self._status(context)
+                return {'RUNNING_MODAL'}
+            self._thread = None
+        if self._cancel.is_set():
+            self._job.close()
+            return self._end(context, pipeline.Cancelled())
+        try:
+            kind, payload = self._send or ("value", None)
+            self._send = None
+            work = self._job.throw(payload) if kind == "error" else self._job.send(payload)
+        except StopIteration as stop:
+            return self._end(context, None, stop.value)
+        except BaseException as error:
+            return self._end(context, error)
+        self._start_work(work)
+        self._status(context)
+        return {'RUNNING_MODAL'}
+
+    def _start_work(self, work):
+        self._work = work
+        self._label = work.label
+        self._fraction = work.start
+
+        def progress(fraction, stage=""):
+            # Called on the worker thread: only plain Python state here, never bpy.
+            self._fraction = work.start + work.span * min(max(float(fraction), 0.0), 1.0)
+            return not self._cancel.is_set()
+
+        def target():
+            try:
+                self._send = ("value", work.call(progress))
+            except BaseException as error:
+                self._send = ("error", error)
+
+        self._thread = threading.Thread(target=target, name="lmrefine", daemon=True)
+        self._thread.start()
+
+    def _status(self, context):
+        if context.workspace is not None:
+            context.workspace.status_text_set(
+                f"Refine Lightmap UVs: {self._label} ({100.0 * self._fraction:.0f}%), Esc to cancel")
+
+    def _end(self, context, error, outcome=None):
+        wm = context.window_manager
+        wm.event_timer_remove(self._timer)
+        wm.progress_end()
+        if context.workspace is not None:
+            context.workspace.status_text_set(None)
+        if error is not None:
+            _rollback(self, self._journal)
+            if _is_cancel(error):
+                self.report({'WARNING'}, "Cancelled: the scene was left unchanged")
+            else:
+                self.report({'ERROR'}, _failure_message(error))
+            return {'CANCELLED'}
+        self._journal.commit()
+        _report_outcome(self, context, outcome, time.perf_counter() - self._started)
+        return {'FINISHED'}
+
+
+class LMREFINE_OT_remove_preview(bpy.types.Operator):
+    """Remove the lightmap preview nodes this add-on put in the selected objects' materials"""
+
+    bl_idname = "object.lmrefine_remove_preview"
+    bl_label = "Remove Lightmap Preview"
+    bl_options = {'REGISTER', 'UNDO'}
+
+    def execute(self, context):
+        from . import materials
+
+        objects = [obj for obj in context.selected_objects if obj.type == 'MESH']
+        if not objects:
+            self.report({'ERROR'}, "No mesh selected: select the objects whose lightmap preview to remove")
+            return {'CANCELLED'}
+        removed = sum(materials.remove_preview(obj) for obj in objects if obj.library is None)
+        if removed == 0:
+            self.report({'INFO'}, "No lightmap preview nodes on the selected objects")
+            return {'CANCELLED'}
+        self.report({'INFO'}, f"Removed {removed} preview node(s)")
+        return {'FINISHED'}
+
+
+CLASSES = (LMREFINE_OT_refine_uvs, LMREFINE_OT_remove_preview)
+
+
+def register():
+    for cls in CLASSES:
+        bpy.utils.register_class(cls)
+
+
+def unregister():
+    for cls in reversed(CLASSES):
+        bpy.utils.unregister_class(cls)
