@@ -379,8 +379,12 @@ def _restore_image_path(image, previous):
 
 # ------------------------------------------------------------------ drivers
 
-def run_blocking(job, progress=None):
-    """Drive `job` on this thread (operator execute, batch). `progress(fraction, label)`."""
+def run_blocking(job, progress=None, should_stop=None):
+    """Drive `job` on this thread (operator execute, batch).
+
+    `progress(fraction, label)` is told the overall progress; `should_stop()`
+    returning True cancels the running native call (lmrefine.CancelledError).
+    """
     value = None
     while True:
         try:
@@ -389,7 +393,7 @@ def run_blocking(job, progress=None):
             return stop.value
         if progress is not None:
             progress(work.start, work.label)
-        value = work.call(_progress_callback(work, progress, lambda: False))
+        value = work.call(_progress_callback(work, progress, should_stop or (lambda: False)))
 
 
 def _progress_callback(work, report, should_stop):

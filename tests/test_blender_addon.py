@@ -1,0 +1,225 @@
+"""The Blender add-on, driven through real headless Blender.
+
+One Blender process runs every in-Blender check (tests/blender/addon_checks.py)
+and writes facts as JSON; the tests below assert on them. The batch entry gets
+its own processes because it is its own command line. Undo is tested in
+background mode by pushing a step before the run (ed.undo_push with a window
+in the context), calling the operator as a script with undo=True, then one
+ed.undo: it must restore the scene, and no further step may remain, which
+shows the whole run was a single undo step.
+"""
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+
+import pytest
+
+pytestmark = pytest.mark.blender
+
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+BLENDER = shutil.which("blender")
+BATCH = os.path.join(REPO, "addon", "lmrefine_blender", "batch.py")
+
+if BLENDER is None:
+    pytest.skip("Blender is not installed", allow_module_level=True)
+
+
+def run_blender(*args, timeout=600):
+    return subprocess.run([BLENDER, "-b", "--factory-startup", "--python-exit-code", "1", *args],
+                          capture_output=True, text=True, timeout=timeout)
+
+
+@pytest.fixture(scope="module")
+def work_dir(tmp_path_factory):
+    return tmp_path_factory.mktemp("blender_addon")
+
+
+@pytest.fixture(scope="module")
+def facts(work_dir):
+    out = work_dir / "facts.json"
+    process = run_blender("--python", os.path.join(REPO, "tests", "blender", "addon_checks.py"), "--",
+                          REPO, str(out), str(work_dir))
+    assert process.returncode == 0, process.stdout[-3000:] + process.stderr[-3000:]
+    return json.loads(out.read_text())
+
+
+def fact(facts, name):
+    value = facts[name]
+    if "exception" in value:
+        pytest.fail(f"check {name} raised inside Blender:\n{value['exception']}")
+    if "skipped" in value:
+        pytest.skip(value["skipped"])
+    return value
+
+
+# ------------------------------------------------------------ error cases
+
+ERRORS = {
+    "error_no_mesh": "No mesh selected",
+    "error_only_light_selected": "No mesh selected",
+    "error_no_uv_layer": "'Bare' has no UV map",
+    "error_missing_source_layer": "has no UV map 'NoSuchMap'",
+    "error_edit_mode": "Object Mode",
+    "error_zero_area_faces": "1 faces of zero area",
+    "error_linked_library": "is linked from",
+    "error_shared_mesh": "share mesh 'FloorMesh'",
+    "error_image_not_found": "No lightmap image found for 'Floor'",
+    "error_image_file_missing": "has no pixels",
+    "error_image_wrong_size": "is 16x16 but Resolution is 64",
+    "error_no_bake_pass": "No bake pass chosen",
+}
+
+
+@pytest.mark.parametrize("name", sorted(ERRORS))
+def test_error_is_reported_and_changes_nothing(facts, name):
+    value = fact(facts, name)
+    assert value["outcome"] == "CANCELLED"
+    assert value["message"] is not None and ERRORS[name] in value["message"]
+    assert value["changed"] == []
+
+
+# ----------------------------------------------------------------- bridge
+
+def test_bridge_exports_world_space_geometry_and_lights(facts):
+    value = fact(facts, "bridge_export")
+    assert value["default_source"] == "Lightmap"
+    # Floor: a 4 m grid moved to (1, 2, 3) and scaled 2x along x.
+    assert value["x_range"] == pytest.approx([-3.0, 5.0], abs=1e-5)
+    assert value["y_range"] == pytest.approx([0.0, 4.0], abs=1e-5)
+    assert value["z_range"] == pytest.approx([3.0, 3.0], abs=1e-5)
+    assert value["normal_mean"] == pytest.approx([0.0, 0.0, 1.0], abs=1e-6)
+    assert value["uvs_match_layout"] and value["triangles_match_layout"]
+    assert value["triangle_count"] == 24 * 24 * 2
+    assert value["base_color"] == pytest.approx([0.8, 0.8, 0.8], abs=1e-6)
+    # The blocker (1 m cube at z = 1) is an occluder until it is hidden from render.
+    assert value["occluders"] == ["Blocker"] and value["occluders_when_hidden"] == []
+    assert value["blocker_z_range"] == pytest.approx([0.5, 1.5], abs=1e-5)
+    assert value["light_kind"] == "sun"
+    sun = value["sun"]
+    assert sun["energy"] == 3.0 and sun["angle"] == pytest.approx(0.02)
+    # Rotation (0.3, 0.2, 0) applied to -Z.
+    assert sun["direction"] == pytest.approx([-0.18980, 0.29552, -0.93629], abs=1e-4)
+    assert value["world"] == [0.0, 0.0, 0.0]
+
+
+def test_default_source_layer(facts):
+    assert fact(facts, "bridge_default_layers") == {
+        "UVMap": "UVMap",
+        "UVMap+UVMap.001": "UVMap.001",
+        "UVMap+Detail+LightmapUV": "LightmapUV",
+        "A+B+C": "B",
+        "UVMap+UVMap.001+UVMap.001_refined": "UVMap.001",
+    }
+
+
+def test_image_rows_are_flipped_once(facts):
+    assert fact(facts, "bridge_image_roundtrip") == {"roundtrip_equal": True, "bottom_row_first": True}
+
+
+def test_cycles_bake_matches_lambert_and_restores_scene(facts):
+    value = fact(facts, "cycles_first_bake")
+    assert value["shape"] == [64, 64, 4]
+    assert value["covered_texels"] > 0.8 * 64 * 64
+    # Diffuse direct with colour off is irradiance / pi: sun 3 W/m^2 at cos 0.93629.
+    assert value["light_max"] == pytest.approx(3.0 * 0.93629 / 3.14159265, rel=0.03)
+    assert value["light_min"] < 0.05  # the blocker's umbra
+    assert 0.5 < value["lit_fraction"] < 0.98
+    assert value["changed"] == [] and value["engine_restored"]
+
+
+# ------------------------------------------------------------- end to end
+
+@pytest.mark.parametrize("name", ["end_to_end_embree", "end_to_end_cycles", "end_to_end_existing_image"])
+def test_operator_end_to_end(facts, name):
+    value = fact(facts, name)
+    assert value["outcome"] == "FINISHED", value.get("message")
+    assert value["layers"] == ["UVMap", "Lightmap", "Lightmap_refined"]
+    # The user's active and render UV maps keep their roles; source and mesh are bit-identical.
+    assert value["active_layer"] == "UVMap" and value["render_layer"] == "UVMap"
+    assert value["source_identical"] and value["texture_uvs_identical"]
+    assert value["check_layout"]["valid"] is True
+    assert value["check_layout"]["min_gutter_texels"] >= 2
+    assert value["uv_max_move"] > 0.5 / 64  # the shadow edge pulled UVs by more than half a texel
+    changed = set(value["changed"])
+    assert "mesh:FloorMesh" in changed and "mesh:Cube" not in changed
+    for name_, stats in value["images"].items():
+        assert stats is not None, f"no image for pass {name_}"
+        assert stats["size"] == [64, 64] and stats["is_float"] and stats["packed"]
+        assert stats["std"] > 0.01 and stats["max"] > 0.1, f"pass {name_} looks unbaked: {stats}"
+    assert ("ShaderNodeUVMap", "Lightmap_refined") in [tuple(node) for node in value["preview_nodes"]]
+    assert value["result_valid"] and value["transition_widening"] > 1.0
+    assert 0.0 < value["density_range"][0] <= value["density_range"][1]
+    assert "refine" in value["timings"]
+
+
+@pytest.mark.parametrize("name", ["end_to_end_embree", "end_to_end_cycles", "end_to_end_existing_image"])
+def test_operator_is_one_undo_step(facts, name):
+    value = fact(facts, name)
+    assert value["can_undo"]
+    assert value["changed_after_undo"] == []
+    assert value["can_undo_further"] is False
+
+
+def test_failure_mid_run_rolls_back(facts):
+    value = fact(facts, "rollback_on_failure")
+    assert value["outcome"] == "CANCELLED"
+    assert "does not use nodes" in value["message"]
+    assert value["changed"] == []
+
+
+def test_cancel_mid_run_rolls_back(facts):
+    value = fact(facts, "rollback_on_cancel")
+    assert value["raised"] == "Cancelled"
+    assert value["changed"] == []
+
+
+# ------------------------------------------------------------------ batch
+
+def run_batch(blend, *flags):
+    return run_blender(str(blend), "--python", BATCH, "--", *flags)
+
+
+def test_batch_help_documents_flags():
+    process = run_blender("--python", BATCH, "--", "--help")
+    assert process.returncode == 0, process.stderr[-2000:]
+    for flag in ("--objects", "--resolution", "--out", "--backend", "--bake-passes", "--first-lightmap"):
+        assert flag in process.stdout
+
+
+def test_batch_fails_with_message_and_report(facts, work_dir):
+    blend = fact(facts, "save_scene_for_batch")["path"]
+    out = work_dir / "batch_fail"
+    process = run_batch(blend, "--objects", "Floor,NoSuchObject", "--resolution", "64", "--out", str(out))
+    assert process.returncode == 1
+    assert "no object(s) named NoSuchObject" in process.stderr
+    report = json.loads((out / "report.json").read_text())
+    assert report["ok"] is False and "NoSuchObject" in report["error"]
+
+
+def test_batch_rejects_bad_flags(facts, work_dir):
+    blend = fact(facts, "save_scene_for_batch")["path"]
+    process = run_batch(blend, "--objects", "Floor", "--out", str(work_dir / "bad"), "--bake-passes", "glow")
+    assert process.returncode == 2
+    assert "unknown pass" in process.stderr
+
+
+def test_batch_refines_bakes_and_reports(facts, work_dir):
+    if not (facts["api"]["refine_uvs"] and facts["api"]["bake"]):
+        pytest.skip("lmrefine lacks refine_uvs/bake (not merged yet)")
+    blend = fact(facts, "save_scene_for_batch")["path"]
+    out = work_dir / "batch_ok"
+    process = run_batch(blend, "--objects", "Floor", "--resolution", "64", "--samples", "4",
+                        "--bake-passes", "direct,ao", "--out", str(out))
+    assert process.returncode == 0, process.stderr[-3000:]
+    report = json.loads((out / "report.json").read_text())
+    assert report["ok"] is True
+    floor = report["objects"]["Floor"]
+    assert floor["refined_layer"] == "Lightmap_refined"
+    assert floor["report"]["check_layout"]["valid"] is True
+    for pass_name in ("direct", "ao"):
+        path = floor["images"][pass_name]
+        assert os.path.dirname(path) == str(out) and os.path.getsize(path) > 0
+    assert os.path.isfile(report["blend"]) and os.path.dirname(report["blend"]) == str(out)
