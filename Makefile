@@ -12,7 +12,7 @@ DEBIAN_PACKAGES := cmake g++ make pkg-config pybind11-dev libembree-dev \
 	libopenimageio-dev libglm-dev python3-dev python3-numpy python3-pytest \
 	python3-pywt python3-matplotlib blender
 
-.PHONY: all deps build install test test-native test-asan bench demo clean
+.PHONY: all deps build install test test-asan bench demo sample-lightmap clean
 
 all: build
 
@@ -40,14 +40,15 @@ test: build
 
 # The native tests under AddressSanitizer + UndefinedBehaviorSanitizer. The
 # sanitized module is built into its own folder so it never replaces the
-# release one; libasan must be preloaded into the (unsanitized) Python.
+# release one; libasan (and libstdc++, so its throw interceptor finds the
+# real __cxa_throw) must be preloaded into the (unsanitized) Python.
 test-asan: deps
 	cmake -S . -B $(ASAN_DIR) -DCMAKE_BUILD_TYPE=RelWithDebInfo -DLMREFINE_SANITIZE=ON \
 		-DPython_EXECUTABLE=$(PYTHON) -DLMREFINE_MODULE_DIR=$(CURDIR)/$(ASAN_DIR)/package/lmrefine
 	cmake --build $(ASAN_DIR) -j $(JOBS)
 	cp python/lmrefine/*.py $(ASAN_DIR)/package/lmrefine/
-	LD_PRELOAD=$$($(CXX) -print-file-name=libasan.so) ASAN_OPTIONS=detect_leaks=0 \
-		UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 PYTHONPATH=$(ASAN_DIR)/package \
+	LD_PRELOAD="$$($(CXX) -print-file-name=libasan.so) $$($(CXX) -print-file-name=libstdc++.so)" ASAN_OPTIONS=detect_leaks=0 \
+		UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 LMREFINE_PYTHONPATH=$(ASAN_DIR)/package \
 		$(PYTHON) -m pytest tests -q -m "not blender and not slow" -p no:cacheprovider
 
 bench: build
@@ -58,3 +59,8 @@ demo: build
 
 clean:
 	rm -rf $(BUILD_DIR) $(ASAN_DIR) $(DEMO_OUT) python/lmrefine/_native*.so
+
+# Re-bake the bundled sample lightmap and its layout with Cycles.
+sample-lightmap: build
+	PYTHONPATH=$(CURDIR)/python blender -b --factory-startup --python-exit-code 1 \
+		--python blend_samples/make_sample_lightmap.py -- blend_samples 256

@@ -4,8 +4,10 @@ import sys
 import numpy as np
 import pytest
 
-# Tests run against the in-place build (`make build`), not an installed copy.
-sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "python"))
+# Tests run against the in-place build (`make build`) unless told otherwise:
+# `make test-asan` points LMREFINE_PYTHONPATH at the sanitized build.
+sys.path.insert(0, os.environ.get("LMREFINE_PYTHONPATH",
+                                  os.path.join(os.path.dirname(__file__), "..", "python")))
 
 
 @pytest.fixture
