@@ -176,6 +176,17 @@ def test_cancel_mid_run_rolls_back(facts):
     assert value["changed"] == []
 
 
+def test_threaded_driver_runs_and_cancels(facts):
+    value = fact(facts, "threaded_driver_runs_and_cancels")
+    run, cancel = value["run"], value["cancel"]
+    assert run["kind"] == "done" and run["value"] == "Outcome" and run["has_layer"]
+    assert "Refining Floor" in run["labels"]
+    # Cancelled while refining: either the native call saw the stop (CancelledError) or the
+    # job stopped before its next step (Cancelled); the scene is untouched either way.
+    assert cancel["kind"] == "error" and cancel["value"] in ("Cancelled", "CancelledError")
+    assert cancel["changed"] == [] and not cancel["has_layer"]
+
+
 # ------------------------------------------------------------------ batch
 
 def run_batch(blend, *flags):
@@ -223,3 +234,38 @@ def test_batch_refines_bakes_and_reports(facts, work_dir):
         path = floor["images"][pass_name]
         assert os.path.dirname(path) == str(out) and os.path.getsize(path) > 0
     assert os.path.isfile(report["blend"]) and os.path.dirname(report["blend"]) == str(out)
+
+
+# -------------------------------------------------------------- packaging
+
+def test_zip_installs_enables_and_carries_the_core(tmp_path):
+    """The release zip installs like a user would (Preferences operators), in a throwaway user folder."""
+    archive = tmp_path / "lmrefine_blender.zip"
+    built = subprocess.run([sys.executable, os.path.join(REPO, "addon", "build_zip.py"), "--out", str(archive)],
+                           capture_output=True, text=True)
+    assert built.returncode == 0, built.stderr
+    env = dict(os.environ, BLENDER_USER_SCRIPTS=str(tmp_path / "scripts"),
+               BLENDER_USER_CONFIG=str(tmp_path / "config"))
+    env.pop("PYTHONPATH", None)
+    install = (
+        "import bpy\n"
+        f"bpy.ops.preferences.addon_install(filepath={str(archive)!r})\n"
+        "bpy.ops.preferences.addon_enable(module='lmrefine_blender')\n"
+        "bpy.ops.wm.save_userpref()\n"
+    )
+    process = subprocess.run([BLENDER, "-b", "--factory-startup", "--python-exit-code", "1",
+                              "--python-expr", install], capture_output=True, text=True, env=env, timeout=120)
+    assert process.returncode == 0, process.stderr[-2000:]
+    # A later session (user preferences read) has the add-on enabled, and the core loads from the zip's copy.
+    probe = (
+        "import bpy, lmrefine\n"
+        "print('PROBE', hasattr(bpy.types.Scene, 'lmrefine'), lmrefine.__file__, "
+        "bpy.ops.object.lmrefine_refine_uvs.idname())\n"
+    )
+    process = subprocess.run([BLENDER, "-b", "--python-exit-code", "1", "--python-expr", probe],
+                             capture_output=True, text=True, env=env, timeout=120)
+    assert process.returncode == 0, process.stderr[-2000:]
+    line = next(line for line in process.stdout.splitlines() if line.startswith("PROBE"))
+    enabled, location, idname = line.split()[1:]
+    assert enabled == "True" and idname == "OBJECT_OT_lmrefine_refine_uvs"
+    assert location.startswith(str(tmp_path / "scripts" / "addons" / "lmrefine_blender" / "lib"))

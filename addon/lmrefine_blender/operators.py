@@ -109,13 +109,9 @@ class LMREFINE_OT_refine_uvs(bpy.types.Operator):
             self.report({'ERROR'}, str(error))
             return {'CANCELLED'}
         self._journal = Journal()
-        self._cancel = threading.Event()
-        self._job = pipeline.run(context, targets, options, self._journal, should_stop=self._cancel.is_set)
-        self._send = None  # what to send into the job next: ("value", v) or ("error", e)
-        self._thread = None
-        self._work = None
-        self._fraction = 0.0
-        self._label = "Starting"
+        stop = threading.Event()
+        job = pipeline.run(context, targets, options, self._journal, should_stop=stop.is_set)
+        self._driver = pipeline.ThreadedDriver(job, stop)
         wm = context.window_manager
         wm.progress_begin(0.0, 1.0)
         self._timer = wm.event_timer_add(0.1, window=context.window)
@@ -125,55 +121,25 @@ class LMREFINE_OT_refine_uvs(bpy.types.Operator):
 
     def modal(self, context, event):
         if event.type == 'ESC' and event.value == 'PRESS':
-            self._cancel.set()
-            self._label = "Cancelling"
+            self._driver.cancel()
             self._status(context)
         if event.type != 'TIMER':
-            return {'RUNNING_MODAL'}  # the scene must not change under the job
-        if self._thread is not None:
-            if self._thread.is_alive():
-                context.window_manager.progress_update(self._fraction)
-                self._status(context)
-                return {'RUNNING_MODAL'}
-            self._thread = None
-        if self._cancel.is_set():
-            self._job.close()
-            return self._end(context, pipeline.Cancelled())
-        try:
-            kind, payload = self._send or ("value", None)
-            self._send = None
-            work = self._job.throw(payload) if kind == "error" else self._job.send(payload)
-        except StopIteration as stop:
-            return self._end(context, None, stop.value)
-        except BaseException as error:
-            return self._end(context, error)
-        self._start_work(work)
-        self._status(context)
-        return {'RUNNING_MODAL'}
-
-    def _start_work(self, work):
-        self._work = work
-        self._label = work.label
-        self._fraction = work.start
-
-        def progress(fraction, stage=""):
-            # Called on the worker thread: only plain Python state here, never bpy.
-            self._fraction = work.start + work.span * min(max(float(fraction), 0.0), 1.0)
-            return not self._cancel.is_set()
-
-        def target():
-            try:
-                self._send = ("value", work.call(progress))
-            except BaseException as error:
-                self._send = ("error", error)
-
-        self._thread = threading.Thread(target=target, name="lmrefine", daemon=True)
-        self._thread.start()
+            return {'RUNNING_MODAL'}  # block other input: the scene must not change under the job
+        state = self._driver.poll()
+        if state is None:
+            context.window_manager.progress_update(self._driver.fraction)
+            self._status(context)
+            return {'RUNNING_MODAL'}
+        kind, value = state
+        if kind == "done":
+            return self._end(context, None, value)
+        return self._end(context, value)
 
     def _status(self, context):
         if context.workspace is not None:
             context.workspace.status_text_set(
-                f"Refine Lightmap UVs: {self._label} ({100.0 * self._fraction:.0f}%), Esc to cancel")
+                f"Refine Lightmap UVs: {self._driver.label} ({100.0 * self._driver.fraction:.0f}%), "
+                "Esc to cancel")
 
     def _end(self, context, error, outcome=None):
         wm = context.window_manager

@@ -12,6 +12,7 @@ with lmrefine.check_layout; lightmaps come from lmrefine.bake or Cycles.
 """
 
 import os
+import threading
 import time
 from dataclasses import dataclass, field
 
@@ -405,3 +406,62 @@ def _progress_callback(work, report, should_stop):
         return not should_stop()
 
     return callback
+
+
+class ThreadedDriver:
+    """Drive `job` without blocking: native work on a worker thread, bpy work in poll().
+
+    The modal operator calls poll() from a timer on Blender's main thread;
+    cancel() (Esc) makes the running native call stop at its next progress
+    report and the job stop before its next step. poll() returns None while
+    the job runs, then ("done", outcome) or ("error", exception) once.
+    """
+
+    def __init__(self, job, should_stop_event):
+        self._job = job
+        self._stop = should_stop_event
+        self._thread = None
+        self._send = ("value", None)
+        self.fraction = 0.0
+        self.label = "Starting"
+
+    def cancel(self):
+        self._stop.set()
+        self.label = "Cancelling"
+
+    def poll(self):
+        if self._thread is not None:
+            if self._thread.is_alive():
+                return None
+            self._thread = None
+        if self._stop.is_set():
+            self._job.close()
+            return ("error", Cancelled())
+        kind, payload = self._send
+        try:
+            work = self._job.throw(payload) if kind == "error" else self._job.send(payload)
+        except StopIteration as stop:
+            return ("done", stop.value)
+        except BaseException as error:
+            return ("error", error)
+        self._start(work)
+        return None
+
+    def _start(self, work):
+        self.label = work.label
+        self.fraction = work.start
+
+        def report(fraction, label):
+            # Runs on the worker thread: plain Python state only, never bpy.
+            self.fraction = fraction
+
+        progress = _progress_callback(work, report, self._stop.is_set)
+
+        def target():
+            try:
+                self._send = ("value", work.call(progress))
+            except BaseException as error:
+                self._send = ("error", error)
+
+        self._thread = threading.Thread(target=target, name="lmrefine", daemon=True)
+        self._thread.start()

@@ -445,6 +445,43 @@ def rollback_on_cancel():
 
 
 @check
+def threaded_driver_runs_and_cancels():
+    """The modal operator's driver (worker thread + poll), which Esc cancels; no event loop needed."""
+    import threading
+    import time as clock
+
+    skipped = _needs("refine")
+    if skipped:
+        return skipped
+    facts = {}
+    for mode in ("run", "cancel"):
+        fresh_shadow_scene(first_lightmap='CYCLES', backend='CYCLES', bake_passes={'DIRECT'})
+        floor = bpy.data.objects["Floor"]
+        options = pipeline.settings_snapshot(bpy.context.scene.lmrefine)
+        before = fingerprint()
+        targets = pipeline.validate(bpy.context, [floor], options)
+        journal = lmrefine_blender.journal.Journal()
+        stop = threading.Event()
+        driver = pipeline.ThreadedDriver(pipeline.run(bpy.context, targets, options, journal, stop.is_set), stop)
+        labels = []
+        while True:
+            state = driver.poll()
+            if state is not None:
+                break
+            labels.append(driver.label)
+            if mode == "cancel" and driver.label.startswith("Refining"):
+                driver.cancel()  # what Esc does, while the native refinement runs on the worker thread
+            clock.sleep(0.01)
+        kind, value = state
+        if kind == "error":
+            journal.rollback()
+        facts[mode] = {"kind": kind, "value": type(value).__name__, "labels": sorted(set(labels)),
+                       "has_layer": "Lightmap_refined" in floor.data.uv_layers,
+                       "changed": changed(before, fingerprint())}
+    return facts
+
+
+@check
 def save_scene_for_batch():
     fresh_shadow_scene()
     path = os.path.join(WORK_DIR, "shadow.blend")
