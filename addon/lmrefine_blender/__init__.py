@@ -27,12 +27,12 @@ if os.path.isdir(_LIB) and _LIB not in sys.path:
 if "bpy" in locals():  # "Reload Scripts": pick up edited modules
     import importlib
 
-    for _module in (properties, bridge, journal, materials, cycles_bake, pipeline, operators, panels):  # noqa: F821
+    for _module in (errors, properties, bridge, journal, materials, cycles_bake, pipeline, operators, panels):  # noqa: F821
         importlib.reload(_module)
 
 import bpy  # noqa: E402,F401
 
-from . import bridge, cycles_bake, journal, materials, operators, panels, pipeline, properties  # noqa: E402,F401
+from . import bridge, cycles_bake, errors, journal, materials, operators, panels, pipeline, properties  # noqa: E402,F401
 
 
 def register():

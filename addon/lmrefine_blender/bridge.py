@@ -17,6 +17,8 @@ from dataclasses import dataclass
 import bpy
 import numpy as np
 
+from .errors import UserError
+
 # Geometry that can become a mesh and so can cast shadows.
 GEOMETRY_TYPES = {'MESH', 'CURVE', 'SURFACE', 'META', 'FONT'}
 
@@ -84,7 +86,7 @@ def write_uv_layer(mesh, uv_name, uvs):
         raise ValueError(f"refined UVs have shape {uvs.shape}, mesh '{mesh.name}' has {len(mesh.loops)} loops")
     layer = mesh.uv_layers.get(uv_name) or mesh.uv_layers.new(name=uv_name, do_init=False)
     if layer is None:  # Blender refuses a 9th UV map
-        raise ValueError(f"mesh '{mesh.name}' already has the maximum of 8 UV maps: remove one to make room "
+        raise UserError(f"mesh '{mesh.name}' already has the maximum of 8 UV maps: remove one to make room "
                          f"for '{uv_name}'")
     layer.data.foreach_set("uv", uvs.ravel())
     mesh.update()
@@ -155,7 +157,7 @@ def export_mesh(obj_eval, matrix_world, uv_name=None, name=None):
         if uv_name is not None:
             layer = mesh.uv_layers.get(uv_name)
             if layer is None:
-                raise ValueError(f"object '{obj_eval.name}' loses UV map '{uv_name}' in its modifier stack: "
+                raise UserError(f"object '{obj_eval.name}' loses UV map '{uv_name}' in its modifier stack: "
                                  "move the modifier that drops it, or apply it")
             uvs = np.empty(loop_count * 2, dtype=np.float32)
             layer.data.foreach_get("uv", uvs)
@@ -198,8 +200,12 @@ def export_scene(context, receivers, uv_name_of):
             continue
         original = obj_eval.original
         if not instance.is_instance and original.name in receiver_names:
-            by_name[original.name] = export_mesh(obj_eval, instance.matrix_world,
-                                                 uv_name=uv_name_of[original.name], name=original.name)
+            export = export_mesh(obj_eval, instance.matrix_world, uv_name=uv_name_of[original.name],
+                                 name=original.name)
+            if export is None:
+                raise UserError(f"'{original.name}' has no faces after its modifiers: disable the modifier "
+                                "that removes them")
+            by_name[original.name] = export
             continue
         if instance.is_instance:
             if instance.parent is None or not renders(instance.parent.original):
@@ -211,7 +217,7 @@ def export_scene(context, receivers, uv_name_of):
             occluders.append(export)
     missing = receiver_names - by_name.keys()
     if missing:
-        raise ValueError(f"objects {sorted(missing)} are not in the evaluated scene: make them visible in "
+        raise UserError(f"objects {sorted(missing)} are not in the evaluated scene: make them visible in "
                          "the view layer")
     return [by_name[obj.name] for obj in receivers], occluders
 
@@ -245,7 +251,7 @@ def light_params(obj):
         params["size"] = float(light.size * abs(scale.x))
         params["size_y"] = float(light.size_y * abs(scale.y))
     else:
-        raise ValueError(f"light '{obj.name}' has unknown type {kind}")
+        raise UserError(f"light '{obj.name}' has unknown type {kind}: delete it or change its type")
     return kind.lower(), params
 
 

@@ -12,6 +12,7 @@ from contextlib import contextmanager
 import bpy
 
 from . import bridge
+from .errors import Cancelled
 from .materials import BakeTarget
 
 BAKE_ARGS = {
@@ -55,8 +56,6 @@ def bake(context, objects, uv_name_of, pass_name, resolution, samples, margin, s
     Each object is baked on its own (only it selected) into a temporary float
     image that is removed afterwards. `should_stop()` is polled between objects.
     """
-    from .pipeline import Cancelled  # no cycle at import time
-
     arguments = BAKE_ARGS[pass_name]
     results = {}
     view_layer = context.view_layer

@@ -7,6 +7,8 @@ removed again without guessing from names that the user may have changed.
 
 import bpy
 
+from .errors import UserError
+
 ROLE = "lmrefine_role"
 OWNER = "lmrefine_object"
 
@@ -81,7 +83,7 @@ class BakeTarget:
         else:
             for slot in obj.material_slots:
                 if slot.material is not None and not slot.material.use_nodes:
-                    raise ValueError(f"material '{slot.material.name}' of '{obj.name}' does not use nodes, "
+                    raise UserError(f"material '{slot.material.name}' of '{obj.name}' does not use nodes, "
                                      "which a Cycles bake needs: enable 'Use Nodes' or bake with Embree")
         for material in _node_trees(obj):
             nodes = material.node_tree.nodes

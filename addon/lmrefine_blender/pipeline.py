@@ -20,17 +20,10 @@ import bpy
 import numpy as np
 
 from . import bridge, cycles_bake, materials
+from .errors import Cancelled, UserError  # noqa: F401  (re-exported for the drivers)
 
 REFINED_SUFFIX = "_refined"
 BAKE_MARGIN_MIN = 2  # texels of dilation even with padding 0, so bilinear lookups stay inside
-
-
-class UserError(Exception):
-    """A problem the user can fix; the message says how. Nothing was changed."""
-
-
-class Cancelled(Exception):
-    """The user pressed Esc (or the progress callback asked to stop)."""
 
 
 @dataclass
@@ -267,7 +260,7 @@ def run(context, targets, options, journal, should_stop, image_dir=None):
     for names in outcome.images.values():
         for image_name in names.values():
             image = bpy.data.images[image_name]
-            outcome.image_files[image_name] = _save_image(image, image_dir, journal)
+            outcome.image_files[image_name] = _save_image(image, image_dir)
     return outcome
 
 
@@ -339,7 +332,15 @@ def _write_refined_layer(target, uvs, journal):
 
 
 def _store_image(obj, pass_name, pixels, journal):
-    """The object's lightmap image for `pass_name` (reused across runs), holding `pixels`."""
+    """The object's lightmap image for `pass_name` (reused across runs), holding `pixels`.
+
+    Alpha is written as 1 everywhere, like Cycles' bake output: Blender stores
+    EXR premultiplied, so an alpha-0 gutter would lose its dilated colour on
+    the next load and seams would show. Coverage comes from the UV layout.
+    The image keeps a fake user so it survives saving even without a material.
+    """
+    pixels = np.array(pixels, dtype=np.float32)  # a copy: never modify the baker's array
+    pixels[..., 3] = 1.0
     name = f"{obj.name}_lightmap_{pass_name}"
     image = bpy.data.images.get(name)
     if image is not None and image.get("lmrefine_object") == obj.name and image.library is None:
@@ -349,13 +350,17 @@ def _store_image(obj, pass_name, pixels, journal):
         image = bridge.new_float_image(name, pixels.shape[0])
         image["lmrefine_object"] = obj.name
         image["lmrefine_pass"] = pass_name
+        image.use_fake_user = True
         journal.on_rollback(lambda: bpy.data.images.remove(image))
     bridge.array_to_image(image, pixels)
     return image
 
 
-def _save_image(image, image_dir, journal):
-    """Write `image` as EXR (into image_dir, or next to the .blend); pack it if there is nowhere to write."""
+def _save_image(image, image_dir):
+    """Write `image` as EXR (into image_dir, or next to the .blend); pack it if there is nowhere to write.
+
+    Runs last: a file on disk is the one change a rollback cannot take back.
+    """
     filename = bpy.path.clean_name(image.name) + ".exr"
     if image_dir is not None:
         path = os.path.join(os.path.abspath(image_dir), filename)
@@ -366,16 +371,10 @@ def _save_image(image, image_dir, journal):
     else:
         image.pack()
         return ""
-    previous = (image.filepath_raw, image.file_format, image.source)
     image.filepath_raw = stored
     image.file_format = 'OPEN_EXR'
     image.save()
-    journal.on_rollback(lambda: _restore_image_path(image, previous))
     return path
-
-
-def _restore_image_path(image, previous):
-    image.filepath_raw, image.file_format, _ = previous
 
 
 # ------------------------------------------------------------------ drivers
