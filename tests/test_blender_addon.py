@@ -210,6 +210,15 @@ def test_batch_fails_with_message_and_report(facts, work_dir):
     assert report["ok"] is False and "NoSuchObject" in report["error"]
 
 
+def test_batch_never_overwrites_its_input(facts):
+    blend = fact(facts, "save_scene_for_batch")["path"]
+    before = os.path.getmtime(blend)
+    process = run_batch(blend, "--objects", "Floor", "--out", os.path.dirname(blend))
+    assert process.returncode == 1
+    assert "would overwrite it" in process.stderr
+    assert os.path.getmtime(blend) == before
+
+
 def test_batch_rejects_bad_flags(facts, work_dir):
     blend = fact(facts, "save_scene_for_batch")["path"]
     process = run_batch(blend, "--objects", "Floor", "--out", str(work_dir / "bad"), "--bake-passes", "glow")

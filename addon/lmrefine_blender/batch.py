@@ -121,11 +121,15 @@ def run(args):
     missing = [name for name in args.objects if name not in bpy.data.objects]
     if missing:
         raise pipeline.UserError(f"no object(s) named {', '.join(missing)} in {bpy.data.filepath}")
+    out = os.path.abspath(args.out)
+    blend_copy = os.path.join(out, os.path.basename(bpy.data.filepath))
+    if os.path.abspath(bpy.data.filepath) == blend_copy:
+        raise pipeline.UserError(f"--out {args.out} is the folder of the input .blend, whose copy would "
+                                 "overwrite it: choose another folder")
     objects = [bpy.data.objects[name] for name in args.objects]
     apply_flags(scene.lmrefine, args)
     options = pipeline.settings_snapshot(scene.lmrefine)
     targets = pipeline.validate(bpy.context, objects, options)
-    out = os.path.abspath(args.out)
     os.makedirs(out, exist_ok=True)
     journal = Journal()
     try:
@@ -135,7 +139,6 @@ def run(args):
         journal.rollback()
         raise
     journal.commit()
-    blend_copy = os.path.join(out, os.path.basename(bpy.data.filepath))
     bpy.ops.wm.save_as_mainfile(filepath=blend_copy)
     bpy.ops.file.make_paths_relative()  # the EXRs sit beside the copy: keep the folder relocatable
     bpy.ops.wm.save_mainfile()
