@@ -2,7 +2,7 @@
 
 A thin layer over the lmrefine package (native C++ core): bridge.py turns the
 scene into numpy arrays, pipeline.py runs the job, operators/panels/properties
-are the UI. Heavy modules (numpy, lmrefine) load when the operator runs.
+are the UI. The native core (lmrefine) loads when the operator first runs.
 """
 
 bl_info = {
@@ -24,15 +24,7 @@ _LIB = os.path.join(os.path.dirname(__file__), "lib")
 if os.path.isdir(_LIB) and _LIB not in sys.path:
     sys.path.insert(0, _LIB)
 
-if "bpy" in locals():  # "Reload Scripts": pick up edited modules
-    import importlib
-
-    for _module in (errors, properties, bridge, journal, materials, cycles_bake, pipeline, operators, panels):  # noqa: F821
-        importlib.reload(_module)
-
-import bpy  # noqa: E402,F401
-
-from . import bridge, cycles_bake, errors, journal, materials, operators, panels, pipeline, properties  # noqa: E402,F401
+from . import operators, panels, properties  # noqa: E402  (after the sys.path set-up)
 
 
 def register():

@@ -24,6 +24,7 @@ import lmrefine  # noqa: E402
 import lmrefine_blender  # noqa: E402
 import scenes  # noqa: E402
 from lmrefine_blender import bridge, cycles_bake, pipeline  # noqa: E402
+from lmrefine_blender.journal import Journal  # noqa: E402
 
 HAS_REFINE = hasattr(lmrefine, "refine_uvs") and hasattr(lmrefine, "check_layout")
 HAS_BAKE = hasattr(lmrefine, "bake") and hasattr(lmrefine, "Scene")
@@ -432,7 +433,7 @@ def rollback_on_cancel():
     options = pipeline.settings_snapshot(bpy.context.scene.lmrefine)
     before = fingerprint()
     targets = pipeline.validate(bpy.context, [bpy.data.objects["Floor"]], options)
-    journal = lmrefine_blender.journal.Journal()
+    journal = Journal()
     stop = lambda: "Lightmap_refined" in mesh.uv_layers  # noqa: E731
     job = pipeline.run(bpy.context, targets, options, journal, should_stop=stop)
     try:
@@ -460,7 +461,7 @@ def threaded_driver_runs_and_cancels():
         options = pipeline.settings_snapshot(bpy.context.scene.lmrefine)
         before = fingerprint()
         targets = pipeline.validate(bpy.context, [floor], options)
-        journal = lmrefine_blender.journal.Journal()
+        journal = Journal()
         stop = threading.Event()
         driver = pipeline.ThreadedDriver(pipeline.run(bpy.context, targets, options, journal, stop.is_set), stop)
         labels = []
