@@ -62,7 +62,7 @@ ERRORS = {
     "error_only_light_selected": "No mesh selected",
     "error_no_uv_layer": "'Bare' has no UV map",
     "error_missing_source_layer": "has no UV map 'NoSuchMap'",
-    "error_edit_mode": "Object Mode",
+    "error_edit_mode": "works in Object Mode, not Edit Mesh",
     "error_zero_area_faces": "1 faces of zero area",
     "error_linked_library": "is linked from",
     "error_shared_mesh": "share mesh 'FloorMesh'",

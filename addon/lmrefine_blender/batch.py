@@ -133,7 +133,7 @@ def run(args):
     os.makedirs(out, exist_ok=True)
     journal = Journal()
     try:
-        job = pipeline.run(bpy.context, targets, options, journal, should_stop=lambda: False, image_dir=out)
+        job = pipeline.run(bpy.context, targets, options, journal, image_dir=out)
         outcome = pipeline.run_blocking(job, progress=_progress)
     except BaseException:
         journal.rollback()

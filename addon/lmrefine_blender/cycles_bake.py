@@ -12,7 +12,6 @@ from contextlib import contextmanager
 import bpy
 
 from . import bridge
-from .errors import Cancelled
 from .materials import BakeTarget
 
 BAKE_ARGS = {
@@ -24,8 +23,8 @@ BAKE_ARGS = {
 
 
 @contextmanager
-def _render_settings(context, samples):
-    """Cycles with denoising off (Debian's Blender has no OpenImageDenoise), restored on exit."""
+def render_settings(context, samples):
+    """Cycles with denoising off (Debian's Blender has no OpenImageDenoise); everything restored on exit."""
     scene = context.scene
     view_layer = context.view_layer
     saved_engine = scene.render.engine
@@ -39,7 +38,7 @@ def _render_settings(context, samples):
         cycles.samples = samples
         cycles.use_denoising = False
         cycles.use_preview_denoising = False
-        cycles.use_adaptive_sampling = False  # a bake has no adaptive sampling; keep settings honest
+        cycles.use_adaptive_sampling = False  # bakes have no adaptive sampling: keep the settings honest
         yield
     finally:
         for name, value in saved_cycles.items():
@@ -50,33 +49,26 @@ def _render_settings(context, samples):
         view_layer.objects.active = saved_active
 
 
-def bake(context, objects, uv_name_of, pass_name, resolution, samples, margin, should_stop=None):
-    """Bake `pass_name` for each object with its UV map; returns {object name: (R, R, 4) float32}.
+def bake_object(context, obj, uv_name, pass_name, resolution, margin):
+    """Bake `pass_name` of `obj` with UV map `uv_name`; returns (R, R, 4) float32, row 0 at the top.
 
-    Each object is baked on its own (only it selected) into a temporary float
-    image that is removed afterwards. `should_stop()` is polled between objects.
+    Call inside render_settings(). Only `obj` is selected while it bakes, into
+    a temporary float image that is removed afterwards.
     """
     arguments = BAKE_ARGS[pass_name]
-    results = {}
     view_layer = context.view_layer
-    with _render_settings(context, samples):
-        for obj in objects:
-            if should_stop is not None and should_stop():
-                raise Cancelled()
-            image = bridge.new_float_image(f"lmrefine bake {obj.name}", resolution)
-            try:
-                with BakeTarget(obj, image):
-                    for other in view_layer.objects:
-                        other.select_set(other == obj)
-                    view_layer.objects.active = obj
-                    result = bpy.ops.object.bake(
-                        type=arguments["type"], pass_filter=arguments["pass_filter"],
-                        uv_layer=uv_name_of[obj.name], margin=margin, margin_type='EXTEND',
-                        use_clear=True, use_selected_to_active=False, target='IMAGE_TEXTURES',
-                        save_mode='INTERNAL')
-                    if 'FINISHED' not in result:
-                        raise RuntimeError(f"Cycles could not bake '{obj.name}' (see the console)")
-                results[obj.name] = bridge.image_to_array(image)
-            finally:
-                bpy.data.images.remove(image)
-    return results
+    image = bridge.new_float_image(f"lmrefine bake {obj.name}", resolution)
+    try:
+        with BakeTarget(obj, image):
+            for other in view_layer.objects:
+                other.select_set(other == obj)
+            view_layer.objects.active = obj
+            result = bpy.ops.object.bake(
+                type=arguments["type"], pass_filter=arguments["pass_filter"], uv_layer=uv_name,
+                margin=margin, margin_type='EXTEND', use_clear=True, use_selected_to_active=False,
+                target='IMAGE_TEXTURES', save_mode='INTERNAL')
+            if 'FINISHED' not in result:
+                raise RuntimeError(f"Cycles could not bake '{obj.name}' (see the console)")
+        return bridge.image_to_array(image)
+    finally:
+        bpy.data.images.remove(image)

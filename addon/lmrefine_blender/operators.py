@@ -84,7 +84,7 @@ class LMREFINE_OT_refine_uvs(bpy.types.Operator):
         wm = context.window_manager
         wm.progress_begin(0.0, 1.0)
         try:
-            job = pipeline.run(context, targets, options, journal, should_stop=lambda: False)
+            job = pipeline.run(context, targets, options, journal)
             outcome = pipeline.run_blocking(job, progress=lambda fraction, label: wm.progress_update(fraction))
         except BaseException as error:
             _rollback(self, journal)
@@ -110,7 +110,7 @@ class LMREFINE_OT_refine_uvs(bpy.types.Operator):
             return {'CANCELLED'}
         self._journal = Journal()
         stop = threading.Event()
-        job = pipeline.run(context, targets, options, self._journal, should_stop=stop.is_set)
+        job = pipeline.run(context, targets, options, self._journal)
         self._driver = pipeline.ThreadedDriver(job, stop)
         wm = context.window_manager
         wm.progress_begin(0.0, 1.0)

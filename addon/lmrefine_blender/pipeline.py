@@ -28,7 +28,11 @@ BAKE_MARGIN_MIN = 2  # texels of dilation even with padding 0, so bilinear looku
 
 @dataclass
 class NativeWork:
-    """A long native call the driver must run: `call(progress)` -> value."""
+    """A long native call the driver must run: `call(progress)` -> value.
+
+    With `call` None it is only a progress mark before blocking bpy work (a
+    Cycles bake): the driver shows the label, checks for a cancel and resumes.
+    """
 
     label: str
     call: object
@@ -111,7 +115,9 @@ def import_core():
 def validate(context, objects, options):
     """Targets for `objects`, or a UserError naming the first problem and its fix."""
     if context.mode != 'OBJECT':
-        raise UserError("Lightmap UVs are read in Object Mode: press Tab to leave Edit Mode, then run again")
+        mode = context.mode.replace("_", " ").title()
+        raise UserError(f"Refine Lightmap UVs works in Object Mode, not {mode}: switch to Object Mode (Tab, or "
+                        "the mode menu of the 3D View), then run again")
     meshes = [obj for obj in objects if obj.type == 'MESH']
     if not meshes:
         raise UserError("No mesh selected: select the mesh objects whose lightmap UVs to refine")
@@ -134,7 +140,9 @@ def validate(context, objects, options):
             raise UserError(f"'{obj.name}' has no UV map: add one for the lightmap (Object Data > UV Maps > +, "
                             "then UV > Lightmap Pack)")
         source = options["source_layer"] or bridge.default_source_layer(mesh)
-        if source is None or source not in mesh.uv_layers:
+        if source is None:
+            raise UserError(f"'{obj.name}' has only refined UV maps: set Source UV Map to the one to refine")
+        if source not in mesh.uv_layers:
             available = ", ".join(layer.name for layer in mesh.uv_layers)
             raise UserError(f"'{obj.name}' has no UV map '{source}' (it has: {available}): pick the lightmap "
                             "UV map in the panel")
@@ -178,7 +186,7 @@ def _first_image(obj, source, options):
 
 # ---------------------------------------------------------------------- run
 
-def run(context, targets, options, journal, should_stop, image_dir=None):
+def run(context, targets, options, journal, image_dir=None):
     """The job (a generator; see the module doc). Returns an Outcome.
 
     Every scene change registers its revert in `journal`; the driver rolls
@@ -204,9 +212,8 @@ def run(context, targets, options, journal, should_stop, image_dir=None):
             lightmaps = yield from _bake_embree(context, lmrefine, targets, source_of, options["driving_pass"],
                                                 options, "First bake", done * span, span)
         else:
-            lightmaps = cycles_bake.bake(context, [t.obj for t in targets], source_of, options["driving_pass"],
-                                         resolution, options["samples"], max(padding, BAKE_MARGIN_MIN),
-                                         should_stop)
+            lightmaps = yield from _bake_cycles(context, targets, source_of, options["driving_pass"], options,
+                                                "First bake", done * span, span)
         done += 1
         outcome.timings["first bake"] = time.perf_counter() - clock
 
@@ -243,8 +250,8 @@ def run(context, targets, options, journal, should_stop, image_dir=None):
             baked = yield from _bake_embree(context, lmrefine, targets, refined_of, pass_name, options,
                                             f"Baking {pass_name}", done * span, span)
         else:
-            baked = cycles_bake.bake(context, [t.obj for t in targets], refined_of, pass_name, resolution,
-                                     options["samples"], max(padding, BAKE_MARGIN_MIN), should_stop)
+            baked = yield from _bake_cycles(context, targets, refined_of, pass_name, options,
+                                            f"Baking {pass_name}", done * span, span)
         done += 1
         for target in targets:
             image = _store_image(target.obj, pass_name, baked[target.obj.name], journal)
@@ -297,6 +304,19 @@ def _bake_embree(context, lmrefine, targets, uv_name_of, pass_name, options, lab
                                        samples=options["samples"], seed=0, progress=progress),
         start, span)
     return {name: np.asarray(baked[mesh_id], dtype=np.float32) for name, mesh_id in ids.items()}
+
+
+def _bake_cycles(context, targets, uv_name_of, pass_name, options, label, start, span):
+    """Bake one pass with Cycles, object by object; returns {object name: (R, R, 4) float32}."""
+    baked = {}
+    margin = max(options["padding"], BAKE_MARGIN_MIN)
+    with cycles_bake.render_settings(context, options["samples"]):
+        for index, target in enumerate(targets):
+            name = target.obj.name
+            yield NativeWork(f"{label}: {name} (Cycles)", None, start + span * index / len(targets), 0.0)
+            baked[name] = cycles_bake.bake_object(context, target.obj, uv_name_of[name], pass_name,
+                                                  options["resolution"], margin)
+    return baked
 
 
 def _base_color(export):
@@ -393,7 +413,13 @@ def run_blocking(job, progress=None, should_stop=None):
             return stop.value
         if progress is not None:
             progress(work.start, work.label)
-        value = work.call(_progress_callback(work, progress, should_stop or (lambda: False)))
+        if work.call is None:
+            if should_stop is not None and should_stop():
+                job.close()
+                raise Cancelled()
+            value = None
+        else:
+            value = work.call(_progress_callback(work, progress, should_stop or (lambda: False)))
 
 
 def _progress_callback(work, report, should_stop):
@@ -443,12 +469,15 @@ class ThreadedDriver:
             return ("done", stop.value)
         except BaseException as error:
             return ("error", error)
-        self._start(work)
+        self.label = work.label
+        self.fraction = work.start
+        if work.call is None:  # a progress mark: show it now, do the bpy work on the next poll
+            self._send = ("value", None)
+        else:
+            self._start(work)
         return None
 
     def _start(self, work):
-        self.label = work.label
-        self.fraction = work.start
 
         def report(fraction, label):
             # Runs on the worker thread: plain Python state only, never bpy.

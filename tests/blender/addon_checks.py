@@ -292,8 +292,8 @@ def cycles_first_bake():
     floor = bpy.data.objects["Floor"]
     before = fingerprint()
     engine_before = bpy.context.scene.render.engine
-    baked = cycles_bake.bake(bpy.context, [floor], {"Floor": "Lightmap"}, "direct", RESOLUTION, 4, 2)
-    image = baked["Floor"]
+    with cycles_bake.render_settings(bpy.context, 4):
+        image = cycles_bake.bake_object(bpy.context, floor, "Lightmap", "direct", RESOLUTION, 2)
     layout = bridge.read_layout(floor.data, "Lightmap")
     covered = lmrefine.coverage_mask(layout.uvs, layout.triangles, RESOLUTION)
     light = image[..., :3].mean(axis=2)[covered]
@@ -435,7 +435,7 @@ def rollback_on_cancel():
     targets = pipeline.validate(bpy.context, [bpy.data.objects["Floor"]], options)
     journal = Journal()
     stop = lambda: "Lightmap_refined" in mesh.uv_layers  # noqa: E731
-    job = pipeline.run(bpy.context, targets, options, journal, should_stop=stop)
+    job = pipeline.run(bpy.context, targets, options, journal)
     try:
         pipeline.run_blocking(job, should_stop=stop)
         raised = None
@@ -463,7 +463,7 @@ def threaded_driver_runs_and_cancels():
         targets = pipeline.validate(bpy.context, [floor], options)
         journal = Journal()
         stop = threading.Event()
-        driver = pipeline.ThreadedDriver(pipeline.run(bpy.context, targets, options, journal, stop.is_set), stop)
+        driver = pipeline.ThreadedDriver(pipeline.run(bpy.context, targets, options, journal), stop)
         labels = []
         while True:
             state = driver.poll()
