@@ -70,6 +70,7 @@ ERRORS = {
     "error_image_file_missing": "has no pixels",
     "error_image_wrong_size": "is 16x16 but Resolution is 64",
     "error_no_bake_pass": "No bake pass chosen",
+    "error_uvs_outside_unit_square": "has 1 UVs outside [0, 1]",
 }
 
 
@@ -79,6 +80,13 @@ def test_error_is_reported_and_changes_nothing(facts, name):
     assert value["outcome"] == "CANCELLED"
     assert value["message"] is not None and ERRORS[name] in value["message"]
     assert value["changed"] == []
+
+
+def test_refine_defaults_match_the_library(facts):
+    value = fact(facts, "refine_defaults_match_the_library")
+    assert value["missing"] == []
+    for key, default in value["theirs"].items():
+        assert value["ours"][key] == pytest.approx(default), key
 
 
 # ----------------------------------------------------------------- bridge
@@ -139,7 +147,7 @@ def test_operator_end_to_end(facts, name):
     assert value["layers"] == ["UVMap", "Lightmap", "Lightmap_refined"]
     # The user's active and render UV maps keep their roles; source and mesh are bit-identical.
     assert value["active_layer"] == "UVMap" and value["render_layer"] == "UVMap"
-    assert value["source_identical"] and value["texture_uvs_identical"]
+    assert value["source_identical"] and value["texture_uvs_identical"] and value["geometry_identical"]
     assert value["check_layout"]["valid"] is True
     assert value["check_layout"]["min_gutter_texels"] >= 2
     assert value["uv_max_move"] > 0.5 / 64  # the shadow edge pulled UVs by more than half a texel

@@ -62,15 +62,16 @@ def build_parser():
     parser.add_argument("--lightmap-image", help="name of the image to use with --first-lightmap image "
                         "(default: found in each object's material)")
     parser.add_argument("--driving-pass", choices=PASSES, help="what the first bake measures")
-    parser.add_argument("--strength", type=float, help="0 = unchanged layout, 1 = full refinement")
+    parser.add_argument("--strength", type=float, help="texel growth at the strongest light change (0 = unchanged layout)")
     parser.add_argument("--max-magnification", type=float, help="largest growth of a texel's area")
     parser.add_argument("--min-shrink", type=float, help="smallest a texel's area may become (fraction)")
     parser.add_argument("--delta", type=float, help="automaton stop threshold")
     parser.add_argument("--passes", type=int, help="refinement passes")
-    parser.add_argument("--border", choices=("ring", "same", "spring"), help="grid border treatment")
+    parser.add_argument("--border", choices=("same", "border_rule", "extra_ring"), help="grid border treatment")
     parser.add_argument("--directional", action=argparse.BooleanOptionalAction, default=None,
                         help="four energies per cell")
-    parser.add_argument("--wavelet", choices=("d4", "haar"), help="gradient-map filter")
+    parser.add_argument("--wavelet", choices=("d4", "haar", "d12", "d20", "cdf53", "cdf97"),
+                        help="gradient-map filter")
     parser.add_argument("--backend", choices=("embree", "cycles"), help="baker of the final lightmaps")
     parser.add_argument("--bake-passes", type=_passes, help=f"comma-separated, of: {', '.join(PASSES)}")
     parser.add_argument("--samples", type=int, help="samples per texel")

@@ -247,7 +247,7 @@ def light_params(obj):
     elif kind == 'AREA':
         # Blender scales an area light's size with its object's scale.
         scale = matrix.to_scale()
-        params["shape"] = light.shape.lower()
+        params["shape"] = light.shape  # SQUARE, RECTANGLE, DISK or ELLIPSE, as the baker takes them
         params["size"] = float(light.size * abs(scale.x))
         params["size_y"] = float(light.size_y * abs(scale.y))
     else:

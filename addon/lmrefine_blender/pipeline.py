@@ -23,7 +23,9 @@ from . import bridge, cycles_bake, materials
 from .errors import Cancelled, UserError  # noqa: F401  (re-exported for the drivers)
 
 REFINED_SUFFIX = "_refined"
-BAKE_MARGIN_MIN = 2  # texels of dilation even with padding 0, so bilinear lookups stay inside
+# Texels both bakers fill into the gutter around each chart (Blender's default
+# bake margin): bilinear and mipmapped lookups near a chart border stay on it.
+BAKE_MARGIN = 16
 
 
 @dataclass
@@ -64,12 +66,15 @@ class Outcome:
         widening = float(np.mean([r["transition_widening"] for r in reports]))
         low = min(r["density_min"] for r in reports)
         high = max(r["density_max"] for r in reports)
-        limits = sorted({str(r.get("limited_by") or "") for r in reports} - {""})
+        limits = set()
+        for report in reports:
+            limited_by = report.get("limited_by") or []
+            limits.update([limited_by] if isinstance(limited_by, str) else limited_by)
         return {
             "transition_widening": widening,
             "density_min": float(low),
             "density_max": float(high),
-            "limited_by": ", ".join(limits),
+            "limited_by": ", ".join(sorted(limits)),
         }
 
 
@@ -153,6 +158,10 @@ def validate(context, objects, options):
         layout = bridge.read_layout(mesh, source)
         if len(layout.triangles) == 0:
             raise UserError(f"'{obj.name}' has no faces: nothing to lightmap")
+        outside = int(np.count_nonzero(((layout.uvs < 0.0) | (layout.uvs > 1.0)).any(axis=1)))
+        if outside:
+            raise UserError(f"UV map '{source}' of '{obj.name}' has {outside} UVs outside [0, 1]; a lightmap "
+                            "layout must lie inside the unit square: repack it (UV > Lightmap Pack or Pack Islands)")
         zero_3d, zero_uv = bridge.degenerate_counts(mesh, layout, resolution)
         if zero_3d:
             raise UserError(f"'{obj.name}' has {zero_3d} faces of zero area: remove them (Edit Mode > Mesh > "
@@ -198,7 +207,7 @@ def run(context, targets, options, journal, image_dir=None):
     resolution = options["resolution"]
     padding = options["padding"]
     backend_first = options["first_lightmap"]
-    stages = (0 if backend_first == 'IMAGE' else 1) + len(targets) + len(options["bake_passes"])
+    stages = (0 if backend_first == 'IMAGE' else 1) + len(targets) + 1
     span = 1.0 / stages
     done = 0
 
@@ -208,12 +217,14 @@ def run(context, targets, options, journal, image_dir=None):
         lightmaps = {t.obj.name: bridge.image_to_array(t.image) for t in targets}
     else:
         source_of = {t.obj.name: t.source for t in targets}
+        passes = (options["driving_pass"],)
         if backend_first == 'EMBREE':
-            lightmaps = yield from _bake_embree(context, lmrefine, targets, source_of, options["driving_pass"],
-                                                options, "First bake", done * span, span)
+            baked = yield from _bake_embree(context, lmrefine, targets, source_of, passes, options, "First bake",
+                                            done * span, span)
         else:
-            lightmaps = yield from _bake_cycles(context, targets, source_of, options["driving_pass"], options,
-                                                "First bake", done * span, span)
+            baked = yield from _bake_cycles(context, targets, source_of, passes, options, "First bake",
+                                            done * span, span)
+        lightmaps = baked[options["driving_pass"]]
         done += 1
         outcome.timings["first bake"] = time.perf_counter() - clock
 
@@ -243,20 +254,20 @@ def run(context, targets, options, journal, image_dir=None):
     outcome.timings["refine"] = time.perf_counter() - clock
 
     # 3. The second bake with the refined layout, one image per pass.
+    clock = time.perf_counter()
     refined_of = {t.obj.name: t.refined for t in targets}
-    for pass_name in options["bake_passes"]:
-        clock = time.perf_counter()
-        if options["backend"] == 'EMBREE':
-            baked = yield from _bake_embree(context, lmrefine, targets, refined_of, pass_name, options,
-                                            f"Baking {pass_name}", done * span, span)
-        else:
-            baked = yield from _bake_cycles(context, targets, refined_of, pass_name, options,
-                                            f"Baking {pass_name}", done * span, span)
-        done += 1
+    passes = tuple(options["bake_passes"])
+    if options["backend"] == 'EMBREE':
+        baked = yield from _bake_embree(context, lmrefine, targets, refined_of, passes, options, "Second bake",
+                                        done * span, span)
+    else:
+        baked = yield from _bake_cycles(context, targets, refined_of, passes, options, "Second bake",
+                                        done * span, span)
+    for pass_name in passes:
         for target in targets:
-            image = _store_image(target.obj, pass_name, baked[target.obj.name], journal)
+            image = _store_image(target.obj, pass_name, baked[pass_name][target.obj.name], journal)
             outcome.images.setdefault(target.obj.name, {})[pass_name] = image.name
-        outcome.timings[f"bake {pass_name}"] = time.perf_counter() - clock
+    outcome.timings["second bake"] = time.perf_counter() - clock
 
     # 4. Preview in the materials, then write the images (the one step a rollback cannot undo, so last).
     if options["preview"]:
@@ -284,13 +295,15 @@ def _plain(value):
     return value
 
 
-def _bake_embree(context, lmrefine, targets, uv_name_of, pass_name, options, label, start, span):
-    """Bake one pass with lmrefine's baker; returns {object name: (R, R, 4) float32}."""
+def _bake_embree(context, lmrefine, targets, uv_name_of, passes, options, label, start, span):
+    """Bake `passes` with lmrefine's baker; returns {pass: {object name: (R, R, 4) float32}}."""
     receivers, occluders = bridge.export_scene(context, [t.obj for t in targets], uv_name_of)
     scene = lmrefine.Scene()
     ids = {}
     for export in receivers:
-        ids[export.name] = scene.add_mesh(export.positions, export.triangles, uvs=export.uvs,
+        # The baker takes UVs per triangle corner (row 3t + k), the layout's loops in triangle order.
+        corner_uvs = export.uvs[export.triangles.ravel()]
+        ids[export.name] = scene.add_mesh(export.positions, export.triangles, uvs=corner_uvs,
                                           normals=export.normals, base_color=_base_color(export), receiver=True)
     for export in occluders:
         scene.add_mesh(export.positions, export.triangles, normals=export.normals,
@@ -300,22 +313,24 @@ def _bake_embree(context, lmrefine, targets, uv_name_of, pass_name, options, lab
     scene.set_world(bridge.world_color(context.scene))
     baked = yield NativeWork(
         label,
-        lambda progress: lmrefine.bake(scene, options["resolution"], passes=(pass_name,),
-                                       samples=options["samples"], seed=0, progress=progress),
+        lambda progress: lmrefine.bake(scene, options["resolution"], passes=passes, samples=options["samples"],
+                                       seed=0, progress=progress, dilation=BAKE_MARGIN),
         start, span)
-    return {name: np.asarray(baked[mesh_id], dtype=np.float32) for name, mesh_id in ids.items()}
+    by_pass = {passes[0]: baked} if len(passes) == 1 else baked
+    return {name: {obj: np.asarray(by_pass[name][mesh_id], dtype=np.float32) for obj, mesh_id in ids.items()}
+            for name in passes}
 
 
-def _bake_cycles(context, targets, uv_name_of, pass_name, options, label, start, span):
-    """Bake one pass with Cycles, object by object; returns {object name: (R, R, 4) float32}."""
-    baked = {}
-    margin = max(options["padding"], BAKE_MARGIN_MIN)
+def _bake_cycles(context, targets, uv_name_of, passes, options, label, start, span):
+    """Bake `passes` with Cycles, object by object; returns {pass: {object name: (R, R, 4) float32}}."""
+    baked = {name: {} for name in passes}
+    steps = len(passes) * len(targets)
     with cycles_bake.render_settings(context, options["samples"]):
-        for index, target in enumerate(targets):
-            name = target.obj.name
-            yield NativeWork(f"{label}: {name} (Cycles)", None, start + span * index / len(targets), 0.0)
-            baked[name] = cycles_bake.bake_object(context, target.obj, uv_name_of[name], pass_name,
-                                                  options["resolution"], margin)
+        for index, (name, target) in enumerate((n, t) for n in passes for t in targets):
+            obj = target.obj
+            yield NativeWork(f"{label}: {name} of {obj.name} (Cycles)", None, start + span * index / steps, 0.0)
+            baked[name][obj.name] = cycles_bake.bake_object(context, obj, uv_name_of[obj.name], name,
+                                                            options["resolution"], BAKE_MARGIN)
     return baked
 
 

@@ -36,15 +36,20 @@ PASS_ITEMS = (
     ('AO', "AO", "Ambient occlusion (Cycles: Ambient Occlusion bake)"),
 )
 
+# Enum identifiers are lmrefine.refine_uvs' option values, upper-cased.
 BORDER_ITEMS = (
-    ('RING', "Extra Ring", "An extra ring of cells around the grid, removed after convergence (thesis variant 3)"),
     ('SAME', "Same Rule", "Border cells follow the same rule as every other cell (thesis variant 1)"),
-    ('SPRING', "Border Springs", "Border cells follow their own spring rule (thesis variant 2)"),
+    ('BORDER_RULE', "Border Rule", "Border cells follow their own spring rule (thesis variant 2)"),
+    ('EXTRA_RING', "Extra Ring", "An extra ring of cells around the grid, removed after convergence (variant 3)"),
 )
 
 WAVELET_ITEMS = (
     ('D4', "Daubechies D4", "The thesis' choice: copes with noisy bakes"),
-    ('HAAR', "Haar", "Shortest filter; sharper response, more sensitive to noise"),
+    ('HAAR', "Haar", "Shortest filter: sharpest response, most sensitive to noise"),
+    ('D12', "Daubechies D12", "Longer filter: about the same result as D4, slower"),
+    ('D20', "Daubechies D20", "Longest Daubechies filter"),
+    ('CDF53', "CDF 5/3", "Cohen-Daubechies-Feauveau 5/3"),
+    ('CDF97', "CDF 9/7", "Cohen-Daubechies-Feauveau 9/7"),
 )
 
 
@@ -59,7 +64,7 @@ class LMREFINE_PG_result(bpy.types.PropertyGroup):
     density_min: FloatProperty(name="Min Density", description="Smallest texel-density ratio (new / old area)")
     density_max: FloatProperty(name="Max Density", description="Largest texel-density ratio (new / old area)")
     limited_by: StringProperty(name="Limited By", description="What kept the refinement from going further")
-    timings: StringProperty(name="Timings", description="Seconds per stage, as 'stage=seconds' pairs")
+    timings: StringProperty(name="Timings", description="Seconds per stage of the last run")
     message: StringProperty(name="Message", description="Summary of the last run")
 
 
@@ -92,27 +97,32 @@ class LMREFINE_PG_settings(bpy.types.PropertyGroup):
 
     # Refinement (lmrefine.refine_uvs options).
     strength: FloatProperty(
-        name="Strength", description="How far the layout moves towards the ideal (0 = unchanged)",
-        default=1.0, min=0.0, max=1.0, subtype='FACTOR',
+        name="Strength",
+        description="How much texels at the strongest light change may grow: such a texel wants (1 + strength) "
+                    "times the area of one in flat light. 0 leaves the layout unchanged",
+        default=6.0, min=0.0, soft_max=20.0,
     )
     max_magnification: FloatProperty(
-        name="Max Magnification", description="Largest growth of a texel's area at a transition",
+        name="Max Magnification", description="Largest growth of a texel's area (texel-density ratio)",
         default=8.0, min=1.0, max=64.0,
     )
     min_shrink: FloatProperty(
-        name="Min Shrink", description="Smallest a texel's area may become in flat light (fraction of before)",
+        name="Min Shrink", description="Smallest a texel's area may become in flat light (texel-density ratio)",
         default=0.25, min=0.01, max=1.0,
     )
     delta: FloatProperty(
-        name="Delta", description="The automaton stops when neighbouring energies differ by less than this",
-        default=0.01, min=1e-5, max=0.5, precision=4,
+        name="Delta",
+        description="The automaton stops when neighbouring texel densities differ by less than this (relative)",
+        default=0.02, min=1e-5, max=0.5, precision=4,
     )
     passes: IntProperty(
-        name="Refinement Passes", description="Refine, re-bake and refine again this many times",
+        name="Refinement Passes",
+        description="Automaton passes: each extra pass reruns the finest level with fresh energies, "
+                    "deforming further",
         default=1, min=1, max=8,
     )
     border: EnumProperty(name="Border", description="How the grid's outer cells behave", items=BORDER_ITEMS,
-                         default='RING')
+                         default='SAME')
     directional: BoolProperty(
         name="Directional", description="Four energies per cell (one per direction) instead of one",
         default=False,

@@ -88,6 +88,13 @@ def fingerprint():
     return parts
 
 
+def geometry_digest(mesh):
+    """Vertices, topology, normals and material indices: what a refinement must never touch."""
+    return _digest(_array(mesh.vertices, "co", 3), _array(mesh.loops, "vertex_index", 1, np.int32),
+                   _array(mesh.polygons, "loop_start", 1, np.int32), _array(mesh.polygons, "loop_total", 1, np.int32),
+                   _array(mesh.polygons, "material_index", 1, np.int32), _array(mesh.polygons, "use_smooth", 1, bool))
+
+
 def changed(before, after):
     return sorted(key for key in set(before) | set(after) if before.get(key) != after.get(key))
 
@@ -215,6 +222,15 @@ def error_image_wrong_size():
 
 
 @check
+def error_uvs_outside_unit_square():
+    def prepare():
+        layer = bpy.data.objects["Floor"].data.uv_layers["Lightmap"]
+        layer.data[0].uv = (1.5, 0.5)
+
+    return _error_case(prepare)
+
+
+@check
 def error_no_bake_pass():
     return _error_case(lambda: settings(bake_passes=set()))
 
@@ -324,6 +340,23 @@ def _needs(*names):
     return None
 
 
+@check
+def refine_defaults_match_the_library():
+    """The panel's defaults are refine_uvs' own, so the add-on and the Python API agree out of the box."""
+    import inspect
+
+    skipped = _needs("refine")
+    if skipped:
+        return skipped
+    fresh_shadow_scene()
+    options = pipeline.settings_snapshot(bpy.context.scene.lmrefine)["refine_options"]
+    signature = inspect.signature(lmrefine.refine_uvs).parameters
+    ours = {key: value for key, value in options.items()}
+    theirs = {key: signature[key].default for key in options if key in signature}
+    return {"ours": ours, "theirs": theirs,
+            "missing": sorted(key for key in options if key not in signature)}
+
+
 def _image_stats(name, layout_uvs, triangles):
     image = bpy.data.images.get(name)
     if image is None:
@@ -343,6 +376,7 @@ def _end_to_end(first, backend, passes):
         _hook_existing_lightmap(floor)
     layout = bridge.read_layout(mesh, "Lightmap")
     texture_uvs = bridge.read_uv_layer(mesh, "UVMap")
+    geometry = geometry_digest(mesh)
     window = bpy.context.window_manager.windows[0]
     with bpy.context.temp_override(window=window):
         bpy.ops.ed.undo_push(message="before refine")
@@ -366,6 +400,7 @@ def _end_to_end(first, backend, passes):
         "uv_max_move": float(np.abs(refined - layout.uvs).max()),
         "source_identical": bool(np.array_equal(bridge.read_uv_layer(mesh, "Lightmap"), layout.uvs)),
         "texture_uvs_identical": bool(np.array_equal(bridge.read_uv_layer(mesh, "UVMap"), texture_uvs)),
+        "geometry_identical": geometry_digest(mesh) == geometry,
         "images": {p.lower(): _image_stats(f"Floor_lightmap_{p.lower()}", refined, layout.triangles)
                    for p in passes},
         "preview_nodes": sorted(preview, key=str),
