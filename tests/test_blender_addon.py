@@ -113,6 +113,15 @@ def test_bridge_exports_world_space_geometry_and_lights(facts):
     assert value["world"] == [0.0, 0.0, 0.0]
 
 
+def test_layout_is_welded_within_blenders_connect_limit(facts):
+    value = fact(facts, "bridge_welds_blender_layouts")
+    # The premise: Blender's own grid reads as several bit-identical-UV charts, a few UVs past 1.
+    assert value["raw_charts"] > 1 and value["raw_out_of_bounds"] > 0
+    assert value["welded_charts"] == 1 and value["welded_in_bounds"]
+    assert value["welded_max_shift"] < 1e-4
+    assert value["raw_unchanged"]
+
+
 def test_default_source_layer(facts):
     assert fact(facts, "bridge_default_layers") == {
         "UVMap": "UVMap",

@@ -140,6 +140,8 @@ def run(args):
         journal.rollback()
         raise
     journal.commit()
+    for warning in outcome.warnings:
+        print(f"lmrefine: warning: {warning}", file=sys.stderr, flush=True)
     bpy.ops.wm.save_as_mainfile(filepath=blend_copy)
     bpy.ops.file.make_paths_relative()  # the EXRs sit beside the copy: keep the folder relocatable
     bpy.ops.wm.save_mainfile()
@@ -151,6 +153,7 @@ def run(args):
                            "images": {p: outcome.image_files[i] for p, i in outcome.images[name].items()}}
                     for name, t in ((t.obj.name, t) for t in targets)},
         "summary": outcome.summary(),
+        "warnings": outcome.warnings,
         "timings": outcome.timings,
         "settings": {key: value for key, value in options.items() if key != "lightmap_image"},
     }

@@ -63,14 +63,46 @@ def default_source_layer(mesh):
     return names[0] if names else None
 
 
+# Blender's own tolerance for "these face corners share a UV" (STD_UV_CONNECT_LIMIT).
+UV_CONNECT_LIMIT = 1e-4
+
+
 def read_layout(mesh, uv_name):
-    """The loop UVs of `uv_name` and the loop triangles of an (original) mesh."""
+    """The loop UVs of `uv_name` and the loop triangles of an (original) mesh, welded.
+
+    Blender stores one UV per face corner, and corners of one vertex that a
+    user sees as connected often differ in the last bits (even in Blender's
+    own primitives). lmrefine joins charts by bit-identical UVs, so such a
+    layout would read as many charts touching each other. Corners of the same
+    vertex within Blender's connect limit therefore get one UV, and UVs a
+    rounding error outside [0, 1] are clamped. The refined map is computed
+    from this welded layout; the source map is never written.
+    """
     mesh.calc_loop_triangles()
     triangles = np.empty(len(mesh.loop_triangles) * 3, dtype=np.int32)
     mesh.loop_triangles.foreach_get("loops", triangles)
-    uvs = np.empty(len(mesh.loops) * 2, dtype=np.float32)
-    mesh.uv_layers[uv_name].data.foreach_get("uv", uvs)
-    return Layout(uvs.reshape(-1, 2), triangles.reshape(-1, 3))
+    uvs = read_uv_layer(mesh, uv_name)
+    loop_vertex = np.empty(len(mesh.loops), dtype=np.int32)
+    mesh.loops.foreach_get("vertex_index", loop_vertex)
+    return Layout(weld_uvs(uvs, loop_vertex), triangles.reshape(-1, 3))
+
+
+def weld_uvs(uvs, loop_vertex, limit=UV_CONNECT_LIMIT):
+    """Give corners of one vertex whose UVs lie within `limit` the same UV; returns a new array."""
+    welded = uvs.copy()
+    if len(uvs) == 0:
+        return welded
+    order = np.lexsort((uvs[:, 1], uvs[:, 0], loop_vertex))
+    sorted_uvs = uvs[order]
+    new_group = np.ones(len(order), dtype=bool)
+    new_group[1:] = ((loop_vertex[order][1:] != loop_vertex[order][:-1])
+                     | (np.abs(np.diff(sorted_uvs, axis=0)) > limit).any(axis=1))
+    first = np.flatnonzero(new_group)[np.cumsum(new_group) - 1]  # each corner's group leader
+    welded[order] = sorted_uvs[first]
+    # Within the limit of the unit square counts as inside (packers round to 1.0000001).
+    edge = ((welded < 0.0) & (welded > -limit)) | ((welded > 1.0) & (welded < 1.0 + limit))
+    welded[edge] = np.clip(welded[edge], 0.0, 1.0)
+    return welded
 
 
 def read_uv_layer(mesh, uv_name):

@@ -29,6 +29,8 @@ def _report_outcome(operator, context, outcome, seconds):
     result.message = (f"Refined {len(outcome.objects)} object(s) in {seconds:.1f}s: transitions widened "
                       f"{summary['transition_widening']:.2f}x, texel density "
                       f"{summary['density_min']:.2f}x to {summary['density_max']:.2f}x")
+    for warning in outcome.warnings:
+        operator.report({'WARNING'}, warning)
     operator.report({'INFO'}, result.message)
 
 

@@ -60,6 +60,7 @@ class Outcome:
     images: dict = field(default_factory=dict)  # object name -> {pass: image name}
     image_files: dict = field(default_factory=dict)  # image name -> file path ('' when packed)
     timings: dict = field(default_factory=dict)  # stage -> seconds
+    warnings: list = field(default_factory=list)  # things the user should know, though the run succeeded
 
     def summary(self):
         reports = list(self.reports.values())
@@ -241,12 +242,22 @@ def run(context, targets, options, journal, image_dir=None):
                 **options["refine_options"]),
             done * span, span)
         done += 1
+        # An independent check of the promise refine_uvs makes: never worse than the source layout.
+        source_check = lmrefine.check_layout(layout.uvs, layout.triangles, resolution, padding=padding)
         check = lmrefine.check_layout(result.uvs, layout.triangles, resolution, padding=padding)
-        if not check["valid"]:
-            raise RuntimeError(f"refine_uvs returned an invalid layout for '{name}' ({check}); this is a bug "
-                               "in lmrefine, please report it with the .blend")
+        worse = layout_regressions(check, source_check, padding)
+        if worse:
+            raise RuntimeError(f"refine_uvs returned a layout for '{name}' that is worse than the source "
+                               f"({', '.join(worse)}: {dict(check)}); this is a bug in lmrefine, please report "
+                               "it with the .blend")
+        if not source_check["valid"]:
+            outcome.warnings.append(
+                f"'{name}': UV map '{target.source}' was already invalid at {resolution} texels "
+                f"({_describe_problems(source_check, padding)}); the refined map is no worse, but lightmap "
+                "bleeding may show: repack the source map (UV > Lightmap Pack)")
         report = {key: value for key, value in result.report.items() if key != "triangle_density"}
         report["check_layout"] = dict(check)
+        report["source_check_layout"] = dict(source_check)
         outcome.reports[name] = _plain(report)
         refined_uvs[name] = result.uvs
     for target in targets:
@@ -280,6 +291,28 @@ def run(context, targets, options, journal, image_dir=None):
             image = bpy.data.images[image_name]
             outcome.image_files[image_name] = _save_image(image, image_dir)
     return outcome
+
+
+def layout_regressions(check, source, padding):
+    """What makes a refined layout's check worse than its source's (empty: acceptable)."""
+    worse = []
+    for key in ("flipped", "degenerate", "overlapping"):
+        if check[key] > source[key]:
+            worse.append(key)
+    if check["out_of_bounds"]:
+        worse.append("out_of_bounds")
+    # float32 UVs carry about 1e-4 texel of rounding at 4k.
+    if check["min_gutter_texels"] < min(padding, source["min_gutter_texels"]) - 1e-4:
+        worse.append("gutter")
+    return worse
+
+
+def _describe_problems(check, padding):
+    problems = [f"{check[key]} {key}" for key in ("flipped", "degenerate", "overlapping", "out_of_bounds")
+                if check[key]]
+    if check["min_gutter_texels"] < padding:
+        problems.append(f"charts {check['min_gutter_texels']:.2f} texels apart, padding is {padding}")
+    return ", ".join(problems)
 
 
 def _plain(value):
