@@ -259,7 +259,7 @@ def bridge_export():
         "y_range": [float(export.positions[:, 1].min()), float(export.positions[:, 1].max())],
         "z_range": [float(export.positions[:, 2].min()), float(export.positions[:, 2].max())],
         "normal_mean": export.normals.mean(axis=0).tolist(),
-        "uvs_match_layout": bool(np.array_equal(export.uvs, layout.uvs)),
+        "uvs_match_layout": bool(np.array_equal(export.uvs, bridge.read_uv_layer(floor.data, "Lightmap"))),
         "triangles_match_layout": bool(np.array_equal(export.triangles, layout.triangles)),
         "triangle_count": int(len(export.triangles)),
         "base_color": export.base_color[0].tolist(),
