@@ -7,6 +7,7 @@ run is rolled back through the job's journal, and a successful one is a
 single undo step (bl_options UNDO; the modal run pushes it when it finishes).
 """
 
+import sys
 import threading
 import time
 
@@ -52,7 +53,8 @@ def _failure_message(error):
 def _is_cancel(error):
     if isinstance(error, (pipeline.Cancelled, KeyboardInterrupt)):
         return True
-    return type(error).__name__ == "CancelledError" and type(error).__module__.startswith("lmrefine")
+    core = sys.modules.get("lmrefine")  # loaded if a native call could have raised its CancelledError
+    return core is not None and isinstance(error, core.CancelledError)
 
 
 class LMREFINE_OT_refine_uvs(bpy.types.Operator):

@@ -183,6 +183,9 @@ def _first_image(obj, source, options):
         raise UserError(f"No lightmap image found for '{obj.name}': give its material an Image Texture node "
                         f"fed by a UV Map node set to '{source}', pick the image in the panel, or set First "
                         "Lightmap to a bake")
+    if image.get("lmrefine_object") is not None:
+        raise UserError(f"'{image.name}' was baked with a refined UV map, not with '{source}': pick a lightmap "
+                        "baked with the source map, or set First Lightmap to a bake")
     problem = materials.image_problem(image)
     if problem:
         raise UserError(problem)

@@ -231,6 +231,16 @@ def error_uvs_outside_unit_square():
 
 
 @check
+def error_image_from_refined_bake():
+    def prepare():
+        image = bpy.data.images.new("Floor_lightmap_direct", RESOLUTION, RESOLUTION, float_buffer=True)
+        image["lmrefine_object"] = "Floor"
+        settings(first_lightmap='IMAGE', lightmap_image=image)
+
+    return _error_case(prepare)
+
+
+@check
 def error_no_bake_pass():
     return _error_case(lambda: settings(bake_passes=set()))
 
