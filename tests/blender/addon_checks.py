@@ -123,6 +123,31 @@ def fresh_shadow_scene(**values):
     settings(resolution=RESOLUTION, padding=2, samples=4, **values)
 
 
+@check
+def registration():
+    """register() adds the operators, the panels and Scene.lmrefine; unregister() removes all of them."""
+    register()
+    names = ("LMREFINE_PT_refine", "LMREFINE_PT_refine_options", "LMREFINE_PT_refine_bake",
+             "LMREFINE_PT_refine_result")
+    registered = {
+        "panels": [name for name in names if hasattr(bpy.types, name)],
+        "category": bpy.types.LMREFINE_PT_refine.bl_category,
+        "space": bpy.types.LMREFINE_PT_refine.bl_space_type,
+        "operators": [hasattr(bpy.ops.object, "lmrefine_refine_uvs"),
+                      hasattr(bpy.ops.object, "lmrefine_remove_preview")],
+        "label": bpy.ops.object.lmrefine_refine_uvs.get_rna_type().name,
+        "scene_property": hasattr(bpy.types.Scene, "lmrefine"),
+    }
+    lmrefine_blender.unregister()
+    unregistered = {
+        "panels": [name for name in names if hasattr(bpy.types, name)],
+        "scene_property": hasattr(bpy.types.Scene, "lmrefine"),
+        "operator": "lmrefine_refine_uvs" in dir(bpy.ops.object),
+    }
+    lmrefine_blender.register()
+    return {"registered": registered, "unregistered": unregistered}
+
+
 # ------------------------------------------------------------ error cases
 
 def _error_case(prepare):
