@@ -191,6 +191,12 @@ def test_operator_is_one_undo_step(facts, name):
     assert value["can_undo_further"] is False
 
 
+def test_invoke_in_background_runs_blocking(facts):
+    value = fact(facts, "invoke_in_background_runs_blocking")
+    assert value["outcome"] == "FINISHED", value["message"]
+    assert value["has_layer"]
+
+
 def test_failure_mid_run_rolls_back(facts):
     value = fact(facts, "rollback_on_failure")
     assert value["outcome"] == "CANCELLED"
@@ -271,6 +277,23 @@ def test_batch_refines_bakes_and_reports(facts, work_dir):
         path = floor["images"][pass_name]
         assert os.path.dirname(path) == str(out) and os.path.getsize(path) > 0
     assert os.path.isfile(report["blend"]) and os.path.dirname(report["blend"]) == str(out)
+    assert sorted(os.listdir(out)) == ["Floor_lightmap_ao.exr", "Floor_lightmap_direct.exr", "report.json",
+                                       os.path.basename(blend)]
+    # The saved copy opens with the refined map and finds its lightmaps through relative paths.
+    probe = (
+        "import bpy, json\n"
+        "mesh = bpy.data.objects['Floor'].data\n"
+        "images = {i.name: [i.filepath, i.size[0], i.has_data] for i in bpy.data.images if i.get('lmrefine_object')}\n"
+        "print('PROBE', json.dumps({'layers': [l.name for l in mesh.uv_layers], 'images': images}))\n"
+    )
+    process = run_blender(report["blend"], "--python-expr", probe)
+    assert process.returncode == 0, process.stderr[-2000:]
+    saved = json.loads(next(line for line in process.stdout.splitlines() if line.startswith("PROBE"))[6:])
+    assert saved["layers"] == ["UVMap", "Lightmap", "Lightmap_refined"]
+    assert saved["images"] == {
+        "Floor_lightmap_direct": ["//Floor_lightmap_direct.exr", 64, True],
+        "Floor_lightmap_ao": ["//Floor_lightmap_ao.exr", 64, True],
+    }
 
 
 # -------------------------------------------------------------- packaging

@@ -107,10 +107,11 @@ def apply_flags(settings, args):
                 raise pipeline.UserError(f"--{key.replace('_', '-')}: {error}") from error
 
 
-def _progress(fraction, label, state={"shown": -1}):
-    step = int(fraction * 10)
-    if step != state["shown"]:
-        state["shown"] = step
+def _progress(fraction, label, state={"shown": None}):
+    """One line per stage and per tenth of the run."""
+    key = (label, int(fraction * 10))
+    if key != state["shown"]:
+        state["shown"] = key
         print(f"lmrefine: {100 * fraction:3.0f}% {label}", flush=True)
 
 
@@ -142,9 +143,15 @@ def run(args):
     journal.commit()
     for warning in outcome.warnings:
         print(f"lmrefine: warning: {warning}", file=sys.stderr, flush=True)
-    bpy.ops.wm.save_as_mainfile(filepath=blend_copy)
-    bpy.ops.file.make_paths_relative()  # the EXRs sit beside the copy: keep the folder relocatable
-    bpy.ops.wm.save_mainfile()
+    filepaths = bpy.context.preferences.filepaths
+    save_version = filepaths.save_version
+    filepaths.save_version = 0  # no copy.blend1 backup beside the copy
+    try:
+        bpy.ops.wm.save_as_mainfile(filepath=blend_copy)
+        bpy.ops.file.make_paths_relative()  # the EXRs sit beside the copy: keep the folder relocatable
+        bpy.ops.wm.save_mainfile()
+    finally:
+        filepaths.save_version = save_version
     return {
         "ok": True,
         "blend": blend_copy,

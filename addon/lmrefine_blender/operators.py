@@ -106,6 +106,8 @@ class LMREFINE_OT_refine_uvs(bpy.types.Operator):
     # --------------------------------------------------------------- modal
 
     def invoke(self, context, event):
+        if bpy.app.background or context.window is None:
+            return self.execute(context)  # no event loop to drive a modal run
         self._started = time.perf_counter()
         try:
             options, targets = self._prepare(context)

@@ -474,11 +474,17 @@ def run_blocking(job, progress=None, should_stop=None):
 
 
 def _progress_callback(work, report, should_stop):
-    """The callable lmrefine's native calls take: progress(fraction, stage) -> False cancels."""
+    """The callable lmrefine's native calls take: progress(fraction, stage) -> False cancels.
+
+    A native call may restart its fraction per sub-stage (the baker per pass);
+    the overall progress only moves forward.
+    """
+    furthest = [0.0]
 
     def callback(fraction, stage=""):
+        furthest[0] = max(furthest[0], min(max(float(fraction), 0.0), 1.0))
         if report is not None:
-            report(work.start + work.span * min(max(float(fraction), 0.0), 1.0), stage or work.label)
+            report(work.start + work.span * furthest[0], f"{work.label} ({stage})" if stage else work.label)
         return not should_stop()
 
     return callback

@@ -99,12 +99,12 @@ def changed(before, after):
     return sorted(key for key in set(before) | set(after) if before.get(key) != after.get(key))
 
 
-def refine(undo=False):
+def refine(undo=False, how='EXEC_DEFAULT'):
     """Run the operator like a script does; returns ('FINISHED'|'CANCELLED', error message or None)."""
     window = bpy.context.window_manager.windows[0]
     with bpy.context.temp_override(window=window):
         try:
-            result = bpy.ops.object.lmrefine_refine_uvs('EXEC_DEFAULT', undo)
+            result = bpy.ops.object.lmrefine_refine_uvs(how, undo)
         except RuntimeError as error:  # an ERROR report raises
             return "CANCELLED", str(error)
     return sorted(result)[0], None
@@ -490,6 +490,18 @@ def end_to_end_embree():
 @check
 def end_to_end_cycles():
     return _needs("refine") or _end_to_end('CYCLES', 'CYCLES', {'DIRECT', 'AO'})
+
+
+@check
+def invoke_in_background_runs_blocking():
+    """INVOKE_DEFAULT (a button press) in background Blender has no event loop for the modal run."""
+    skipped = _needs("refine")
+    if skipped:
+        return skipped
+    fresh_shadow_scene(first_lightmap='CYCLES', backend='CYCLES', bake_passes={'DIRECT'})
+    outcome, message = refine(how='INVOKE_DEFAULT')
+    return {"outcome": outcome, "message": message,
+            "has_layer": "Lightmap_refined" in bpy.data.objects["Floor"].data.uv_layers}
 
 
 @check
