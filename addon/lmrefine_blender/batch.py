@@ -62,7 +62,8 @@ def build_parser():
     parser.add_argument("--lightmap-image", help="name of the image to use with --first-lightmap image "
                         "(default: found in each object's material)")
     parser.add_argument("--driving-pass", choices=PASSES, help="what the first bake measures")
-    parser.add_argument("--strength", type=float, help="texel growth at the strongest light change (0 = unchanged layout)")
+    parser.add_argument("--strength", type=float,
+                        help="texel growth at the strongest light change (0 = unchanged layout)")
     parser.add_argument("--max-magnification", type=float, help="largest growth of a texel's area")
     parser.add_argument("--min-shrink", type=float, help="smallest a texel's area may become (fraction)")
     parser.add_argument("--delta", type=float, help="automaton stop threshold")

@@ -189,12 +189,4 @@ class LMREFINE_OT_remove_preview(bpy.types.Operator):
 
 CLASSES = (LMREFINE_OT_refine_uvs, LMREFINE_OT_remove_preview)
 
-
-def register():
-    for cls in CLASSES:
-        bpy.utils.register_class(cls)
-
-
-def unregister():
-    for cls in reversed(CLASSES):
-        bpy.utils.unregister_class(cls)
+register, unregister = bpy.utils.register_classes_factory(CLASSES)

@@ -5,17 +5,26 @@ import bpy
 from . import bridge
 
 
-class LMREFINE_PT_refine(bpy.types.Panel):
-    bl_idname = "LMREFINE_PT_refine"
-    bl_label = "Refine Lightmap UVs"
+class _LightmapTab:
+    """Where every panel of the add-on lives: 3D View > Sidebar > Lightmap."""
+
     bl_space_type = 'VIEW_3D'
     bl_region_type = 'UI'
     bl_category = "Lightmap"
 
-    def draw(self, context):
+    def split_layout(self):
         layout = self.layout
         layout.use_property_split = True
         layout.use_property_decorate = False
+        return layout
+
+
+class LMREFINE_PT_refine(_LightmapTab, bpy.types.Panel):
+    bl_idname = "LMREFINE_PT_refine"
+    bl_label = "Refine Lightmap UVs"
+
+    def draw(self, context):
+        layout = self.split_layout()
         settings = context.scene.lmrefine
         obj = context.active_object
 
@@ -41,36 +50,25 @@ class LMREFINE_PT_refine(bpy.types.Panel):
         layout.operator("object.lmrefine_refine_uvs", icon='UV')
 
 
-class LMREFINE_PT_refine_options(bpy.types.Panel):
+class LMREFINE_PT_refine_options(_LightmapTab, bpy.types.Panel):
     bl_label = "Refinement"
-    bl_space_type = 'VIEW_3D'
-    bl_region_type = 'UI'
-    bl_category = "Lightmap"
     bl_parent_id = "LMREFINE_PT_refine"
     bl_options = {'DEFAULT_CLOSED'}
 
     def draw(self, context):
-        layout = self.layout
-        layout.use_property_split = True
-        layout.use_property_decorate = False
         settings = context.scene.lmrefine
-        column = layout.column()
+        column = self.split_layout().column()
         for name in ("strength", "max_magnification", "min_shrink", "delta", "passes", "border", "wavelet",
                      "directional"):
             column.prop(settings, name)
 
 
-class LMREFINE_PT_refine_bake(bpy.types.Panel):
+class LMREFINE_PT_refine_bake(_LightmapTab, bpy.types.Panel):
     bl_label = "Second Bake"
-    bl_space_type = 'VIEW_3D'
-    bl_region_type = 'UI'
-    bl_category = "Lightmap"
     bl_parent_id = "LMREFINE_PT_refine"
 
     def draw(self, context):
-        layout = self.layout
-        layout.use_property_split = True
-        layout.use_property_decorate = False
+        layout = self.split_layout()
         settings = context.scene.lmrefine
         layout.prop(settings, "backend")
         layout.column(heading="Passes").prop(settings, "bake_passes")
@@ -79,11 +77,8 @@ class LMREFINE_PT_refine_bake(bpy.types.Panel):
         layout.operator("object.lmrefine_remove_preview", icon='X')
 
 
-class LMREFINE_PT_refine_result(bpy.types.Panel):
+class LMREFINE_PT_refine_result(_LightmapTab, bpy.types.Panel):
     bl_label = "Last Result"
-    bl_space_type = 'VIEW_3D'
-    bl_region_type = 'UI'
-    bl_category = "Lightmap"
     bl_parent_id = "LMREFINE_PT_refine"
 
     def draw(self, context):
@@ -105,12 +100,4 @@ class LMREFINE_PT_refine_result(bpy.types.Panel):
 
 CLASSES = (LMREFINE_PT_refine, LMREFINE_PT_refine_options, LMREFINE_PT_refine_bake, LMREFINE_PT_refine_result)
 
-
-def register():
-    for cls in CLASSES:
-        bpy.utils.register_class(cls)
-
-
-def unregister():
-    for cls in reversed(CLASSES):
-        bpy.utils.unregister_class(cls)
+register, unregister = bpy.utils.register_classes_factory(CLASSES)

@@ -151,14 +151,14 @@ class LMREFINE_PG_settings(bpy.types.PropertyGroup):
 
 CLASSES = (LMREFINE_PG_result, LMREFINE_PG_settings)
 
+_register_classes, _unregister_classes = bpy.utils.register_classes_factory(CLASSES)
+
 
 def register():
-    for cls in CLASSES:
-        bpy.utils.register_class(cls)
+    _register_classes()
     bpy.types.Scene.lmrefine = PointerProperty(type=LMREFINE_PG_settings)
 
 
 def unregister():
     del bpy.types.Scene.lmrefine
-    for cls in reversed(CLASSES):
-        bpy.utils.unregister_class(cls)
+    _unregister_classes()

@@ -33,12 +33,22 @@ RESOLUTION = 64  # small: the whole group must stay fast
 results = {"api": {"refine_uvs": HAS_REFINE, "bake": HAS_BAKE}}
 
 
-def check(function):
-    try:
-        results[function.__name__] = function()
-    except Exception:
-        results[function.__name__] = {"exception": traceback.format_exc()}
-    return function
+def check(*needs):
+    """Run the decorated check now and record its facts (or why it was skipped, or its traceback)."""
+    available = {"refine": HAS_REFINE, "bake": HAS_BAKE}
+
+    def run(function):
+        missing = [name for name in needs if not available[name]]
+        if missing:
+            results[function.__name__] = {"skipped": f"lmrefine lacks {', '.join(missing)} (not merged yet)"}
+            return function
+        try:
+            results[function.__name__] = function()
+        except Exception:
+            results[function.__name__] = {"exception": traceback.format_exc()}
+        return function
+
+    return run
 
 
 def register():
@@ -123,7 +133,7 @@ def fresh_shadow_scene(**values):
     settings(resolution=RESOLUTION, padding=2, samples=4, **values)
 
 
-@check
+@check()
 def registration():
     """register() adds the operators, the panels and Scene.lmrefine; unregister() removes all of them."""
     register()
@@ -158,27 +168,27 @@ def _error_case(prepare):
     return {"outcome": outcome, "message": message, "changed": changed(before, fingerprint())}
 
 
-@check
+@check()
 def error_no_mesh():
     return _error_case(lambda: scenes.select_only())
 
 
-@check
+@check()
 def error_only_light_selected():
     return _error_case(lambda: scenes.select_only(bpy.data.objects["Sun"]))
 
 
-@check
+@check()
 def error_no_uv_layer():
     return _error_case(lambda: scenes.select_only(scenes.bare_mesh()))
 
 
-@check
+@check()
 def error_missing_source_layer():
     return _error_case(lambda: settings(source_layer="NoSuchMap"))
 
 
-@check
+@check()
 def error_edit_mode():
     def prepare():
         bpy.ops.object.mode_set(mode='EDIT')
@@ -187,12 +197,12 @@ def error_edit_mode():
     return result
 
 
-@check
+@check()
 def error_zero_area_faces():
     return _error_case(lambda: scenes.select_only(scenes.degenerate_mesh()))
 
 
-@check
+@check()
 def error_linked_library():
     library_path = os.path.join(WORK_DIR, "library.blend")
 
@@ -209,7 +219,7 @@ def error_linked_library():
     return _error_case(prepare)
 
 
-@check
+@check()
 def error_shared_mesh():
     def prepare():
         floor = bpy.data.objects["Floor"]
@@ -220,12 +230,12 @@ def error_shared_mesh():
     return _error_case(prepare)
 
 
-@check
+@check()
 def error_image_not_found():
     return _error_case(lambda: settings(first_lightmap='IMAGE'))
 
 
-@check
+@check()
 def error_image_file_missing():
     def prepare():
         image = bpy.data.images.load(os.path.join(WORK_DIR, "lightmap.exr"), check_existing=False) \
@@ -237,7 +247,7 @@ def error_image_file_missing():
     return _error_case(prepare)
 
 
-@check
+@check()
 def error_image_wrong_size():
     def prepare():
         image = bpy.data.images.new("SmallLightmap", 16, 16, float_buffer=True)
@@ -246,7 +256,7 @@ def error_image_wrong_size():
     return _error_case(prepare)
 
 
-@check
+@check()
 def error_uvs_outside_unit_square():
     def prepare():
         layer = bpy.data.objects["Floor"].data.uv_layers["Lightmap"]
@@ -255,7 +265,7 @@ def error_uvs_outside_unit_square():
     return _error_case(prepare)
 
 
-@check
+@check()
 def error_image_from_refined_bake():
     def prepare():
         image = bpy.data.images.new("Floor_lightmap_direct", RESOLUTION, RESOLUTION, float_buffer=True)
@@ -265,14 +275,14 @@ def error_image_from_refined_bake():
     return _error_case(prepare)
 
 
-@check
+@check()
 def error_no_bake_pass():
     return _error_case(lambda: settings(bake_passes=set()))
 
 
 # ----------------------------------------------------------------- bridge
 
-@check
+@check()
 def bridge_export():
     fresh_shadow_scene()
     floor = bpy.data.objects["Floor"]
@@ -305,7 +315,7 @@ def bridge_export():
     }
 
 
-@check
+@check()
 def bridge_welds_blender_layouts():
     """Blender's grid primitive stores corner UVs of one vertex that differ in the last bits."""
     fresh_shadow_scene()
@@ -322,7 +332,7 @@ def bridge_welds_blender_layouts():
     }
 
 
-@check
+@check()
 def bridge_default_layers():
     mesh = bpy.data.meshes.new("Layers")
     mesh.from_pydata([(0, 0, 0), (1, 0, 0), (1, 1, 0)], [], [(0, 1, 2)])
@@ -337,7 +347,7 @@ def bridge_default_layers():
     return answers
 
 
-@check
+@check()
 def bridge_image_roundtrip():
     image = bpy.data.images.new("Roundtrip", 8, 4, alpha=True, float_buffer=True)
     array = np.random.default_rng(5).random((4, 8, 4), dtype=np.float32)
@@ -354,7 +364,7 @@ def bridge_image_roundtrip():
 
 # ------------------------------------------------------------ Cycles bake
 
-@check
+@check()
 def cycles_first_bake():
     fresh_shadow_scene()
     floor = bpy.data.objects["Floor"]
@@ -385,21 +395,11 @@ def cycles_first_bake():
 
 # ----------------------------------------------------- end to end (needs API)
 
-def _needs(*names):
-    missing = [n for n in names if not {"refine": HAS_REFINE, "bake": HAS_BAKE}[n]]
-    if missing:
-        return {"skipped": f"lmrefine lacks {', '.join(missing)} (not merged yet)"}
-    return None
-
-
-@check
+@check("refine")
 def refine_defaults_match_the_library():
     """The panel's defaults are refine_uvs' own, so the add-on and the Python API agree out of the box."""
     import inspect
 
-    skipped = _needs("refine")
-    if skipped:
-        return skipped
     fresh_shadow_scene()
     options = pipeline.settings_snapshot(bpy.context.scene.lmrefine)["refine_options"]
     signature = inspect.signature(lmrefine.refine_uvs).parameters
@@ -482,39 +482,33 @@ def _hook_existing_lightmap(floor):
     tree.links.new(uv_node.outputs["UV"], image_node.inputs["Vector"])
 
 
-@check
+@check("refine", "bake")
 def end_to_end_embree():
-    return _needs("refine", "bake") or _end_to_end('EMBREE', 'EMBREE', {'DIRECT', 'AO'})
+    return _end_to_end('EMBREE', 'EMBREE', {'DIRECT', 'AO'})
 
 
-@check
+@check("refine")
 def end_to_end_cycles():
-    return _needs("refine") or _end_to_end('CYCLES', 'CYCLES', {'DIRECT', 'AO'})
+    return _end_to_end('CYCLES', 'CYCLES', {'DIRECT', 'AO'})
 
 
-@check
+@check("refine")
 def invoke_in_background_runs_blocking():
     """INVOKE_DEFAULT (a button press) in background Blender has no event loop for the modal run."""
-    skipped = _needs("refine")
-    if skipped:
-        return skipped
     fresh_shadow_scene(first_lightmap='CYCLES', backend='CYCLES', bake_passes={'DIRECT'})
     outcome, message = refine(how='INVOKE_DEFAULT')
     return {"outcome": outcome, "message": message,
             "has_layer": "Lightmap_refined" in bpy.data.objects["Floor"].data.uv_layers}
 
 
-@check
+@check("refine")
 def end_to_end_existing_image():
-    return _needs("refine") or _end_to_end('IMAGE', 'CYCLES', {'DIRECT'})
+    return _end_to_end('IMAGE', 'CYCLES', {'DIRECT'})
 
 
-@check
+@check("refine")
 def rollback_on_failure():
     """A Cycles second bake that fails after the refined layer was written leaves nothing behind."""
-    skipped = _needs("refine")
-    if skipped:
-        return skipped
     fresh_shadow_scene(first_lightmap='IMAGE', backend='CYCLES', bake_passes={'DIRECT'})
     settings(lightmap_image=bpy.data.images.load(os.path.join(WORK_DIR, "lightmap.exr")))
     bpy.data.materials["FloorMaterial"].use_nodes = False  # the second bake refuses this material
@@ -523,12 +517,9 @@ def rollback_on_failure():
     return {"outcome": outcome, "message": message, "changed": changed(before, fingerprint())}
 
 
-@check
+@check("refine")
 def rollback_on_cancel():
     """Cancelled during the second bake (after the layer was written): the scene is as before."""
-    skipped = _needs("refine")
-    if skipped:
-        return skipped
     fresh_shadow_scene(first_lightmap='CYCLES', backend='CYCLES', bake_passes={'DIRECT', 'AO'})
     mesh = bpy.data.objects["Floor"].data
     options = pipeline.settings_snapshot(bpy.context.scene.lmrefine)
@@ -546,15 +537,12 @@ def rollback_on_cancel():
     return {"raised": raised, "changed": changed(before, fingerprint())}
 
 
-@check
+@check("refine")
 def threaded_driver_runs_and_cancels():
     """The modal operator's driver (worker thread + poll), which Esc cancels; no event loop needed."""
     import threading
     import time as clock
 
-    skipped = _needs("refine")
-    if skipped:
-        return skipped
     facts = {}
     for mode in ("run", "cancel"):
         fresh_shadow_scene(first_lightmap='CYCLES', backend='CYCLES', bake_passes={'DIRECT'})
@@ -583,7 +571,7 @@ def threaded_driver_runs_and_cancels():
     return facts
 
 
-@check
+@check()
 def save_scene_for_batch():
     fresh_shadow_scene()
     path = os.path.join(WORK_DIR, "shadow.blend")
