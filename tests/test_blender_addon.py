@@ -197,6 +197,20 @@ def test_invoke_in_background_runs_blocking(facts):
     assert value["has_layer"]
 
 
+def test_remove_preview_restores_materials(facts):
+    value = fact(facts, "remove_preview_restores_materials")
+    assert value["outcome"] == "FINISHED", value["message"]
+    assert value["changed_by_run"] and value["restored"]
+    assert value["removed"] == ["FINISHED"] and value["again"] == ["CANCELLED"]
+
+
+def test_failed_rerun_restores_the_previous_result(facts):
+    value = fact(facts, "rerun_failure_restores_previous_run")
+    assert value["first_outcome"] == "FINISHED", value["message"]
+    assert value["raised"] == "RuntimeError"  # Blender could not write the EXR
+    assert value["changed"] == [] and value["refined_restored"] and value["pixels_restored"]
+
+
 def test_failure_mid_run_rolls_back(facts):
     value = fact(facts, "rollback_on_failure")
     assert value["outcome"] == "CANCELLED"

@@ -11,6 +11,7 @@ from .errors import UserError
 
 ROLE = "lmrefine_role"
 OWNER = "lmrefine_object"
+PREVIOUS_ACTIVE = "lmrefine_previous_active"  # on a preview image node: the active node it replaced
 
 
 def _node_trees(obj):
@@ -131,6 +132,7 @@ def add_preview(obj, image, uv_name, journal):
         uv_node.label = "lmrefine UV"
         image_node = nodes.new("ShaderNodeTexImage")
         image_node[ROLE], image_node[OWNER] = "preview_image", obj.name
+        image_node[PREVIOUS_ACTIVE] = previous.name if previous is not None else ""
         image_node.image = image
         image_node.label = "lmrefine lightmap"
         left = min((node.location.x for node in nodes if node not in (uv_node, image_node)), default=0.0)
@@ -152,9 +154,12 @@ def remove_preview(obj, journal=None):
             continue
         if journal is not None:
             journal.on_rollback(_recreate_preview_nodes(tree, ours))
+        previous = next((node.get(PREVIOUS_ACTIVE) for node in ours if node.get(PREVIOUS_ACTIVE)), None)
         for node in ours:
             tree.nodes.remove(node)
             removed += 1
+        if previous and previous in tree.nodes:
+            tree.nodes.active = tree.nodes[previous]
     return removed
 
 
@@ -177,6 +182,7 @@ def _recreate_preview_nodes(tree, nodes):
         saved.append({
             "bl_idname": node.bl_idname, "name": node.name, "label": node.label,
             "location": tuple(node.location), "role": node[ROLE], "owner": node[OWNER],
+            "previous_active": node.get(PREVIOUS_ACTIVE), "active": tree.nodes.active == node,
             "image": getattr(node, "image", None), "uv_map": getattr(node, "uv_map", None),
         })
 
@@ -186,11 +192,15 @@ def _recreate_preview_nodes(tree, nodes):
             node = tree.nodes.new(item["bl_idname"])
             node.name, node.label, node.location = item["name"], item["label"], item["location"]
             node[ROLE], node[OWNER] = item["role"], item["owner"]
+            if item["previous_active"] is not None:
+                node[PREVIOUS_ACTIVE] = item["previous_active"]
             if item["image"] is not None:
                 node.image = item["image"]
             if item["uv_map"] is not None:
                 node.uv_map = item["uv_map"]
             created[item["role"]] = node
+            if item["active"]:
+                tree.nodes.active = node
         if "preview_uv" in created and "preview_image" in created:
             tree.links.new(created["preview_uv"].outputs["UV"], created["preview_image"].inputs["Vector"])
 

@@ -507,6 +507,52 @@ def end_to_end_existing_image():
 
 
 @check("refine")
+def remove_preview_restores_materials():
+    """Remove Lightmap Preview takes out exactly the nodes the run added."""
+    fresh_shadow_scene(first_lightmap='CYCLES', backend='CYCLES', bake_passes={'DIRECT'})
+    material_before = fingerprint()["material:FloorMaterial"]
+    outcome, message = refine()
+    material_after_run = fingerprint()["material:FloorMaterial"]
+    with bpy.context.temp_override(window=bpy.context.window_manager.windows[0]):
+        removed = sorted(bpy.ops.object.lmrefine_remove_preview())
+        again = sorted(bpy.ops.object.lmrefine_remove_preview())
+    return {"outcome": outcome, "message": message, "removed": removed, "again": again,
+            "changed_by_run": material_after_run != material_before,
+            "restored": fingerprint()["material:FloorMaterial"] == material_before}
+
+
+@check("refine")
+def rerun_failure_restores_previous_run():
+    """A second run that fails at its very last step (writing the EXRs) restores the first run's result:
+    the refined map's UVs, the images' pixels and the preview nodes."""
+    fresh_shadow_scene(first_lightmap='CYCLES', backend='CYCLES', bake_passes={'DIRECT'})
+    first_outcome, message = refine()
+    floor = bpy.data.objects["Floor"]
+    settings(strength=2.0)  # a different layout and different pixels the second time
+    before = fingerprint()
+    refined_before = bridge.read_uv_layer(floor.data, "Lightmap_refined")
+    pixels_before = bridge.image_to_array(bpy.data.images["Floor_lightmap_direct"])
+    options = pipeline.settings_snapshot(bpy.context.scene.lmrefine)
+    targets = pipeline.validate(bpy.context, [floor], options)
+    journal = Journal()
+    unwritable = os.path.join(WORK_DIR, "lightmap.exr", "inside_a_file")  # a folder Blender cannot create
+    try:
+        pipeline.run_blocking(pipeline.run(bpy.context, targets, options, journal, image_dir=unwritable))
+        raised = None
+    except Exception as error:
+        raised = type(error).__name__
+        journal.rollback()
+    return {
+        "first_outcome": first_outcome, "message": message, "raised": raised,
+        "changed": changed(before, fingerprint()),
+        "refined_restored": bool(np.array_equal(bridge.read_uv_layer(floor.data, "Lightmap_refined"),
+                                                refined_before)),
+        "pixels_restored": bool(np.array_equal(bridge.image_to_array(bpy.data.images["Floor_lightmap_direct"]),
+                                               pixels_before)),
+    }
+
+
+@check("refine")
 def rollback_on_failure():
     """A Cycles second bake that fails after the refined layer was written leaves nothing behind."""
     fresh_shadow_scene(first_lightmap='IMAGE', backend='CYCLES', bake_passes={'DIRECT'})
