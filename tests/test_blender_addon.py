@@ -124,6 +124,23 @@ def test_bridge_exports_world_space_geometry_and_lights(facts):
     assert value["world"] == [0.0, 0.0, 0.0]
 
 
+def test_lights_in_blender_units_and_world_space(facts):
+    value = fact(facts, "bridge_lights")
+    assert value["count"] == 4  # the zero-energy light is left out
+    # Rotated 90 degrees about x, a light's -Z (where it points) becomes +Y.
+    for kind in ("point", "spot", "sun", "area"):
+        assert value[kind]["position"] == pytest.approx([1.0, 2.0, 3.0], abs=1e-6)
+        assert value[kind]["direction"] == pytest.approx([0.0, 1.0, 0.0], abs=1e-6)
+    assert value["point"]["shadow_soft_size"] == pytest.approx(0.3)
+    assert value["spot"]["spot_size"] == pytest.approx(0.8) and value["spot"]["spot_blend"] == pytest.approx(0.25)
+    assert value["sun"]["angle"] == pytest.approx(0.1)
+    area = value["area"]
+    assert area["shape"] == "RECTANGLE"
+    assert area["size"] == pytest.approx(6.0) and area["size_y"] == pytest.approx(1.0)  # times the object scale
+    assert area["color"] == pytest.approx([1.0, 0.5, 0.25])
+    assert area["energy"] == pytest.approx(10.0)  # Blender's default area light power, in W
+
+
 def test_layout_is_welded_within_blenders_connect_limit(facts):
     value = fact(facts, "bridge_welds_blender_layouts")
     # The premise: Blender's own grid reads as several bit-identical-UV charts, a few UVs past 1.

@@ -333,6 +333,34 @@ def bridge_welds_blender_layouts():
 
 
 @check()
+def bridge_lights():
+    """Each Blender light type in the baker's terms: Blender's names and units, world-space pose."""
+    scenes.reset()
+    made = {}
+    for kind in ('POINT', 'SPOT', 'SUN', 'AREA'):
+        bpy.ops.object.light_add(type=kind, location=(1.0, 2.0, 3.0), rotation=(np.pi / 2, 0.0, 0.0))
+        light = bpy.context.active_object
+        light.name = kind
+        made[kind] = light
+    made['POINT'].data.shadow_soft_size = 0.3
+    made['SPOT'].data.spot_size = 0.8
+    made['SPOT'].data.spot_blend = 0.25
+    made['SUN'].data.angle = 0.1
+    made['AREA'].data.shape = 'RECTANGLE'
+    made['AREA'].data.size, made['AREA'].data.size_y = 2.0, 0.5
+    made['AREA'].scale = (3.0, 2.0, 1.0)
+    made['AREA'].data.color = (1.0, 0.5, 0.25)
+    dark = made['POINT'].copy()
+    dark.data = made['POINT'].data.copy()
+    dark.data.energy = 0.0
+    dark.name = "Dark"
+    bpy.context.scene.collection.objects.link(dark)
+    bpy.context.view_layer.update()
+    return {kind: params for kind, params in bridge.scene_lights(bpy.context)} | {
+        "count": len(bridge.scene_lights(bpy.context))}
+
+
+@check()
 def bridge_default_layers():
     mesh = bpy.data.meshes.new("Layers")
     mesh.from_pydata([(0, 0, 0), (1, 0, 0), (1, 1, 0)], [], [(0, 1, 2)])
