@@ -10,6 +10,8 @@ namespace lmrefine::bindings {
 void bind_image_io(py::module_& m);
 void bind_coverage(py::module_& m);
 void bind_chart(py::module_& m);
+void bind_wavelet(py::module_& m);
+void bind_gradient_map(py::module_& m);
 }  // namespace lmrefine::bindings
 
 PYBIND11_MODULE(_native, m) {
@@ -37,4 +39,6 @@ PYBIND11_MODULE(_native, m) {
     lmrefine::bindings::bind_image_io(m);
     lmrefine::bindings::bind_coverage(m);
     lmrefine::bindings::bind_chart(m);
+    lmrefine::bindings::bind_wavelet(m);
+    lmrefine::bindings::bind_gradient_map(m);
 }

@@ -24,7 +24,12 @@ except ImportError as error:  # pragma: no cover - depends on the build state
 from ._native import (  # noqa: F401  (re-exports)
     CancelledError,
     coverage_mask,
+    dwt,
+    dwt2,
     find_charts,
+    gradient_map,
+    idwt,
+    idwt2,
     read_image,
     write_image,
 )
@@ -34,7 +39,12 @@ __version__ = _native.__version__
 __all__ = [
     "CancelledError",
     "coverage_mask",
+    "dwt",
+    "dwt2",
     "find_charts",
+    "gradient_map",
+    "idwt",
+    "idwt2",
     "read_image",
     "write_image",
 ]
