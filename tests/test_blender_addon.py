@@ -17,7 +17,7 @@ import sys
 
 import pytest
 
-pytestmark = pytest.mark.blender
+pytestmark = [pytest.mark.blender, pytest.mark.slow]  # each group starts Blender (~1.5 s)
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 BLENDER = shutil.which("blender")

@@ -157,7 +157,15 @@ def _material_base_color(material):
 
 
 def export_mesh(obj_eval, matrix_world, uv_name=None, name=None):
-    """An evaluated object (modifiers applied) as world-space per-loop arrays."""
+    """An evaluated object (modifiers applied) as world-space per-loop arrays.
+
+    None when there is nothing to bake or to cast a shadow: no faces, or a
+    transform that flattens them (a zero scale).
+    """
+    matrix = np.array(matrix_world, dtype=np.float64)
+    linear = matrix[:3, :3]
+    if abs(np.linalg.det(linear)) < 1e-12:
+        return None
     mesh = obj_eval.to_mesh()
     try:
         if mesh is None or len(mesh.polygons) == 0:
@@ -177,8 +185,6 @@ def export_mesh(obj_eval, matrix_world, uv_name=None, name=None):
         normals = np.empty(loop_count * 3, dtype=np.float32)
         mesh.loops.foreach_get("normal", normals)
 
-        matrix = np.array(matrix_world, dtype=np.float64)
-        linear = matrix[:3, :3]
         positions = vertex_co.reshape(-1, 3)[loop_vertex] @ linear.T + matrix[:3, 3]
         # Normals transform with the inverse transpose (non-uniform scale).
         normals = normals.reshape(-1, 3) @ np.linalg.inv(linear)
@@ -235,8 +241,8 @@ def export_scene(context, receivers, uv_name_of):
             export = export_mesh(obj_eval, instance.matrix_world, uv_name=uv_name_of[original.name],
                                  name=original.name)
             if export is None:
-                raise UserError(f"'{original.name}' has no faces after its modifiers: disable the modifier "
-                                "that removes them")
+                raise UserError(f"'{original.name}' has no faces after its modifiers and transform: disable "
+                                "the modifier that removes them, or give the object a non-zero scale")
             by_name[original.name] = export
             continue
         if instance.is_instance:
