@@ -208,6 +208,17 @@ def test_operator_is_one_undo_step(facts, name):
     assert value["can_undo_further"] is False
 
 
+def test_two_objects_in_one_run(facts):
+    value = fact(facts, "end_to_end_two_objects")
+    assert value["outcome"] == "FINISHED", value["message"]
+    assert value["Floor"]["charts"] == 1 and value["Blocker"]["charts"] == 6
+    for name in ("Floor", "Blocker"):
+        assert value[name]["valid"] and value[name]["min_gutter_texels"] >= 2
+        assert value[name]["image"] is not None and value[name]["image"]["max"] > 0.1
+    # The floor gets the box's shadow: dark and lit texels on the same map.
+    assert value["Floor"]["image"]["min"] < 0.05 and value["Floor"]["image"]["max"] > 0.5
+
+
 def test_invoke_in_background_runs_blocking(facts):
     value = fact(facts, "invoke_in_background_runs_blocking")
     assert value["outcome"] == "FINISHED", value["message"]

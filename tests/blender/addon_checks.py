@@ -520,6 +520,27 @@ def end_to_end_cycles():
     return _end_to_end('CYCLES', 'CYCLES', {'DIRECT', 'AO'})
 
 
+@check("refine", "bake")
+def end_to_end_two_objects():
+    """Floor and box at once: each its own refined map and images; the box's six charts keep their gutters."""
+    fresh_shadow_scene(first_lightmap='EMBREE', backend='EMBREE', bake_passes={'DIRECT'})
+    floor, box = bpy.data.objects["Floor"], bpy.data.objects["Blocker"]
+    scenes.select_only(floor, box)
+    source = {obj.name: bridge.read_layout(obj.data, "Lightmap") for obj in (floor, box)}
+    outcome, message = refine()
+    facts = {"outcome": outcome, "message": message}
+    for obj in (floor, box):
+        layout = source[obj.name]
+        refined = bridge.read_uv_layer(obj.data, "Lightmap_refined")
+        check = lmrefine.check_layout(refined, layout.triangles, RESOLUTION, padding=2)
+        facts[obj.name] = {
+            "charts": int(lmrefine.find_charts(refined, layout.triangles).max() + 1),
+            "valid": bool(check["valid"]), "min_gutter_texels": float(check["min_gutter_texels"]),
+            "image": _image_stats(f"{obj.name}_lightmap_direct", refined, layout.triangles),
+        }
+    return facts
+
+
 @check("refine")
 def invoke_in_background_runs_blocking():
     """INVOKE_DEFAULT (a button press) in background Blender has no event loop for the modal run."""

@@ -31,8 +31,25 @@ def _set_lightmap_layer(mesh, name="Lightmap", margin=0.05):
     return layer
 
 
+def _set_face_charts_layer(mesh, name="Lightmap", columns=3, rows=2, margin=0.05):
+    """A lightmap UV map with every (quad) face its own chart in a grid of cells, like Lightmap Pack."""
+    uvs = np.zeros((len(mesh.loops), 2), dtype=np.float32)
+    corners = np.array([(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0)])
+    for index, polygon in enumerate(mesh.polygons):
+        cell = np.array([index % columns, index // columns], dtype=np.float64)
+        size = np.array([1.0 / columns, 1.0 / rows])
+        quad = (cell + margin / size + corners * (1.0 - 2.0 * margin / size)) * size
+        uvs[polygon.loop_start:polygon.loop_start + 4] = quad[:polygon.loop_total]
+    layer = mesh.uv_layers.new(name=name)
+    layer.data.foreach_set("uv", uvs.ravel())
+    return layer
+
+
 def shadow_scene():
     """A finely tessellated floor 'Floor' (UVMap + Lightmap), a box 'Blocker' above it, a sun.
+
+    The box's Lightmap map has six charts (one per face) with gutters of
+    6 texels at 64 x 64, like a Lightmap Pack.
 
     The box's shadow draws a hard edge across the floor: where a refinement
     should put more texels.
@@ -48,6 +65,7 @@ def shadow_scene():
     bpy.ops.mesh.primitive_cube_add(size=1.0, location=(0.3, 0.2, 1.0))
     blocker = bpy.context.active_object
     blocker.name = "Blocker"
+    _set_face_charts_layer(blocker.data)
     blocker.data.materials.append(_material("BlockerMaterial", (0.5, 0.5, 0.5)))
 
     bpy.ops.object.light_add(type='SUN', location=(0.0, 0.0, 5.0))
