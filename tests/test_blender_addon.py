@@ -219,6 +219,12 @@ def test_two_objects_in_one_run(facts):
     assert value["Floor"]["image"]["min"] < 0.05 and value["Floor"]["image"]["max"] > 0.5
 
 
+def test_black_first_lightmap_warns_and_keeps_the_layout(facts):
+    value = fact(facts, "black_first_lightmap_warns")
+    assert len(value["warnings"]) == 1 and "the first lightmap is black" in value["warnings"][0]
+    assert value["max_move"] < 1e-6
+
+
 def test_invoke_in_background_runs_blocking(facts):
     value = fact(facts, "invoke_in_background_runs_blocking")
     assert value["outcome"] == "FINISHED", value["message"]
@@ -293,6 +299,13 @@ def test_batch_never_overwrites_its_input(facts):
     assert process.returncode == 1
     assert "would overwrite it" in process.stderr
     assert os.path.getmtime(blend) == before
+
+
+def test_batch_refuses_objects_that_are_not_meshes(facts, work_dir):
+    blend = fact(facts, "save_scene_for_batch")["path"]
+    process = run_batch(blend, "--objects", "Floor,Sun", "--out", str(work_dir / "not_mesh"))
+    assert process.returncode == 1
+    assert "not meshes: 'Sun' (light)" in process.stderr
 
 
 def test_batch_rejects_bad_flags(facts, work_dir):

@@ -130,6 +130,9 @@ def run(args):
         raise pipeline.UserError(f"--out {args.out} is the folder of the input .blend, whose copy would "
                                  "overwrite it: choose another folder")
     objects = [bpy.data.objects[name] for name in args.objects]
+    not_meshes = [f"'{obj.name}' ({obj.type.lower()})" for obj in objects if obj.type != 'MESH']
+    if not_meshes:
+        raise pipeline.UserError(f"--objects names objects that are not meshes: {', '.join(not_meshes)}")
     apply_flags(scene.lmrefine, args)
     options = pipeline.settings_snapshot(scene.lmrefine)
     targets = pipeline.validate(bpy.context, objects, options)

@@ -232,6 +232,11 @@ def run(context, targets, options, journal, image_dir=None):
         done += 1
         outcome.timings["first bake"] = time.perf_counter() - clock
 
+    for name, lightmap in lightmaps.items():
+        if not np.any(lightmap[..., :3] > 0.0):
+            outcome.warnings.append(f"'{name}': the first lightmap is black (no light reaches it), so there is "
+                                    "nothing to refine for: add lights or a world colour")
+
     # 2. Refine every layout (native, off the main thread), check it, write it.
     clock = time.perf_counter()
     refined_uvs = {}

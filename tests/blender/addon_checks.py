@@ -542,6 +542,20 @@ def end_to_end_two_objects():
 
 
 @check("refine")
+def black_first_lightmap_warns():
+    """No light at all: the run succeeds, says why nothing moved, and the layout is the source's."""
+    fresh_shadow_scene(first_lightmap='CYCLES', backend='CYCLES', bake_passes={'DIRECT'})
+    bpy.data.objects["Sun"].hide_render = True
+    floor = bpy.data.objects["Floor"]
+    options = pipeline.settings_snapshot(bpy.context.scene.lmrefine)
+    targets = pipeline.validate(bpy.context, [floor], options)
+    outcome = pipeline.run_blocking(pipeline.run(bpy.context, targets, options, Journal()))
+    refined = bridge.read_uv_layer(floor.data, "Lightmap_refined")
+    return {"warnings": outcome.warnings,
+            "max_move": float(np.abs(refined - targets[0].layout.uvs).max())}
+
+
+@check("refine")
 def invoke_in_background_runs_blocking():
     """INVOKE_DEFAULT (a button press) in background Blender has no event loop for the modal run."""
     fresh_shadow_scene(first_lightmap='CYCLES', backend='CYCLES', bake_passes={'DIRECT'})
