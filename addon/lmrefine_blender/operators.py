@@ -8,7 +8,6 @@ single undo step (bl_options UNDO; the modal run pushes it when it finishes).
 """
 
 import sys
-import threading
 import time
 
 import bpy
@@ -115,9 +114,7 @@ class LMREFINE_OT_refine_uvs(bpy.types.Operator):
             self.report({'ERROR'}, str(error))
             return {'CANCELLED'}
         self._journal = Journal()
-        stop = threading.Event()
-        job = pipeline.run(context, targets, options, self._journal)
-        self._driver = pipeline.ThreadedDriver(job, stop)
+        self._driver = pipeline.ThreadedDriver(pipeline.run(context, targets, options, self._journal))
         wm = context.window_manager
         wm.progress_begin(0.0, 1.0)
         self._timer = wm.event_timer_add(0.1, window=context.window)

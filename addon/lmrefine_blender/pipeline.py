@@ -504,9 +504,9 @@ class ThreadedDriver:
     the job runs, then ("done", outcome) or ("error", exception) once.
     """
 
-    def __init__(self, job, should_stop_event):
+    def __init__(self, job):
         self._job = job
-        self._stop = should_stop_event
+        self._stop = threading.Event()
         self._thread = None
         self._send = ("value", None)
         self.fraction = 0.0
@@ -540,7 +540,6 @@ class ThreadedDriver:
         return None
 
     def _start(self, work):
-
         def report(fraction, label):
             # Runs on the worker thread: plain Python state only, never bpy.
             self.fraction = fraction

@@ -649,7 +649,6 @@ def rollback_on_cancel():
 @check("refine")
 def threaded_driver_runs_and_cancels():
     """The modal operator's driver (worker thread + poll), which Esc cancels; no event loop needed."""
-    import threading
     import time as clock
 
     facts = {}
@@ -660,8 +659,7 @@ def threaded_driver_runs_and_cancels():
         before = fingerprint()
         targets = pipeline.validate(bpy.context, [floor], options)
         journal = Journal()
-        stop = threading.Event()
-        driver = pipeline.ThreadedDriver(pipeline.run(bpy.context, targets, options, journal), stop)
+        driver = pipeline.ThreadedDriver(pipeline.run(bpy.context, targets, options, journal))
         labels = []
         while True:
             state = driver.poll()
