@@ -225,6 +225,17 @@ def test_black_first_lightmap_warns_and_keeps_the_layout(facts):
     assert value["max_move"] < 1e-6
 
 
+def test_modal_run_and_escape(facts):
+    value = fact(facts, "modal_events")
+    run, escape = value["run"], value["escape"]
+    assert run["returned"] == ["FINISHED"] and run["result_valid"]
+    assert run["reports"][-1][0] == ["INFO"] and "Refined 1 object(s)" in run["reports"][-1][1]
+    assert "mesh:FloorMesh" in run["changed"]
+    assert escape["returned"] == ["CANCELLED"] and not escape["result_valid"]
+    assert escape["reports"] == [[["WARNING"], "Cancelled: the scene was left unchanged"]]
+    assert escape["changed"] == []
+
+
 def test_invoke_in_background_runs_blocking(facts):
     value = fact(facts, "invoke_in_background_runs_blocking")
     assert value["outcome"] == "FINISHED", value["message"]

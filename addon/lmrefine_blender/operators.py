@@ -113,14 +113,18 @@ class LMREFINE_OT_refine_uvs(bpy.types.Operator):
         except pipeline.UserError as error:
             self.report({'ERROR'}, str(error))
             return {'CANCELLED'}
+        self._begin_modal(context, options, targets)
+        context.window_manager.modal_handler_add(self)
+        return {'RUNNING_MODAL'}
+
+    def _begin_modal(self, context, options, targets):
+        """Everything a modal run needs but the handler: the job, its driver, progress and the timer."""
         self._journal = Journal()
         self._driver = pipeline.ThreadedDriver(pipeline.run(context, targets, options, self._journal))
         wm = context.window_manager
         wm.progress_begin(0.0, 1.0)
         self._timer = wm.event_timer_add(0.1, window=context.window)
-        wm.modal_handler_add(self)
         self._status(context)
-        return {'RUNNING_MODAL'}
 
     def modal(self, context, event):
         if event.type == 'ESC' and event.value == 'PRESS':

@@ -556,6 +556,48 @@ def black_first_lightmap_warns():
 
 
 @check("refine")
+def modal_events():
+    """The modal operator's own code (invoke's set-up, modal, Esc, the end) fed with timer and key events.
+
+    Background Blender has no event loop, so the events are handed to modal()
+    directly, and the operator's methods run on a stand-in `self` (reports are
+    collected); everything else (driver, worker thread, journal, window
+    manager, timer) is the real thing.
+    """
+    import time as clock
+    from types import SimpleNamespace
+
+    from lmrefine_blender.operators import LMREFINE_OT_refine_uvs as Operator
+
+    facts = {}
+    for mode in ("run", "escape"):
+        fresh_shadow_scene(first_lightmap='CYCLES', backend='CYCLES', bake_passes={'DIRECT'})
+        window = bpy.context.window_manager.windows[0]  # a fresh scene comes with a new window
+        before = fingerprint()
+        reports = []
+        operator = SimpleNamespace(report=lambda kind, text: reports.append([sorted(kind), text]),
+                                   _started=clock.perf_counter())
+        for name in ("_prepare", "_begin_modal", "modal", "_status", "_end"):
+            setattr(operator, name, getattr(Operator, name).__get__(operator))
+        with bpy.context.temp_override(window=window):
+            options, targets = operator._prepare(bpy.context)
+            operator._begin_modal(bpy.context, options, targets)
+            returned = {'RUNNING_MODAL'}
+            events = 0
+            while returned == {'RUNNING_MODAL'} and events < 10000:
+                if mode == "escape" and operator._driver.label.startswith("Refining"):
+                    operator.modal(bpy.context, SimpleNamespace(type='ESC', value='PRESS'))
+                returned = operator.modal(bpy.context, SimpleNamespace(type='TIMER', value='NOTHING'))
+                ignored = operator.modal(bpy.context, SimpleNamespace(type='LEFTMOUSE', value='PRESS'))
+                assert ignored == {'RUNNING_MODAL'}
+                events += 1
+                clock.sleep(0.005)
+        facts[mode] = {"returned": sorted(returned), "reports": reports, "changed": changed(before, fingerprint()),
+                       "result_valid": bpy.context.scene.lmrefine.result.valid}
+    return facts
+
+
+@check("refine")
 def invoke_in_background_runs_blocking():
     """INVOKE_DEFAULT (a button press) in background Blender has no event loop for the modal run."""
     fresh_shadow_scene(first_lightmap='CYCLES', backend='CYCLES', bake_passes={'DIRECT'})
