@@ -85,7 +85,7 @@ class LMREFINE_PT_refine_result(_LightmapTab, bpy.types.Panel):
         layout = self.layout
         result = context.scene.lmrefine.result
         if not result.valid:
-            layout.label(text="No run yet in this session")
+            layout.label(text="No run yet")
             return
         column = layout.column(align=True)
         column.label(text=f"Objects: {result.objects}")

@@ -56,7 +56,7 @@ WAVELET_ITEMS = (
 class LMREFINE_PG_result(bpy.types.PropertyGroup):
     """The last run's numbers, shown in the panel (not an input)."""
 
-    valid: BoolProperty(name="Has Result", default=False, options={'SKIP_SAVE'})
+    valid: BoolProperty(name="Has Result", default=False)
     objects: StringProperty(name="Objects", description="Objects the last run refined")
     transition_widening: FloatProperty(
         name="Transition Widening",
