@@ -62,6 +62,7 @@ def test_register_and_unregister(facts):
     assert registered["category"] == "Lightmap" and registered["space"] == "VIEW_3D"
     assert registered["operators"] == [True, True] and registered["label"] == "Refine Lightmap UVs"
     assert registered["scene_property"]
+    assert len(registered["icons_used"]) >= 4 and registered["icons_missing"] == []
     assert unregistered == {"panels": [], "scene_property": False, "operator": False}
 
 

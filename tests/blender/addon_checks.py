@@ -148,6 +148,15 @@ def registration():
         "label": bpy.ops.object.lmrefine_refine_uvs.get_rna_type().name,
         "scene_property": hasattr(bpy.types.Scene, "lmrefine"),
     }
+    # Panels are only drawn with a window; at least every icon they name must exist in this Blender.
+    import inspect
+    import re
+    from lmrefine_blender import panels
+    icons = bpy.types.UILayout.bl_rna.functions["prop"].parameters["icon"].enum_items.keys()
+    used = set(re.findall(r"icon='(\w+)'", inspect.getsource(panels)))
+    used |= set(re.findall(r"else '(\w+)'", inspect.getsource(panels)))
+    registered["icons_used"] = sorted(used)
+    registered["icons_missing"] = sorted(used - set(icons))
     lmrefine_blender.unregister()
     unregistered = {
         "panels": [name for name in names if hasattr(bpy.types, name)],
