@@ -76,6 +76,7 @@ ERRORS = {
     "error_edit_mode": "works in Object Mode, not Edit Mesh",
     "error_zero_area_faces": "1 faces of zero area",
     "error_linked_library": "is linked from",
+    "error_hidden_object": "'Floor' is hidden",
     "error_shared_mesh": "share mesh 'FloorMesh'",
     "error_image_not_found": "No lightmap image found for 'Floor'",
     "error_image_file_missing": "has no pixels",

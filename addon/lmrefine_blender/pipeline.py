@@ -138,6 +138,9 @@ def validate(context, objects, options):
             library = (obj.library or mesh.library).filepath
             raise UserError(f"'{obj.name}' is linked from {library}: make it local (Object > Relations > "
                             "Make Local > Selected Objects and Data) to change its UV maps")
+        if not obj.visible_get():
+            raise UserError(f"'{obj.name}' is hidden: show it (Object > Show/Hide, or its collection), since "
+                            "both bakers only see visible objects")
         if mesh.name in owners:
             raise UserError(f"'{owners[mesh.name]}' and '{obj.name}' share mesh '{mesh.name}': UV maps belong "
                             "to the mesh, so select only one of them")

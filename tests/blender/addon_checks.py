@@ -212,6 +212,21 @@ def error_zero_area_faces():
 
 
 @check()
+def error_hidden_object():
+    """Hiding deselects in the UI, but the batch entry names objects: validation must catch it."""
+    fresh_shadow_scene()
+    floor = bpy.data.objects["Floor"]
+    floor.hide_set(True)
+    before = fingerprint()
+    try:
+        pipeline.validate(bpy.context, [floor], pipeline.settings_snapshot(bpy.context.scene.lmrefine))
+        message = None
+    except pipeline.UserError as error:
+        message = str(error)
+    return {"outcome": "CANCELLED", "message": message, "changed": changed(before, fingerprint())}
+
+
+@check()
 def error_linked_library():
     library_path = os.path.join(WORK_DIR, "library.blend")
 
