@@ -12,6 +12,8 @@ void bind_coverage(py::module_& m);
 void bind_chart(py::module_& m);
 void bind_wavelet(py::module_& m);
 void bind_gradient_map(py::module_& m);
+void bind_scene(py::module_& m);
+void bind_baker(py::module_& m);
 }  // namespace lmrefine::bindings
 
 PYBIND11_MODULE(_native, m) {
@@ -41,4 +43,6 @@ PYBIND11_MODULE(_native, m) {
     lmrefine::bindings::bind_chart(m);
     lmrefine::bindings::bind_wavelet(m);
     lmrefine::bindings::bind_gradient_map(m);
+    lmrefine::bindings::bind_scene(m);
+    lmrefine::bindings::bind_baker(m);
 }

@@ -23,6 +23,7 @@ except ImportError as error:  # pragma: no cover - depends on the build state
 
 from ._native import (  # noqa: F401  (re-exports)
     CancelledError,
+    Scene,
     coverage_mask,
     dwt,
     dwt2,
@@ -33,14 +34,19 @@ from ._native import (  # noqa: F401  (re-exports)
     read_image,
     write_image,
 )
+from .baker import BakeResult, bake, evaluate  # noqa: F401  (re-exports)
 
 __version__ = _native.__version__
 
 __all__ = [
+    "BakeResult",
     "CancelledError",
+    "Scene",
+    "bake",
     "coverage_mask",
     "dwt",
     "dwt2",
+    "evaluate",
     "find_charts",
     "gradient_map",
     "idwt",

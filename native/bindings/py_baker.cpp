@@ -1,0 +1,111 @@
+// The native half of lmrefine.bake / lmrefine.evaluate (python/lmrefine/baker.py
+// holds the documented Python API and shapes the results).
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+
+#include <string>
+#include <vector>
+
+#include "lmrefine/baker.h"
+#include "lmrefine/error.h"
+#include "numpy_util.h"
+#include "progress_binding.h"
+
+namespace py = pybind11;
+
+namespace lmrefine::bindings {
+namespace {
+
+BakeOptions make_options(const std::vector<std::string>& passes, int samples, uint64_t seed, int bounces,
+                         float ao_distance) {
+    BakeOptions options;
+    options.passes.clear();
+    for (const auto& name : passes) options.passes.push_back(parse_bake_pass(name));
+    options.samples = samples;
+    options.seed = seed;
+    options.bounces = bounces;
+    options.ao_distance = ao_distance;
+    return options;
+}
+
+py::dict stats_dict(const BakeStats& stats) {
+    py::dict seconds;
+    for (const auto& p : stats.pass_seconds) seconds[py::str(p.first)] = p.second;
+    py::dict d;
+    d["rays"] = stats.rays;
+    d["rays_per_second"] = stats.rays_per_second();
+    d["seconds"] = stats.seconds;
+    d["pass_seconds"] = seconds;
+    d["texels"] = stats.texels;
+    d["degenerate_triangles"] = stats.degenerate_triangles;
+    return d;
+}
+
+py::tuple bake_native(const Scene& scene, const py::handle& resolution, const std::vector<std::string>& passes,
+                      int samples, uint64_t seed, const py::object& progress, int dilation, bool denoise, int bounces,
+                      float ao_distance, bool atlas) {
+    BakeOptions options = make_options(passes, samples, seed, bounces, ao_distance);
+    std::tie(options.height, options.width) = py_util::parse_resolution(resolution);
+    options.dilation = dilation;
+    options.denoise = denoise;
+    options.atlas = atlas;
+    py_util::PythonProgress reporter(progress);
+    BakeResult result = reporter.run([&](Progress& p) { return bake(scene, options, p); });
+    py::list maps;
+    for (auto& map : result.maps) {
+        py::list images;
+        for (auto& image : map.passes) {
+            images.append(py_util::to_numpy(std::move(image), {options.height, options.width, 4}));
+        }
+        maps.append(py::make_tuple(map.mesh, images));
+    }
+    return py::make_tuple(maps, stats_dict(result.stats));
+}
+
+py::tuple evaluate_native(const Scene& scene, const py::handle& points_in, const py::handle& normals_in,
+                          const std::vector<std::string>& passes, int samples, uint64_t seed, const py::object& progress,
+                          int bounces, float ao_distance) {
+    auto points = py_util::require_points(points_in, "points", 3);
+    auto normals = py_util::require_points(normals_in, "normals", 3);
+    if (normals.shape(0) != points.shape(0)) {
+        throw py::value_error("normals must have one row per point: " + py_util::shape_string(points) + " points, " +
+                              py_util::shape_string(normals) + " normals");
+    }
+    const BakeOptions options = make_options(passes, samples, seed, bounces, ao_distance);
+    py_util::PythonProgress reporter(progress);
+    const int64_t count = points.shape(0);
+    EvaluateResult result =
+        reporter.run([&](Progress& p) { return evaluate(scene, points.data(), normals.data(), count, options, p); });
+    py::list values;
+    for (auto& v : result.passes) values.append(py_util::to_numpy(std::move(v), {py::ssize_t(count), 3}));
+    return py::make_tuple(values, stats_dict(result.stats));
+}
+
+}  // namespace
+
+void bind_baker(py::module_& m) {
+    m.def("_bake", &bake_native, py::arg("scene"), py::arg("resolution"), py::arg("passes"), py::arg("samples"),
+          py::arg("seed"), py::arg("progress"), py::arg("dilation"), py::arg("denoise"), py::arg("bounces"),
+          py::arg("ao_distance"), py::arg("atlas"),
+          "Native bake: returns ([(mesh id or -1, [image per pass])], stats). Use lmrefine.bake.");
+    m.def("_evaluate", &evaluate_native, py::arg("scene"), py::arg("points"), py::arg("normals"), py::arg("passes"),
+          py::arg("samples"), py::arg("seed"), py::arg("progress"), py::arg("bounces"), py::arg("ao_distance"),
+          "Native evaluate: returns ([(P, 3) per pass], stats). Use lmrefine.evaluate.");
+    m.def(
+        "_bench_occluded_loop",
+        [](const Scene& scene, const py::handle& rays_in) {
+            auto rays = py_util::require_points(rays_in, "rays", 7);
+            const int64_t count = rays.shape(0);
+            OcclusionLoopResult result;
+            {
+                py::gil_scoped_release release;
+                result = time_occluded_loop(scene, rays.data(), count);
+            }
+            return py::make_tuple(result.seconds, result.occluded);
+        },
+        py::arg("scene"), py::arg("rays"),
+        "Benchmark baseline: a bare rtcOccluded1 loop over rays (N, 7) = origin, direction, tfar on all threads; "
+        "returns (seconds, occluded count).");
+}
+
+}  // namespace lmrefine::bindings

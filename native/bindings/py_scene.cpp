@@ -1,0 +1,154 @@
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+
+#include <memory>
+#include <string>
+
+#include "lmrefine/error.h"
+#include "lmrefine/scene.h"
+#include "numpy_util.h"
+
+namespace py = pybind11;
+
+namespace lmrefine::bindings {
+namespace {
+
+glm::vec3 vec3_param(const py::handle& value, const char* name) {
+    auto array = py::array_t<float, py::array::c_style | py::array::forcecast>::ensure(value);
+    if (!array || array.size() != 3) throw py::value_error(std::string(name) + " must be 3 numbers (x, y, z) or (r, g, b)");
+    return {array.data()[0], array.data()[1], array.data()[2]};
+}
+
+AreaShape parse_shape(const std::string& shape) {
+    if (shape == "SQUARE") return AreaShape::Square;
+    if (shape == "RECTANGLE") return AreaShape::Rectangle;
+    if (shape == "DISK") return AreaShape::Disk;
+    if (shape == "ELLIPSE") return AreaShape::Ellipse;
+    throw py::value_error("shape must be \"SQUARE\", \"RECTANGLE\", \"DISK\" or \"ELLIPSE\", got \"" + shape + "\"");
+}
+
+int add_mesh(Scene& scene, const py::handle& positions_in, const py::handle& triangles_in, const py::handle& uvs_in,
+             const py::handle& normals_in, const py::handle& base_color_in, bool receiver) {
+    auto positions = py_util::require_points(positions_in, "positions", 3);
+    auto triangles = py_util::require_indices(triangles_in, "triangles", 3);
+    MeshInput in;
+    in.positions = positions.data();
+    in.vertex_count = positions.shape(0);
+    in.triangles = triangles.data();
+    in.triangle_count = triangles.shape(0);
+    in.receiver = receiver;
+    py_util::FloatArray uvs, normals;
+    if (!uvs_in.is_none()) {
+        uvs = py_util::require_points(uvs_in, "uvs", 2);
+        if (uvs.shape(0) != in.triangle_count * 3) {
+            throw py::value_error("uvs must be per corner, shape (T*3, 2) = (" + std::to_string(in.triangle_count * 3) +
+                                  ", 2) with corner k of triangle t at row 3t+k (as Blender's loop triangles), got " +
+                                  py_util::shape_string(uvs));
+        }
+        in.uvs = uvs.data();
+    }
+    if (!normals_in.is_none()) {
+        normals = py_util::require_points(normals_in, "normals", 3);
+        in.normals = normals.data();
+        in.normal_count = normals.shape(0);
+    }
+    auto base_color = py::array_t<float, py::array::c_style | py::array::forcecast>::ensure(base_color_in);
+    if (!base_color || !((base_color.ndim() == 1 && base_color.shape(0) == 3) ||
+                         (base_color.ndim() == 2 && base_color.shape(1) == 3))) {
+        throw py::value_error("base_color must be one RGB colour (3,) or one per triangle (T, 3)");
+    }
+    in.base_color = base_color.data();
+    in.base_color_count = base_color.ndim() == 1 ? 1 : base_color.shape(0);
+    return scene.add_mesh(in);
+}
+
+int add_light(Scene& scene, const std::string& kind, const py::kwargs& params) {
+    Light light;
+    if (kind == "point") light.kind = LightKind::Point;
+    else if (kind == "spot") light.kind = LightKind::Spot;
+    else if (kind == "sun") light.kind = LightKind::Sun;
+    else if (kind == "area") light.kind = LightKind::Area;
+    else throw py::value_error("light kind must be \"point\", \"spot\", \"sun\" or \"area\", got \"" + kind + "\"");
+    if (!params.contains("energy")) {
+        throw py::value_error("add_light needs energy= (W, or W/m^2 for a sun), as Blender's light property");
+    }
+    for (const auto& item : params) {
+        const std::string key = py::str(item.first);
+        const py::handle value = item.second;
+        if (key == "energy") light.energy = value.cast<float>();
+        else if (key == "color") light.color = vec3_param(value, "color");
+        else if (key == "position") light.position = vec3_param(value, "position");
+        else if (key == "direction") light.direction = vec3_param(value, "direction");
+        else if (key == "shadow_soft_size") light.shadow_soft_size = value.cast<float>();
+        else if (key == "angle") light.angle = value.cast<float>();
+        else if (key == "spot_size") light.spot_size = value.cast<float>();
+        else if (key == "spot_blend") light.spot_blend = value.cast<float>();
+        else if (key == "shape") light.shape = parse_shape(value.cast<std::string>());
+        else if (key == "size") light.size = value.cast<float>();
+        else if (key == "size_y") light.size_y = value.cast<float>();
+        else {
+            throw py::value_error("unknown light parameter \"" + key + "\"; use energy, color, position, direction, "
+                                  "shadow_soft_size, angle, spot_size, spot_blend, shape, size, size_y");
+        }
+    }
+    return scene.add_light(light);
+}
+
+}  // namespace
+
+void bind_scene(py::module_& m) {
+    py::class_<Scene, std::shared_ptr<Scene>>(m, "Scene", R"doc(A scene to bake: meshes, lights and a world colour.
+
+World space, transforms applied. Receivers get a lightmap; occluders
+(receiver=False) only cast shadows and reflect light. See docs/baker.md.
+)doc")
+        .def(py::init<>())
+        .def("add_mesh", &add_mesh, py::arg("positions"), py::arg("triangles"), py::arg("uvs") = py::none(),
+             py::arg("normals") = py::none(), py::arg("base_color") = py::make_tuple(0.8, 0.8, 0.8),
+             py::arg("receiver") = true,
+             R"doc(Add a triangle mesh; returns its id (0, 1, ...).
+
+Args:
+    positions (numpy.ndarray): (V, 3) world-space vertex positions.
+    triangles (numpy.ndarray): (T, 3) vertex indices; the winding gives the
+        front (lit, baked) side unless normals say otherwise.
+    uvs (numpy.ndarray | None): lightmap UVs per corner, (T*3, 2), corner k
+        of triangle t at row 3t+k (Blender's loop triangles), inside [0, 1].
+        Required for a receiver.
+    normals (numpy.ndarray | None): smooth shading normals per corner
+        (T*3, 3) or per vertex (V, 3) (if V == T*3 they are read per corner);
+        None shades flat.
+    base_color: albedo in [0, 1], one RGB for the mesh or (T, 3) per triangle;
+        it colours the light the mesh reflects onto others (indirect pass).
+    receiver (bool): bake a lightmap for this mesh.
+
+Raises:
+    ValueError: NaN/Inf values, indices out of range, UVs outside [0, 1],
+        a receiver without UVs, bad shapes. Zero-area triangles are skipped
+        and counted (degenerate_triangles).
+)doc")
+        .def("add_light", &add_light, py::arg("kind"),
+             R"doc(Add a light with Blender's property names and units; returns its id.
+
+kind: "point", "spot", "sun" or "area". Keyword parameters: energy (W, or
+W/m^2 for a sun; required), color (RGB), position (point, spot, area),
+direction (where the light points; spot, sun, area; default down -Z),
+shadow_soft_size (point/spot radius), angle (sun angular diameter, rad),
+spot_size (cone angle, rad), spot_blend, shape ("SQUARE", "RECTANGLE",
+"DISK", "ELLIPSE"), size, size_y. Defaults are Blender's.
+)doc")
+        .def(
+            "set_world",
+            [](Scene& scene, const py::handle& color) { scene.set_world(vec3_param(color, "color")); },
+            py::arg("color"), "Uniform sky radiance (Blender's world Background colour at strength 1).")
+        .def("degenerate_triangles",
+             [](const Scene& scene, int mesh) {
+                 if (mesh < 0 || mesh >= int(scene.meshes().size())) throw py::index_error("no mesh " + std::to_string(mesh));
+                 return scene.meshes()[size_t(mesh)].degenerate_count;
+             },
+             py::arg("mesh"), "Number of zero-area triangles of a mesh (skipped by the baker).")
+        .def_property_readonly("mesh_count", [](const Scene& s) { return s.meshes().size(); })
+        .def_property_readonly("light_count", [](const Scene& s) { return s.lights().size(); });
+}
+
+}  // namespace lmrefine::bindings

@@ -1,0 +1,123 @@
+#include "integrator.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include <glm/geometric.hpp>
+
+#include "lmrefine/scene.h"
+
+namespace lmrefine {
+namespace {
+
+constexpr float kPi = 3.14159265358979f;
+constexpr float kInfinity = std::numeric_limits<float>::infinity();
+// Offsets scale with the coordinates' magnitude: float spacing grows with it.
+constexpr float kRelativeOffset = 1e-5f;
+
+glm::vec3 cosine_hemisphere(const glm::vec3& n, const glm::vec2& u) {
+    const float r = std::sqrt(u.x), phi = 2.0f * kPi * u.y;
+    const float sign = std::copysign(1.0f, n.z);
+    const float a = -1.0f / (sign + n.z);
+    const float b = n.x * n.y * a;
+    const glm::vec3 x(1.0f + sign * n.x * n.x * a, sign * b, -sign * n.x), y(b, sign + n.y * n.y * a, -n.y);
+    return glm::normalize(x * (r * std::cos(phi)) + y * (r * std::sin(phi)) + n * std::sqrt(std::max(0.0f, 1.0f - u.x)));
+}
+
+}  // namespace
+
+Integrator::Integrator(const Scene& scene, const RayTracer& tracer, const IntegratorSettings& settings)
+    : scene_(scene), tracer_(tracer), settings_(settings), offset_floor_(0.05f * std::max(scene.extent(), 1e-6f)) {}
+
+glm::vec3 Integrator::offset(const SurfacePoint& point, const glm::vec3& direction) const {
+    const glm::vec3& p = point.position;
+    const float magnitude = std::max({std::abs(p.x), std::abs(p.y), std::abs(p.z), offset_floor_});
+    const float side = glm::dot(direction, point.geometric_normal) >= 0.0f ? 1.0f : -1.0f;
+    return p + point.geometric_normal * (side * kRelativeOffset * magnitude);
+}
+
+uint32_t Integrator::dimension(int bounce, uint32_t slot) const {
+    // Per bounce: the world/AO direction, the bounce direction, one per light.
+    const uint32_t per_bounce = 2 + uint32_t(scene_.lights().size());
+    return kFirstDimension + uint32_t(bounce) * per_bounce + slot;
+}
+
+glm::vec3 Integrator::direct(const SurfacePoint& point, const Sampler& sampler, int bounce, uint64_t& rays) const {
+    glm::vec3 sum(0.0f);
+    const auto& lights = scene_.lights();
+    for (size_t i = 0; i < lights.size(); ++i) {
+        LightSample s;
+        if (!sample_light(lights[i], point.position, sampler.get(dimension(bounce, 2 + uint32_t(i))), s)) continue;
+        const float cos_theta = glm::dot(point.shading_normal, s.direction);
+        // Light from below the shading or geometric surface does not reach it.
+        if (cos_theta <= 0.0f || glm::dot(point.geometric_normal, s.direction) <= 0.0f) continue;
+        const glm::vec3 origin = offset(point, s.direction);
+        const float tfar = std::isinf(s.distance) ? kInfinity : glm::length(point.position + s.direction * s.distance - origin) * (1.0f - 1e-4f);
+        ++rays;
+        if (!tracer_.occluded(origin, s.direction, tfar)) sum += s.value * cos_theta;
+    }
+    if (scene_.has_world()) {
+        // Cosine sampling of a uniform sky: the estimate is the sky colour where open.
+        const glm::vec3 d = cosine_hemisphere(point.shading_normal, sampler.get(dimension(bounce, 0)));
+        if (glm::dot(point.geometric_normal, d) > 0.0f) {
+            ++rays;
+            if (!tracer_.occluded(offset(point, d), d, kInfinity)) sum += scene_.world();
+        }
+    }
+    return sum;
+}
+
+float Integrator::ambient_occlusion(const SurfacePoint& point, const Sampler& sampler, uint64_t& rays) const {
+    const glm::vec3 d = cosine_hemisphere(point.shading_normal, sampler.get(dimension(0, 0)));
+    if (glm::dot(point.geometric_normal, d) <= 0.0f) return 0.0f;
+    ++rays;
+    return tracer_.occluded(offset(point, d), d, settings_.ao_distance) ? 0.0f : 1.0f;
+}
+
+bool Integrator::surface_at(const Hit& hit, const glm::vec3& ray_direction, SurfacePoint& point,
+                            glm::vec3& albedo) const {
+    const Mesh& mesh = scene_.meshes()[size_t(hit.mesh)];
+    if (mesh.degenerate[size_t(hit.triangle)]) return false;
+    const int32_t* v = &mesh.triangles[size_t(3 * hit.triangle)];
+    const float w = 1.0f - hit.u - hit.v;
+    const glm::vec3 &a = mesh.positions[v[0]], &b = mesh.positions[v[1]], &c = mesh.positions[v[2]];
+    point.position = a * w + b * hit.u + c * hit.v;
+    glm::vec3 ng = glm::normalize(glm::cross(b - a, c - a));
+    // Surfaces hit by a bounce are two-sided, as in Cycles: face the ray.
+    if (glm::dot(ng, ray_direction) > 0.0f) ng = -ng;
+    point.geometric_normal = ng;
+    point.shading_normal = ng;
+    if (!mesh.normals.empty()) {
+        const glm::vec3* n = &mesh.normals[size_t(3 * hit.triangle)];
+        glm::vec3 ns = n[0] * w + n[1] * hit.u + n[2] * hit.v;
+        const float length = glm::length(ns);
+        if (length > 0.0f) {
+            ns /= length;
+            point.shading_normal = glm::dot(ns, ng) >= 0.0f ? ns : -ns;
+        }
+    }
+    albedo = mesh.base_color[size_t(hit.triangle)];
+    return true;
+}
+
+glm::vec3 Integrator::indirect(const SurfacePoint& start, const Sampler& sampler, uint64_t& rays) const {
+    glm::vec3 sum(0.0f), throughput(1.0f);
+    SurfacePoint point = start;
+    for (int bounce = 1; bounce <= settings_.bounces; ++bounce) {
+        // Cosine sampling cancels the cos / pi of the diffuse reflection.
+        const glm::vec3 d = cosine_hemisphere(point.shading_normal, sampler.get(dimension(bounce - 1, 1)));
+        if (glm::dot(point.geometric_normal, d) <= 0.0f) break;
+        Hit hit;
+        ++rays;
+        if (!tracer_.intersect(offset(point, d), d, kInfinity, hit)) break;  // the sky is direct light
+        glm::vec3 albedo;
+        if (!surface_at(hit, d, point, albedo)) break;
+        throughput *= albedo;
+        if (throughput.x <= 0.0f && throughput.y <= 0.0f && throughput.z <= 0.0f) break;
+        sum += throughput * direct(point, sampler, bounce, rays);
+    }
+    return sum;
+}
+
+}  // namespace lmrefine

@@ -1,0 +1,100 @@
+"""The lightmap baker's Python API: lmrefine.bake and lmrefine.evaluate.
+
+The work is native (Embree 3, all cores, GIL released); this module only
+normalizes arguments and shapes the results. Units, passes and how they match
+Blender's Cycles: docs/baker.md.
+"""
+
+from . import _native
+
+PASSES = ("direct", "ao", "indirect", "combined")
+
+
+class BakeResult(dict):
+    """``{mesh id: float32 (H, W, 4)}`` (or ``{pass: {mesh id: ...}}`` when
+    several passes were asked for), plus ``.stats``: a dict with ``rays``,
+    ``rays_per_second``, ``seconds`` (whole call), ``pass_seconds``
+    (``{"direct" | "ao" | "indirect": seconds}``), ``texels`` and
+    ``degenerate_triangles``."""
+
+    def __init__(self, maps, stats):
+        super().__init__(maps)
+        self.stats = stats
+
+
+def _pass_names(passes):
+    names = (passes,) if isinstance(passes, str) else tuple(passes)
+    if not names:
+        raise ValueError(f"passes is empty; ask for some of {PASSES}")
+    for name in names:
+        if name not in PASSES:
+            raise ValueError(f"unknown pass {name!r}; use one of {PASSES}")
+    if len(set(names)) != len(names):
+        raise ValueError(f"passes {names} names a pass twice")
+    return names
+
+
+def bake(scene, resolution, passes=("direct",), samples=16, seed=0, progress=None, dilation=16,
+         denoise=False, bounces=4, ao_distance=10.0, atlas=False):
+    """Bake lightmaps of every receiving mesh of ``scene``.
+
+    Args:
+        scene (Scene): meshes, lights, world.
+        resolution (int | tuple[int, int]): lightmap size, square or (height, width).
+        passes (str | tuple[str, ...]): "direct" (lights and world, with shadows),
+            "ao" (ambient occlusion up to ``ao_distance``), "indirect" (light after
+            1..``bounces`` diffuse bounces, base colours as albedo), "combined"
+            (direct + indirect). Values are Cycles' DIFFUSE bake with the colour
+            pass off, and Cycles' AO bake.
+        samples (int): samples per texel (stratified over the texel).
+        seed (int): results depend only on the seed, never on thread count.
+        progress (callable | None): ``progress(fraction, stage)``; returning
+            False cancels (raises ``lmrefine.CancelledError``, nothing partial).
+        dilation (int): texels to fill into the gutter around each chart, from
+            that chart's own texels (Blender's bake margin, default 16).
+        denoise (bool): edge-aware a-trous filter guided by position, normal and
+            the per-texel noise estimate.
+        bounces (int): diffuse bounces of the indirect pass (Cycles' default 4).
+        ao_distance (float): AO ray length (Blender's world AO distance).
+        atlas (bool): bake every receiver into one shared map, keyed "atlas"
+            (their UV layouts must not overlap).
+
+    Returns:
+        BakeResult: ``{mesh id: float32 (H, W, 4)}`` with one pass, else
+        ``{pass: {mesh id: ...}}``; row 0 at the top (v = 1), RGB linear,
+        alpha = coverage (1 where a chart covers the texel, 0 in the gutter).
+        ``.stats`` holds rays cast, rays per second and time per pass.
+
+    Raises:
+        ValueError: empty scene, bad options, resolution above 32768.
+        MemoryError: the bake would need more than half the machine's memory
+            (estimated before allocating; the message gives the estimate).
+        lmrefine.CancelledError: the progress callback returned False.
+    """
+    names = _pass_names(passes)
+    maps, stats = _native._bake(scene, resolution, list(names), int(samples), int(seed), progress, int(dilation),
+                                bool(denoise), int(bounces), float(ao_distance), bool(atlas))
+    by_pass = {name: {} for name in names}
+    for mesh, images in maps:
+        key = "atlas" if mesh < 0 else mesh
+        for name, image in zip(names, images):
+            by_pass[name][key] = image
+    return BakeResult(by_pass[names[0]] if len(names) == 1 else by_pass, stats)
+
+
+def evaluate(scene, points, normals, passes=("direct",), samples=64, seed=0, progress=None, bounces=4,
+             ao_distance=10.0):
+    """The baker's light at arbitrary surface points (ground truth for metrics).
+
+    Args:
+        points (numpy.ndarray): (P, 3) world positions on surfaces.
+        normals (numpy.ndarray): (P, 3) normals of the lit side (normalized here).
+        passes, samples, seed, progress, bounces, ao_distance: as for bake.
+
+    Returns:
+        numpy.ndarray: float32 (P, 3) with one pass, else ``{pass: (P, 3)}``.
+    """
+    names = _pass_names(passes)
+    values, _stats = _native._evaluate(scene, points, normals, list(names), int(samples), int(seed), progress,
+                                       int(bounces), float(ao_distance))
+    return values[0] if len(names) == 1 else dict(zip(names, values))
