@@ -46,7 +46,8 @@ test-asan: deps
 	cmake -S . -B $(ASAN_DIR) -DCMAKE_BUILD_TYPE=RelWithDebInfo -DLMREFINE_SANITIZE=ON \
 		-DPython_EXECUTABLE=$(PYTHON) -DLMREFINE_MODULE_DIR=$(CURDIR)/$(ASAN_DIR)/package/lmrefine
 	cmake --build $(ASAN_DIR) -j $(JOBS)
-	cp python/lmrefine/*.py $(ASAN_DIR)/package/lmrefine/
+	tar -C python --exclude="_native*.so" --exclude=__pycache__ -cf - lmrefine | tar -C $(ASAN_DIR)/package -xf -
+	ln -sfn $(CURDIR)/blend_samples $(ASAN_DIR)/blend_samples
 	LD_PRELOAD="$$($(CXX) -print-file-name=libasan.so) $$($(CXX) -print-file-name=libstdc++.so)" ASAN_OPTIONS=detect_leaks=0 \
 		UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 LMREFINE_PYTHONPATH=$(ASAN_DIR)/package \
 		$(PYTHON) -m pytest tests -q -m "not blender and not slow" -p no:cacheprovider

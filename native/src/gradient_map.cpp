@@ -20,8 +20,12 @@ struct LineFilter {
     int pad = 0;              // samples of extension needed past each end of a run
 };
 
+// The longest detail filter (D20).
+constexpr int kMaxTaps = 20;
+
 LineFilter make_line_filter(Wavelet wavelet) {
     const DetailFilter detail = detail_filter(wavelet);
+    LMREFINE_REQUIRE(int(detail.taps.size()) <= kMaxTaps, "detail filter longer than kMaxTaps");
     LineFilter f;
     f.taps.assign(detail.taps.begin(), detail.taps.end());
     const int length = int(f.taps.size());
@@ -50,21 +54,59 @@ double antireflect(const float* x, int64_t n, int64_t j) {
     return offset + sign * x[j];
 }
 
-struct LineScratch {
-    std::vector<float> extended, forward, backward;
-};
+// The stencil sums of `count` texels, forward and backward:
+//   fwd[t] = |sum_k g[k] (forward[k][t] - centre[t])|, likewise backward.
+// The taps sum to zero, so sums over differences equal the detail, and the
+// differences make a flat run exactly 0 and keep HDR offsets out. A length
+// known at compile time unrolls the taps so the loop over texels vectorizes
+// with the sums in registers; kLength = 0 takes the length at run time.
+// Both directions go through here, so they agree bit for bit.
+template <int kLength>
+void stencil_sums(const float* taps, int length, const float* const* forward, const float* const* backward,
+                  const float* centre, int64_t count, float* __restrict fwd, float* __restrict bwd) {
+    const int taps_count = kLength ? kLength : length;
+    const float* sources[2][kMaxTaps];
+    for (int k = 0; k < taps_count; ++k) {
+        sources[0][k] = forward[k];
+        sources[1][k] = backward[k];
+    }
+    for (int64_t t = 0; t < count; ++t) {
+        const float x = centre[t];
+        float sf = 0.0f, sb = 0.0f;
+        for (int k = 0; k < taps_count; ++k) {
+            sf += taps[k] * (sources[0][k][t] - x);
+            sb += taps[k] * (sources[1][k][t] - x);
+        }
+        fwd[t] = std::abs(sf);
+        bwd[t] = std::abs(sb);
+    }
+}
 
-// Filters one line (a row, or a column stored as a row) of `n` texels:
-// writes |forward| and |backward| detail to fwd[i * step], bwd[i * step],
-// 0 where the line is not covered.
+void stencil(const LineFilter& f, const float* const* forward, const float* const* backward, const float* centre,
+             int64_t count, float* fwd, float* bwd) {
+    const float* g = f.taps.data();
+    const int n = int(f.taps.size());
+    switch (n) {
+        case 2: return stencil_sums<2>(g, n, forward, backward, centre, count, fwd, bwd);
+        case 3: return stencil_sums<3>(g, n, forward, backward, centre, count, fwd, bwd);
+        case 4: return stencil_sums<4>(g, n, forward, backward, centre, count, fwd, bwd);
+        case 7: return stencil_sums<7>(g, n, forward, backward, centre, count, fwd, bwd);
+        case 12: return stencil_sums<12>(g, n, forward, backward, centre, count, fwd, bwd);
+        case 20: return stencil_sums<20>(g, n, forward, backward, centre, count, fwd, bwd);
+        default: return stencil_sums<0>(g, n, forward, backward, centre, count, fwd, bwd);
+    }
+}
+
+// Filters one row of `n` texels along x: writes |forward| and |backward|
+// detail to fwd[0..n), bwd[0..n), 0 where the row is not covered.
+// `extended` is scratch space.
 void filter_line(const LineFilter& f, const float* x, const uint8_t* covered, int64_t n, float* fwd, float* bwd,
-                 int64_t step, LineScratch& scratch) {
+                 std::vector<float>& extended) {
     const int length = int(f.taps.size()), c = f.centre, pad = f.pad;
     int64_t i = 0;
     while (i < n) {
         if (covered && !covered[i]) {
-            fwd[i * step] = 0.0f;
-            bwd[i * step] = 0.0f;
+            fwd[i] = bwd[i] = 0.0f;
             ++i;
             continue;
         }
@@ -74,99 +116,87 @@ void filter_line(const LineFilter& f, const float* x, const uint8_t* covered, in
         const float* r = x + i;
 
         // The run with `pad` extended samples on each side.
-        scratch.extended.resize(run + 2 * pad);
-        float* e = scratch.extended.data() + pad;
+        extended.resize(run + 2 * pad);
+        float* e = extended.data() + pad;
         for (int64_t j = -pad; j < 0; ++j) e[j] = float(antireflect(r, run, j));
         std::copy(r, r + run, e);
         for (int64_t j = run; j < run + pad; ++j) e[j] = float(antireflect(r, run, j));
 
-        // The taps sum to zero, so sum g[k] (x[k] - x[i]) equals the detail;
-        // differences make a flat run exactly 0 and keep HDR offsets out.
-        scratch.forward.assign(run, 0.0f);
-        scratch.backward.assign(run, 0.0f);
-        float* af = scratch.forward.data();
-        float* ab = scratch.backward.data();
+        const float* forward[kMaxTaps];
+        const float* backward[kMaxTaps];
         for (int k = 0; k < length; ++k) {
-            const float g = f.taps[k];
-            const float* ef = e - c + k;
-            const float* eb = e + c - k;
-            for (int64_t t = 0; t < run; ++t) {
-                af[t] += g * (ef[t] - e[t]);
-                ab[t] += g * (eb[t] - e[t]);
-            }
+            forward[k] = e - c + k;
+            backward[k] = e + c - k;
         }
-        for (int64_t t = 0; t < run; ++t) {
-            fwd[(i + t) * step] = std::abs(af[t]);
-            bwd[(i + t) * step] = std::abs(ab[t]);
-        }
+        stencil(f, forward, backward, e, run, fwd + i, bwd + i);
         i = end;
     }
 }
 
-// Along y for one texel row: rows i - pad .. i + pad are read row by row,
-// so the loop runs along memory over every column at once. Texels whose
-// stencil leaves their column's run of covered texels (or the image) are
-// redone one by one with the run's extension; the arithmetic is the same as
-// filter_line's, so the two directions agree bit for bit.
+// The value of one texel whose vertical stencil leaves its column's run of
+// covered texels (or the image): the run through it, clipped to the rows the
+// stencil can reach (a reflection about a real end never lands past the
+// clip), extended like filter_line does, with the same float arithmetic.
+void filter_column_texel(const LineFilter& f, const float* lum, const uint8_t* mask, int64_t height, int64_t width,
+                         int64_t i, int64_t j, float* fwd, float* bwd, std::vector<float>& segment) {
+    auto covered = [&](int64_t row) { return !mask || mask[row * width + j]; };
+    if (!covered(i)) {
+        *fwd = *bwd = 0.0f;
+        return;
+    }
+    const int length = int(f.taps.size()), c = f.centre, pad = f.pad;
+    int64_t lo = i, hi = i;
+    while (lo > 0 && lo > i - pad && covered(lo - 1)) --lo;
+    while (hi < height - 1 && hi < i + pad && covered(hi + 1)) ++hi;
+    segment.resize(hi - lo + 1);
+    for (int64_t r = lo; r <= hi; ++r) segment[r - lo] = lum[r * width + j];
+    const int64_t n = hi - lo + 1, t = i - lo;
+    float values[2][kMaxTaps];
+    const float* forward[kMaxTaps];
+    const float* backward[kMaxTaps];
+    for (int k = 0; k < length; ++k) {
+        values[0][k] = float(antireflect(segment.data(), n, t - c + k));
+        values[1][k] = float(antireflect(segment.data(), n, t + c - k));
+        forward[k] = &values[0][k];
+        backward[k] = &values[1][k];
+    }
+    stencil(f, forward, backward, &segment[t], 1, fwd, bwd);
+}
+
 struct RowScratch {
-    LineScratch line;
-    std::vector<float> forward, backward, segment;
+    std::vector<float> along_x_fwd, along_x_bwd, along_y_fwd, along_y_bwd, extended, segment;
     std::vector<uint8_t> inside;
 };
 
+// Along y for one texel row: rows i - c .. i + c are read row by row, so the
+// loop runs along memory over every column at once; texels whose stencil
+// leaves their column's run are then redone by filter_column_texel. The
+// arithmetic is filter_line's, so both directions agree bit for bit.
 void filter_columns_at_row(const LineFilter& f, const float* lum, const uint8_t* mask, int64_t height,
-                           int64_t width, int64_t i, float* out_row, RowScratch& s) {
+                           int64_t width, int64_t i, float* fwd, float* bwd, RowScratch& s) {
     const int length = int(f.taps.size()), c = f.centre, pad = f.pad;
+    // Rows past the image are clamped only to stay in memory: the texels
+    // that read them are redone below.
+    const float* forward[kMaxTaps];
+    const float* backward[kMaxTaps];
+    for (int k = 0; k < length; ++k) {
+        forward[k] = lum + std::clamp<int64_t>(i - c + k, 0, height - 1) * width;
+        backward[k] = lum + std::clamp<int64_t>(i + c - k, 0, height - 1) * width;
+    }
+    stencil(f, forward, backward, lum + i * width, width, fwd, bwd);
+
     const bool rows_exist = i - pad >= 0 && i + pad < height;
+    if (rows_exist && !mask) return;  // every stencil is inside the image and covered
     s.inside.assign(width, rows_exist ? 1 : 0);
-    if (rows_exist && mask) {
+    uint8_t* inside = s.inside.data();
+    if (rows_exist) {
         for (int o = -pad; o <= pad; ++o) {
             const uint8_t* m = mask + (i + o) * width;
-            for (int64_t j = 0; j < width; ++j) s.inside[j] &= m[j] ? 1 : 0;
-        }
-    }
-    s.forward.assign(width, 0.0f);
-    s.backward.assign(width, 0.0f);
-    float* af = s.forward.data();
-    float* ab = s.backward.data();
-    const float* centre = lum + i * width;
-    for (int k = 0; k < length; ++k) {
-        const float g = f.taps[k];
-        const float* xf = lum + std::clamp<int64_t>(i - c + k, 0, height - 1) * width;
-        const float* xb = lum + std::clamp<int64_t>(i + c - k, 0, height - 1) * width;
-        for (int64_t j = 0; j < width; ++j) {
-            af[j] += g * (xf[j] - centre[j]);
-            ab[j] += g * (xb[j] - centre[j]);
+            for (int64_t j = 0; j < width; ++j) inside[j] &= m[j] ? 1 : 0;
         }
     }
     for (int64_t j = 0; j < width; ++j) {
-        out_row[4 * j] = std::abs(af[j]);
-        out_row[4 * j + 2] = std::abs(ab[j]);
-    }
-    for (int64_t j = 0; j < width; ++j) {
-        if (s.inside[j]) continue;
-        auto covered = [&](int64_t row) { return !mask || mask[row * width + j]; };
-        if (!covered(i)) {
-            out_row[4 * j] = out_row[4 * j + 2] = 0.0f;
-            continue;
-        }
-        // The run through texel i, clipped to the rows the stencil can reach
-        // (a reflection about a real end never lands past the clip).
-        int64_t lo = i, hi = i;
-        while (lo > 0 && lo > i - pad && covered(lo - 1)) --lo;
-        while (hi < height - 1 && hi < i + pad && covered(hi + 1)) ++hi;
-        s.segment.resize(hi - lo + 1);
-        for (int64_t r = lo; r <= hi; ++r) s.segment[r - lo] = lum[r * width + j];
-        const int64_t n = hi - lo + 1, t = i - lo;
-        const float xi = s.segment[t];
-        float sf = 0.0f, sb = 0.0f;
-        for (int k = 0; k < length; ++k) {
-            const float g = f.taps[k];
-            sf += g * (float(antireflect(s.segment.data(), n, t - c + k)) - xi);
-            sb += g * (float(antireflect(s.segment.data(), n, t + c - k)) - xi);
-        }
-        out_row[4 * j] = std::abs(sf);
-        out_row[4 * j + 2] = std::abs(sb);
+        if (!inside[j]) filter_column_texel(f, lum, mask, height, width, i, j, fwd + j, bwd + j, s.segment);
     }
 }
 
@@ -250,12 +280,20 @@ void gradient_map(const float* image, int64_t height, int64_t width, int channel
     parallel_for(
         height, 4,
         [&](int64_t begin, int64_t end) {
-            RowScratch scratch;
+            RowScratch s;
+            for (auto* v : {&s.along_x_fwd, &s.along_x_bwd, &s.along_y_fwd, &s.along_y_bwd}) v->resize(width);
             for (int64_t i = begin; i < end; ++i) {
-                float* row = out + i * width * 4;
-                filter_line(filter, lum + i * width, mask ? mask + i * width : nullptr, width, row + 1, row + 3, 4,
-                            scratch.line);
-                filter_columns_at_row(filter, lum, mask, height, width, i, row, scratch);
+                filter_line(filter, lum + i * width, mask ? mask + i * width : nullptr, width, s.along_x_fwd.data(),
+                            s.along_x_bwd.data(), s.extended);
+                filter_columns_at_row(filter, lum, mask, height, width, i, s.along_y_fwd.data(),
+                                      s.along_y_bwd.data(), s);
+                float* texel = out + i * width * 4;
+                for (int64_t j = 0; j < width; ++j, texel += 4) {
+                    texel[0] = s.along_y_fwd[j];
+                    texel[1] = s.along_x_fwd[j];
+                    texel[2] = s.along_y_bwd[j];
+                    texel[3] = s.along_x_bwd[j];
+                }
             }
         },
         progress);

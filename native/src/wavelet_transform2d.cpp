@@ -42,13 +42,13 @@ void column_pass(const LiftingScheme& scheme, BoundaryMode mode, const std::vect
     for (int p = 0; p < int(pairs.size()); ++p) {
         for (int64_t lane = 0; lane < pairs[p].lanes; lane += kStripLanes) strips.emplace_back(p, lane);
     }
+    // A few chunks per thread: enough to balance the load, few enough that
+    // the strip buffers (a fresh, page-faulting allocation each) are cheap.
+    const int64_t grain = std::max<int64_t>(1, int64_t(strips.size()) / (4 * thread_count()));
     parallel_for(
-        int64_t(strips.size()), 1,
+        int64_t(strips.size()), grain,
         [&](int64_t begin, int64_t end) {
-            // Per thread, so a strip does not pay for a fresh (page-faulting) buffer.
-            thread_local std::vector<float> scratch, s, d;
-            s.resize(size_t(count * kStripLanes));
-            d.resize(s.size());
+            std::vector<float> scratch, s(size_t(count * kStripLanes)), d(s.size());
             for (int64_t t = begin; t < end; ++t) {
                 const ColumnPair& pair = pairs[strips[t].first];
                 const int64_t lane = strips[t].second;

@@ -1,11 +1,14 @@
 """Derives the lifting steps of the long Daubechies wavelets (D12 = db6, D20 = db10).
 
 Daubechies & Sweldens (1998), "Factoring wavelet transforms into lifting
-steps": the analysis polyphase matrix A(z) of an orthogonal filter pair is
+steps". D12: the analysis polyphase matrix A(z) of PyWavelets' db6 pair is
 reduced to a diagonal (scaling) matrix by column operations, each one a
-lifting step, chosen by a Euclidean algorithm on the first row. The result is
-printed as C++ initialisers for native/src/wavelet_filters.cpp and checked
-here in float64 against the filter taps.
+lifting step, chosen by a Euclidean algorithm on the first row (in 40-digit
+arithmetic, quotients picked for small coefficients). D20: that route needs
+coefficients up to 68 for db10, too many for float32, so db10 uses the
+paraunitary lattice instead (derive_lattice). The result is printed as C++
+initialisers for native/src/wavelet_filters.cpp and checked here in float64
+against the filter taps.
 
 Conventions (those of native/src/wavelet_lifting.cpp): a Laurent polynomial
 {offset: c} applied to a sequence y gives sum_k c_k y[n + k]. The signal x is
@@ -89,15 +92,13 @@ def divide(a, b):
     the smallest largest coefficient (keeps float32 round-off small)."""
     na, nb = len(a.c), len(b.c)
     best = None
-    qlo = a.lo - b.lo - (nb - 1)
+    # q*b spans exactly a's powers [a.lo, a.hi]: q has na - nb + 1 terms.
+    qpowers = list(range(a.lo - b.lo, a.hi - b.hi + 1))
     for t in range(na - nb + 2):
-        # The remainder lives on powers [a.lo + t, a.lo + t + nb - 2].
+        # The remainder lives on powers [a.lo + t, a.lo + t + nb - 2]; every
+        # other power of a is cancelled.
         window = set(range(a.lo + t, a.lo + t + nb - 1))
-        qpowers = list(range(a.lo - b.hi + 0, a.hi - b.lo + 1))
-        kill = [p for p in range(min(a.lo, a.lo), a.hi + 1) if p not in window]
-        # Powers touched by q*b must stay inside [a.lo, a.hi]: choose q powers
-        # so that q*b spans exactly [a.lo, a.hi] (na - nb + 1 terms).
-        qpowers = list(range(a.lo - b.lo, a.hi - b.hi + 1))
+        kill = [p for p in range(a.lo, a.hi + 1) if p not in window]
         if len(qpowers) != len(kill):
             continue
         M = mpmath.matrix(len(kill), len(qpowers))
@@ -249,25 +250,17 @@ def derive_lattice(name, pywt_name):
     g = np.array(w.rec_hi, dtype=np.float64)
     L = len(h)
     K = L // 2
-    # Polyphase coefficient arrays A[power] (2x2), powers 0..K-1 (h offset 0).
-    for g_off in range(-L, L + 1, 2):
-        A = np.zeros((K, 2, 2))
-        ok = True
-        for k in range(L):
-            A[k // 2, 0, k % 2] = h[k]
-            m = k + g_off
-            if not (0 <= m < L):
-                ok = False
-                break
-            A[m // 2, 1, m % 2] = g[k]
-        if not ok or g_off != 0:
-            continue
-        break
+    # Polyphase coefficient matrices A[p] (2x2) of z^p, p = 0..K-1: row 0
+    # the low-pass h, row 1 the high-pass g, both reading x[2n .. 2n + L).
+    A = np.zeros((K, 2, 2))
+    for k in range(L):
+        A[k // 2, 0, k % 2] = h[k]
+        A[k // 2, 1, k % 2] = g[k]
     # A(z) = sum_p A[p] z^p must be paraunitary: sum_p A[p] A[p]^T = I.
     assert np.allclose(sum(A[p] @ A[p].T for p in range(K)), np.eye(2)), "not paraunitary"
     rotations = []  # forward order
     while len(A) > 1:
-        top, bottom = A[-1], A[0]
+        top = A[-1]
         # Rows of the top coefficient are multiples of v; rotate so that
         # column 0 loses the top power and column 1 the bottom one.
         v = top[np.argmax(np.linalg.norm(top, axis=1))]
