@@ -19,18 +19,26 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 EPOCH = (2020, 1, 1, 0, 0, 0)
 
 
+def _tree(folder, prefix):
+    """(path on disk, path in the zip) for every file under `folder`, caches left out."""
+    pairs = []
+    for directory, subdirectories, files in os.walk(folder):
+        subdirectories[:] = sorted(d for d in subdirectories if d != "__pycache__")
+        for name in sorted(files):
+            if name.endswith((".pyc", ".pyo")):
+                continue
+            path = os.path.join(directory, name)
+            pairs.append((path, os.path.join(prefix, os.path.relpath(path, folder))))
+    return pairs
+
+
 def files_to_pack():
     """(path on disk, path in the zip) pairs; raises SystemExit when the extension is missing."""
     addon = os.path.join(ROOT, "addon", "lmrefine_blender")
     package = os.path.join(ROOT, "python", "lmrefine")
-    natives = sorted(glob.glob(os.path.join(package, "_native*.so")))
-    if not natives:
+    if not glob.glob(os.path.join(package, "_native*.so")):
         raise SystemExit(f"error: no compiled extension in {package}: run `make build` first")
-    pairs = [(path, os.path.join("lmrefine_blender", os.path.basename(path)))
-             for path in sorted(glob.glob(os.path.join(addon, "*.py")))]
-    pairs += [(path, os.path.join("lmrefine_blender", "lib", "lmrefine", os.path.basename(path)))
-              for path in sorted(glob.glob(os.path.join(package, "*.py"))) + natives]
-    return pairs
+    return _tree(addon, "lmrefine_blender") + _tree(package, os.path.join("lmrefine_blender", "lib", "lmrefine"))
 
 
 def build(out):
