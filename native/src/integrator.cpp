@@ -13,8 +13,6 @@ namespace {
 
 constexpr float kPi = 3.14159265358979f;
 constexpr float kInfinity = std::numeric_limits<float>::infinity();
-// Offsets scale with the coordinates' magnitude: float spacing grows with it.
-constexpr float kRelativeOffset = 1e-5f;
 
 glm::vec3 cosine_hemisphere(const glm::vec3& n, const glm::vec2& u) {
     const float r = std::sqrt(u.x), phi = 2.0f * kPi * u.y;
@@ -22,57 +20,83 @@ glm::vec3 cosine_hemisphere(const glm::vec3& n, const glm::vec2& u) {
     const float a = -1.0f / (sign + n.z);
     const float b = n.x * n.y * a;
     const glm::vec3 x(1.0f + sign * n.x * n.x * a, sign * b, -sign * n.x), y(b, sign + n.y * n.y * a, -n.y);
-    return glm::normalize(x * (r * std::cos(phi)) + y * (r * std::sin(phi)) + n * std::sqrt(std::max(0.0f, 1.0f - u.x)));
+    // (x, y, n) is orthonormal, so the result is unit length without normalizing.
+    return x * (r * std::cos(phi)) + y * (r * std::sin(phi)) + n * std::sqrt(std::max(0.0f, 1.0f - u.x));
 }
 
 }  // namespace
 
 Integrator::Integrator(const Scene& scene, const RayTracer& tracer, const IntegratorSettings& settings)
-    : scene_(scene), tracer_(tracer), settings_(settings), offset_floor_(0.05f * std::max(scene.extent(), 1e-6f)) {}
+    : scene_(scene),
+      tracer_(tracer),
+      settings_(settings),
+      offset_floor_(0.05f * std::max(scene.extent(), 1e-6f)),
+      light_count_(uint32_t(scene.lights().size())) {}
 
-glm::vec3 Integrator::offset(const SurfacePoint& point, const glm::vec3& direction) const {
-    const glm::vec3& p = point.position;
-    const float magnitude = std::max({std::abs(p.x), std::abs(p.y), std::abs(p.z), offset_floor_});
-    const float side = glm::dot(direction, point.geometric_normal) >= 0.0f ? 1.0f : -1.0f;
-    return p + point.geometric_normal * (side * kRelativeOffset * magnitude);
+bool Integrator::light_ray(const SurfacePoint& point, const Sampler& sampler, int bounce, size_t light, Ray& ray,
+                           glm::vec3& value) const {
+    LightSample s;
+    if (!sample_light(scene_.lights()[light], point.position, sampler.get(dimension(bounce, 2 + uint32_t(light))), s)) {
+        return false;
+    }
+    const float cos_theta = glm::dot(point.shading_normal, s.direction);
+    // Light from below the shading or geometric surface does not reach it.
+    if (cos_theta <= 0.0f || glm::dot(point.geometric_normal, s.direction) <= 0.0f) return false;
+    ray.origin = offset(point, s.direction);
+    ray.direction = s.direction;
+    // Stop just short of the light sample.
+    ray.tfar = std::isinf(s.distance)
+                   ? kInfinity
+                   : glm::length(point.position + s.direction * s.distance - ray.origin) * (1.0f - 1e-4f);
+    value = s.value * cos_theta;
+    return true;
 }
 
-uint32_t Integrator::dimension(int bounce, uint32_t slot) const {
-    // Per bounce: the world/AO direction, the bounce direction, one per light.
-    const uint32_t per_bounce = 2 + uint32_t(scene_.lights().size());
-    return kFirstDimension + uint32_t(bounce) * per_bounce + slot;
+bool Integrator::hemisphere_ray(const SurfacePoint& point, const Sampler& sampler, int bounce, float tfar,
+                                Ray& ray) const {
+    ray.direction = cosine_hemisphere(point.shading_normal, sampler.get(dimension(bounce, 0)));
+    if (glm::dot(point.geometric_normal, ray.direction) <= 0.0f) return false;
+    ray.origin = offset(point, ray.direction);
+    ray.tfar = tfar;
+    return true;
 }
 
 glm::vec3 Integrator::direct(const SurfacePoint& point, const Sampler& sampler, int bounce, uint64_t& rays) const {
-    glm::vec3 sum(0.0f);
-    const auto& lights = scene_.lights();
-    for (size_t i = 0; i < lights.size(); ++i) {
-        LightSample s;
-        if (!sample_light(lights[i], point.position, sampler.get(dimension(bounce, 2 + uint32_t(i))), s)) continue;
-        const float cos_theta = glm::dot(point.shading_normal, s.direction);
-        // Light from below the shading or geometric surface does not reach it.
-        if (cos_theta <= 0.0f || glm::dot(point.geometric_normal, s.direction) <= 0.0f) continue;
-        const glm::vec3 origin = offset(point, s.direction);
-        const float tfar = std::isinf(s.distance) ? kInfinity : glm::length(point.position + s.direction * s.distance - origin) * (1.0f - 1e-4f);
+    glm::vec3 sum(0.0f), value;
+    Ray ray;
+    for (size_t i = 0; i < scene_.lights().size(); ++i) {
+        if (!light_ray(point, sampler, bounce, i, ray, value)) continue;
         ++rays;
-        if (!tracer_.occluded(origin, s.direction, tfar)) sum += s.value * cos_theta;
+        if (!tracer_.occluded(ray.origin, ray.direction, ray.tfar)) sum += value;
     }
-    if (scene_.has_world()) {
-        // Cosine sampling of a uniform sky: the estimate is the sky colour where open.
-        const glm::vec3 d = cosine_hemisphere(point.shading_normal, sampler.get(dimension(bounce, 0)));
-        if (glm::dot(point.geometric_normal, d) > 0.0f) {
-            ++rays;
-            if (!tracer_.occluded(offset(point, d), d, kInfinity)) sum += scene_.world();
-        }
+    // Cosine sampling of a uniform sky: the estimate is the sky colour where open.
+    if (scene_.has_world() && hemisphere_ray(point, sampler, bounce, kInfinity, ray)) {
+        ++rays;
+        if (!tracer_.occluded(ray.origin, ray.direction, ray.tfar)) sum += scene_.world();
     }
     return sum;
 }
 
+void Integrator::direct_rays(const SurfacePoint& point, const Sampler& sampler, uint32_t sample,
+                             ShadowBatch& batch) const {
+    glm::vec3 value;
+    Ray ray;
+    for (size_t i = 0; i < scene_.lights().size(); ++i) {
+        if (light_ray(point, sampler, 0, i, ray, value)) batch.add(ray, value, sample);
+    }
+    if (scene_.has_world() && hemisphere_ray(point, sampler, 0, kInfinity, ray)) batch.add(ray, scene_.world(), sample);
+}
+
 float Integrator::ambient_occlusion(const SurfacePoint& point, const Sampler& sampler, uint64_t& rays) const {
-    const glm::vec3 d = cosine_hemisphere(point.shading_normal, sampler.get(dimension(0, 0)));
-    if (glm::dot(point.geometric_normal, d) <= 0.0f) return 0.0f;
+    Ray ray;
+    if (!hemisphere_ray(point, sampler, 0, settings_.ao_distance, ray)) return 0.0f;
     ++rays;
-    return tracer_.occluded(offset(point, d), d, settings_.ao_distance) ? 0.0f : 1.0f;
+    return tracer_.occluded(ray.origin, ray.direction, ray.tfar) ? 0.0f : 1.0f;
+}
+
+void Integrator::ao_rays(const SurfacePoint& point, const Sampler& sampler, uint32_t sample, ShadowBatch& batch) const {
+    Ray ray;
+    if (hemisphere_ray(point, sampler, 0, settings_.ao_distance, ray)) batch.add(ray, glm::vec3(1.0f), sample);
 }
 
 bool Integrator::surface_at(const Hit& hit, const glm::vec3& ray_direction, SurfacePoint& point,

@@ -105,6 +105,16 @@ bool RayTracer::occluded(const glm::vec3& origin, const glm::vec3& direction, fl
     return ray.tfar < 0.0f;  // Embree sets tfar to -inf on a hit
 }
 
+void RayTracer::occluded(const Ray* rays, size_t count, uint8_t* blocked) const {
+    RTCIntersectContext context;
+    rtcInitIntersectContext(&context);
+    for (size_t i = 0; i < count; ++i) {
+        RTCRay ray = make_ray(rays[i].origin, rays[i].direction, rays[i].tfar);
+        rtcOccluded1(impl_->scene, &context, &ray);
+        blocked[i] = ray.tfar < 0.0f;
+    }
+}
+
 bool RayTracer::intersect(const glm::vec3& origin, const glm::vec3& direction, float tfar, Hit& hit) const {
     RTCIntersectContext context;
     rtcInitIntersectContext(&context);

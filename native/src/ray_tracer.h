@@ -12,6 +12,12 @@ namespace lmrefine {
 
 class Scene;
 
+struct Ray {
+    glm::vec3 origin{0.0f};
+    glm::vec3 direction{0.0f};
+    float tfar = 0.0f;
+};
+
 struct Hit {
     int mesh = -1;
     int64_t triangle = -1;
@@ -27,6 +33,9 @@ public:
 
     // True if anything lies along origin + t * direction, t in (0, tfar).
     bool occluded(const glm::vec3& origin, const glm::vec3& direction, float tfar) const;
+    // blocked[i] = occluded(rays[i]): a tight loop, so Embree's code and data
+    // stay in cache over a texel's rays.
+    void occluded(const Ray* rays, size_t count, uint8_t* blocked) const;
     // The closest hit along the ray, if any.
     bool intersect(const glm::vec3& origin, const glm::vec3& direction, float tfar, Hit& hit) const;
 

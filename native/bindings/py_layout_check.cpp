@@ -1,0 +1,79 @@
+#include <pybind11/pybind11.h>
+
+#include "lmrefine/error.h"
+#include "lmrefine/layout_check.h"
+#include "numpy_util.h"
+
+namespace py = pybind11;
+
+namespace lmrefine::bindings {
+namespace {
+
+py::dict check(const py::handle& uvs_in, const py::handle& triangles_in, const py::handle& resolution,
+               double padding, const py::handle& reference_in, bool failing_charts) {
+    auto uvs = py_util::require_points(uvs_in, "uvs", 2);
+    auto triangles = py_util::require_indices(triangles_in, "triangles", 3, /*allow_empty=*/true);
+    const auto [height, width] = py_util::parse_resolution(resolution);
+    py_util::FloatArray reference;
+    if (!reference_in.is_none()) {
+        reference = py_util::require_points(reference_in, "reference_uvs", 2);
+        if (reference.shape(0) != uvs.shape(0)) {
+            throw py::value_error("reference_uvs has " + std::to_string(reference.shape(0)) + " UVs but uvs has " +
+                                  std::to_string(uvs.shape(0)) + "; pass the original layout of the same mesh");
+        }
+    }
+    UvLayout layout{uvs.data(), uvs.shape(0), triangles.data(), triangles.shape(0)};
+    LayoutReport r;
+    {
+        py::gil_scoped_release release;
+        r = check_layout(layout, width, height, padding, reference_in.is_none() ? nullptr : reference.data(),
+                         failing_charts);
+    }
+    py::dict out;
+    out["flipped"] = r.flipped;
+    out["degenerate"] = r.degenerate;
+    out["overlapping"] = r.overlapping;
+    out["out_of_bounds"] = r.out_of_bounds;
+    out["min_gutter_texels"] = r.min_gutter_texels;
+    out["charts"] = r.charts;
+    out["valid"] = r.valid;
+    if (failing_charts) {
+        const py::ssize_t n = py::ssize_t(r.failing_charts.size());
+        out["failing_charts"] = py_util::to_numpy(std::move(r.failing_charts), {n});
+    }
+    return out;
+}
+
+}  // namespace
+
+void bind_layout_check(py::module_& m) {
+    m.def("check_layout", &check, py::arg("uvs"), py::arg("triangles"), py::arg("resolution"),
+          py::arg("padding") = 2.0, py::kw_only(), py::arg("reference_uvs") = py::none(),
+          py::arg("failing_charts") = false,
+          R"doc(Check a UV layout for use as a lightmap layout at a resolution.
+
+Args:
+    uvs (numpy.ndarray): (N, 2) per-corner UVs.
+    triangles (numpy.ndarray): (T, 3) integer indices into ``uvs``.
+    resolution (int | tuple[int, int]): lightmap size, square or (height, width).
+    padding (float): the smallest acceptable gutter between charts, in texels.
+    reference_uvs (numpy.ndarray | None): the original layout (N, 2); with
+        it, a triangle is flipped if its orientation differs from the
+        original's, without it if it differs from most of its chart's.
+
+Returns:
+    dict: flipped, degenerate (zero area to float precision), overlapping
+    (triangles that share area with a triangle of another chart, tested
+    exactly where their rasterizations meet), out_of_bounds (UVs outside
+    [0, 1]), min_gutter_texels (exact smallest distance between two charts'
+    boundaries in texels; inf with fewer than two charts), charts, and valid
+    (nothing flipped, degenerate, overlapping or out of bounds, and
+    min_gutter_texels >= padding). Charts are those of find_charts (of the
+    reference layout when given).
+
+Raises:
+    ValueError: bad shapes, indices out of range, NaN UVs, resolution <= 0.
+)doc");
+}
+
+}  // namespace lmrefine::bindings
