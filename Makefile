@@ -12,7 +12,7 @@ DEBIAN_PACKAGES := cmake g++ make pkg-config pybind11-dev libembree-dev \
 	libopenimageio-dev libglm-dev python3-dev python3-numpy python3-pytest \
 	python3-pywt python3-matplotlib blender
 
-.PHONY: all deps build install test test-asan bench demo evaluate samples sample-lightmap clean
+.PHONY: all deps build install test test-asan bench demo evaluate samples sample-lightmap addon-zip clean
 
 all: build
 
@@ -69,8 +69,13 @@ samples:
 	blender -b --factory-startup --python-exit-code 1 \
 		--python blend_samples/make_samples.py -- blend_samples
 
+# The Blender add-on as one installable zip: the add-on, the lmrefine package
+# and its compiled extension (docs/blender.md).
+addon-zip: build
+	$(PYTHON) addon/build_zip.py --out dist/lmrefine_blender.zip
+
 clean:
-	rm -rf $(BUILD_DIR) $(ASAN_DIR) $(DEMO_OUT) evaluate_out python/lmrefine/_native*.so
+	rm -rf $(BUILD_DIR) $(ASAN_DIR) $(DEMO_OUT) evaluate_out dist python/lmrefine/_native*.so
 
 # Re-bake the bundled sample lightmap and its layout with Cycles.
 sample-lightmap: build
