@@ -88,11 +88,33 @@ def test_invariants_hold_after_every_step_on_random_inputs(rng, shape, border):
         covered = energy[mask].sum()
         assert run["energy"][mask].sum() == pytest.approx(covered, rel=1e-5, abs=1e-6)
         assert (run["energy"] >= 0).all()
-        # Uncovered cells shift but are not compressed (up to the
-        # interpolation between pyramid levels; extra_ring's final rescale
-        # shrinks every cell alike).
-        if (~mask).any() and border != "extra_ring":
-            assert run["cell_area"][~mask].min() > 0.4
+        # Uncovered cells shift but are not compressed, and covered cells
+        # stay within [min_shrink, max_magnification] (extra_ring's final
+        # rescale shrinks every cell alike).
+        if border != "extra_ring":
+            area = run["cell_area"]
+            if (~mask).any():
+                assert area[~mask].min() >= 1 - 1e-4
+            if mask.any():
+                assert 0.25 - 1e-4 <= area[mask].min() and area[mask].max() <= 8 + 1e-3
+
+
+def test_rigid_cells_keep_their_width_and_height(rng):
+    # Cells of rigid texels may shift, never get thinner: both edge pairs
+    # stay at least one texel apart (parallelogram thickness, exact enough
+    # for these near-parallelogram cells), and their area at least 1.
+    shape = (48, 64)
+    energy = (rng.random(shape) ** 4).astype(np.float32)
+    rigid = np.zeros(shape, bool)
+    rigid[:, 20:23] = True
+    rigid[30:32, :] = True
+    run = lmrefine.run_automaton(energy, rigid=rigid, check_invariants=True)
+    grid = run["grid"] * np.array([shape[1], shape[0]])
+    assert run["cell_area"][rigid].min() >= 1 - 1e-4
+    assert run["cell_area"][~rigid].min() < 0.9  # the others do shrink
+    left, right = grid[:-1, :-1], grid[:-1, 1:]
+    width = np.linalg.norm(right - left, axis=-1)
+    assert width[rigid].min() >= 1 - 1e-3
 
 
 def test_invariants_hold_for_the_directional_variant(rng):

@@ -110,3 +110,37 @@ def test_failing_charts_names_the_charts_to_fix():
     report = lmrefine.check_layout(uvs, tris, R, padding=0.5, failing_charts=True)
     np.testing.assert_array_equal(report["failing_charts"], [2, 3])
     assert "failing_charts" not in lmrefine.check_layout(uvs, tris, R)
+
+
+def test_relative_gutter_judges_each_chart_pair_against_its_original_distance():
+    # Charts 0-1 packed 1.5 texels apart, 1-2 5 texels apart; padding 2.
+    R = 64
+    def layout(gap01, gap12):
+        return merge(grid_chart(2, (0.1, 0.4), (0.3, 0.6)),
+                     grid_chart(2, (0.3 + gap01 / R, 0.4), (0.5, 0.6)),
+                     grid_chart(2, (0.5 + gap12 / R, 0.4), (0.7, 0.6)))
+    reference, tris = layout(1.5, 5.0)
+    def check(gap01, gap12):
+        uvs, _ = layout(gap01, gap12)
+        return lmrefine.check_layout(uvs, tris, R, 2, reference_uvs=reference, relative_gutter=True,
+                                     failing_charts=True)
+    kept = check(1.5, 2.5)  # the tight pair kept its gutter, the wide one stays above the padding
+    assert kept["gutter_violations"] == 0 and list(kept["failing_charts"]) == []
+    assert not kept["valid"]  # valid stays absolute: 1.5 < padding
+    tighter = check(1.3, 5.0)  # the tight pair got tighter
+    assert tighter["gutter_violations"] == 1 and list(tighter["failing_charts"]) == [0, 1]
+    thinned = check(1.5, 1.8)  # the wide pair fell below the padding
+    assert thinned["gutter_violations"] == 1 and list(thinned["failing_charts"]) == [1, 2]
+    assert "gutter_violations" not in lmrefine.check_layout(reference, tris, R, 2)
+    with pytest.raises(ValueError, match="reference_uvs"):
+        lmrefine.check_layout(reference, tris, R, 2, relative_gutter=True)
+
+
+def test_gutter_texels_mark_the_texels_between_charts():
+    R = 32
+    uvs, tris = merge(grid_chart(2, (0.0, 0.0), (0.5, 1.0)), grid_chart(2, (0.5 + 0.4 / R, 0.0), (1.0, 1.0)))
+    gutter = lmrefine._native.gutter_texels(uvs, tris, R)
+    # No uncovered texel between the charts (0.4 texel apart): the texels on
+    # both sides of the seam still are gutter, the rest of each chart not.
+    assert lmrefine.coverage_mask(uvs, tris, R).all()
+    assert gutter[:, 15:17].all() and not gutter[:, :14].any() and not gutter[:, 18:].any()

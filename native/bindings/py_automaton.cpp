@@ -13,7 +13,7 @@ namespace py = pybind11;
 namespace lmrefine::bindings {
 namespace {
 
-py::dict run(const py::handle& energy_in, const py::handle& mask_in, double diffusion, double rate, double delta,
+py::dict run(const py::handle& energy_in, const py::handle& mask_in, const py::handle& rigid_in, double diffusion, double rate, double delta,
              int max_steps, double min_shrink, double max_magnification, const std::string& border,
              bool coarse_to_fine, int passes, bool check_invariants, py::object progress_callback) {
     auto energy = py_util::require_float32(energy_in, "energy", {2, 3});
@@ -30,6 +30,15 @@ py::dict run(const py::handle& energy_in, const py::handle& mask_in, double diff
                                   std::to_string(input.height) + "x" + std::to_string(input.width));
         }
         input.mask = mask.data();
+    }
+    py::array_t<uint8_t, py::array::c_style | py::array::forcecast> rigid;
+    if (!rigid_in.is_none()) {
+        rigid = py::array_t<uint8_t, py::array::c_style | py::array::forcecast>::ensure(rigid_in);
+        if (!rigid || rigid.ndim() != 2 || rigid.shape(0) != input.height || rigid.shape(1) != input.width) {
+            throw py::value_error("rigid must be a (H, W) boolean array matching energy's " +
+                                  std::to_string(input.height) + "x" + std::to_string(input.width));
+        }
+        input.rigid = rigid.data();
     }
     AutomatonOptions options;
     options.diffusion = diffusion;
@@ -75,6 +84,7 @@ py::dict run(const py::handle& energy_in, const py::handle& mask_in, double diff
 void bind_automaton(py::module_& m) {
     const AutomatonOptions d;
     m.def("run_automaton", &run, py::arg("energy"), py::arg("mask") = py::none(), py::kw_only(),
+          py::arg("rigid") = py::none(),
           py::arg("diffusion") = d.diffusion, py::arg("rate") = d.rate, py::arg("delta") = d.delta,
           py::arg("max_steps") = d.max_steps, py::arg("min_shrink") = d.min_area,
           py::arg("max_magnification") = d.max_area, py::arg("border") = "same",
@@ -87,6 +97,10 @@ Args:
         the directional variant (r facing down, g right, b up, a left).
     mask (numpy.ndarray | None): (H, W) bool, True where a chart covers the
         texel. Uncovered cells hold no energy and are never compressed.
+    rigid (numpy.ndarray | None): (H, W) bool, more texels whose cells may
+        shift but never shrink below their original area, width or height
+        (e.g. gutter_texels(uvs, triangles, resolution)); uncovered texels
+        and covered ones next to them always are.
     diffusion (float): energy moved per step per unit density difference, <= 0.25.
     rate (float): node move per step, in cell sizes, at full contrast.
     delta (float): stop when every neighbour density difference, relative

@@ -160,6 +160,8 @@ NodeGrid inner_grid(const Level& level, bool ring, int width, int height) {
 void run_level(Level& level, const AutomatonOptions& options, bool ring, LevelStats& stats, int& total_steps,
                Progress* progress) {
     automaton_detail::prepare_level(level, options, ring);
+    // The finest level's grid: every bound holds from its start.
+    if (level.grid.xs[1] - level.grid.xs[0] == 1) automaton_detail::fit_to_bounds(level);
     if (options.check_invariants) automaton_detail::check_invariants(level, total_steps);
     stats.steps = 0;
     stats.converged = false;
@@ -214,7 +216,10 @@ AutomatonResult run_automaton(const AutomatonInput& input, const AutomatonOption
     const int levels = level_count(input.width, input.height, options.coarse_to_fine);
     if (progress) progress->begin("automaton", uint64_t(options.max_steps) * (levels + options.passes - 1));
 
-    const std::vector<uint8_t> rigid = rigid_texels(input);
+    std::vector<uint8_t> rigid = rigid_texels(input);
+    if (input.rigid) {
+        for (size_t t = 0; t < rigid.size(); ++t) rigid[t] = rigid[t] | (input.rigid[t] != 0);
+    }
     AutomatonResult result;
     NodeGrid carried;
     Level level;

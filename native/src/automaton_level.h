@@ -56,6 +56,13 @@ struct Level {
 // energies and uncovered areas already in `level` (grid and energy set).
 void prepare_level(Level& level, const AutomatonOptions& options, bool ring);
 
+// The finest level starts from a grid interpolated from the level above,
+// where cells of one coarse cell differ in size: some may start outside
+// their bounds (area, a rigid cell's width and height). Blends the nodes
+// around every such cell back towards rest until every cell is inside, so
+// the steps' guards keep every bound from the start. Returns the rounds.
+int fit_to_bounds(Level& level);
+
 struct StepStats {
     double difference;  // largest neighbour density difference / reference density, before the step
     double moved;       // largest node move made, in cells of this level

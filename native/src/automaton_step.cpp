@@ -17,6 +17,13 @@ namespace lmrefine::automaton_detail {
 namespace {
 
 constexpr int64_t kRowGrain = 8;
+// fit_to_bounds: nodes this many around an out-of-bounds cell back off with
+// it; below kFitSnap of its move a node goes back to rest; after kFitRounds
+// rounds every node still lowered goes back to rest.
+constexpr int kFitMargin = 1;
+constexpr double kFitSnap = 0.05;
+constexpr int kFitRounds = 40;
+constexpr double kFitFactor = 0.8;
 
 double cross(const glm::dvec2& a, const glm::dvec2& b) { return a.x * b.y - a.y * b.x; }
 
@@ -114,6 +121,10 @@ void prepare_level(Level& level, const AutomatonOptions& options, bool ring) {
                 level.min_area[c] = a0;  // gutter texels shift but are never compressed
                 level.max_area[c] = std::numeric_limits<double>::infinity();
             } else {
+                // A coarse cell holding any rigid texel is rigid as a whole:
+                // its texels get their share of its area when it is
+                // interpolated, so a partly rigid block may not shrink.
+                if (coarse && level.rigid_area[c] > 0) level.rigid_area[c] = a0;
                 level.min_area[c] = std::max(lowest * a0, level.rigid_area[c]);
                 level.max_area[c] = highest * a0;
                 for (int k = 0; k < channels; ++k) {
@@ -374,6 +385,62 @@ StepStats step(Level& level, const AutomatonOptions& options) {
     level.grid.nodes.swap(level.next_nodes);
     level.energy.swap(level.next_energy);
     return {difference, moved / block};
+}
+
+int fit_to_bounds(Level& level) {
+    const int rows = level.rows(), cols = level.cols();
+    const NodeGrid& grid = level.grid;
+    const std::vector<glm::dvec2> carried = grid.nodes;
+    std::vector<double> kept(carried.size(), 1.0);
+    std::vector<uint8_t> bad(size_t(rows) * cols, 0);
+    auto out_of_bounds = [&](int i, int j) {
+        const size_t c = level.cell(i, j);
+        glm::dvec2 q[4];
+        corners(level, grid.nodes, i, j, q);
+        const Shape now = shape(q);
+        if (now.quality2 < 0) return true;  // not convex
+        if (now.area < level.min_area[c] || now.area > level.max_area[c]) return true;
+        if (level.rigid_area[c] < level.original_area[c]) return false;
+        const glm::dvec2 thin = thickness(q, now.area);
+        return thin.x < grid.xs[j + 1] - grid.xs[j] || thin.y < grid.ys[i + 1] - grid.ys[i];
+    };
+    for (int round = 0;; ++round) {
+        std::vector<uint8_t> any_bad(size_t(rows), 0);
+        parallel_for(rows, kRowGrain, [&](int64_t begin, int64_t end) {
+            for (int i = int(begin); i < int(end); ++i) {
+                for (int j = 0; j < cols; ++j) {
+                    bad[level.cell(i, j)] = out_of_bounds(i, j);
+                    any_bad[size_t(i)] |= bad[level.cell(i, j)];
+                }
+            }
+        });
+        if (std::find(any_bad.begin(), any_bad.end(), 1) == any_bad.end()) return round;
+        // Halve the move of every node within kFitMargin nodes of a bad
+        // cell (once per round), to 0 below kFitSnap: a cell whose nodes
+        // are all back at rest is the identity, inside every bound.
+        std::vector<uint8_t> lower(carried.size(), 0);
+        for (int i = 0; i < rows; ++i) {
+            if (!any_bad[size_t(i)]) continue;
+            for (int j = 0; j < cols; ++j) {
+                if (!bad[level.cell(i, j)]) continue;
+                for (int ni = std::max(0, i - kFitMargin); ni <= std::min(rows, i + 1 + kFitMargin); ++ni) {
+                    for (int nj = std::max(0, j - kFitMargin); nj <= std::min(cols, j + 1 + kFitMargin); ++nj) {
+                        lower[level.node(ni, nj)] = 1;
+                    }
+                }
+            }
+        }
+        const bool last = round >= kFitRounds;
+        for (int i = 0; i <= rows; ++i) {
+            for (int j = 0; j <= cols; ++j) {
+                const size_t n = level.node(i, j);
+                if (!lower[n]) continue;
+                kept[n] = last || kept[n] < kFitSnap ? 0.0 : kFitFactor * kept[n];
+                const glm::dvec2 rest(grid.xs[j], grid.ys[i]);
+                level.grid.nodes[n] = rest + kept[n] * (carried[n] - rest);
+            }
+        }
+    }
 }
 
 void check_invariants(const Level& level, int step_index) {

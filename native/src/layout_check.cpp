@@ -8,6 +8,7 @@
 #include <string>
 #include <tuple>
 #include <unordered_map>
+#include <utility>
 #include <vector>
 
 #include <glm/geometric.hpp>
@@ -24,6 +25,9 @@ namespace {
 constexpr double kFlat = 1e-7;
 // Triangles whose projections overlap by less than this (texels) only touch.
 constexpr double kTouch = 1e-6;
+// A chart pair may end this much (texels) closer than required: float32 UV
+// rounding, about 1e-4 texel at 4k.
+constexpr double kGutterTolerance = 1e-4;
 
 using Triangle = std::array<glm::dvec2, 3>;
 
@@ -134,13 +138,22 @@ std::vector<Edge> boundary_edges(const UvLayout& layout, const Charts& charts, i
     return edges;
 }
 
+// Chart pair (smaller id first) -> smallest distance between the two charts.
+using PairDistances = std::unordered_map<uint64_t, double>;
+
+uint64_t pair_key(int32_t a, int32_t b) {
+    return (uint64_t(uint32_t(std::min(a, b))) << 32) | uint32_t(std::max(a, b));
+}
+
 // Smallest distance between edges of different charts. Edges go into square
 // buckets `radius` wide, each widened by radius / 2: two edges closer than
 // `radius` share the bucket of their closest points' midpoint, so a result
 // below `radius` is exact; otherwise the radius doubles. With `close`, every
-// chart closer than `threshold` to another is marked in it.
+// chart closer than `threshold` to another is marked in it; with `pairs`,
+// every chart pair closer than `threshold` gets its smallest distance (all
+// such pairs are found in the first round: threshold <= radius).
 double min_gutter(const std::vector<Edge>& edges, int width, int height, double threshold,
-                  std::vector<uint8_t>* close) {
+                  std::vector<uint8_t>* close, PairDistances* pairs = nullptr) {
     double best = std::numeric_limits<double>::infinity();
     const double limit = 2.0 * std::max(width, height);
     for (double radius = std::max(4.0, 2 * threshold);; radius *= 2) {
@@ -168,11 +181,15 @@ double min_gutter(const std::vector<Edge>& edges, int width, int height, double 
                                                 std::min(e.a.x, e.b.x) - std::max(f.a.x, f.b.x)});
                     const double gy = std::max({0.0, std::min(f.a.y, f.b.y) - std::max(e.a.y, e.b.y),
                                                 std::min(e.a.y, e.b.y) - std::max(f.a.y, f.b.y)});
-                    const double cutoff = close ? std::max(best, threshold) : best;
+                    const double cutoff = close || pairs ? std::max(best, threshold) : best;
                     if (gx >= cutoff || gy >= cutoff) continue;
                     const double d = segment_distance(e.a, e.b, f.a, f.b);
                     best = std::min(best, d);
                     if (close && d < threshold) (*close)[size_t(e.chart)] = (*close)[size_t(f.chart)] = 1;
+                    if (pairs && d < threshold) {
+                        const auto [it, inserted] = pairs->emplace(pair_key(e.chart, f.chart), d);
+                        if (!inserted) it->second = std::min(it->second, d);
+                    }
                 }
             }
         }
@@ -183,7 +200,9 @@ double min_gutter(const std::vector<Edge>& edges, int width, int height, double 
 }  // namespace
 
 LayoutReport check_layout(const UvLayout& layout, int width, int height, double padding,
-                          const float* reference_uvs, bool list_failing_charts) {
+                          const float* reference_uvs, bool list_failing_charts, bool relative_gutter) {
+    LMREFINE_REQUIRE(!relative_gutter || reference_uvs,
+                     "relative_gutter compares with the original layout: pass reference_uvs");
     LMREFINE_REQUIRE(width > 0 && height > 0, "resolution must be positive, got " + std::to_string(height) +
                                                   "x" + std::to_string(width));
     LMREFINE_REQUIRE(padding >= 0, "padding must be >= 0 texels");
@@ -272,10 +291,31 @@ LayoutReport check_layout(const UvLayout& layout, int width, int height, double 
         if (overlapping[t]) failing[size_t(charts.triangle_chart[t])] = 1;
     }
 
-    report.min_gutter_texels =
-        charts.count < 2 ? std::numeric_limits<double>::infinity()
-                         : min_gutter(boundary_edges(layout, charts, width, height), width, height, padding,
-                                      list_failing_charts ? &failing : nullptr);
+    if (charts.count < 2) {
+        report.min_gutter_texels = std::numeric_limits<double>::infinity();
+    } else if (!relative_gutter) {
+        report.min_gutter_texels = min_gutter(boundary_edges(layout, charts, width, height), width, height, padding,
+                                              list_failing_charts ? &failing : nullptr);
+    } else {
+        // Every chart pair must stay at least min(padding, its original
+        // distance) apart: a pair the original packed tighter than the
+        // padding keeps its own gutter, without holding back all the others.
+        PairDistances before, after;
+        const UvLayout reference{reference_uvs, layout.uv_count, layout.triangles, layout.triangle_count};
+        min_gutter(boundary_edges(reference, charts, width, height), width, height, padding, nullptr, &before);
+        report.min_gutter_texels =
+            min_gutter(boundary_edges(layout, charts, width, height), width, height, padding, nullptr, &after);
+        std::vector<std::pair<uint64_t, double>> close(after.begin(), after.end());
+        std::sort(close.begin(), close.end());  // hash order is arbitrary
+        for (const auto& [key, distance] : close) {
+            const auto original = before.find(key);
+            const double required = original == before.end() ? padding : std::min(padding, original->second);
+            if (distance < required - kGutterTolerance) {
+                ++report.gutter_violations;
+                failing[size_t(key >> 32)] = failing[size_t(key & 0xffffffffu)] = 1;
+            }
+        }
+    }
     if (list_failing_charts) {
         for (int32_t c = 0; c < charts.count; ++c) {
             if (failing[size_t(c)]) report.failing_charts.push_back(c);

@@ -22,7 +22,9 @@ _SNAP_TO_ZERO = 0.05
 
 
 def failures(report, original, padding):
-    """What makes `report` worse than allowed, relative to the original layout."""
+    """What makes `report` worse than allowed, relative to the original layout.
+    The gutter: per chart pair when `report` has gutter_violations (a
+    check_layout(..., relative_gutter=True) report), else globally."""
     failed = []
     if report["flipped"]:
         failed.append("flipped")
@@ -32,7 +34,10 @@ def failures(report, original, padding):
         failed.append("overlapping")
     if report["out_of_bounds"]:
         failed.append("out_of_bounds")
-    if report["min_gutter_texels"] < allowed_gutter(padding, original):
+    if "gutter_violations" in report:
+        if report["gutter_violations"]:
+            failed.append("gutter")
+    elif report["min_gutter_texels"] < allowed_gutter(padding, original):
         failed.append("gutter")
     return failed
 
@@ -119,11 +124,16 @@ def accept(full, identity, uvs, triangles, shape, padding, original):
         bad_cells = invalid_cells(grid)
         if not bad_cells.any():
             new_uvs = _native.warp_uvs(uvs, grid)
-            check = _native.check_layout(new_uvs, triangles, shape, threshold, reference_uvs=uvs,
-                                         failing_charts=True)
+            # Per chart pair: no pair closer than min(padding, its original
+            # distance), so one tight pair does not hold back all the others.
+            check = _native.check_layout(new_uvs, triangles, shape, padding, reference_uvs=uvs,
+                                         failing_charts=True, relative_gutter=True)
             failed = failures(check, original, padding)
             if not failed:
                 check.pop("failing_charts")
+                # `valid` at the gutter required of the whole layout.
+                check["valid"] = bool(check["flipped"] == check["degenerate"] == check["overlapping"]
+                                      == check["out_of_bounds"] == 0 and check["min_gutter_texels"] >= threshold)
                 return grid, new_uvs, check, kept, limited_by
             limited_by += [f for f in failed if f not in limited_by]
             if boxes is None:

@@ -129,8 +129,9 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
         uvs: (N, 2) per-corner UVs inside [0, 1]; never modified.
         triangles: (T, 3) integer indices into uvs.
         resolution: the lightmap's int or (height, width).
-        padding: the smallest gutter between charts, in texels, the result
-            must keep (or the original's, if that is smaller).
+        padding: the gutter between charts, in texels, the result must
+            keep; a chart pair the original packed closer keeps its
+            original distance instead (method §7).
         mask: (H, W) bool chart coverage; default coverage_mask(uvs, ...).
         gradient: a (H, W, 4) float32 gradient map to use instead of
             computing one from the lightmap.
@@ -158,8 +159,10 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
         (fraction of grid nodes that backed off), strength_used (strength x
         backoff), limited_by (list of what held the result back: 'flipped',
         'overlapping', 'gutter', 'degenerate', 'grid' (a blend made a cell
-        invalid), 'step_cap', 'max_magnification', 'min_shrink'; empty if
-        nothing), passes,
+        invalid), 'step_cap', 'max_magnification', 'min_shrink',
+        'original_gutter' (the original is tighter than padding); empty if
+        nothing), notes (list of sentences, e.g. on the original's gutter),
+        passes,
         border, seconds (timings: setup, gradient_map, automaton,
         warp_and_check), original_check and check (check_layout reports).
 
@@ -190,7 +193,9 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
     energy, scalar_energy = _energy(gradient, mask, float(strength), directional)
     timings["gradient_map"] = time.perf_counter() - clock
     clock = time.perf_counter()
-    run = _native.run_automaton(energy, mask, diffusion=diffusion, delta=delta, max_steps=max_steps,
+    # Texels between charts only shift: chart pairs keep their distance.
+    rigid = _native.gutter_texels(uvs, triangles, shape)
+    run = _native.run_automaton(energy, mask, rigid=rigid, diffusion=diffusion, delta=delta, max_steps=max_steps,
                                 min_shrink=min_shrink, max_magnification=max_magnification, border=border,
                                 passes=int(passes), progress=progress)
     identity = identity_grid(shape)
@@ -199,9 +204,15 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
     clock = time.perf_counter()
 
     original = _native.check_layout(uvs, triangles, shape, padding)
-    limited_by = []
+    limited_by, notes = [], []
     if not run["converged"]:
         limited_by.append("step_cap")
+    if original["min_gutter_texels"] < padding:
+        # method §7: keep the gutter the original had; pairs packed tighter
+        # than the padding keep their own distance (backoff.accept).
+        limited_by.append("original_gutter")
+        notes.append(f"original gutter {original['min_gutter_texels']:.2f} texels < padding {padding:g}: "
+                     f"chart pairs closer than the padding keep their original distance")
 
     if np.array_equal(full, identity):
         grid, new_uvs, check, kept = identity, uvs.copy(), original, np.ones(identity.shape[:2], np.float32)
@@ -229,6 +240,7 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
         "backoff": float(kept.min()),
         "backoff_area": float((kept < 1).mean()),
         "limited_by": limited_by,
+        "notes": notes,
         "passes": int(passes),
         "border": border,
         "seconds": time.perf_counter() - start,

@@ -50,6 +50,10 @@ struct AutomatonOptions {
 struct AutomatonInput {
     const float* energy = nullptr;  // height * width * channels, >= 0
     const uint8_t* mask = nullptr;  // height * width, 1 = covered; null = all covered
+    // height * width, 1 = rigid: the cell may shift, never get smaller than
+    // its original area, width or height (the gutter). Null: uncovered
+    // texels and covered ones next to them.
+    const uint8_t* rigid = nullptr;
     int height = 0;
     int width = 0;
     int channels = 1;
