@@ -35,8 +35,11 @@ build: deps $(BUILD_DIR)/CMakeCache.txt
 install: build
 	cmake --install $(BUILD_DIR)
 
+# Every test against the release build, then the native ones again under
+# the sanitizers (a memory error in the core fails CI, not a user's scene).
 test: build
 	PYTHONPATH=python $(PYTHON) -m pytest tests -q
+	$(MAKE) --no-print-directory test-asan
 
 # The native tests under AddressSanitizer + UndefinedBehaviorSanitizer. The
 # sanitized module is built into its own folder so it never replaces the
