@@ -12,7 +12,7 @@ DEBIAN_PACKAGES := cmake g++ make pkg-config pybind11-dev libembree-dev \
 	libopenimageio-dev libglm-dev python3-dev python3-numpy python3-pytest \
 	python3-pywt python3-matplotlib blender
 
-.PHONY: all deps build install test test-asan bench demo sample-lightmap clean
+.PHONY: all deps build install test test-asan bench demo evaluate samples sample-lightmap addon-zip clean
 
 all: build
 
@@ -35,8 +35,11 @@ build: deps $(BUILD_DIR)/CMakeCache.txt
 install: build
 	cmake --install $(BUILD_DIR)
 
+# Every test against the release build, then the native ones again under
+# the sanitizers (a memory error in the core fails CI, not a user's scene).
 test: build
 	PYTHONPATH=python $(PYTHON) -m pytest tests -q
+	$(MAKE) --no-print-directory test-asan
 
 # The native tests under AddressSanitizer + UndefinedBehaviorSanitizer. The
 # sanitized module is built into its own folder so it never replaces the
@@ -55,11 +58,27 @@ test-asan: deps
 bench: build
 	PYTHONPATH=python $(PYTHON) bench/run.py
 
+# The whole pipeline on the bundled courtyard at 256^2: bake, refine, re-bake,
+# measure; prints the summary table, writes $(DEMO_OUT)/report.md + pictures.
 demo: build
 	PYTHONPATH=python $(PYTHON) -m lmrefine demo --out $(DEMO_OUT)
 
+# Every bundled sample scene with its Smart UV Project layout at 256^2.
+evaluate: build
+	PYTHONPATH=python $(PYTHON) -m lmrefine evaluate --out evaluate_out
+
+# Rebuild the sample scenes (blend_samples/*.blend and their .npz) in Blender.
+samples:
+	blender -b --factory-startup --python-exit-code 1 \
+		--python blend_samples/make_samples.py -- blend_samples
+
+# The Blender add-on as one installable zip: the add-on, the lmrefine package
+# and its compiled extension (docs/blender.md).
+addon-zip: build
+	$(PYTHON) addon/build_zip.py --out dist/lmrefine_blender.zip
+
 clean:
-	rm -rf $(BUILD_DIR) $(ASAN_DIR) $(DEMO_OUT) python/lmrefine/_native*.so
+	rm -rf $(BUILD_DIR) $(ASAN_DIR) $(DEMO_OUT) evaluate_out dist python/lmrefine/_native*.so
 
 # Re-bake the bundled sample lightmap and its layout with Cycles.
 sample-lightmap: build

@@ -10,6 +10,9 @@ namespace lmrefine::bindings {
 void bind_image_io(py::module_& m);
 void bind_coverage(py::module_& m);
 void bind_chart(py::module_& m);
+void bind_automaton(py::module_& m);
+void bind_warp(py::module_& m);
+void bind_layout_check(py::module_& m);
 void bind_wavelet(py::module_& m);
 void bind_gradient_map(py::module_& m);
 void bind_scene(py::module_& m);
@@ -41,6 +44,9 @@ PYBIND11_MODULE(_native, m) {
     lmrefine::bindings::bind_image_io(m);
     lmrefine::bindings::bind_coverage(m);
     lmrefine::bindings::bind_chart(m);
+    lmrefine::bindings::bind_automaton(m);
+    lmrefine::bindings::bind_warp(m);
+    lmrefine::bindings::bind_layout_check(m);
     lmrefine::bindings::bind_wavelet(m);
     lmrefine::bindings::bind_gradient_map(m);
     lmrefine::bindings::bind_scene(m);

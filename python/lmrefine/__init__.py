@@ -24,33 +24,45 @@ except ImportError as error:  # pragma: no cover - depends on the build state
 from ._native import (  # noqa: F401  (re-exports)
     CancelledError,
     Scene,
+    check_layout,
     coverage_mask,
     dwt,
     dwt2,
     find_charts,
     gradient_map,
+    grid_cell_areas,
     idwt,
     idwt2,
     read_image,
+    run_automaton,
+    warp_uvs,
     write_image,
 )
 from .baker import BakeResult, bake, evaluate  # noqa: F401  (re-exports)
+from .refine import RefineResult, identity_grid, refine_uvs  # noqa: F401
 
 __version__ = _native.__version__
 
 __all__ = [
     "BakeResult",
     "CancelledError",
+    "RefineResult",
     "Scene",
     "bake",
+    "check_layout",
     "coverage_mask",
     "dwt",
     "dwt2",
     "evaluate",
     "find_charts",
     "gradient_map",
+    "grid_cell_areas",
+    "identity_grid",
     "idwt",
     "idwt2",
     "read_image",
+    "refine_uvs",
+    "run_automaton",
+    "warp_uvs",
     "write_image",
 ]

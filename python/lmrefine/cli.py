@@ -11,7 +11,6 @@ from .gradient_report import write_gradient_report
 from .progressbar import ProgressBar
 
 WAVELETS = ("haar", "d4", "d12", "d20", "cdf53", "cdf97")
-SAMPLES_DIR = os.path.normpath(os.path.join(os.path.dirname(__file__), "..", "..", "blend_samples"))
 
 
 class CliError(Exception):
@@ -52,15 +51,99 @@ def run_gradient_map(args):
     return summary
 
 
+def parse_multipliers(text):
+    try:
+        return tuple(float(x) for x in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated numbers like 1,1.5,2,3,4, got '{text}'")
+
+
+def evaluation_options(args):
+    from .evaluation import EvaluationOptions
+
+    refine_options = {}
+    if args.strength is not None:
+        refine_options["strength"] = args.strength
+    if args.refine_passes is not None:
+        refine_options["passes"] = args.refine_passes
+    return EvaluationOptions(resolution=args.resolution, samples=args.samples, truth_samples=args.truth_samples,
+                             points=args.points, seed=args.seed, multipliers=args.multipliers,
+                             padding=args.padding, denoise=args.denoise, bake_pass=args.bake_pass,
+                             refine_options=refine_options)
+
+
+def load_scenes(names):
+    from .sample_scenes import load_sample, sample_names
+
+    names = names or sample_names()
+    if not names:
+        raise CliError("no sample scenes found in blend_samples/ (run `make samples`), and none given")
+    return [load_sample(name) for name in names]
+
+
+def run_evaluate(args):
+    from .evaluation import evaluate_samples
+    from .evaluation_report import summary_table
+
+    options = evaluation_options(args)
+    options.check()
+    scenes = load_scenes(args.scenes)
+    variants = ("smart", "lightmap") if args.variant == "both" else (args.variant,)
+    bar = ProgressBar()
+    try:
+        summary = evaluate_samples(scenes, options, args.out, variants=variants, progress=bar)
+    finally:
+        bar.close()
+    print(summary_table(summary))
+    for scene in summary["scenes"]:
+        if scene["notes"]:
+            verdict = "gain, but" if scene["gain"] else "no gain"
+            print(f"\n{scene['scene']} ({scene['variant']}): {verdict}: " + "; ".join(scene["notes"]))
+    print(f"\nwrote {args.out}/report.md, report.json and one folder of pictures per scene")
+    return summary
+
+
 def run_demo(args):
-    args.lightmap = args.lightmap or os.path.join(SAMPLES_DIR, "courtyard_lightmap.exr")
-    args.layout = args.layout or os.path.join(SAMPLES_DIR, "courtyard_layout.npz")
-    args.mask = None
-    for path in (args.lightmap, args.layout):
-        if not os.path.exists(path):
-            raise CliError(f"sample '{path}' not found; run from the lmrefine checkout or pass "
-                           "--lightmap and --layout")
-    return run_gradient_map(args)
+    """The full pipeline on one bundled scene, plus the gradient-map pictures
+    of its baseline bake (stage 1 of the method)."""
+    from .sample_scenes import load_sample
+
+    summary = run_evaluate(args)
+    scene = summary["scenes"][0]
+    sample = load_sample(args.scenes[0])
+    uvs, triangles = sample.layout(scene["variant"])
+    baseline = _native.read_image(os.path.join(args.out, f"{scene['scene']}_{scene['variant']}", "baseline.exr"))
+    mask = _native.coverage_mask(uvs, triangles, baseline.shape[:2])
+    write_gradient_report(np.ascontiguousarray(baseline[..., :3]), mask, os.path.join(args.out, "gradient"),
+                          source=f"{scene['scene']} baseline bake", wavelet=args.wavelet)
+    print(f"gradient map pictures of the baseline bake: {args.out}/gradient/")
+    return summary
+
+
+def add_evaluation_arguments(parser, resolution, points):
+    parser.add_argument("--resolution", type=int, default=resolution,
+                        help=f"lightmap resolution R (default: {resolution})")
+    parser.add_argument("--samples", type=int, default=32, help="bake samples per texel (default: 32)")
+    parser.add_argument("--truth-samples", type=int, default=256,
+                        help="samples per point of the ground truth (default: 256)")
+    parser.add_argument("--points", type=int, default=points,
+                        help=f"surface points the error is measured at (default: {points})")
+    parser.add_argument("--multipliers", type=parse_multipliers, default=(1.0, 1.5, 2.0, 3.0, 4.0),
+                        help="baseline resolutions for the equal-error search, as multiples of R "
+                             "(default: 1,1.5,2,3,4)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the points and the bakes (default: 0)")
+    parser.add_argument("--padding", type=float, default=2.0,
+                        help="gutter in texels the refined layout must keep (default: 2, or the original's if smaller)")
+    parser.add_argument("--strength", type=float, help="refine_uvs strength (default: refine_uvs' own)")
+    parser.add_argument("--refine-passes", type=int, help="refine_uvs passes (default: refine_uvs' own)")
+    parser.add_argument("--denoise", action="store_true", help="denoise every bake (edge-aware)")
+    parser.add_argument("--pass", dest="bake_pass", choices=("direct", "ao", "indirect", "combined"),
+                        help="light to bake and compare (default: the scene's own: direct, combined for the room)")
+
+
+def _demo_scenes(args):
+    args.scenes = [args.scene]
+    return args
 
 
 def build_parser():
@@ -81,14 +164,32 @@ def build_parser():
     gradient.add_argument("--out", default="gradient_out", help="output folder (default: gradient_out)")
     gradient.set_defaults(run=run_gradient_map)
 
+    evaluate = commands.add_parser(
+        "evaluate", help="measure the method on scenes: baseline vs refined lightmaps, report and pictures",
+        description="Bake each scene with its uniform lightmap layout, refine the layout, bake again at the same "
+                    "resolution, and measure both against a ground truth at surface points (RMSE, transition-point "
+                    "error, transition widening, equal-error resolution). Writes report.md, report.json and "
+                    "pictures per scene. Metrics: docs/evaluation.md.")
+    evaluate.add_argument("scenes", nargs="*",
+                          help="bundled sample names (courtyard, room, fence_and_tree, game_level) or scene .npz "
+                               "files (default: every bundled sample)")
+    evaluate.add_argument("--variant", choices=("smart", "lightmap", "both"), default="smart",
+                          help="lightmap UVs: Smart UV Project, Lightmap Pack, or both (default: smart)")
+    add_evaluation_arguments(evaluate, resolution=256, points=20000)
+    evaluate.add_argument("--out", default="evaluate_out", help="output folder (default: evaluate_out)")
+    evaluate.set_defaults(run=run_evaluate)
+
     demo = commands.add_parser(
-        "demo", help="run the pipeline on the bundled sample and write its report",
-        description="Run lmrefine on the bundled courtyard sample (blend_samples/) and write the report.")
-    demo.add_argument("--lightmap", help="lightmap to use instead of the bundled sample")
-    demo.add_argument("--layout", help="layout .npz to use instead of the bundled sample's")
-    demo.add_argument("--wavelet", choices=WAVELETS, default="d4", help="wavelet (default: d4)")
+        "demo", help="run the whole pipeline on a bundled sample and print the summary",
+        description="Bake the bundled courtyard, refine its lightmap layout, bake again and compare "
+                    "(python3 -m lmrefine evaluate courtyard), plus the gradient-map pictures of the first bake.")
+    demo.add_argument("--scene", default="courtyard", help="bundled sample or scene .npz (default: courtyard)")
+    demo.add_argument("--variant", choices=("smart", "lightmap"), default="smart",
+                      help="lightmap UVs (default: smart)")
+    add_evaluation_arguments(demo, resolution=256, points=20000)
+    demo.add_argument("--wavelet", choices=WAVELETS, default="d4", help="wavelet of the gradient-map pictures")
     demo.add_argument("--out", default="demo_out", help="output folder (default: demo_out)")
-    demo.set_defaults(run=run_demo)
+    demo.set_defaults(run=lambda args: run_demo(_demo_scenes(args)))
     return parser
 
 
@@ -96,7 +197,7 @@ def main(argv=None):
     args = build_parser().parse_args(argv)
     try:
         args.run(args)
-    except (CliError, ValueError, OSError) as error:
+    except (CliError, ValueError, OSError, MemoryError) as error:
         print(f"lmrefine {args.command}: error: {error}", file=sys.stderr)
         return 2
     except _native.CancelledError:

@@ -1,0 +1,197 @@
+"""Headless batch refinement: refine, re-bake, save the images and a .blend, write a JSON report.
+
+    blender -b scene.blend --python batch.py -- --objects A,B --resolution 1024 --out DIR
+
+Flags mirror the panel's settings; a flag left out keeps the setting saved in
+the .blend (Scene > lmrefine), i.e. the add-on's default for a scene that
+never used it. Exit status: 0 on success, 1 when the run failed (the message
+goes to stderr and into the report), 2 for bad flags.
+"""
+
+import argparse
+import json
+import os
+import sys
+import time
+
+# Runs as a plain script (`--python`), not as part of the package: make the
+# package importable from an installed add-on folder or from a checkout.
+_HERE = os.path.dirname(os.path.abspath(__file__))
+for _path in (os.path.dirname(_HERE), os.path.join(_HERE, "..", "..", "python")):
+    _path = os.path.normpath(_path)
+    if os.path.isdir(_path) and _path not in sys.path:
+        sys.path.insert(0, _path)
+
+import bpy  # noqa: E402
+
+import lmrefine_blender  # noqa: E402
+from lmrefine_blender import pipeline  # noqa: E402
+from lmrefine_blender.journal import Journal  # noqa: E402
+
+PASSES = ("direct", "indirect", "combined", "ao")
+
+
+def _csv(text):
+    return [item.strip() for item in text.split(",") if item.strip()]
+
+
+def _passes(text):
+    names = [name.lower() for name in _csv(text)]
+    unknown = sorted(set(names) - set(PASSES))
+    if unknown or not names:
+        raise argparse.ArgumentTypeError(f"unknown pass(es) {unknown or text!r}; choose from {', '.join(PASSES)}")
+    return names
+
+
+def build_parser():
+    parser = argparse.ArgumentParser(
+        prog="blender -b scene.blend --python batch.py --",
+        description="Refine the lightmap UV maps of a .blend's objects, bake the lightmaps again with the "
+                    "refined layout, and write the images (EXR), a copy of the .blend and report.json into "
+                    "--out. Flags left out keep the scene's lmrefine settings.",
+    )
+    parser.add_argument("--objects", type=_csv, required=True,
+                        help="comma-separated object names to refine (mesh objects)")
+    parser.add_argument("--out", required=True, help="output folder (created if missing)")
+    parser.add_argument("--source-layer", help="lightmap UV map to refine (default: a map named like "
+                        "'Lightmap'/'UVMap.001', else the second map)")
+    parser.add_argument("--resolution", type=int, help="lightmap size in texels")
+    parser.add_argument("--padding", type=int, help="gutter between charts in texels")
+    parser.add_argument("--first-lightmap", choices=("image", "embree", "cycles"),
+                        help="the lightmap that drives the refinement: an existing image, or bake it now")
+    parser.add_argument("--lightmap-image", help="name of the image to use with --first-lightmap image "
+                        "(default: found in each object's material)")
+    parser.add_argument("--driving-pass", choices=PASSES, help="what the first bake measures")
+    parser.add_argument("--strength", type=float,
+                        help="texel growth at the strongest light change (0 = unchanged layout)")
+    parser.add_argument("--max-magnification", type=float, help="largest growth of a texel's area")
+    parser.add_argument("--min-shrink", type=float, help="smallest a texel's area may become (fraction)")
+    parser.add_argument("--delta", type=float, help="automaton stop threshold")
+    parser.add_argument("--passes", type=int, help="refinement passes")
+    parser.add_argument("--border", choices=("same", "border_rule", "extra_ring"), help="grid border treatment")
+    parser.add_argument("--directional", action=argparse.BooleanOptionalAction, default=None,
+                        help="four energies per cell")
+    parser.add_argument("--wavelet", choices=("d4", "haar", "d12", "d20", "cdf53", "cdf97"),
+                        help="gradient-map filter")
+    parser.add_argument("--backend", choices=("embree", "cycles"), help="baker of the final lightmaps")
+    parser.add_argument("--bake-passes", type=_passes, help=f"comma-separated, of: {', '.join(PASSES)}")
+    parser.add_argument("--samples", type=int, help="samples per texel")
+    parser.add_argument("--preview", action=argparse.BooleanOptionalAction, default=None,
+                        help="hook the lightmap into the materials of the saved .blend")
+    parser.add_argument("--report", help="JSON report path (default: OUT/report.json)")
+    return parser
+
+
+def apply_flags(settings, args):
+    """Copy the given flags onto the scene's settings (unset flags keep the scene's values)."""
+    mapping = {
+        "source_layer": args.source_layer, "resolution": args.resolution, "padding": args.padding,
+        "strength": args.strength, "max_magnification": args.max_magnification, "min_shrink": args.min_shrink,
+        "delta": args.delta, "passes": args.passes, "directional": args.directional, "samples": args.samples,
+        "preview": args.preview,
+    }
+    upper = {"first_lightmap": args.first_lightmap, "driving_pass": args.driving_pass, "border": args.border,
+             "wavelet": args.wavelet, "backend": args.backend}
+    mapping.update({key: value.upper() for key, value in upper.items() if value is not None})
+    if args.bake_passes is not None:
+        mapping["bake_passes"] = {name.upper() for name in args.bake_passes}
+    if args.lightmap_image is not None:
+        image = bpy.data.images.get(args.lightmap_image)
+        if image is None:
+            raise pipeline.UserError(f"no image named '{args.lightmap_image}' in {bpy.data.filepath}")
+        mapping["lightmap_image"] = image
+    for key, value in mapping.items():
+        if value is not None:
+            try:
+                setattr(settings, key, value)
+            except (TypeError, ValueError) as error:
+                raise pipeline.UserError(f"--{key.replace('_', '-')}: {error}") from error
+
+
+def _progress(fraction, label, state={"shown": None}):
+    """One line per stage and per tenth of the run."""
+    key = (label, int(fraction * 10))
+    if key != state["shown"]:
+        state["shown"] = key
+        print(f"lmrefine: {100 * fraction:3.0f}% {label}", flush=True)
+
+
+def run(args):
+    """The batch job; returns the report dict (raises pipeline.UserError and the job's errors)."""
+    if not bpy.data.filepath:
+        raise pipeline.UserError("no .blend opened: run `blender -b scene.blend --python batch.py -- ...`")
+    scene = bpy.context.scene
+    missing = [name for name in args.objects if name not in bpy.data.objects]
+    if missing:
+        raise pipeline.UserError(f"no object(s) named {', '.join(missing)} in {bpy.data.filepath}")
+    out = os.path.abspath(args.out)
+    blend_copy = os.path.join(out, os.path.basename(bpy.data.filepath))
+    if os.path.abspath(bpy.data.filepath) == blend_copy:
+        raise pipeline.UserError(f"--out {args.out} is the folder of the input .blend, whose copy would "
+                                 "overwrite it: choose another folder")
+    objects = [bpy.data.objects[name] for name in args.objects]
+    not_meshes = [f"'{obj.name}' ({obj.type.lower()})" for obj in objects if obj.type != 'MESH']
+    if not_meshes:
+        raise pipeline.UserError(f"--objects names objects that are not meshes: {', '.join(not_meshes)}")
+    apply_flags(scene.lmrefine, args)
+    options = pipeline.settings_snapshot(scene.lmrefine)
+    targets = pipeline.validate(bpy.context, objects, options)
+    os.makedirs(out, exist_ok=True)
+    journal = Journal()
+    try:
+        job = pipeline.run(bpy.context, targets, options, journal, image_dir=out)
+        outcome = pipeline.run_blocking(job, progress=_progress)
+    except BaseException:
+        journal.rollback()
+        raise
+    journal.commit()
+    for warning in outcome.warnings:
+        print(f"lmrefine: warning: {warning}", file=sys.stderr, flush=True)
+    filepaths = bpy.context.preferences.filepaths
+    save_version = filepaths.save_version
+    filepaths.save_version = 0  # no copy.blend1 backup beside the copy
+    try:
+        bpy.ops.wm.save_as_mainfile(filepath=blend_copy)
+        bpy.ops.file.make_paths_relative()  # the EXRs sit beside the copy: keep the folder relocatable
+        bpy.ops.wm.save_mainfile()
+    finally:
+        filepaths.save_version = save_version
+    return {
+        "ok": True,
+        "blend": blend_copy,
+        "objects": {name: {"source_layer": t.source, "refined_layer": t.refined,
+                           "report": outcome.reports[name],
+                           "images": {p: outcome.image_files[i] for p, i in outcome.images[name].items()}}
+                    for name, t in ((t.obj.name, t) for t in targets)},
+        "summary": outcome.summary(),
+        "warnings": outcome.warnings,
+        "timings": outcome.timings,
+        "settings": {key: value for key, value in options.items() if key != "lightmap_image"},
+    }
+
+
+def main(argv):
+    parser = build_parser()
+    args = parser.parse_args(argv)  # exits 2 with usage on bad flags, 0 on --help
+    report_path = os.path.abspath(args.report or os.path.join(args.out, "report.json"))
+    started = time.perf_counter()
+    if not hasattr(bpy.types.Scene, "lmrefine"):
+        lmrefine_blender.register()
+    try:
+        report = run(args)
+        code = 0
+    except Exception as error:
+        message = str(error) if isinstance(error, pipeline.UserError) else f"{type(error).__name__}: {error}"
+        print(f"lmrefine: error: {message}", file=sys.stderr, flush=True)
+        report = {"ok": False, "error": message}
+        code = 1
+    report["seconds"] = time.perf_counter() - started
+    os.makedirs(os.path.dirname(report_path), exist_ok=True)
+    with open(report_path, "w", encoding="utf-8") as stream:
+        json.dump(report, stream, indent=2)
+    return code
+
+
+if __name__ == "__main__":
+    argv = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
+    sys.exit(main(argv))

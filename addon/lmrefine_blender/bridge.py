@@ -1,0 +1,346 @@
+"""bpy <-> numpy: what the native core needs from a Blender scene, and back.
+
+Nothing here decides anything about the method; it converts. Conventions:
+
+* Layouts are per-loop (Blender's "face corner") UVs (L, 2) float32 and loop
+  triangles (T, 3) int32 indices into them, so a refined layout maps back onto
+  the same loops of the same UV map.
+* Geometry for the baker is per loop as well: positions (L, 3) and split
+  normals (L, 3) in world space, indexed by the same loop triangles, so the
+  baker sees exactly the UVs, normals and faces Blender renders.
+* Images are (H, W, 4) float32, row 0 at the top (v = 1); Blender's
+  Image.pixels is bottom-up, so rows are flipped here and nowhere else.
+"""
+
+from dataclasses import dataclass
+
+import bpy
+import numpy as np
+
+from .errors import UserError
+
+# Geometry that can become a mesh and so can cast shadows.
+GEOMETRY_TYPES = {'MESH', 'CURVE', 'SURFACE', 'META', 'FONT'}
+
+DEFAULT_BASE_COLOR = (0.8, 0.8, 0.8)
+
+
+@dataclass
+class Layout:
+    """A UV layout of one mesh, as refine_uvs takes it."""
+
+    uvs: np.ndarray  # (L, 2) float32, per loop
+    triangles: np.ndarray  # (T, 3) int32, loop indices
+
+
+@dataclass
+class MeshExport:
+    """One evaluated mesh in world space, ready for lmrefine.Scene.add_mesh."""
+
+    name: str
+    positions: np.ndarray  # (L, 3) float32, per loop
+    normals: np.ndarray  # (L, 3) float32, split normals
+    triangles: np.ndarray  # (T, 3) int32, loop indices
+    uvs: np.ndarray | None  # (L, 2) float32 from the requested UV map, or None
+    base_color: np.ndarray  # (T, 3) float32, the material's base colour per triangle
+
+
+# ---------------------------------------------------------------- UV layouts
+
+def default_source_layer(mesh):
+    """The lightmap UV map a user most likely means, or None if there is none.
+
+    A map named like "Lightmap"/"LM"/"UVMap.001" wins; else the second map
+    (the first is by convention the texture UVs); a single map is used as is.
+    """
+    names = [layer.name for layer in mesh.uv_layers if not layer.name.endswith("_refined")]
+    for name in names:
+        lowered = name.lower()
+        if "lightmap" in lowered or lowered in {"lm", "uvmap.001", "uv2", "uvmap2"}:
+            return name
+    if len(names) >= 2:
+        return names[1]
+    return names[0] if names else None
+
+
+# Blender's own tolerance for "these face corners share a UV" (STD_UV_CONNECT_LIMIT).
+UV_CONNECT_LIMIT = 1e-4
+
+
+def read_layout(mesh, uv_name):
+    """The loop UVs of `uv_name` and the loop triangles of an (original) mesh, welded.
+
+    Blender stores one UV per face corner, and corners of one vertex that a
+    user sees as connected often differ in the last bits (even in Blender's
+    own primitives). lmrefine joins charts by bit-identical UVs, so such a
+    layout would read as many charts touching each other. Corners of the same
+    vertex within Blender's connect limit therefore get one UV, and UVs a
+    rounding error outside [0, 1] are clamped. The refined map is computed
+    from this welded layout; the source map is never written.
+    """
+    mesh.calc_loop_triangles()
+    triangles = np.empty(len(mesh.loop_triangles) * 3, dtype=np.int32)
+    mesh.loop_triangles.foreach_get("loops", triangles)
+    uvs = read_uv_layer(mesh, uv_name)
+    loop_vertex = np.empty(len(mesh.loops), dtype=np.int32)
+    mesh.loops.foreach_get("vertex_index", loop_vertex)
+    return Layout(weld_uvs(uvs, loop_vertex), triangles.reshape(-1, 3))
+
+
+def weld_uvs(uvs, loop_vertex, limit=UV_CONNECT_LIMIT):
+    """Give corners of one vertex whose UVs lie within `limit` the same UV; returns a new array."""
+    welded = uvs.copy()
+    if len(uvs) == 0:
+        return welded
+    order = np.lexsort((uvs[:, 1], uvs[:, 0], loop_vertex))
+    sorted_uvs = uvs[order]
+    new_group = np.ones(len(order), dtype=bool)
+    new_group[1:] = ((loop_vertex[order][1:] != loop_vertex[order][:-1])
+                     | (np.abs(np.diff(sorted_uvs, axis=0)) > limit).any(axis=1))
+    first = np.flatnonzero(new_group)[np.cumsum(new_group) - 1]  # each corner's group leader
+    welded[order] = sorted_uvs[first]
+    # Within the limit of the unit square counts as inside (packers round to 1.0000001).
+    edge = ((welded < 0.0) & (welded > -limit)) | ((welded > 1.0) & (welded < 1.0 + limit))
+    welded[edge] = np.clip(welded[edge], 0.0, 1.0)
+    return welded
+
+
+def read_uv_layer(mesh, uv_name):
+    uvs = np.empty(len(mesh.loops) * 2, dtype=np.float32)
+    mesh.uv_layers[uv_name].data.foreach_get("uv", uvs)
+    return uvs.reshape(-1, 2)
+
+
+def write_uv_layer(mesh, uv_name, uvs):
+    """Create (or overwrite) UV map `uv_name` with per-loop `uvs` (L, 2)."""
+    uvs = np.ascontiguousarray(uvs, dtype=np.float32)
+    if uvs.shape != (len(mesh.loops), 2):
+        raise ValueError(f"refined UVs have shape {uvs.shape}, mesh '{mesh.name}' has {len(mesh.loops)} loops")
+    layer = mesh.uv_layers.get(uv_name) or mesh.uv_layers.new(name=uv_name, do_init=False)
+    if layer is None:  # Blender refuses a 9th UV map
+        raise UserError(f"mesh '{mesh.name}' already has the maximum of 8 UV maps: remove one to make room "
+                         f"for '{uv_name}'")
+    layer.data.foreach_set("uv", uvs.ravel())
+    mesh.update()
+    return layer
+
+
+def degenerate_counts(mesh, layout, resolution):
+    """(faces with zero 3-D area, triangles with zero UV area at `resolution`)."""
+    areas = np.empty(len(mesh.polygons), dtype=np.float32)
+    mesh.polygons.foreach_get("area", areas)
+    zero_3d = int(np.count_nonzero(areas <= 0.0))
+    corners = layout.uvs[layout.triangles].astype(np.float64) * resolution  # texel units
+    edge1 = corners[:, 1] - corners[:, 0]
+    edge2 = corners[:, 2] - corners[:, 0]
+    texel_area = 0.5 * np.abs(edge1[:, 0] * edge2[:, 1] - edge1[:, 1] * edge2[:, 0])
+    # A millionth of a texel: a triangle that small carries no texel of its own.
+    zero_uv = int(np.count_nonzero(texel_area < 1e-6))
+    return zero_3d, zero_uv
+
+
+# ----------------------------------------------------------------- geometry
+
+def _material_base_color(material):
+    if material is None:
+        return DEFAULT_BASE_COLOR
+    if material.use_nodes and material.node_tree is not None:
+        output = material.node_tree.get_output_node('CYCLES')
+        surface = output.inputs["Surface"] if output is not None else None
+        if surface is not None and surface.is_linked:
+            shader = surface.links[0].from_node
+            color = shader.inputs.get("Base Color") or shader.inputs.get("Color")
+            if color is not None:
+                # A texture in the colour slot is not sampled: its constant is used.
+                return tuple(color.default_value[:3])
+    return tuple(material.diffuse_color[:3])
+
+
+def export_mesh(obj_eval, matrix_world, uv_name=None, name=None):
+    """An evaluated object (modifiers applied) as world-space per-loop arrays.
+
+    None when there is nothing to bake or to cast a shadow: no faces, or a
+    transform that flattens them (a zero scale).
+    """
+    matrix = np.array(matrix_world, dtype=np.float64)
+    linear = matrix[:3, :3]
+    if abs(np.linalg.det(linear)) < 1e-12:
+        return None
+    mesh = obj_eval.to_mesh()
+    try:
+        if mesh is None or len(mesh.polygons) == 0:
+            return None
+        mesh.calc_loop_triangles()
+        mesh.calc_normals_split()
+        loop_count = len(mesh.loops)
+        triangles = np.empty(len(mesh.loop_triangles) * 3, dtype=np.int32)
+        mesh.loop_triangles.foreach_get("loops", triangles)
+        material_index = np.empty(len(mesh.loop_triangles), dtype=np.int32)
+        mesh.loop_triangles.foreach_get("material_index", material_index)
+
+        vertex_co = np.empty(len(mesh.vertices) * 3, dtype=np.float32)
+        mesh.vertices.foreach_get("co", vertex_co)
+        loop_vertex = np.empty(loop_count, dtype=np.int32)
+        mesh.loops.foreach_get("vertex_index", loop_vertex)
+        normals = np.empty(loop_count * 3, dtype=np.float32)
+        mesh.loops.foreach_get("normal", normals)
+
+        positions = vertex_co.reshape(-1, 3)[loop_vertex] @ linear.T + matrix[:3, 3]
+        # Normals transform with the inverse transpose (non-uniform scale).
+        normals = normals.reshape(-1, 3) @ np.linalg.inv(linear)
+        lengths = np.linalg.norm(normals, axis=1, keepdims=True)
+        normals = normals / np.where(lengths > 0.0, lengths, 1.0)
+
+        uvs = None
+        if uv_name is not None:
+            layer = mesh.uv_layers.get(uv_name)
+            if layer is None:
+                raise UserError(f"object '{obj_eval.name}' loses UV map '{uv_name}' in its modifier stack: "
+                                 "move the modifier that drops it, or apply it")
+            uvs = np.empty(loop_count * 2, dtype=np.float32)
+            layer.data.foreach_get("uv", uvs)
+            uvs = uvs.reshape(-1, 2)
+
+        palette = [_material_base_color(slot.material) for slot in obj_eval.material_slots] or [DEFAULT_BASE_COLOR]
+        palette = np.asarray(palette, dtype=np.float32)
+        base_color = palette[np.clip(material_index, 0, len(palette) - 1)]
+
+        return MeshExport(
+            name=name or obj_eval.name,
+            positions=np.ascontiguousarray(positions, dtype=np.float32),
+            normals=np.ascontiguousarray(normals, dtype=np.float32),
+            triangles=triangles.reshape(-1, 3),
+            uvs=uvs,
+            base_color=base_color,
+        )
+    finally:
+        obj_eval.to_mesh_clear()
+
+
+def renders(obj):
+    """Whether a (non-instanced) object takes part in a bake: visible and enabled for render."""
+    return obj.visible_get() and not obj.hide_render
+
+
+def export_scene(context, receivers, uv_name_of):
+    """Receivers (with the UV map `uv_name_of[obj.name]`) and occluders of the scene.
+
+    Returns (receiver exports in `receivers` order, occluder exports): every
+    other visible, render-enabled geometry, instances included, casts shadows.
+    """
+    depsgraph = context.evaluated_depsgraph_get()
+    receiver_names = {obj.name for obj in receivers}
+    by_name = {}
+    occluders = []
+    for instance in depsgraph.object_instances:
+        obj_eval = instance.object
+        if obj_eval.type not in GEOMETRY_TYPES:
+            continue
+        original = obj_eval.original
+        if not instance.is_instance and original.name in receiver_names:
+            export = export_mesh(obj_eval, instance.matrix_world, uv_name=uv_name_of[original.name],
+                                 name=original.name)
+            if export is None:
+                raise UserError(f"'{original.name}' has no faces after its modifiers and transform: disable "
+                                "the modifier that removes them, or give the object a non-zero scale")
+            by_name[original.name] = export
+            continue
+        if instance.is_instance:
+            if instance.parent is None or not renders(instance.parent.original):
+                continue
+        elif not renders(original):
+            continue
+        export = export_mesh(obj_eval, instance.matrix_world, name=original.name)
+        if export is not None:
+            occluders.append(export)
+    missing = receiver_names - by_name.keys()
+    if missing:
+        raise UserError(f"objects {sorted(missing)} are not in the evaluated scene: make them visible in "
+                         "the view layer")
+    return [by_name[obj.name] for obj in receivers], occluders
+
+
+# ------------------------------------------------------------------- lights
+
+def light_params(obj):
+    """A Blender light object as (kind, params) in Blender's own names and units."""
+    light = obj.data
+    matrix = obj.matrix_world
+    direction = -(matrix.to_3x3() @ _z_axis())
+    params = {
+        "energy": float(light.energy),
+        "color": tuple(float(c) for c in light.color),
+        "position": tuple(float(c) for c in matrix.translation),
+        "direction": tuple(float(c) for c in direction.normalized()),
+    }
+    kind = light.type
+    if kind == 'POINT':
+        params["shadow_soft_size"] = float(light.shadow_soft_size)
+    elif kind == 'SPOT':
+        params["shadow_soft_size"] = float(light.shadow_soft_size)
+        params["spot_size"] = float(light.spot_size)
+        params["spot_blend"] = float(light.spot_blend)
+    elif kind == 'SUN':
+        params["angle"] = float(light.angle)
+    elif kind == 'AREA':
+        # Blender scales an area light's size with its object's scale.
+        scale = matrix.to_scale()
+        params["shape"] = light.shape  # SQUARE, RECTANGLE, DISK or ELLIPSE, as the baker takes them
+        params["size"] = float(light.size * abs(scale.x))
+        params["size_y"] = float(light.size_y * abs(scale.y))
+    else:
+        raise UserError(f"light '{obj.name}' has unknown type {kind}: delete it or change its type")
+    return kind.lower(), params
+
+
+def _z_axis():
+    from mathutils import Vector
+    return Vector((0.0, 0.0, 1.0))
+
+
+def scene_lights(context):
+    """Every visible, render-enabled light with non-zero energy."""
+    return [light_params(obj) for obj in context.scene.objects
+            if obj.type == 'LIGHT' and renders(obj) and obj.data.energy > 0.0]
+
+
+def world_color(scene):
+    """The uniform world colour (Background colour x strength), black without a world."""
+    world = scene.world
+    if world is None:
+        return (0.0, 0.0, 0.0)
+    if world.use_nodes and world.node_tree is not None:
+        output = world.node_tree.get_output_node('CYCLES')
+        surface = output.inputs["Surface"] if output is not None else None
+        if surface is not None and surface.is_linked:
+            node = surface.links[0].from_node
+            if node.type == 'BACKGROUND':
+                strength = node.inputs["Strength"].default_value
+                return tuple(float(c) * strength for c in node.inputs["Color"].default_value[:3])
+        return (0.0, 0.0, 0.0)
+    return tuple(float(c) for c in world.color)
+
+
+# ------------------------------------------------------------------- images
+
+def image_to_array(image):
+    """Image pixels as (H, W, 4) float32, row 0 at the top."""
+    width, height = image.size
+    pixels = np.empty(width * height * 4, dtype=np.float32)
+    image.pixels.foreach_get(pixels)
+    return np.ascontiguousarray(pixels.reshape(height, width, 4)[::-1])
+
+
+def array_to_image(image, array):
+    """Write (H, W, 4) top-down float32 `array` into `image` (resized to fit)."""
+    height, width = array.shape[:2]
+    if tuple(image.size) != (width, height):
+        image.scale(width, height)
+    pixels = np.ascontiguousarray(array[::-1], dtype=np.float32)
+    image.pixels.foreach_set(pixels.ravel())
+    image.update()
+
+
+def new_float_image(name, resolution):
+    """A linear float RGBA image (HDR lightmaps need more than 8 bits)."""
+    return bpy.data.images.new(name, resolution, resolution, alpha=True, float_buffer=True)

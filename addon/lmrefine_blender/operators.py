@@ -1,0 +1,193 @@
+"""Operators: Refine Lightmap UVs, and removing the material preview it adds.
+
+Run from the UI, the refinement is modal: native work runs on a worker thread
+while a timer polls it, Blender's progress indicator moves and Esc cancels.
+Run from a script (EXEC_DEFAULT), it blocks. Either way a failed or cancelled
+run is rolled back through the job's journal, and a successful one is a
+single undo step (bl_options UNDO; the modal run pushes it when it finishes).
+"""
+
+import sys
+import time
+
+import bpy
+
+from . import pipeline
+from .journal import Journal
+
+
+def _report_outcome(operator, context, outcome, seconds):
+    summary = outcome.summary()
+    result = context.scene.lmrefine.result
+    result.valid = True
+    result.objects = ", ".join(outcome.objects)
+    result.transition_widening = summary["transition_widening"]
+    result.density_min = summary["density_min"]
+    result.density_max = summary["density_max"]
+    result.limited_by = summary["limited_by"]
+    result.timings = "  ".join(f"{stage} {value:.2f}s" for stage, value in outcome.timings.items())
+    result.message = (f"Refined {len(outcome.objects)} object(s) in {seconds:.1f}s: transitions widened "
+                      f"{summary['transition_widening']:.2f}x, texel density "
+                      f"{summary['density_min']:.2f}x to {summary['density_max']:.2f}x")
+    for warning in outcome.warnings:
+        operator.report({'WARNING'}, warning)
+    operator.report({'INFO'}, result.message)
+
+
+def _rollback(operator, journal):
+    try:
+        journal.rollback()
+    except Exception as error:  # the scene may be half-reverted: say so loudly
+        operator.report({'ERROR'}, f"Could not fully revert the scene ({error}): use Edit > Undo")
+
+
+def _failure_message(error):
+    if isinstance(error, pipeline.UserError):
+        return str(error)
+    if isinstance(error, ValueError):  # lmrefine's own messages name the problem and the fix
+        return f"lmrefine: {error}"
+    return f"Refinement failed ({type(error).__name__}: {error}); the scene was left unchanged"
+
+
+def _is_cancel(error):
+    if isinstance(error, (pipeline.Cancelled, KeyboardInterrupt)):
+        return True
+    core = sys.modules.get("lmrefine")  # loaded if a native call could have raised its CancelledError
+    return core is not None and isinstance(error, core.CancelledError)
+
+
+class LMREFINE_OT_refine_uvs(bpy.types.Operator):
+    """Refine the lightmap UV map of the selected meshes so light/shadow edges get more texels, then bake"""
+
+    bl_idname = "object.lmrefine_refine_uvs"
+    bl_label = "Refine Lightmap UVs"
+    bl_options = {'REGISTER', 'UNDO'}
+
+    @classmethod
+    def poll(cls, context):
+        # Problems (wrong mode, nothing selected, ...) are reported by the operator with the fix,
+        # rather than a greyed-out button that does not say why.
+        return context.scene is not None and hasattr(context.scene, "lmrefine")
+
+    def _prepare(self, context):
+        options = pipeline.settings_snapshot(context.scene.lmrefine)
+        targets = pipeline.validate(context, list(context.selected_objects), options)
+        return options, targets
+
+    # ------------------------------------------------------------ blocking
+
+    def execute(self, context):
+        started = time.perf_counter()
+        try:
+            options, targets = self._prepare(context)
+        except pipeline.UserError as error:
+            self.report({'ERROR'}, str(error))
+            return {'CANCELLED'}
+        journal = Journal()
+        wm = context.window_manager
+        wm.progress_begin(0.0, 1.0)
+        try:
+            job = pipeline.run(context, targets, options, journal)
+            outcome = pipeline.run_blocking(job, progress=lambda fraction, label: wm.progress_update(fraction))
+        except BaseException as error:
+            _rollback(self, journal)
+            if _is_cancel(error):
+                self.report({'WARNING'}, "Cancelled: the scene was left unchanged")
+                return {'CANCELLED'}
+            self.report({'ERROR'}, _failure_message(error))
+            return {'CANCELLED'}
+        finally:
+            wm.progress_end()
+        journal.commit()
+        _report_outcome(self, context, outcome, time.perf_counter() - started)
+        return {'FINISHED'}
+
+    # --------------------------------------------------------------- modal
+
+    def invoke(self, context, event):
+        if bpy.app.background or context.window is None:
+            return self.execute(context)  # no event loop to drive a modal run
+        self._started = time.perf_counter()
+        try:
+            options, targets = self._prepare(context)
+        except pipeline.UserError as error:
+            self.report({'ERROR'}, str(error))
+            return {'CANCELLED'}
+        self._begin_modal(context, options, targets)
+        context.window_manager.modal_handler_add(self)
+        return {'RUNNING_MODAL'}
+
+    def _begin_modal(self, context, options, targets):
+        """Everything a modal run needs but the handler: the job, its driver, progress and the timer."""
+        self._journal = Journal()
+        self._driver = pipeline.ThreadedDriver(pipeline.run(context, targets, options, self._journal))
+        wm = context.window_manager
+        wm.progress_begin(0.0, 1.0)
+        self._timer = wm.event_timer_add(0.1, window=context.window)
+        self._status(context)
+
+    def modal(self, context, event):
+        if event.type == 'ESC' and event.value == 'PRESS':
+            self._driver.cancel()
+            self._status(context)
+        if event.type != 'TIMER':
+            return {'RUNNING_MODAL'}  # block other input: the scene must not change under the job
+        state = self._driver.poll()
+        if state is None:
+            context.window_manager.progress_update(self._driver.fraction)
+            self._status(context)
+            return {'RUNNING_MODAL'}
+        kind, value = state
+        if kind == "done":
+            return self._end(context, None, value)
+        return self._end(context, value)
+
+    def _status(self, context):
+        if context.workspace is not None:
+            context.workspace.status_text_set(
+                f"Refine Lightmap UVs: {self._driver.label} ({100.0 * self._driver.fraction:.0f}%), "
+                "Esc to cancel")
+
+    def _end(self, context, error, outcome=None):
+        wm = context.window_manager
+        wm.event_timer_remove(self._timer)
+        wm.progress_end()
+        if context.workspace is not None:
+            context.workspace.status_text_set(None)
+        if error is not None:
+            _rollback(self, self._journal)
+            if _is_cancel(error):
+                self.report({'WARNING'}, "Cancelled: the scene was left unchanged")
+            else:
+                self.report({'ERROR'}, _failure_message(error))
+            return {'CANCELLED'}
+        self._journal.commit()
+        _report_outcome(self, context, outcome, time.perf_counter() - self._started)
+        return {'FINISHED'}
+
+
+class LMREFINE_OT_remove_preview(bpy.types.Operator):
+    """Remove the lightmap preview nodes this add-on put in the selected objects' materials"""
+
+    bl_idname = "object.lmrefine_remove_preview"
+    bl_label = "Remove Lightmap Preview"
+    bl_options = {'REGISTER', 'UNDO'}
+
+    def execute(self, context):
+        from . import materials
+
+        objects = [obj for obj in context.selected_objects if obj.type == 'MESH']
+        if not objects:
+            self.report({'ERROR'}, "No mesh selected: select the objects whose lightmap preview to remove")
+            return {'CANCELLED'}
+        removed = sum(materials.remove_preview(obj) for obj in objects if obj.library is None)
+        if removed == 0:
+            self.report({'INFO'}, "No lightmap preview nodes on the selected objects")
+            return {'CANCELLED'}
+        self.report({'INFO'}, f"Removed {removed} preview node(s)")
+        return {'FINISHED'}
+
+
+CLASSES = (LMREFINE_OT_refine_uvs, LMREFINE_OT_remove_preview)
+
+register, unregister = bpy.utils.register_classes_factory(CLASSES)

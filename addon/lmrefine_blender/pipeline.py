@@ -1,0 +1,559 @@
+"""The refinement job: validate, first bake, refine, write the layer, second bake.
+
+The job is a generator so one implementation serves both drivers: it runs
+bpy work itself (on Blender's main thread) and *yields* each long native call
+as a NativeWork; the driver runs it, inline (operator `execute`, batch) or
+on a worker thread while a modal operator keeps Blender responsive and
+listens for Esc, and sends the result back. Native calls touch numpy only,
+never bpy, so running them off the main thread is safe.
+
+No algorithm here: the layout comes from lmrefine.refine_uvs and is checked
+with lmrefine.check_layout; lightmaps come from lmrefine.bake or Cycles.
+"""
+
+import os
+import threading
+import time
+from dataclasses import dataclass, field
+
+import bpy
+import numpy as np
+
+from . import bridge, cycles_bake, materials
+from .errors import Cancelled, UserError  # noqa: F401  (re-exported for the drivers)
+
+REFINED_SUFFIX = "_refined"
+# Texels both bakers fill into the gutter around each chart (Blender's default
+# bake margin): bilinear and mipmapped lookups near a chart border stay on it.
+BAKE_MARGIN = 16
+
+
+@dataclass
+class NativeWork:
+    """A long native call the driver must run: `call(progress)` -> value.
+
+    With `call` None it is only a progress mark before blocking bpy work (a
+    Cycles bake): the driver shows the label, checks for a cancel and resumes.
+    """
+
+    label: str
+    call: object
+    start: float  # overall progress at the start of this work, in [0, 1]
+    span: float  # share of the overall progress it covers
+
+
+@dataclass
+class Target:
+    """One object to refine, with everything validated up front."""
+
+    obj: object
+    source: str
+    refined: str
+    layout: bridge.Layout
+    image: object = None  # first lightmap, when it comes from an existing image
+
+
+@dataclass
+class Outcome:
+    objects: list
+    reports: dict = field(default_factory=dict)  # object name -> refine_uvs report (+ check_layout)
+    images: dict = field(default_factory=dict)  # object name -> {pass: image name}
+    image_files: dict = field(default_factory=dict)  # image name -> file path ('' when packed)
+    timings: dict = field(default_factory=dict)  # stage -> seconds
+    warnings: list = field(default_factory=list)  # things the user should know, though the run succeeded
+
+    def summary(self):
+        reports = list(self.reports.values())
+        widening = float(np.mean([r["transition_widening"] for r in reports]))
+        low = min(r["density_min"] for r in reports)
+        high = max(r["density_max"] for r in reports)
+        limits = set()
+        for report in reports:
+            limited_by = report.get("limited_by") or []
+            limits.update([limited_by] if isinstance(limited_by, str) else limited_by)
+        return {
+            "transition_widening": widening,
+            "density_min": float(low),
+            "density_max": float(high),
+            "limited_by": ", ".join(sorted(limits)),
+        }
+
+
+def settings_snapshot(settings):
+    """The settings as plain values: a running job must not see later UI edits."""
+    return {
+        "source_layer": settings.source_layer.strip(),
+        "resolution": settings.resolution,
+        "padding": settings.padding,
+        "first_lightmap": settings.first_lightmap,
+        "lightmap_image": settings.lightmap_image,
+        "driving_pass": settings.driving_pass.lower(),
+        "refine_options": {
+            "strength": settings.strength,
+            "max_magnification": settings.max_magnification,
+            "min_shrink": settings.min_shrink,
+            "delta": settings.delta,
+            "passes": settings.passes,
+            "border": settings.border.lower(),
+            "directional": settings.directional,
+            "wavelet": settings.wavelet.lower(),
+        },
+        "backend": settings.backend,
+        "bake_passes": [name.lower() for name in ("DIRECT", "INDIRECT", "COMBINED", "AO")
+                        if name in settings.bake_passes],
+        "samples": settings.samples,
+        "preview": settings.preview,
+    }
+
+
+def import_core():
+    """lmrefine, or a UserError that says how to get it."""
+    try:
+        import lmrefine
+    except ImportError as error:
+        raise UserError(f"lmrefine's native core could not be loaded ({error}); reinstall the add-on from "
+                        "the lmrefine_blender.zip built for this Blender") from error
+    return lmrefine
+
+
+# --------------------------------------------------------------- validation
+
+def validate(context, objects, options):
+    """Targets for `objects`, or a UserError naming the first problem and its fix."""
+    if context.mode != 'OBJECT':
+        mode = context.mode.replace("_", " ").title()
+        raise UserError(f"Refine Lightmap UVs works in Object Mode, not {mode}: switch to Object Mode (Tab, or "
+                        "the mode menu of the 3D View), then run again")
+    meshes = [obj for obj in objects if obj.type == 'MESH']
+    if not meshes:
+        raise UserError("No mesh selected: select the mesh objects whose lightmap UVs to refine")
+    if not options["bake_passes"]:
+        raise UserError("No bake pass chosen: enable at least one of Direct, Indirect, Combined, AO")
+    resolution = options["resolution"]
+    owners = {}
+    targets = []
+    for obj in meshes:
+        mesh = obj.data
+        if obj.library is not None or mesh.library is not None:
+            library = (obj.library or mesh.library).filepath
+            raise UserError(f"'{obj.name}' is linked from {library}: make it local (Object > Relations > "
+                            "Make Local > Selected Objects and Data) to change its UV maps")
+        if not obj.visible_get():
+            raise UserError(f"'{obj.name}' is hidden: show it (Object > Show/Hide, or its collection), since "
+                            "both bakers only see visible objects")
+        if mesh.name in owners:
+            raise UserError(f"'{owners[mesh.name]}' and '{obj.name}' share mesh '{mesh.name}': UV maps belong "
+                            "to the mesh, so select only one of them")
+        owners[mesh.name] = obj.name
+        if len(mesh.uv_layers) == 0:
+            raise UserError(f"'{obj.name}' has no UV map: add one for the lightmap (Object Data > UV Maps > +, "
+                            "then UV > Lightmap Pack)")
+        source = options["source_layer"] or bridge.default_source_layer(mesh)
+        if source is None:
+            raise UserError(f"'{obj.name}' has only refined UV maps: set Source UV Map to the one to refine")
+        if source not in mesh.uv_layers:
+            available = ", ".join(layer.name for layer in mesh.uv_layers)
+            raise UserError(f"'{obj.name}' has no UV map '{source}' (it has: {available}): pick the lightmap "
+                            "UV map in the panel")
+        refined = source + REFINED_SUFFIX
+        if refined not in mesh.uv_layers and len(mesh.uv_layers) >= 8:
+            raise UserError(f"'{obj.name}' already has 8 UV maps, Blender's limit: remove one to make room "
+                            f"for '{refined}'")
+        layout = bridge.read_layout(mesh, source)
+        if len(layout.triangles) == 0:
+            raise UserError(f"'{obj.name}' has no faces: nothing to lightmap")
+        outside = int(np.count_nonzero(((layout.uvs < 0.0) | (layout.uvs > 1.0)).any(axis=1)))
+        if outside:
+            raise UserError(f"UV map '{source}' of '{obj.name}' has {outside} UVs outside [0, 1]; a lightmap "
+                            "layout must lie inside the unit square: repack it (UV > Lightmap Pack or Pack Islands)")
+        zero_3d, zero_uv = bridge.degenerate_counts(mesh, layout, resolution)
+        if zero_3d:
+            raise UserError(f"'{obj.name}' has {zero_3d} faces of zero area: remove them (Edit Mode > Mesh > "
+                            "Clean Up > Degenerate Dissolve), then run again")
+        if zero_uv:
+            raise UserError(f"'{obj.name}' has {zero_uv} triangles of zero area in UV map '{source}': "
+                            "re-unwrap it (UV > Lightmap Pack) so every face has its own texels")
+        target = Target(obj, source, refined, layout)
+        if options["first_lightmap"] == 'IMAGE':
+            target.image = _first_image(obj, source, options)
+        targets.append(target)
+    return targets
+
+
+def _first_image(obj, source, options):
+    image = options["lightmap_image"] or materials.find_lightmap_image(obj, source)
+    if image is None:
+        raise UserError(f"No lightmap image found for '{obj.name}': give its material an Image Texture node "
+                        f"fed by a UV Map node set to '{source}', pick the image in the panel, or set First "
+                        "Lightmap to a bake")
+    if image.get("lmrefine_object") is not None:
+        raise UserError(f"'{image.name}' was baked with a refined UV map, not with '{source}': pick a lightmap "
+                        "baked with the source map, or set First Lightmap to a bake")
+    problem = materials.image_problem(image)
+    if problem:
+        raise UserError(problem)
+    resolution = options["resolution"]
+    if tuple(image.size) != (resolution, resolution):
+        width, height = image.size
+        raise UserError(f"Lightmap '{image.name}' is {width}x{height} but Resolution is {resolution}: set "
+                        f"Resolution to {width} (the layout is refined at the lightmap's own resolution)")
+    return image
+
+
+# ---------------------------------------------------------------------- run
+
+def run(context, targets, options, journal, image_dir=None):
+    """The job (a generator; see the module doc). Returns an Outcome.
+
+    Every scene change registers its revert in `journal`; the driver rolls
+    back on any exception. `image_dir`: where to write the EXR lightmaps
+    (default: next to the .blend, or packed into it when it was never saved).
+    """
+    lmrefine = import_core()
+    outcome = Outcome(objects=[t.obj.name for t in targets])
+    resolution = options["resolution"]
+    padding = options["padding"]
+    backend_first = options["first_lightmap"]
+    stages = (0 if backend_first == 'IMAGE' else 1) + len(targets) + 1
+    span = 1.0 / stages
+    done = 0
+
+    # 1. The first lightmap, on the source layout.
+    clock = time.perf_counter()
+    if backend_first == 'IMAGE':
+        lightmaps = {t.obj.name: bridge.image_to_array(t.image) for t in targets}
+    else:
+        source_of = {t.obj.name: t.source for t in targets}
+        passes = (options["driving_pass"],)
+        if backend_first == 'EMBREE':
+            baked = yield from _bake_embree(context, lmrefine, targets, source_of, passes, options, "First bake",
+                                            done * span, span)
+        else:
+            baked = yield from _bake_cycles(context, targets, source_of, passes, options, "First bake",
+                                            done * span, span)
+        lightmaps = baked[options["driving_pass"]]
+        done += 1
+        outcome.timings["first bake"] = time.perf_counter() - clock
+
+    for name, lightmap in lightmaps.items():
+        if not np.any(lightmap[..., :3] > 0.0):
+            outcome.warnings.append(f"'{name}': the first lightmap is black (no light reaches it), so there is "
+                                    "nothing to refine for: add lights or a world colour")
+
+    # 2. Refine every layout (native, off the main thread), check it, write it.
+    clock = time.perf_counter()
+    refined_uvs = {}
+    for target in targets:
+        name = target.obj.name
+        layout = target.layout
+        result = yield NativeWork(
+            f"Refining {name}",
+            lambda progress, lightmap=lightmaps[name], layout=layout: lmrefine.refine_uvs(
+                lightmap, layout.uvs, layout.triangles, resolution, padding=padding, progress=progress,
+                **options["refine_options"]),
+            done * span, span)
+        done += 1
+        # An independent check of the promise refine_uvs makes: never worse than the source layout.
+        source_check = lmrefine.check_layout(layout.uvs, layout.triangles, resolution, padding=padding)
+        check = lmrefine.check_layout(result.uvs, layout.triangles, resolution, padding=padding)
+        worse = layout_regressions(check, source_check, padding)
+        if worse:
+            raise RuntimeError(f"refine_uvs returned a layout for '{name}' that is worse than the source "
+                               f"({', '.join(worse)}: {dict(check)}); this is a bug in lmrefine, please report "
+                               "it with the .blend")
+        if not source_check["valid"]:
+            outcome.warnings.append(
+                f"'{name}': UV map '{target.source}' was already invalid at {resolution} texels "
+                f"({_describe_problems(source_check, padding)}); the refined map is no worse, but lightmap "
+                "bleeding may show: repack the source map (UV > Lightmap Pack)")
+        report = {key: value for key, value in result.report.items() if key != "triangle_density"}
+        report["check_layout"] = dict(check)
+        report["source_check_layout"] = dict(source_check)
+        outcome.reports[name] = _plain(report)
+        refined_uvs[name] = result.uvs
+    for target in targets:
+        _write_refined_layer(target, refined_uvs[target.obj.name], journal)
+    outcome.timings["refine"] = time.perf_counter() - clock
+
+    # 3. The second bake with the refined layout, one image per pass.
+    clock = time.perf_counter()
+    refined_of = {t.obj.name: t.refined for t in targets}
+    passes = tuple(options["bake_passes"])
+    if options["backend"] == 'EMBREE':
+        baked = yield from _bake_embree(context, lmrefine, targets, refined_of, passes, options, "Second bake",
+                                        done * span, span)
+    else:
+        baked = yield from _bake_cycles(context, targets, refined_of, passes, options, "Second bake",
+                                        done * span, span)
+    for pass_name in passes:
+        for target in targets:
+            image = _store_image(target.obj, pass_name, baked[pass_name][target.obj.name], journal)
+            outcome.images.setdefault(target.obj.name, {})[pass_name] = image.name
+    outcome.timings["second bake"] = time.perf_counter() - clock
+
+    # 4. Preview in the materials, then write the images (the one step a rollback cannot undo, so last).
+    if options["preview"]:
+        first_pass = options["bake_passes"][0]
+        for target in targets:
+            image = bpy.data.images[outcome.images[target.obj.name][first_pass]]
+            materials.add_preview(target.obj, image, target.refined, journal)
+    for names in outcome.images.values():
+        for image_name in names.values():
+            image = bpy.data.images[image_name]
+            outcome.image_files[image_name] = _save_image(image, image_dir)
+    return outcome
+
+
+def layout_regressions(check, source, padding):
+    """What makes a refined layout's check worse than its source's (empty: acceptable)."""
+    worse = []
+    for key in ("flipped", "degenerate", "overlapping"):
+        if check[key] > source[key]:
+            worse.append(key)
+    if check["out_of_bounds"]:
+        worse.append("out_of_bounds")
+    # float32 UVs carry about 1e-4 texel of rounding at 4k.
+    if check["min_gutter_texels"] < min(padding, source["min_gutter_texels"]) - 1e-4:
+        worse.append("gutter")
+    return worse
+
+
+def _describe_problems(check, padding):
+    problems = [f"{check[key]} {key}" for key in ("flipped", "degenerate", "overlapping", "out_of_bounds")
+                if check[key]]
+    if check["min_gutter_texels"] < padding:
+        problems.append(f"charts {check['min_gutter_texels']:.2f} texels apart, padding is {padding}")
+    return ", ".join(problems)
+
+
+def _plain(value):
+    """numpy scalars/arrays -> JSON-able Python values."""
+    if isinstance(value, dict):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+def _bake_embree(context, lmrefine, targets, uv_name_of, passes, options, label, start, span):
+    """Bake `passes` with lmrefine's baker; returns {pass: {object name: (R, R, 4) float32}}."""
+    receivers, occluders = bridge.export_scene(context, [t.obj for t in targets], uv_name_of)
+    scene = lmrefine.Scene()
+    ids = {}
+    for export in receivers:
+        # The baker takes UVs per triangle corner (row 3t + k), the layout's loops in triangle order.
+        corner_uvs = export.uvs[export.triangles.ravel()]
+        ids[export.name] = scene.add_mesh(export.positions, export.triangles, uvs=corner_uvs,
+                                          normals=export.normals, base_color=_base_color(export), receiver=True)
+    for export in occluders:
+        scene.add_mesh(export.positions, export.triangles, normals=export.normals,
+                       base_color=_base_color(export), receiver=False)
+    for kind, params in bridge.scene_lights(context):
+        scene.add_light(kind, **params)
+    scene.set_world(bridge.world_color(context.scene))
+    baked = yield NativeWork(
+        label,
+        lambda progress: lmrefine.bake(scene, options["resolution"], passes=passes, samples=options["samples"],
+                                       seed=0, progress=progress, dilation=BAKE_MARGIN),
+        start, span)
+    by_pass = {passes[0]: baked} if len(passes) == 1 else baked
+    return {name: {obj: np.asarray(by_pass[name][mesh_id], dtype=np.float32) for obj, mesh_id in ids.items()}
+            for name in passes}
+
+
+def _bake_cycles(context, targets, uv_name_of, passes, options, label, start, span):
+    """Bake `passes` with Cycles, object by object; returns {pass: {object name: (R, R, 4) float32}}."""
+    baked = {name: {} for name in passes}
+    steps = len(passes) * len(targets)
+    with cycles_bake.render_settings(context, options["samples"]):
+        for index, (name, target) in enumerate((n, t) for n in passes for t in targets):
+            obj = target.obj
+            yield NativeWork(f"{label}: {name} of {obj.name} (Cycles)", None, start + span * index / steps, 0.0)
+            baked[name][obj.name] = cycles_bake.bake_object(context, obj, uv_name_of[obj.name], name,
+                                                            options["resolution"], BAKE_MARGIN)
+    return baked
+
+
+def _base_color(export):
+    """One colour when the mesh is uniform (the common case), else one per triangle."""
+    colors = export.base_color
+    if len(colors) and np.all(colors == colors[0]):
+        return tuple(float(c) for c in colors[0])
+    return colors
+
+
+def _write_refined_layer(target, uvs, journal):
+    mesh = target.obj.data
+    active_index = mesh.uv_layers.active_index
+    render_name = next((layer.name for layer in mesh.uv_layers if layer.active_render), None)
+    existing = mesh.uv_layers.get(target.refined)
+    if existing is not None:
+        previous = bridge.read_uv_layer(mesh, target.refined)
+        journal.on_rollback(lambda: bridge.write_uv_layer(mesh, target.refined, previous))
+    else:
+        def remove_layer():
+            layer = mesh.uv_layers.get(target.refined)
+            if layer is not None:
+                mesh.uv_layers.remove(layer)
+            mesh.uv_layers.active_index = active_index
+            if render_name is not None:
+                mesh.uv_layers[render_name].active_render = True
+        journal.on_rollback(remove_layer)
+    bridge.write_uv_layer(mesh, target.refined, uvs)
+    # A new UV map must not steal the active or render slot from the user's maps.
+    mesh.uv_layers.active_index = active_index
+    if render_name is not None:
+        mesh.uv_layers[render_name].active_render = True
+
+
+def _store_image(obj, pass_name, pixels, journal):
+    """The object's lightmap image for `pass_name` (reused across runs), holding `pixels`.
+
+    Alpha is written as 1 everywhere, like Cycles' bake output: Blender stores
+    EXR premultiplied, so an alpha-0 gutter would lose its dilated colour on
+    the next load and seams would show. Coverage comes from the UV layout.
+    The image keeps a fake user so it survives saving even without a material.
+    """
+    pixels = np.array(pixels, dtype=np.float32)  # a copy: never modify the baker's array
+    pixels[..., 3] = 1.0
+    name = f"{obj.name}_lightmap_{pass_name}"
+    image = bpy.data.images.get(name)
+    if image is not None and image.get("lmrefine_object") == obj.name and image.library is None:
+        previous = bridge.image_to_array(image)
+        journal.on_rollback(lambda: bridge.array_to_image(image, previous))
+    else:
+        image = bridge.new_float_image(name, pixels.shape[0])
+        image["lmrefine_object"] = obj.name
+        image["lmrefine_pass"] = pass_name
+        image.use_fake_user = True
+        journal.on_rollback(lambda: bpy.data.images.remove(image))
+    bridge.array_to_image(image, pixels)
+    return image
+
+
+def _save_image(image, image_dir):
+    """Write `image` as EXR (into image_dir, or next to the .blend); pack it if there is nowhere to write.
+
+    Runs last: a file on disk is the one change a rollback cannot take back.
+    """
+    filename = bpy.path.clean_name(image.name) + ".exr"
+    if image_dir is not None:
+        path = os.path.join(os.path.abspath(image_dir), filename)
+        stored = path
+    elif bpy.data.filepath:
+        path = os.path.join(os.path.dirname(bpy.data.filepath), filename)
+        stored = "//" + filename
+    else:
+        image.pack()
+        return ""
+    image.filepath_raw = stored
+    image.file_format = 'OPEN_EXR'
+    image.save()
+    return path
+
+
+# ------------------------------------------------------------------ drivers
+
+def run_blocking(job, progress=None, should_stop=None):
+    """Drive `job` on this thread (operator execute, batch).
+
+    `progress(fraction, label)` is told the overall progress; `should_stop()`
+    returning True cancels the running native call (lmrefine.CancelledError).
+    """
+    value = None
+    while True:
+        try:
+            work = job.send(value)
+        except StopIteration as stop:
+            return stop.value
+        if progress is not None:
+            progress(work.start, work.label)
+        if work.call is None:
+            if should_stop is not None and should_stop():
+                job.close()
+                raise Cancelled()
+            value = None
+        else:
+            value = work.call(_progress_callback(work, progress, should_stop or (lambda: False)))
+
+
+def _progress_callback(work, report, should_stop):
+    """The callable lmrefine's native calls take: progress(fraction, stage) -> False cancels.
+
+    A native call may restart its fraction per sub-stage (the baker per pass);
+    the overall progress only moves forward.
+    """
+    furthest = [0.0]
+
+    def callback(fraction, stage=""):
+        furthest[0] = max(furthest[0], min(max(float(fraction), 0.0), 1.0))
+        if report is not None:
+            report(work.start + work.span * furthest[0], f"{work.label} ({stage})" if stage else work.label)
+        return not should_stop()
+
+    return callback
+
+
+class ThreadedDriver:
+    """Drive `job` without blocking: native work on a worker thread, bpy work in poll().
+
+    The modal operator calls poll() from a timer on Blender's main thread;
+    cancel() (Esc) makes the running native call stop at its next progress
+    report and the job stop before its next step. poll() returns None while
+    the job runs, then ("done", outcome) or ("error", exception) once.
+    """
+
+    def __init__(self, job):
+        self._job = job
+        self._stop = threading.Event()
+        self._thread = None
+        self._send = ("value", None)
+        self.fraction = 0.0
+        self.label = "Starting"
+
+    def cancel(self):
+        self._stop.set()
+        self.label = "Cancelling"
+
+    def poll(self):
+        if self._thread is not None:
+            if self._thread.is_alive():
+                return None
+            self._thread = None
+        if self._stop.is_set():
+            self._job.close()
+            return ("error", Cancelled())
+        kind, payload = self._send
+        try:
+            work = self._job.throw(payload) if kind == "error" else self._job.send(payload)
+        except StopIteration as stop:
+            return ("done", stop.value)
+        except BaseException as error:
+            return ("error", error)
+        self.label = work.label
+        self.fraction = work.start
+        if work.call is None:  # a progress mark: show it now, do the bpy work on the next poll
+            self._send = ("value", None)
+        else:
+            self._start(work)
+        return None
+
+    def _start(self, work):
+        def report(fraction, label):
+            # Runs on the worker thread: plain Python state only, never bpy.
+            self.fraction = fraction
+
+        progress = _progress_callback(work, report, self._stop.is_set)
+
+        def target():
+            try:
+                self._send = ("value", work.call(progress))
+            except BaseException as error:
+                self._send = ("error", error)
+
+        self._thread = threading.Thread(target=target, name="lmrefine", daemon=True)
+        self._thread.start()

@@ -1,0 +1,164 @@
+"""Settings of the refinement (Scene.lmrefine) and the last result shown in the panel.
+
+Every property lives in one PropertyGroup attached to the Scene under the
+prefixed name ``lmrefine``, so the add-on never collides with other add-ons'
+Scene properties. The batch entry fills the same group from its flags.
+"""
+
+import bpy
+from bpy.props import (
+    BoolProperty,
+    EnumProperty,
+    FloatProperty,
+    IntProperty,
+    PointerProperty,
+    StringProperty,
+)
+
+FIRST_LIGHTMAP_ITEMS = (
+    ('IMAGE', "Existing Image",
+     "Use the lightmap already baked into the object's material (an Image Texture node fed by a UV Map "
+     "node set to the source layer, or one named like 'lightmap'), or the image picked below"),
+    ('EMBREE', "Bake with Embree", "Bake the first lightmap now with lmrefine's Embree baker (fast)"),
+    ('CYCLES', "Bake with Cycles", "Bake the first lightmap now with Blender's Cycles bake"),
+)
+
+BACKEND_ITEMS = (
+    ('EMBREE', "Embree", "Bake with lmrefine's Embree baker (fast, same light model as Cycles' diffuse bake)"),
+    ('CYCLES', "Cycles", "Bake with Blender's own Cycles bake"),
+)
+
+# Pass names are the lmrefine baker's; Cycles equivalents are in cycles_bake.py.
+PASS_ITEMS = (
+    ('DIRECT', "Direct", "Direct diffuse light with shadows (Cycles: Diffuse bake, Direct only, Color off)"),
+    ('INDIRECT', "Indirect", "Indirect diffuse light (Cycles: Diffuse bake, Indirect only, Color off)"),
+    ('COMBINED', "Combined", "Direct + indirect diffuse light (Cycles: Diffuse bake, Direct + Indirect, Color off)"),
+    ('AO', "AO", "Ambient occlusion (Cycles: Ambient Occlusion bake)"),
+)
+
+# Enum identifiers are lmrefine.refine_uvs' option values, upper-cased.
+BORDER_ITEMS = (
+    ('SAME', "Same Rule", "Border cells follow the same rule as every other cell (thesis variant 1)"),
+    ('BORDER_RULE', "Border Rule", "Border cells follow their own spring rule (thesis variant 2)"),
+    ('EXTRA_RING', "Extra Ring", "An extra ring of cells around the grid, removed after convergence (variant 3)"),
+)
+
+WAVELET_ITEMS = (
+    ('D4', "Daubechies D4", "The thesis' choice: copes with noisy bakes"),
+    ('HAAR', "Haar", "Shortest filter: sharpest response, most sensitive to noise"),
+    ('D12', "Daubechies D12", "Longer filter: about the same result as D4, slower"),
+    ('D20', "Daubechies D20", "Longest Daubechies filter"),
+    ('CDF53', "CDF 5/3", "Cohen-Daubechies-Feauveau 5/3"),
+    ('CDF97', "CDF 9/7", "Cohen-Daubechies-Feauveau 9/7"),
+)
+
+
+class LMREFINE_PG_result(bpy.types.PropertyGroup):
+    """The last run's numbers, shown in the panel (not an input)."""
+
+    valid: BoolProperty(name="Has Result", default=False)
+    objects: StringProperty(name="Objects", description="Objects the last run refined")
+    transition_widening: FloatProperty(
+        name="Transition Widening",
+        description="Texel density at light/shadow transitions, relative to before (higher = sharper edges)")
+    density_min: FloatProperty(name="Min Density", description="Smallest texel-density ratio (new / old area)")
+    density_max: FloatProperty(name="Max Density", description="Largest texel-density ratio (new / old area)")
+    limited_by: StringProperty(name="Limited By", description="What kept the refinement from going further")
+    timings: StringProperty(name="Timings", description="Seconds per stage of the last run")
+    message: StringProperty(name="Message", description="Summary of the last run")
+
+
+class LMREFINE_PG_settings(bpy.types.PropertyGroup):
+    source_layer: StringProperty(
+        name="Source UV Map",
+        description="Lightmap UV map to refine (left untouched; the result goes to '<name>_refined'). "
+                    "Empty: a map named like 'Lightmap' or 'UVMap.001', else the second UV map",
+    )
+    resolution: IntProperty(
+        name="Resolution", description="Lightmap width and height in texels",
+        default=512, min=16, max=16384, soft_max=4096,
+    )
+    padding: IntProperty(
+        name="Padding", description="Gutter between charts in texels that the refined layout must keep",
+        default=2, min=0, max=64,
+    )
+    first_lightmap: EnumProperty(
+        name="First Lightmap", description="Where the lightmap that drives the refinement comes from",
+        items=FIRST_LIGHTMAP_ITEMS, default='EMBREE',
+    )
+    lightmap_image: PointerProperty(
+        name="Lightmap Image", type=bpy.types.Image,
+        description="Lightmap to use for every selected object (optional; default: found in each material)",
+    )
+    driving_pass: EnumProperty(
+        name="Driving Pass", description="Which light the first bake measures to decide where texels go",
+        items=PASS_ITEMS, default='DIRECT',
+    )
+
+    # Refinement (lmrefine.refine_uvs options).
+    strength: FloatProperty(
+        name="Strength",
+        description="How much texels at the strongest light change may grow: such a texel wants (1 + strength) "
+                    "times the area of one in flat light. 0 leaves the layout unchanged",
+        default=6.0, min=0.0, soft_max=20.0,
+    )
+    max_magnification: FloatProperty(
+        name="Max Magnification", description="Largest growth of a texel's area (texel-density ratio)",
+        default=8.0, min=1.0, max=64.0,
+    )
+    min_shrink: FloatProperty(
+        name="Min Shrink", description="Smallest a texel's area may become in flat light (texel-density ratio)",
+        default=0.25, min=0.01, max=1.0,
+    )
+    delta: FloatProperty(
+        name="Delta",
+        description="The automaton stops when neighbouring texel densities differ by less than this (relative)",
+        default=0.02, min=1e-5, max=0.5, precision=4,
+    )
+    passes: IntProperty(
+        name="Refinement Passes",
+        description="Automaton passes: each extra pass reruns the finest level with fresh energies, "
+                    "deforming further",
+        default=1, min=1, max=8,
+    )
+    border: EnumProperty(name="Border", description="How the grid's outer cells behave", items=BORDER_ITEMS,
+                         default='SAME')
+    directional: BoolProperty(
+        name="Directional", description="Four energies per cell (one per direction) instead of one",
+        default=False,
+    )
+    wavelet: EnumProperty(name="Wavelet", description="Filter of the gradient map", items=WAVELET_ITEMS,
+                          default='D4')
+
+    # Second bake.
+    backend: EnumProperty(name="Bake With", description="Baker of the final lightmap", items=BACKEND_ITEMS,
+                          default='EMBREE')
+    bake_passes: EnumProperty(
+        name="Bake Passes", description="Lightmaps to bake with the refined layout (one image each)",
+        items=PASS_ITEMS, default={'DIRECT'}, options={'ENUM_FLAG'},
+    )
+    samples: IntProperty(name="Samples", description="Samples per texel for both bakes", default=16, min=1,
+                         max=4096)
+    preview: BoolProperty(
+        name="Preview in Material",
+        description="Add the baked lightmap to each material through a UV Map node set to the refined map "
+                    "(remove with 'Remove Lightmap Preview')",
+        default=True,
+    )
+
+    result: PointerProperty(type=LMREFINE_PG_result)
+
+
+CLASSES = (LMREFINE_PG_result, LMREFINE_PG_settings)
+
+_register_classes, _unregister_classes = bpy.utils.register_classes_factory(CLASSES)
+
+
+def register():
+    _register_classes()
+    bpy.types.Scene.lmrefine = PointerProperty(type=LMREFINE_PG_settings)
+
+
+def unregister():
+    del bpy.types.Scene.lmrefine
+    _unregister_classes()

@@ -1,0 +1,105 @@
+"""Benchmark of the UV refiner (docs/refiner.md).
+
+1. The whole refinement (gradient map + automaton + warp + validity check)
+   at 256^2, 512^2 and 1024^2 on a finely tessellated plane with a hard
+   shadow edge; baseline: the 256^2 run's cost per texel.
+2. Coarse-to-fine against one level at 256^2: steps (and time) one level
+   needs to give the shadow edge 90% of the texels the pyramid gives it.
+3. The three border treatments, on an edge across the middle and one near
+   the border (how the default was chosen).
+
+    PYTHONPATH=python /usr/bin/python3 bench/bench_refine.py
+"""
+
+import os
+import sys
+import time
+
+import numpy as np
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tests"))
+import lmrefine  # noqa: E402
+from layouts import finite_difference_gradient, plane, shadow_edge_lightmap  # noqa: E402
+
+HAVE_WAVELET = hasattr(lmrefine, "gradient_map")
+
+
+def best_of(runs, work):
+    times, result = [], None
+    for _ in range(runs):
+        start = time.perf_counter()
+        result = work()
+        times.append(time.perf_counter() - start)
+    return min(times), result
+
+
+def scene(resolution, position=0.5, angle=0.3, quads=128):
+    uvs, tris = plane(quads, margin=0.02)
+    lightmap = shadow_edge_lightmap(resolution, position, angle)
+    return uvs, tris, lightmap
+
+
+def refine(lightmap, uvs, tris, resolution, **options):
+    if HAVE_WAVELET:
+        return lmrefine.refine_uvs(lightmap, uvs, tris, resolution, **options)
+    mask = lmrefine.coverage_mask(uvs, tris, resolution)
+    gradient = finite_difference_gradient(lightmap, mask)
+    return lmrefine.refine_uvs(None, uvs, tris, resolution, gradient=gradient, mask=mask, **options)
+
+
+def whole_refinement():
+    print(f"threads: {os.environ.get('LMREFINE_THREADS', os.cpu_count())}; load average: "
+          f"{os.getloadavg()[0]:.1f} (a shared machine: compare ratios); gradient map: "
+          + ("lmrefine.gradient_map (D4)" if HAVE_WAVELET else "finite differences (gradient_map not built in)"))
+    print(f"{'size':>6} {'seconds':>8} {'steps':>6} {'ns/texel':>9} {'vs 256^2':>9} {'widening':>9} {'valid':>6}"
+          f"   gradient / automaton / warp+check (s)")
+    base = None
+    for resolution in (256, 512, 1024):
+        uvs, tris, lightmap = scene(resolution)
+        seconds, result = best_of(3 if resolution < 1024 else 2, lambda: refine(lightmap, uvs, tris, resolution))
+        per_texel = seconds / resolution ** 2 * 1e9
+        base = base or per_texel
+        report = result.report
+        print(f"{resolution:>5}^2 {seconds:>8.3f} {report['steps']:>6} {per_texel:>9.1f} {per_texel / base:>8.2f}x "
+              f"{report['transition_widening']:>9.2f} {str(report['check']['valid']):>6}   "
+              + " / ".join(f"{report['timings'][k]:.3f}" for k in ("gradient_map", "automaton", "warp_and_check")))
+
+
+def coarse_to_fine_against_one_level(resolution=256):
+    energy = np.full((resolution, resolution), 1 / 7, np.float32)
+    energy[:, resolution // 2 - 2:resolution // 2 + 2] = 1.0  # a 4-texel band, as strength 6 makes it
+    band = slice(resolution // 2 - 2, resolution // 2 + 2)
+    t_pyramid, pyramid = best_of(3, lambda: lmrefine.run_automaton(energy))
+    target = 0.9 * pyramid["cell_area"][:, band].mean()
+    reached, t_one, steps = 0.0, 0.0, 0
+    for budget in (16, 64, 256, 1024, 4096, 8192):
+        steps = budget
+        t_one, one = best_of(1, lambda: lmrefine.run_automaton(energy, coarse_to_fine=False, max_steps=budget))
+        reached = one["cell_area"][:, band].mean()
+        if reached >= target:
+            break
+    print(f"\ncoarse-to-fine vs one level at {resolution}^2 (band magnification target {target:.2f}):")
+    print(f"  pyramid : {pyramid['steps']:>5} steps ({len(pyramid['levels'])} levels) {t_pyramid:.3f} s")
+    note = "" if reached >= target else f" (only reached {reached:.2f})"
+    print(f"  one level: {steps:>5} steps{note} {t_one:.3f} s")
+    print(f"  ratio: {t_one / t_pyramid:.1f}x time, {steps / pyramid['steps']:.1f}x steps")
+
+
+def border_modes(resolution=256):
+    print(f"\nborder treatments at {resolution}^2 (widening = texel-density ratio at the edge; "
+          "unused = texels no original texel maps to):")
+    print(f"{'scene':>14} {'border':>12} {'widening':>9} {'min':>6} {'max':>6} {'unused':>7} {'valid':>6}")
+    for name, position, angle in (("edge middle", 0.5, 0.3), ("edge at border", 0.06, 0.0)):
+        uvs, tris, lightmap = scene(resolution, position, angle)
+        for border in ("same", "border_rule", "extra_ring"):
+            result = refine(lightmap, uvs, tris, resolution, border=border)
+            report = result.report
+            unused = 1 - lmrefine.grid_cell_areas(result.grid).sum() / resolution ** 2
+            print(f"{name:>14} {border:>12} {report['transition_widening']:>9.2f} {report['density_min']:>6.2f} "
+                  f"{report['density_max']:>6.2f} {unused:>7.1%} {str(report['check']['valid']):>6}")
+
+
+if __name__ == "__main__":
+    whole_refinement()
+    coarse_to_fine_against_one_level()
+    border_modes()

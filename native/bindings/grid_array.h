@@ -1,0 +1,19 @@
+// Deformed grids cross the boundary as (H + 1, W + 1, 2) float32 arrays of
+// node positions in UV space (the identity grid has node (i, j) at
+// u = j / W, v = 1 - i / H); natively they are NodeGrids in pixel space.
+#pragma once
+
+#include <pybind11/numpy.h>
+
+#include "lmrefine/warp.h"
+
+namespace lmrefine::py_util {
+
+namespace py = pybind11;
+
+py::array_t<float> grid_to_numpy(const NodeGrid& grid, int width, int height);
+
+// Checks shape and dtype; the grid is over a (shape[0] - 1) x (shape[1] - 1) lightmap.
+NodeGrid grid_from_numpy(const py::handle& array, const char* name);
+
+}  // namespace lmrefine::py_util

@@ -1,0 +1,126 @@
+#include <pybind11/pybind11.h>
+
+#include <string>
+
+#include "grid_array.h"
+#include "lmrefine/automaton.h"
+#include "lmrefine/error.h"
+#include "numpy_util.h"
+#include "progress_binding.h"
+
+namespace py = pybind11;
+
+namespace lmrefine::bindings {
+namespace {
+
+py::dict run(const py::handle& energy_in, const py::handle& mask_in, const py::handle& rigid_in, double diffusion, double rate, double delta,
+             int max_steps, double min_shrink, double max_magnification, const std::string& border,
+             bool coarse_to_fine, int passes, bool check_invariants, py::object progress_callback) {
+    auto energy = py_util::require_float32(energy_in, "energy", {2, 3});
+    AutomatonInput input;
+    input.height = int(energy.shape(0));
+    input.width = int(energy.shape(1));
+    input.channels = energy.ndim() == 3 ? int(energy.shape(2)) : 1;
+    input.energy = energy.data();
+    py::array_t<uint8_t, py::array::c_style | py::array::forcecast> mask;
+    if (!mask_in.is_none()) {
+        mask = py::array_t<uint8_t, py::array::c_style | py::array::forcecast>::ensure(mask_in);
+        if (!mask || mask.ndim() != 2 || mask.shape(0) != input.height || mask.shape(1) != input.width) {
+            throw py::value_error("mask must be a (H, W) boolean array matching energy's " +
+                                  std::to_string(input.height) + "x" + std::to_string(input.width));
+        }
+        input.mask = mask.data();
+    }
+    py::array_t<uint8_t, py::array::c_style | py::array::forcecast> rigid;
+    if (!rigid_in.is_none()) {
+        rigid = py::array_t<uint8_t, py::array::c_style | py::array::forcecast>::ensure(rigid_in);
+        if (!rigid || rigid.ndim() != 2 || rigid.shape(0) != input.height || rigid.shape(1) != input.width) {
+            throw py::value_error("rigid must be a (H, W) boolean array matching energy's " +
+                                  std::to_string(input.height) + "x" + std::to_string(input.width));
+        }
+        input.rigid = rigid.data();
+    }
+    AutomatonOptions options;
+    options.diffusion = diffusion;
+    options.rate = rate;
+    options.delta = delta;
+    options.max_steps = max_steps;
+    options.min_area = min_shrink;
+    options.max_area = max_magnification;
+    options.border = parse_border_mode(border);
+    options.coarse_to_fine = coarse_to_fine;
+    options.passes = passes;
+    options.check_invariants = check_invariants;
+
+    py_util::PythonProgress progress(std::move(progress_callback));
+    AutomatonResult result = progress.run([&](Progress& p) { return run_automaton(input, options, &p); });
+
+    py::list levels;
+    for (const LevelStats& s : result.levels) {
+        py::dict level;
+        level["block"] = s.block;
+        level["rows"] = s.rows;
+        level["cols"] = s.cols;
+        level["steps"] = s.steps;
+        level["max_difference"] = s.max_difference;
+        level["converged"] = s.converged;
+        level["settled"] = s.settled;
+        levels.append(level);
+    }
+    py::dict out;
+    out["cell_area"] = py_util::to_numpy(cell_areas(result.grid), {input.height, input.width});
+    out["grid"] = py_util::grid_to_numpy(result.grid, input.width, input.height);
+    std::vector<py::ssize_t> shape{input.height, input.width};
+    if (input.channels > 1) shape.push_back(input.channels);
+    out["energy"] = py_util::to_numpy(std::move(result.energy), shape);
+    out["steps"] = result.steps;
+    out["converged"] = result.converged;
+    out["levels"] = levels;
+    return out;
+}
+
+}  // namespace
+
+void bind_automaton(py::module_& m) {
+    const AutomatonOptions d;
+    m.def("run_automaton", &run, py::arg("energy"), py::arg("mask") = py::none(), py::kw_only(),
+          py::arg("rigid") = py::none(),
+          py::arg("diffusion") = d.diffusion, py::arg("rate") = d.rate, py::arg("delta") = d.delta,
+          py::arg("max_steps") = d.max_steps, py::arg("min_shrink") = d.min_area,
+          py::arg("max_magnification") = d.max_area, py::arg("border") = "same",
+          py::arg("coarse_to_fine") = d.coarse_to_fine, py::arg("passes") = d.passes,
+          py::arg("check_invariants") = false, py::arg("progress") = py::none(),
+          R"doc(Run the cellular automaton on an energy map (see docs/refiner.md).
+
+Args:
+    energy (numpy.ndarray): float32 (H, W) energies >= 0, or (H, W, 4) for
+        the directional variant (r facing down, g right, b up, a left).
+    mask (numpy.ndarray | None): (H, W) bool, True where a chart covers the
+        texel. Uncovered cells hold no energy and are never compressed.
+    rigid (numpy.ndarray | None): (H, W) bool, more texels whose cells may
+        shift but never shrink below their original area, width or height
+        (e.g. gutter_texels(uvs, triangles, resolution)); uncovered texels
+        and covered ones next to them always are.
+    diffusion (float): energy moved per step per unit density difference, <= 0.25.
+    rate (float): node move per step, in cell sizes, at full contrast.
+    delta (float): stop when every neighbour density difference, relative
+        to the mean density, is below delta.
+    max_steps (int): step cap per pyramid level.
+    min_shrink, max_magnification (float): bounds on a covered cell's area
+        relative to its original area.
+    border (str): 'same', 'border_rule' or 'extra_ring'.
+    coarse_to_fine (bool): run on a pyramid (False: one level, for comparison).
+    passes (int): extra passes rerun the finest level with fresh energies.
+    check_invariants (bool): verify every invariant after every step and
+        raise RuntimeError naming the first that fails (for tests).
+    progress (callable | None): progress(fraction, stage); False cancels.
+
+Returns:
+    dict: grid (H + 1, W + 1, 2) float32 node positions in UV space,
+    cell_area (H, W) float32 in texels, energy (final energies, the input's
+    shape), steps (int), converged (bool), levels (list of per-level dicts:
+    block, rows, cols, steps, max_difference, converged, settled; coarsest first).
+)doc");
+}
+
+}  // namespace lmrefine::bindings

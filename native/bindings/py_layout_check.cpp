@@ -1,0 +1,111 @@
+#include <pybind11/pybind11.h>
+
+#include "lmrefine/error.h"
+#include "lmrefine/gutter.h"
+#include "lmrefine/layout_check.h"
+#include "numpy_util.h"
+
+namespace py = pybind11;
+
+namespace lmrefine::bindings {
+namespace {
+
+py::dict check(const py::handle& uvs_in, const py::handle& triangles_in, const py::handle& resolution,
+               double padding, const py::handle& reference_in, bool failing_charts,
+               bool relative_gutter) {
+    auto uvs = py_util::require_points(uvs_in, "uvs", 2);
+    auto triangles = py_util::require_indices(triangles_in, "triangles", 3, /*allow_empty=*/true);
+    const auto [height, width] = py_util::parse_resolution(resolution);
+    py_util::FloatArray reference;
+    if (!reference_in.is_none()) {
+        reference = py_util::require_points(reference_in, "reference_uvs", 2);
+        if (reference.shape(0) != uvs.shape(0)) {
+            throw py::value_error("reference_uvs has " + std::to_string(reference.shape(0)) + " UVs but uvs has " +
+                                  std::to_string(uvs.shape(0)) + "; pass the original layout of the same mesh");
+        }
+    }
+    UvLayout layout{uvs.data(), uvs.shape(0), triangles.data(), triangles.shape(0)};
+    LayoutReport r;
+    {
+        py::gil_scoped_release release;
+        r = check_layout(layout, width, height, padding, reference_in.is_none() ? nullptr : reference.data(),
+                         failing_charts, relative_gutter);
+    }
+    py::dict out;
+    out["flipped"] = r.flipped;
+    out["degenerate"] = r.degenerate;
+    out["overlapping"] = r.overlapping;
+    out["out_of_bounds"] = r.out_of_bounds;
+    out["min_gutter_texels"] = r.min_gutter_texels;
+    out["charts"] = r.charts;
+    out["valid"] = r.valid;
+    if (relative_gutter) out["gutter_violations"] = r.gutter_violations;
+    if (failing_charts) {
+        const py::ssize_t n = py::ssize_t(r.failing_charts.size());
+        out["failing_charts"] = py_util::to_numpy(std::move(r.failing_charts), {n});
+    }
+    return out;
+}
+
+py::array_t<bool> gutter(const py::handle& uvs_in, const py::handle& triangles_in, const py::handle& resolution) {
+    auto uvs = py_util::require_points(uvs_in, "uvs", 2);
+    auto triangles = py_util::require_indices(triangles_in, "triangles", 3, /*allow_empty=*/true);
+    const auto [height, width] = py_util::parse_resolution(resolution);
+    UvLayout layout{uvs.data(), uvs.shape(0), triangles.data(), triangles.shape(0)};
+    std::vector<uint8_t> texels;
+    {
+        py::gil_scoped_release release;
+        texels = gutter_texels(layout, width, height);
+    }
+    auto bytes = py_util::to_numpy(std::move(texels), {height, width});
+    return bytes.attr("view")(py::dtype::of<bool>()).cast<py::array_t<bool>>();
+}
+
+}  // namespace
+
+void bind_layout_check(py::module_& m) {
+    m.def("gutter_texels", &gutter, py::arg("uvs"), py::arg("triangles"), py::arg("resolution"),
+          R"doc(Texels the refiner may shift but not compress: (H, W) bool, True for
+texels no chart covers and texels next to (8-neighbourhood) a texel of
+another owner (uncovered, another chart, or two charts). Pass as
+``run_automaton(..., rigid=)`` so chart pairs do not get closer.
+)doc");
+    m.def("check_layout", &check, py::arg("uvs"), py::arg("triangles"), py::arg("resolution"),
+          py::arg("padding") = 2.0, py::kw_only(), py::arg("reference_uvs") = py::none(),
+          py::arg("failing_charts") = false, py::arg("relative_gutter") = false,
+          R"doc(Check a UV layout for use as a lightmap layout at a resolution.
+
+Args:
+    uvs (numpy.ndarray): (N, 2) per-corner UVs.
+    triangles (numpy.ndarray): (T, 3) integer indices into ``uvs``.
+    resolution (int | tuple[int, int]): lightmap size, square or (height, width).
+    padding (float): the smallest acceptable gutter between charts, in texels.
+    reference_uvs (numpy.ndarray | None): the original layout (N, 2); with
+        it, a triangle is flipped if its orientation differs from the
+        original's, without it if it differs from most of its chart's.
+    failing_charts (bool): also return ``failing_charts``, the ids of charts
+        with a flipped, overlapping or newly degenerate triangle or too close
+        to another chart.
+    relative_gutter (bool): with ``reference_uvs``, judge the gutter per
+        chart pair: a pair must stay at least min(padding, its distance in
+        the reference) apart (less 1e-4 texel); adds ``gutter_violations``
+        (pairs closer than that), and ``failing_charts`` then lists their
+        charts rather than every chart closer than padding. ``valid`` stays
+        absolute (min_gutter_texels >= padding).
+
+Returns:
+    dict: flipped, degenerate (zero area to float precision), overlapping
+    (triangles that share area with a triangle of another chart, tested
+    exactly where their rasterizations meet), out_of_bounds (UVs outside
+    [0, 1]), min_gutter_texels (exact smallest distance between two charts'
+    boundaries in texels; inf with fewer than two charts), charts, and valid
+    (nothing flipped, degenerate, overlapping or out of bounds, and
+    min_gutter_texels >= padding). Charts are those of find_charts (of the
+    reference layout when given).
+
+Raises:
+    ValueError: bad shapes, indices out of range, NaN UVs, resolution <= 0.
+)doc");
+}
+
+}  // namespace lmrefine::bindings

@@ -1,0 +1,19 @@
+// Gutter texels: the texels whose cells the automaton may shift but not
+// compress, so the gutter between charts keeps its width (issue 3, method §7).
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "lmrefine/coverage.h"
+
+namespace lmrefine {
+
+// (height * width) bytes, 1 for texels no chart covers and for texels next
+// to (8-neighbourhood) a texel of another owner: uncovered, another chart,
+// or covered by two charts. Every straight path between two charts crosses
+// only such texels near its ends, so if their cells do not contract, chart
+// pairs do not get closer. Charts as find_charts.
+std::vector<uint8_t> gutter_texels(const UvLayout& layout, int width, int height);
+
+}  // namespace lmrefine

@@ -1,0 +1,475 @@
+// The automaton's rule (method §4) and its guards. Every quantity of step n+1
+// is computed from the state of step n only, cell by cell and edge by edge,
+// so rows can be split among threads in any way with the same result.
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <string>
+
+#include <glm/common.hpp>
+#include <glm/geometric.hpp>
+
+#include "automaton_level.h"
+#include "lmrefine/error.h"
+#include "lmrefine/parallel.h"
+
+namespace lmrefine::automaton_detail {
+namespace {
+
+constexpr int64_t kRowGrain = 8;
+// fit_to_bounds: nodes this many around an out-of-bounds cell back off with
+// it; below kFitSnap of its move a node goes back to rest; after kFitRounds
+// rounds every node still lowered goes back to rest.
+constexpr int kFitMargin = 1;
+constexpr double kFitSnap = 0.05;
+constexpr int kFitRounds = 40;
+constexpr double kFitFactor = 0.8;
+
+double cross(const glm::dvec2& a, const glm::dvec2& b) { return a.x * b.y - a.y * b.x; }
+
+// Corners of cell (i, j) in order around it.
+void corners(const Level& level, const std::vector<glm::dvec2>& nodes, int i, int j, glm::dvec2 q[4]) {
+    q[0] = nodes[level.node(i, j)];
+    q[1] = nodes[level.node(i, j + 1)];
+    q[2] = nodes[level.node(i + 1, j + 1)];
+    q[3] = nodes[level.node(i + 1, j)];
+}
+
+double quad_area(const glm::dvec2 q[4]) { return 0.5 * (cross(q[2] - q[0], q[3] - q[1])); }
+
+struct Shape {
+    double area;
+    // How far a corner may move in one step: c / (2 (|a| + |b|)) with c the
+    // cross product of the edges a, b at a corner (bounded through
+    // |a| + |b| <= sqrt(2 (|a|^2 + |b|^2))); a quarter cell for a square.
+    // Moves this size can still spoil a cell when all its corners move
+    // against it; step 4 puts those moves back, so validity never rests on
+    // the radius, which only keeps such reverts rare.
+    double radius;
+    // How well shaped, squared and signed (negative if inverted): the
+    // smallest sin^2 of the corner angles, or 16 (shortest / longest edge)^2
+    // if smaller (a convex cell can still collapse an edge into a triangle).
+    double quality2;
+};
+
+Shape shape(const glm::dvec2 q[4]) {
+    glm::dvec2 e[4];
+    double l2[4];
+    for (int k = 0; k < 4; ++k) {
+        e[k] = q[(k + 1) % 4] - q[k];
+        l2[k] = glm::dot(e[k], e[k]);
+    }
+    double r2 = std::numeric_limits<double>::infinity(), sin2 = 1.0;
+    for (int k = 0; k < 4; ++k) {
+        const int p = (k + 3) % 4;
+        const double c = cross(e[p], e[k]);  // at corner k, between its two edges
+        if (!(c > 0)) return {quad_area(q), 0.0, -1.0};
+        r2 = std::min(r2, c * c / (8 * (l2[p] + l2[k])));
+        sin2 = std::min(sin2, c * c / (l2[p] * l2[k]));
+    }
+    const double shortest = std::min({l2[0], l2[1], l2[2], l2[3]});
+    const double longest = std::max({l2[0], l2[1], l2[2], l2[3]});
+    return {quad_area(q), std::sqrt(r2), std::min(sin2, 16 * shortest / longest)};
+}
+
+// Distance across the cell between its left and right edges, and between
+// its top and bottom edges (exact for parallelograms, a lower bound otherwise).
+glm::dvec2 thickness(const glm::dvec2 q[4], double area) {
+    return {area / std::max(glm::length(q[3] - q[0]), glm::length(q[2] - q[1])),
+            area / std::max(glm::length(q[1] - q[0]), glm::length(q[2] - q[3]))};
+}
+
+// The channel of a cell that faces each side (directional variant); with one
+// channel every side uses channel 0.
+struct Facing {
+    int down, right, up, left;
+};
+Facing facing(int channels) { return channels == 4 ? Facing{0, 1, 2, 3} : Facing{0, 0, 0, 0}; }
+
+// Relative pressure difference in [-1, 1]; > 0 moves the edge towards b.
+double push(double a, double b) { return a + b > 0 ? (a - b) / (a + b) : 0.0; }
+
+}  // namespace
+
+void prepare_level(Level& level, const AutomatonOptions& options, bool ring) {
+    const int rows = level.rows(), cols = level.cols(), channels = level.channels;
+    const size_t cells = size_t(rows) * cols;
+    level.kind.assign(cells, CellKind::Material);
+    level.original_area.resize(cells);
+    level.min_area.resize(cells);
+    level.max_area.resize(cells);
+    std::array<double, 4> energy{}, covered_area{};
+    // Coarse levels keep a margin inside the bounds: cells interpolated from
+    // a coarse cell differ in size, and the finest level must start inside.
+    const bool coarse = level.grid.xs[1] - level.grid.xs[0] > 1;
+    const double lowest = coarse ? std::min(1.0, options.min_area * 1.25) : options.min_area;
+    const double highest = coarse ? std::max(1.0, options.max_area * 0.8) : options.max_area;
+    for (int i = 0; i < rows; ++i) {
+        for (int j = 0; j < cols; ++j) {
+            const size_t c = level.cell(i, j);
+            const double a0 = (level.grid.xs[j + 1] - level.grid.xs[j]) * (level.grid.ys[i + 1] - level.grid.ys[i]);
+            level.original_area[c] = a0;
+            const bool in_ring = ring && (i == 0 || j == 0 || i == rows - 1 || j == cols - 1);
+            if (in_ring) {
+                level.kind[c] = CellKind::Ring;
+                level.uncovered_area[c] = a0;
+                level.rigid_area[c] = 0;
+                level.min_area[c] = options.min_area * a0;
+                level.max_area[c] = std::numeric_limits<double>::infinity();
+            } else if (level.uncovered_area[c] >= a0) {
+                level.kind[c] = CellKind::Gutter;
+                level.min_area[c] = a0;  // gutter texels shift but are never compressed
+                level.max_area[c] = std::numeric_limits<double>::infinity();
+            } else {
+                // A coarse cell holding any rigid texel is rigid as a whole:
+                // its texels get their share of its area when it is
+                // interpolated, so a partly rigid block may not shrink.
+                if (coarse && level.rigid_area[c] > 0) level.rigid_area[c] = a0;
+                level.min_area[c] = std::max(lowest * a0, level.rigid_area[c]);
+                level.max_area[c] = highest * a0;
+                for (int k = 0; k < channels; ++k) {
+                    energy[k] += level.energy[c * channels + k];
+                    covered_area[k] += a0 - level.uncovered_area[c];
+                }
+            }
+        }
+    }
+    level.initial_total = 0;
+    for (double e : level.energy) level.initial_total += e;
+    for (int k = 0; k < channels; ++k) {
+        level.reference_density[k] = covered_area[k] > 0 ? energy[k] / covered_area[k] : 0.0;
+    }
+
+    level.node_mode.assign(size_t(rows + 1) * (cols + 1), NodeMode::Free);
+    for (int i = 0; i <= rows; ++i) {
+        for (int j = 0; j <= cols; ++j) {
+            const bool top_bottom = i == 0 || i == rows, left_right = j == 0 || j == cols;
+            NodeMode mode = NodeMode::Free;
+            if (top_bottom && left_right) {
+                mode = NodeMode::Fixed;
+            } else if (top_bottom || left_right) {
+                if (ring || options.border == BorderMode::BorderRule) {
+                    mode = NodeMode::Fixed;
+                } else {
+                    mode = top_bottom ? NodeMode::SlideX : NodeMode::SlideY;
+                }
+            }
+            level.node_mode[level.node(i, j)] = mode;
+        }
+    }
+
+    level.next_nodes = level.grid.nodes;
+    level.next_energy = level.energy;
+    level.area.resize(cells);
+    level.safe_radius.resize(cells);
+    level.quality.resize(cells);
+    level.diffusion_density.resize(cells * channels);
+    level.pressure_density.resize(cells * (channels == 4 ? 2 : 1));
+    level.push_v.assign(size_t(rows) * (cols + 1), 0.0);
+    level.flux_v.assign(size_t(rows) * (cols + 1), 0.0);
+    level.push_h.assign(size_t(rows + 1) * cols, 0.0);
+    level.flux_h.assign(size_t(rows + 1) * cols, 0.0);
+    level.row_difference.assign(size_t(rows + 1), 0.0);
+}
+
+StepStats step(Level& level, const AutomatonOptions& options) {
+    const int rows = level.rows(), cols = level.cols(), channels = level.channels;
+    const Facing face = facing(channels);
+    const int axes = channels == 4 ? 2 : 1;  // pressure: y (and x) axis
+    const std::vector<glm::dvec2>& nodes = level.grid.nodes;
+
+    // 1. Cell state: area, how far its corners may move, densities.
+    parallel_for(rows, kRowGrain, [&](int64_t begin, int64_t end) {
+        for (int i = int(begin); i < int(end); ++i) {
+            for (int j = 0; j < cols; ++j) {
+                const size_t c = level.cell(i, j);
+                glm::dvec2 q[4];
+                corners(level, nodes, i, j, q);
+                const Shape now = shape(q);
+                const double a = now.area;
+                level.area[c] = a;
+                level.safe_radius[c] = now.radius;
+                level.quality[c] = now.quality2;
+                const bool material = level.kind[c] == CellKind::Material;
+                for (int k = 0; k < channels; ++k) {
+                    level.diffusion_density[c * channels + k] = material ? level.energy[c * channels + k] / a : 0.0;
+                }
+                // Pressure per axis: a cell's springs along an axis push both
+                // its edges across that axis (four channels: y from r + b,
+                // x from g + a). Uncovered texels weigh as the mean density.
+                for (int axis = 0; axis < axes; ++axis) {
+                    double e = 0.0, reference = 0.0;
+                    for (int k = axis; k < channels; k += axes) {
+                        e += level.energy[c * channels + k];
+                        reference += level.reference_density[k];
+                    }
+                    level.pressure_density[c * axes + axis] = (e + reference * level.uncovered_area[c]) / a;
+                }
+            }
+        }
+    });
+
+    // 2. Edges: energy flux (only between covered cells, from the denser to
+    // the less dense; the border and the gutter are adiabatic) and the push
+    // that moves the edge towards the less dense cell.
+    auto edge = [&](size_t a, int ka, size_t b, int kb, int axis, double& push_out, double& flux_out) {
+        const double pa = level.pressure_density[a * axes + axis], pb = level.pressure_density[b * axes + axis];
+        push_out = push(pa, pb);
+        flux_out = 0.0;
+        double difference = 0.0;
+        if (level.kind[a] == CellKind::Material && level.kind[b] == CellKind::Material) {
+            const double da = level.diffusion_density[a * channels + ka];
+            const double db = level.diffusion_density[b * channels + kb];
+            flux_out = options.diffusion * std::min(level.area[a], level.area[b]) * (da - db);
+            double reference = 0.0;
+            for (int k = axis; k < channels; k += axes) reference += level.reference_density[k];
+            if (reference > 0) difference = std::abs(pa - pb) / reference;
+        }
+        return difference;
+    };
+    parallel_for(rows + 1, kRowGrain, [&](int64_t begin, int64_t end) {
+        for (int i = int(begin); i < int(end); ++i) {
+            double largest = 0.0;
+            if (i < rows) {
+                for (int j = 1; j < cols; ++j) {
+                    const size_t e = size_t(i) * (cols + 1) + j;
+                    largest = std::max(largest, edge(level.cell(i, j - 1), face.right, level.cell(i, j), face.left,
+                                                     axes - 1, level.push_v[e], level.flux_v[e]));
+                }
+            }
+            if (i > 0 && i < rows) {
+                for (int j = 0; j < cols; ++j) {
+                    const size_t e = size_t(i) * cols + j;
+                    largest = std::max(largest, edge(level.cell(i - 1, j), face.down, level.cell(i, j), face.up, 0,
+                                                     level.push_h[e], level.flux_h[e]));
+                }
+            }
+            level.row_difference[i] = largest;
+        }
+    });
+    const double difference = *std::max_element(level.row_difference.begin(), level.row_difference.end());
+
+    // 3. New energies (each edge's flux leaves one cell and enters the other,
+    // so the total is conserved) and proposed node positions.
+    parallel_for(rows + 1, kRowGrain, [&](int64_t begin, int64_t end) {
+        for (int i = int(begin); i < int(end); ++i) {
+            if (i < rows) {
+                for (int j = 0; j < cols; ++j) {
+                    const size_t c = level.cell(i, j);
+                    double* e = &level.next_energy[c * channels];
+                    for (int k = 0; k < channels; ++k) e[k] = level.energy[c * channels + k];
+                    const size_t v = size_t(i) * (cols + 1) + j, h = size_t(i) * cols + j;
+                    e[face.left] += level.flux_v[v];
+                    e[face.right] -= level.flux_v[v + 1];
+                    e[face.up] += level.flux_h[h];
+                    e[face.down] -= level.flux_h[h + cols];
+                    // Rounding can leave -1e-17 where a cell gave all it had.
+                    for (int k = 0; k < channels; ++k) e[k] = std::max(e[k], 0.0);
+                }
+            }
+            for (int j = 0; j <= cols; ++j) {
+                const size_t n = level.node(i, j);
+                glm::dvec2 p = nodes[n];
+                const NodeMode mode = level.node_mode[n];
+                if (mode != NodeMode::Fixed) {
+                    // The vertical edges above and below the node move it in x,
+                    // the horizontal edges left and right of it in y; a missing
+                    // edge (at the border) contributes nothing.
+                    double fx = 0, fy = 0, area_sum = 0, radius = std::numeric_limits<double>::infinity();
+                    int adjacent = 0;
+                    if (i > 0) fx += level.push_v[size_t(i - 1) * (cols + 1) + j];
+                    if (i < rows) fx += level.push_v[size_t(i) * (cols + 1) + j];
+                    if (j > 0) fy += level.push_h[size_t(i) * cols + j - 1];
+                    if (j < cols) fy += level.push_h[size_t(i) * cols + j];
+                    for (int di = -1; di <= 0; ++di) {
+                        for (int dj = -1; dj <= 0; ++dj) {
+                            const int ci = i + di, cj = j + dj;
+                            if (ci < 0 || cj < 0 || ci >= rows || cj >= cols) continue;
+                            area_sum += level.area[level.cell(ci, cj)];
+                            radius = std::min(radius, level.safe_radius[level.cell(ci, cj)]);
+                            ++adjacent;
+                        }
+                    }
+                    const double size = std::sqrt(area_sum / adjacent);
+                    glm::dvec2 move = 0.5 * options.rate * size * glm::dvec2(fx, fy);
+                    if (mode == NodeMode::SlideX) move.y = 0;
+                    if (mode == NodeMode::SlideY) move.x = 0;
+                    const double length = glm::length(move);
+                    if (length > radius) move *= radius / length;
+                    p += move;
+                    p.x = std::clamp(p.x, level.grid.xs.front(), level.grid.xs.back());
+                    p.y = std::clamp(p.y, level.grid.ys.front(), level.grid.ys.back());
+                }
+                level.next_nodes[n] = p;
+            }
+        }
+    });
+
+    // 4. Shape bounds: a cell may not leave [min_area, max_area], get a corner
+    // sharper or an edge shorter than kMinQuality allows (which includes
+    // turning concave or inside out), or (a cell of rigid texels only) get
+    // thinner than its original width or height; nor move further out of a
+    // bound it already breaks (cells interpolated from a coarser level may).
+    // Cells that would are frozen by putting their corners back. A cell all
+    // of whose corners are back is in its previous, valid state, so
+    // repeating until nothing breaks a bound ends in a valid state. The first round
+    // checks every cell in parallel; later rounds only the cells around the
+    // corners just put back (rounds are whole sets, so the order within a
+    // round does not matter).
+    auto breaks_bound = [&](int i, int j) {
+        const size_t c = level.cell(i, j);
+        glm::dvec2 q[4];
+        corners(level, level.next_nodes, i, j, q);
+        glm::dvec2 old[4];
+        corners(level, nodes, i, j, old);
+        if (q[0] == old[0] && q[1] == old[1] && q[2] == old[2] && q[3] == old[3]) return false;  // unchanged
+        const Shape now = shape(q);
+        const double a = now.area, before = level.area[c];
+        if ((a < level.min_area[c] && a < before) || (a > level.max_area[c] && a > before)) return true;
+        if (now.quality2 < kMinQuality * kMinQuality && now.quality2 < level.quality[c]) return true;
+        if (level.rigid_area[c] < level.original_area[c]) return false;
+        const glm::dvec2 thin = thickness(q, a), was = thickness(old, before);
+        const double w0 = level.grid.xs[j + 1] - level.grid.xs[j];
+        const double h0 = level.grid.ys[i + 1] - level.grid.ys[i];
+        return (thin.x < w0 && thin.x < was.x) || (thin.y < h0 && thin.y < was.y);
+    };
+    std::vector<std::vector<int32_t>> row_breaking(static_cast<size_t>(rows));
+    parallel_for(rows, kRowGrain, [&](int64_t begin, int64_t end) {
+        for (int i = int(begin); i < int(end); ++i) {
+            row_breaking[size_t(i)].clear();
+            for (int j = 0; j < cols; ++j) {
+                if (breaks_bound(i, j)) row_breaking[size_t(i)].push_back(int32_t(level.cell(i, j)));
+            }
+        }
+    });
+    std::vector<int32_t> breaking;
+    for (const auto& r : row_breaking) breaking.insert(breaking.end(), r.begin(), r.end());
+    std::vector<int32_t> suspects;
+    while (!breaking.empty()) {
+        suspects.clear();
+        for (int32_t c : breaking) {
+            const int i = c / cols, j = c % cols;
+            for (int ni = i; ni <= i + 1; ++ni) {
+                for (int nj = j; nj <= j + 1; ++nj) {
+                    level.next_nodes[level.node(ni, nj)] = nodes[level.node(ni, nj)];
+                    for (int ci = std::max(0, ni - 1); ci <= std::min(rows - 1, ni); ++ci) {
+                        for (int cj = std::max(0, nj - 1); cj <= std::min(cols - 1, nj); ++cj) {
+                            suspects.push_back(int32_t(level.cell(ci, cj)));
+                        }
+                    }
+                }
+            }
+        }
+        std::sort(suspects.begin(), suspects.end());
+        suspects.erase(std::unique(suspects.begin(), suspects.end()), suspects.end());
+        breaking.clear();
+        for (int32_t c : suspects) {
+            if (breaks_bound(c / cols, c % cols)) breaking.push_back(c);
+        }
+    }
+
+    // The largest node move actually made, in cell sizes of this level.
+    const double block = level.grid.xs[1] - level.grid.xs[0];
+    parallel_for(rows + 1, kRowGrain, [&](int64_t begin, int64_t end) {
+        for (int i = int(begin); i < int(end); ++i) {
+            double largest = 0.0;
+            for (int j = 0; j <= cols; ++j) {
+                const glm::dvec2 d = level.next_nodes[level.node(i, j)] - nodes[level.node(i, j)];
+                largest = std::max(largest, glm::dot(d, d));
+            }
+            level.row_difference[size_t(i)] = largest;
+        }
+    });
+    const double moved = std::sqrt(*std::max_element(level.row_difference.begin(), level.row_difference.end()));
+
+    level.grid.nodes.swap(level.next_nodes);
+    level.energy.swap(level.next_energy);
+    return {difference, moved / block};
+}
+
+int fit_to_bounds(Level& level) {
+    const int rows = level.rows(), cols = level.cols();
+    const NodeGrid& grid = level.grid;
+    const std::vector<glm::dvec2> carried = grid.nodes;
+    std::vector<double> kept(carried.size(), 1.0);
+    std::vector<uint8_t> bad(size_t(rows) * cols, 0);
+    auto out_of_bounds = [&](int i, int j) {
+        const size_t c = level.cell(i, j);
+        glm::dvec2 q[4];
+        corners(level, grid.nodes, i, j, q);
+        const Shape now = shape(q);
+        if (now.quality2 < 0) return true;  // not convex
+        if (now.area < level.min_area[c] || now.area > level.max_area[c]) return true;
+        if (level.rigid_area[c] < level.original_area[c]) return false;
+        const glm::dvec2 thin = thickness(q, now.area);
+        return thin.x < grid.xs[j + 1] - grid.xs[j] || thin.y < grid.ys[i + 1] - grid.ys[i];
+    };
+    for (int round = 0;; ++round) {
+        std::vector<uint8_t> any_bad(size_t(rows), 0);
+        parallel_for(rows, kRowGrain, [&](int64_t begin, int64_t end) {
+            for (int i = int(begin); i < int(end); ++i) {
+                for (int j = 0; j < cols; ++j) {
+                    bad[level.cell(i, j)] = out_of_bounds(i, j);
+                    any_bad[size_t(i)] |= bad[level.cell(i, j)];
+                }
+            }
+        });
+        if (std::find(any_bad.begin(), any_bad.end(), 1) == any_bad.end()) return round;
+        // Halve the move of every node within kFitMargin nodes of a bad
+        // cell (once per round), to 0 below kFitSnap: a cell whose nodes
+        // are all back at rest is the identity, inside every bound.
+        std::vector<uint8_t> lower(carried.size(), 0);
+        for (int i = 0; i < rows; ++i) {
+            if (!any_bad[size_t(i)]) continue;
+            for (int j = 0; j < cols; ++j) {
+                if (!bad[level.cell(i, j)]) continue;
+                for (int ni = std::max(0, i - kFitMargin); ni <= std::min(rows, i + 1 + kFitMargin); ++ni) {
+                    for (int nj = std::max(0, j - kFitMargin); nj <= std::min(cols, j + 1 + kFitMargin); ++nj) {
+                        lower[level.node(ni, nj)] = 1;
+                    }
+                }
+            }
+        }
+        const bool last = round >= kFitRounds;
+        for (int i = 0; i <= rows; ++i) {
+            for (int j = 0; j <= cols; ++j) {
+                const size_t n = level.node(i, j);
+                if (!lower[n]) continue;
+                kept[n] = last || kept[n] < kFitSnap ? 0.0 : kFitFactor * kept[n];
+                const glm::dvec2 rest(grid.xs[j], grid.ys[i]);
+                level.grid.nodes[n] = rest + kept[n] * (carried[n] - rest);
+            }
+        }
+    }
+}
+
+void check_invariants(const Level& level, int step_index) {
+    auto fail = [&](const std::string& what) {
+        LMREFINE_THROW(Error, "automaton invariant broken after step " + std::to_string(step_index) + " (" +
+                                  std::to_string(level.rows()) + "x" + std::to_string(level.cols()) +
+                                  " cells): " + what);
+    };
+    const NodeGrid& grid = level.grid;
+    for (int i = 0; i < level.rows(); ++i) {
+        for (int j = 0; j < level.cols(); ++j) {
+            if (!(min_corner_cross(grid, i, j) > 0)) {
+                fail("cell (" + std::to_string(i) + ", " + std::to_string(j) + ") is inverted or degenerate");
+            }
+        }
+    }
+    for (const glm::dvec2& p : grid.nodes) {
+        if (!(p.x >= grid.xs.front() && p.x <= grid.xs.back() && p.y >= grid.ys.front() && p.y <= grid.ys.back())) {
+            fail("a node left the grid's rectangle");
+        }
+    }
+    double total = 0;
+    for (double e : level.energy) {
+        if (!(e >= 0)) fail("negative energy " + std::to_string(e));
+        total += e;
+    }
+    if (std::abs(total - level.initial_total) > 1e-9 * std::max(1.0, level.initial_total)) {
+        fail("total energy changed from " + std::to_string(level.initial_total) + " to " + std::to_string(total));
+    }
+}
+
+}  // namespace lmrefine::automaton_detail

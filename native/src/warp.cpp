@@ -1,0 +1,91 @@
+#include "lmrefine/warp.h"
+
+#include <algorithm>
+
+#include "lmrefine/error.h"
+#include "lmrefine/parallel.h"
+#include "lmrefine/texel_space.h"
+
+namespace lmrefine {
+namespace {
+
+// Index of the interval [v[k], v[k+1]] that holds x (clamped to the ends).
+// Grids are nearly always evenly spaced (all but the last interval), so the
+// index is guessed from the first spacing and searched for only if wrong.
+int interval(const std::vector<double>& v, double x) {
+    const int last = int(v.size()) - 2;
+    const int guess = std::clamp(int((x - v[0]) / (v[1] - v[0])), 0, last);
+    if ((v[guess] <= x || guess == 0) && (x <= v[guess + 1] || guess == last)) return guess;
+    const auto it = std::upper_bound(v.begin() + 1, v.end() - 1, x);
+    return int(it - v.begin()) - 1;
+}
+
+double cross(const glm::dvec2& a, const glm::dvec2& b) { return a.x * b.y - a.y * b.x; }
+
+}  // namespace
+
+NodeGrid identity_grid(int width, int height, int block) {
+    LMREFINE_REQUIRE(width > 0 && height > 0 && block > 0, "grid size must be positive");
+    NodeGrid grid;
+    grid.cols = (width + block - 1) / block;
+    grid.rows = (height + block - 1) / block;
+    for (int j = 0; j <= grid.cols; ++j) grid.xs.push_back(std::min(j * block, width));
+    for (int i = 0; i <= grid.rows; ++i) grid.ys.push_back(std::min(i * block, height));
+    grid.nodes.resize(size_t(grid.rows + 1) * (grid.cols + 1));
+    for (int i = 0; i <= grid.rows; ++i) {
+        for (int j = 0; j <= grid.cols; ++j) grid.node(i, j) = {grid.xs[j], grid.ys[i]};
+    }
+    return grid;
+}
+
+glm::dvec2 warp_point(const NodeGrid& grid, glm::dvec2 p) {
+    p.x = std::clamp(p.x, grid.xs.front(), grid.xs.back());
+    p.y = std::clamp(p.y, grid.ys.front(), grid.ys.back());
+    const int j = interval(grid.xs, p.x), i = interval(grid.ys, p.y);
+    const double s = (p.x - grid.xs[j]) / (grid.xs[j + 1] - grid.xs[j]);
+    const double t = (p.y - grid.ys[i]) / (grid.ys[i + 1] - grid.ys[i]);
+    const glm::dvec2 top = grid.node(i, j) * (1 - s) + grid.node(i, j + 1) * s;
+    const glm::dvec2 bottom = grid.node(i + 1, j) * (1 - s) + grid.node(i + 1, j + 1) * s;
+    return top * (1 - t) + bottom * t;
+}
+
+void warp_uvs(const NodeGrid& grid, int width, int height, const float* uvs, int64_t count, float* out) {
+    parallel_for(count, 4096, [&](int64_t begin, int64_t end) {
+        for (int64_t k = begin; k < end; ++k) {
+            const glm::dvec2 p = uv_to_pixel({uvs[2 * k], uvs[2 * k + 1]}, width, height);
+            const glm::dvec2 uv = pixel_to_uv(warp_point(grid, p), width, height);
+            out[2 * k] = float(uv.x);
+            out[2 * k + 1] = float(uv.y);
+        }
+    });
+}
+
+double min_corner_cross(const NodeGrid& grid, int i, int j) {
+    // Corners in order around the cell: top-left, top-right, bottom-right, bottom-left.
+    const glm::dvec2 q[4] = {grid.node(i, j), grid.node(i, j + 1), grid.node(i + 1, j + 1), grid.node(i + 1, j)};
+    double smallest = cross(q[1] - q[0], q[3] - q[0]);
+    for (int k = 1; k < 4; ++k) {
+        smallest = std::min(smallest, cross(q[(k + 1) % 4] - q[k], q[(k + 3) % 4] - q[k]));
+    }
+    return smallest;
+}
+
+}  // namespace lmrefine
+
+namespace lmrefine {
+
+std::vector<float> cell_areas(const NodeGrid& grid) {
+    std::vector<float> areas(size_t(grid.rows) * grid.cols);
+    parallel_for(grid.rows, 16, [&](int64_t begin, int64_t end) {
+        for (int i = int(begin); i < int(end); ++i) {
+            for (int j = 0; j < grid.cols; ++j) {
+                const glm::dvec2 d1 = grid.node(i + 1, j + 1) - grid.node(i, j);
+                const glm::dvec2 d2 = grid.node(i + 1, j) - grid.node(i, j + 1);
+                areas[size_t(i) * grid.cols + j] = float(0.5 * cross(d1, d2));
+            }
+        }
+    });
+    return areas;
+}
+
+}  // namespace lmrefine

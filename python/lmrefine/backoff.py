@@ -1,0 +1,153 @@
+"""Backing off a deformed grid until the layout it gives is valid (method §7).
+
+The full warp can break a layout where triangles are large next to strong
+deformation (a triangle's edges stay straight while the grid bends), or
+where charts sit closer than the deformation allows. Rather than weakening
+the whole refinement for one tight spot, the deformation is blended back
+towards the identity only around the charts that fail: every node keeps a
+fraction t of its displacement; t halves, round by round, in the
+neighbourhood of each failing chart (and of any grid cell the blend made
+invalid) until the layout passes. The original layout is the last resort.
+"""
+
+import numpy as np
+
+from . import _native
+
+# Nodes this many texels around a failing chart's bounding box back off with it.
+_MARGIN = 3
+_ROUNDS = 10
+# Below this fraction a region goes all the way back to the original.
+_SNAP_TO_ZERO = 0.05
+
+
+def failures(report, original, padding):
+    """What makes `report` worse than allowed, relative to the original layout.
+    The gutter: per chart pair when `report` has gutter_violations (a
+    check_layout(..., relative_gutter=True) report), else globally."""
+    failed = []
+    if report["flipped"]:
+        failed.append("flipped")
+    if report["degenerate"] > original["degenerate"]:
+        failed.append("degenerate")
+    if report["overlapping"] > original["overlapping"]:
+        failed.append("overlapping")
+    if report["out_of_bounds"]:
+        failed.append("out_of_bounds")
+    if "gutter_violations" in report:
+        if report["gutter_violations"]:
+            failed.append("gutter")
+    elif report["min_gutter_texels"] < allowed_gutter(padding, original):
+        failed.append("gutter")
+    return failed
+
+
+def allowed_gutter(padding, original):
+    """The padding, or the original's gutter if that is already narrower
+    (less float32 rounding: about 1e-4 texel at 4k)."""
+    return min(padding, original["min_gutter_texels"]) - 1e-4
+
+
+def invalid_cells(grid):
+    """(H, W) bool: cells that are not convex, non-inverted quadrilaterals
+    (UV space, v up, so a valid cell turns clockwise)."""
+    q = [grid[:-1, :-1], grid[:-1, 1:], grid[1:, 1:], grid[1:, :-1]]
+    bad = np.zeros(grid.shape[:2] - np.array([1, 1]), bool)
+    for k in range(4):
+        a = q[(k + 1) % 4] - q[k]
+        b = q[(k + 3) % 4] - q[k]
+        bad |= (a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]) >= 0
+    return bad
+
+
+def chart_boxes(uvs, triangles, shape):
+    """Per chart, its node-index bounding box (i0, j0, i1, j1), widened by _MARGIN."""
+    height, width = shape
+    charts = _native.find_charts(uvs, triangles)
+    count = int(charts.max()) + 1 if len(charts) else 0
+    corner_chart = np.repeat(charts, 3)
+    corners = uvs[triangles.ravel()].astype(np.float64)
+    x, y = corners[:, 0] * width, (1 - corners[:, 1]) * height
+    lo_x, lo_y = np.full(count, np.inf), np.full(count, np.inf)
+    hi_x, hi_y = np.full(count, -np.inf), np.full(count, -np.inf)
+    np.minimum.at(lo_x, corner_chart, x)
+    np.minimum.at(lo_y, corner_chart, y)
+    np.maximum.at(hi_x, corner_chart, x)
+    np.maximum.at(hi_y, corner_chart, y)
+    i0 = np.clip(np.floor(lo_y) - _MARGIN, 0, height).astype(int)
+    j0 = np.clip(np.floor(lo_x) - _MARGIN, 0, width).astype(int)
+    i1 = np.clip(np.ceil(hi_y) + _MARGIN, 0, height).astype(int)
+    j1 = np.clip(np.ceil(hi_x) + _MARGIN, 0, width).astype(int)
+    return np.stack([i0, j0, i1, j1], axis=1)
+
+
+def _around(cells, margin):
+    """Nodes of the given cells, grown by `margin` nodes."""
+    nodes = np.zeros((cells.shape[0] + 1, cells.shape[1] + 1), bool)
+    for di in (0, 1):
+        for dj in (0, 1):
+            nodes[di:di + cells.shape[0], dj:dj + cells.shape[1]] |= cells
+    for _ in range(margin):
+        grown = nodes.copy()
+        grown[1:] |= nodes[:-1]
+        grown[:-1] |= nodes[1:]
+        grown[:, 1:] |= nodes[:, :-1]
+        grown[:, :-1] |= nodes[:, 1:]
+        nodes = grown
+    return nodes
+
+
+def _ramp(kept):
+    """Lower `kept` around its dips so it changes gradually (a step in the
+    fraction kept would shear the cells across it)."""
+    for _ in range(_MARGIN):
+        padded = np.pad(kept, 1, mode="edge")
+        mean = sum(padded[1 + di:padded.shape[0] - 1 + di, 1 + dj:padded.shape[1] - 1 + dj]
+                   for di in (-1, 0, 1) for dj in (-1, 0, 1)) / 9
+        kept = np.minimum(kept, mean.astype(np.float32))
+    return kept
+
+
+def accept(full, identity, uvs, triangles, shape, padding, original):
+    """The most of `full` that gives a valid layout.
+
+    Returns (grid, uvs, check, kept, limited_by): the blended grid, the
+    warped UVs, their check_layout report, the (H + 1, W + 1) fraction of
+    the deformation kept at each node, and what forced any back-off.
+    """
+    kept = np.ones(full.shape[:2], np.float32)
+    threshold = max(allowed_gutter(padding, original), 0.0)
+    boxes = None
+    limited_by = []
+    for _ in range(_ROUNDS):
+        grid = (identity + kept[..., None] * (full - identity)).astype(np.float32)
+        bad_cells = invalid_cells(grid)
+        if not bad_cells.any():
+            new_uvs = _native.warp_uvs(uvs, grid)
+            # Per chart pair: no pair closer than min(padding, its original
+            # distance), so one tight pair does not hold back all the others.
+            check = _native.check_layout(new_uvs, triangles, shape, padding, reference_uvs=uvs,
+                                         failing_charts=True, relative_gutter=True)
+            failed = failures(check, original, padding)
+            if not failed:
+                check.pop("failing_charts")
+                # `valid` at the gutter required of the whole layout.
+                check["valid"] = bool(check["flipped"] == check["degenerate"] == check["overlapping"]
+                                      == check["out_of_bounds"] == 0 and check["min_gutter_texels"] >= threshold)
+                return grid, new_uvs, check, kept, limited_by
+            limited_by += [f for f in failed if f not in limited_by]
+            if boxes is None:
+                boxes = chart_boxes(uvs, triangles, shape)
+            region = np.zeros(kept.shape, bool)
+            for i0, j0, i1, j1 in boxes[check["failing_charts"]]:
+                region[i0:i1 + 1, j0:j1 + 1] = True
+        else:
+            if "grid" not in limited_by:
+                limited_by.append("grid")
+            region = _around(bad_cells, _MARGIN)
+        if not region.any():  # a failure no chart owns: back off everywhere
+            region[:] = True
+        kept[region] = np.where(kept[region] > _SNAP_TO_ZERO, 0.5 * kept[region], 0.0)
+        kept = _ramp(kept)
+    kept[:] = 0.0
+    return identity, uvs.copy(), original, kept, limited_by

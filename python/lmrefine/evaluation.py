@@ -1,0 +1,308 @@
+"""Evaluation of the whole method on a scene: is the refined lightmap better?
+
+    baseline bake at R -> refine_uvs -> re-bake at R with the refined UVs ->
+    ground truth at surface points -> baseline bakes at R x multipliers ->
+    metrics (lmrefine.metrics) -> report.md, report.json, pictures
+
+Used by ``python3 -m lmrefine evaluate`` and ``demo``; the metrics are defined
+in :mod:`lmrefine.metrics` and docs/evaluation.md.
+"""
+
+import math
+import os
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import bake, check_layout, find_charts, metrics, refine_uvs, write_image
+from . import evaluate as evaluate_light
+
+DEFAULT_MULTIPLIERS = (1.0, 1.5, 2.0, 3.0, 4.0)
+# A transition-point RMSE at least this much lower counts as a gain.
+GAIN_THRESHOLD = 0.05
+
+
+@dataclass
+class EvaluationOptions:
+    resolution: int = 256
+    variant: str = "smart"            # UV variant of the sample scene
+    samples: int = 32                 # bake samples per texel
+    truth_samples: int = 256          # lmrefine.evaluate samples per point (ground truth)
+    points: int = 20000               # surface points
+    seed: int = 0
+    multipliers: tuple = DEFAULT_MULTIPLIERS
+    padding: float = 2.0              # gutter the refined layout must keep, texels
+    denoise: bool = False
+    bake_pass: str = None             # None: the scene's own pass (direct, or combined for the room)
+    refine_options: dict = field(default_factory=dict)   # passed to refine_uvs (strength, passes, ...)
+
+    def check(self):
+        if self.resolution < 8:
+            raise ValueError(f"resolution must be at least 8, got {self.resolution}")
+        if self.points < 100:
+            raise ValueError(f"points must be at least 100 (for a top decile of transitions), got {self.points}")
+        if self.samples < 1 or self.truth_samples < 1:
+            raise ValueError("samples and truth_samples must be at least 1")
+        m = tuple(float(x) for x in self.multipliers)
+        if len(m) < 2 or m[0] != 1.0 or any(b <= a for a, b in zip(m, m[1:])):
+            raise ValueError(f"multipliers must start at 1 and increase, e.g. 1,1.5,2,3,4; got {self.multipliers}")
+        self.multipliers = m
+
+
+class _Stages:
+    """Wall-clock seconds per named stage, and a progress callback that
+    labels every stage with the scene's name."""
+
+    def __init__(self, label, progress):
+        self.label, self.progress, self.seconds = label, progress, {}
+
+    def callback(self, stage):
+        if self.progress is None:
+            return None
+        return lambda fraction, inner=None: self.progress(fraction, f"{self.label}: {stage}")
+
+    def run(self, stage, work):
+        start = time.perf_counter()
+        result = work(self.callback(stage))
+        self.seconds[stage] = self.seconds.get(stage, 0.0) + time.perf_counter() - start
+        return result
+
+
+def _bake_map(sample, uvs, resolution, options, progress):
+    scene = sample.to_scene(uvs)
+    passes = _single_pass(sample, options)
+    result = bake(scene, resolution, passes=passes, samples=options.samples, seed=options.seed,
+                  progress=progress, denoise=options.denoise)
+    return np.ascontiguousarray(result[0][..., :3])
+
+
+def _single_pass(sample, options):
+    if options.bake_pass:
+        return options.bake_pass
+    if len(sample.passes) != 1:
+        raise ValueError(f"scene '{sample.name}' asks for passes {sample.passes}; the evaluation compares one "
+                         "lightmap: use 'combined' for direct + indirect")
+    return sample.passes[0]
+
+
+def _json_safe(value):
+    if isinstance(value, dict):
+        return {str(k): _json_safe(v) for k, v in value.items() if not isinstance(v, np.ndarray) or v.size <= 16}
+    if isinstance(value, (list, tuple)):
+        return [_json_safe(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, (np.floating, float)):
+        return None if not math.isfinite(float(value)) else float(value)
+    if isinstance(value, (np.integer,)):
+        return int(value)
+    if isinstance(value, np.bool_):
+        return bool(value)
+    return value
+
+
+def _diagnose(result, context):
+    """Why a scene shows no gain (or only a small one), from what we know."""
+    notes = []
+    report = context["refine_report"]
+    if report.get("backoff", 1.0) < 1.0:
+        where = (f" over {report['backoff_area'] * 100:.0f}% of the grid" if "backoff_area" in report else "")
+        notes.append(f"the refiner backed off{where}, down to {report['backoff'] * 100:.0f}% of the full "
+                     f"deformation (limited by {', '.join(report.get('limited_by', [])) or 'nothing reported'})")
+    elif report.get("limited_by"):
+        notes.append(f"the refiner was limited by {', '.join(report['limited_by'])}")
+    widening = result["transition_widening"]
+    if widening is not None and widening < 1.25:
+        notes.append(f"transition points gained little texel density (widening {widening:.2f}x)")
+    small_charts = context["chart_texels_at_transitions"] < 100
+    if context["texels_per_transition_triangle"] > 16 and not small_charts:
+        notes.append(f"coarse tessellation: a triangle under a transition covers "
+                     f"{context['texels_per_transition_triangle']:.0f} texels (median), and the texel density "
+                     "is constant inside a triangle, so texels cannot gather at an edge that crosses it "
+                     "(method.md section 5): subdivide the receivers")
+    if small_charts:
+        notes.append(f"small charts: the charts under transitions cover {context['chart_texels_at_transitions']:.0f} "
+                     "texels (median) and the gutters between charts keep their width, so texels can hardly move "
+                     "towards an edge (Lightmap Pack makes one chart per face): use a layout with larger charts "
+                     "(Smart UV Project) or a higher resolution")
+    if result["transition_points"] < 30:
+        notes.append(f"only {result['transition_points']} transition points: too few to measure; raise --points")
+    return notes
+
+
+def evaluate_sample(sample, options, out_dir=None, progress=None):
+    """Run the whole evaluation on one SampleScene; returns its report dict
+    (and writes report.md, report.json and pictures into `out_dir` if given)."""
+    options.check()
+    label = f"{sample.name}/{options.variant}"
+    stages = _Stages(label, progress)
+    resolution = int(options.resolution)
+    passes = _single_pass(sample, options)
+    uvs, triangles = sample.layout(options.variant)
+
+    baseline = stages.run("bake baseline", lambda p: _bake_map(sample, uvs, resolution, options, p))
+    original_check = check_layout(uvs, triangles, resolution, options.padding)
+    padding = min(float(options.padding), float(original_check["min_gutter_texels"]))
+    refined = stages.run("refine", lambda p: refine_uvs(baseline, uvs, triangles, resolution, padding=padding,
+                                                        progress=p, **options.refine_options))
+    refined_map = stages.run("bake refined", lambda p: _bake_map(sample, refined.uvs, resolution, options, p))
+
+    # Ground truth at area-uniform points, and at two neighbours each along
+    # the surface for the transition detector.
+    areas = sample.triangle_areas()
+    density_base = metrics.texel_density(uvs, triangles, areas, resolution)
+    density_refined = metrics.texel_density(refined.uvs, triangles, areas, resolution)
+    points = metrics.sample_surface(sample.positions, sample.triangles, options.points, normals=sample.normals,
+                                    seed=options.seed)
+    texel_size = 1.0 / np.sqrt(np.maximum(density_base, 1e-30))
+    order = np.argsort(texel_size)
+    cumulative = np.cumsum(areas[order])
+    median_texel = float(texel_size[order][np.searchsorted(cumulative, cumulative[-1] / 2)])
+    step = 0.5 * median_texel
+    stencil_points, stencil_normals, distances = metrics.gradient_stencil(
+        sample.positions, sample.triangles, points, step, normals=sample.normals)
+    scene = sample.to_scene(uvs)
+
+    def truth_at(p):
+        every_point = np.concatenate([points.points, stencil_points])
+        every_normal = np.concatenate([points.normals, stencil_normals])
+        first = evaluate_light(scene, every_point, every_normal, passes=passes, samples=options.truth_samples,
+                               seed=options.seed + 1, progress=p)
+        # A second, independent estimate at the points: the truth is their
+        # mean, and their difference measures the truth's own noise.
+        second = evaluate_light(scene, points.points, points.normals, passes=passes,
+                                samples=options.truth_samples, seed=options.seed + 2, progress=p)
+        return first.astype(np.float64), second.astype(np.float64)
+    every_truth, second_truth = stages.run("ground truth", truth_at)
+    truth = (every_truth[:len(points)] + second_truth) / 2
+    neighbour_truth = every_truth[len(points):]
+    truth_noise = metrics.truth_noise(every_truth[:len(points)], second_truth)
+    gradient = metrics.surface_gradient(truth, neighbour_truth, distances)
+    transitions = metrics.transition_mask(gradient)
+
+    uv_base = metrics.interpolate_corners(uvs, points.triangle, points.bary)
+    uv_refined = metrics.interpolate_corners(refined.uvs, points.triangle, points.bary)
+    lookup_base = metrics.bilinear_lookup(baseline, uv_base)
+    lookup_refined = metrics.bilinear_lookup(refined_map, uv_refined)
+
+    # The uniform baseline at higher resolutions, for the equal-error resolution.
+    sweep = [{"multiplier": 1.0, "resolution": resolution, "lookup": lookup_base}]
+    for multiplier in options.multipliers[1:]:
+        size = int(round(resolution * multiplier))
+        image = stages.run("bake resolution sweep", lambda p: _bake_map(sample, uvs, size, options, p))
+        sweep.append({"multiplier": multiplier, "resolution": size, "lookup": metrics.bilinear_lookup(image, uv_base)})
+
+    start = time.perf_counter()
+    charts = find_charts(uvs, triangles)
+    texels = metrics.uv_areas(uvs, triangles) * resolution * resolution
+    chart_texels = np.bincount(charts, weights=texels)
+
+    def figures(where):
+        base = metrics.error_stats(lookup_base, truth, where)
+        ref = metrics.error_stats(lookup_refined, truth, where)
+        base_t = metrics.error_stats(lookup_base, truth, where & transitions)
+        ref_t = metrics.error_stats(lookup_refined, truth, where & transitions)
+        sweep_rmse = [metrics.error_stats(s["lookup"], truth, where)["rmse"] for s in sweep]
+        sweep_t = [metrics.error_stats(s["lookup"], truth, where & transitions)["rmse"] for s in sweep]
+        ratio, status = metrics.equal_error_resolution(options.multipliers, sweep_rmse, ref["rmse"])
+        ratio_t, status_t = metrics.equal_error_resolution(options.multipliers, sweep_t, ref_t["rmse"])
+        return {
+            "points": int(where.sum()),
+            "transition_points": int((where & transitions).sum()),
+            "rmse_baseline": base["rmse"], "rmse_refined": ref["rmse"],
+            "mae_baseline": base["mae"], "mae_refined": ref["mae"],
+            "transition_rmse_baseline": base_t["rmse"], "transition_rmse_refined": ref_t["rmse"],
+            "transition_mae_baseline": base_t["mae"], "transition_mae_refined": ref_t["mae"],
+            "transition_widening": metrics.transition_widening(density_base, density_refined, points.triangle,
+                                                               where & transitions),
+            "equal_error_resolution_ratio": ratio, "equal_error_status": status,
+            "transition_equal_error_resolution_ratio": ratio_t, "transition_equal_error_status": status_t,
+            "resolution_sweep": [{"resolution": s["resolution"], "multiplier": s["multiplier"], "rmse": e,
+                                  "transition_rmse": et} for s, e, et in zip(sweep, sweep_rmse, sweep_t)],
+        }
+
+    everywhere = np.ones(len(points), bool)
+    result = {"scene": sample.name, "variant": options.variant, "resolution": resolution, "pass": passes,
+              "description": sample.description, "bake_samples": options.samples,
+              "truth_samples": options.truth_samples, "gradient_step_m": step, "texel_size_m": median_texel}
+    result.update(figures(everywhere))
+    result["transition_widening_linear"] = (math.sqrt(result["transition_widening"])
+                                            if math.isfinite(result["transition_widening"]) else float("nan"))
+    result["truth_mean"] = float(truth.mean())
+    result["truth_noise_rmse"] = truth_noise
+    object_ids = sample.object_id[points.triangle]
+    result["objects"] = []
+    for index, name in enumerate(sample.objects):
+        where = object_ids == index
+        if where.any():
+            result["objects"].append({"object": name, **{k: v for k, v in figures(where).items()
+                                                         if k != "resolution_sweep"}})
+    on_transitions = points.triangle[transitions]
+    context = {
+        "refine_report": refined.report,
+        "texels_per_transition_triangle": float(np.median(texels[on_transitions])) if on_transitions.size else 0.0,
+        "chart_texels_at_transitions": (float(np.median(chart_texels[charts[on_transitions]]))
+                                        if on_transitions.size else 0.0),
+    }
+    result.update({k: v for k, v in context.items() if k != "refine_report"})
+    result["refine"] = {k: v for k, v in refined.report.items() if k != "triangle_density"}
+    gain = (result["transition_rmse_refined"] <= (1 - GAIN_THRESHOLD) * result["transition_rmse_baseline"])
+    result["gain"] = bool(gain)
+    result["notes"] = [] if gain else _diagnose(result, context)
+    if not gain and not result["notes"]:
+        result["notes"].append("no cause found among tessellation, chart size and refiner limits")
+    if result["equal_error_status"] == "flat":
+        sweep_rmse = [s["rmse"] for s in result["resolution_sweep"]]
+        result["notes"].append(
+            f"noise-limited: the uniform baseline's error hardly falls with resolution ({sweep_rmse[0]:.4g} at "
+            f"{resolution}, {sweep_rmse[-1]:.4g} at {result['resolution_sweep'][-1]['resolution']}), so there is no "
+            f"equal-error resolution; bake with more --samples or --denoise (ground-truth noise: {truth_noise:.3g}, "
+            "raise --truth-samples if that is close to the errors)")
+    if result["rmse_refined"] > result["rmse_baseline"]:
+        result["notes"].append("the error over all points grew: the texels taken from flat areas cost more there "
+                               "than the transitions gained")
+    stages.seconds["metrics"] = time.perf_counter() - start
+
+    if out_dir is not None:
+        from .evaluation_report import write_pictures, write_scene_report
+        os.makedirs(out_dir, exist_ok=True)
+        # The maps and the refined layout themselves, for a closer look.
+        write_image(os.path.join(out_dir, "baseline.exr"), np.ascontiguousarray(baseline), format="half")
+        write_image(os.path.join(out_dir, "refined.exr"), np.ascontiguousarray(refined_map), format="half")
+        np.savez_compressed(os.path.join(out_dir, "refined_layout.npz"), uvs=refined.uvs, triangles=triangles,
+                            original_uvs=uvs)
+        stages.run("pictures", lambda p: write_pictures(out_dir, result, {
+            "baseline": baseline, "refined": refined_map, "uvs": uvs, "refined_uvs": refined.uvs,
+            "triangles": triangles, "density_ratio": density_refined / np.maximum(density_base, 1e-30),
+            "uv_points": uv_base, "error_baseline": np.abs(lookup_base - truth).mean(axis=1),
+            "error_refined": np.abs(lookup_refined - truth).mean(axis=1), "transitions": transitions,
+            "multipliers": options.multipliers}))
+    result["timings"] = dict(stages.seconds)
+    result["timings"]["total"] = sum(stages.seconds.values())
+    result = _json_safe(result)
+    if out_dir is not None:
+        write_scene_report(out_dir, result)
+    return result
+
+
+def evaluate_samples(samples, options, out_dir, variants=None, progress=None):
+    """Evaluate SampleScenes in UV `variants` (default: options.variant),
+    one sub-folder <scene>_<variant> each, and write the summary report.md
+    and report.json into `out_dir`. Returns the summary."""
+    from dataclasses import replace
+
+    from .evaluation_report import write_summary
+
+    os.makedirs(out_dir, exist_ok=True)
+    scenes = []
+    for sample in samples:
+        for variant in variants or (options.variant,):
+            scene_dir = os.path.join(out_dir, f"{sample.name}_{variant}")
+            scenes.append(evaluate_sample(sample, replace(options, variant=variant), scene_dir, progress))
+    options.check()
+    summary = {"resolution": int(options.resolution), "multipliers": list(options.multipliers),
+               "bake_samples": options.samples, "truth_samples": options.truth_samples, "points": options.points,
+               "scenes": scenes}
+    write_summary(out_dir, summary)
+    return summary

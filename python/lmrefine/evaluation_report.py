@@ -1,0 +1,273 @@
+"""Pictures, report.md and report.json of an evaluation (lmrefine.evaluation).
+
+Pictures (matplotlib, Agg backend, one PNG each):
+
+    lightmaps.png            baseline and refined lightmaps side by side, same exposure
+    layout.png               the refined layout (red) over the original one (grey)
+    density.png              texel density, refined over baseline, per triangle (log2 scale)
+    error.png                absolute error at the surface points, baseline and refined
+    error_vs_resolution.png  baseline error against resolution, the refined map's at R
+"""
+
+import json
+import math
+import os
+
+import numpy as np
+
+PICTURES = ("lightmaps.png", "layout.png", "density.png", "error.png", "error_vs_resolution.png")
+
+
+def _pyplot():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _display(image, scale):
+    return np.clip(image[..., :3] / scale, 0, 1) ** (1 / 2.2) if scale > 0 else np.zeros_like(image[..., :3])
+
+
+def _uv_axes(axis, title):
+    axis.set_xlim(0, 1)
+    axis.set_ylim(0, 1)
+    axis.set_aspect("equal")
+    axis.set_title(title, fontsize=10)
+    axis.set_xticks([])
+    axis.set_yticks([])
+
+
+def _edges(uvs, triangles):
+    corners = np.asarray(uvs)[np.asarray(triangles)]
+    return np.concatenate([corners[:, [0, 1]], corners[:, [1, 2]], corners[:, [2, 0]]])
+
+
+def write_pictures(out_dir, result, data):
+    plt = _pyplot()
+    from matplotlib.collections import LineCollection
+    from matplotlib.colors import TwoSlopeNorm
+    from matplotlib.tri import Triangulation
+
+    resolution = result["resolution"]
+    scale = float(np.percentile(data["baseline"], 99.5)) or 1.0
+
+    figure, axes = plt.subplots(1, 2, figsize=(12, 6.4))
+    for axis, key, title in ((axes[0], "baseline", "baseline (uniform layout)"),
+                             (axes[1], "refined", "refined layout, re-baked")):
+        axis.imshow(_display(data[key], scale), extent=(0, 1, 0, 1), interpolation="nearest")
+        _uv_axes(axis, f"{title}, {resolution}x{resolution}")
+    figure.suptitle(f"{result['scene']} ({result['variant']}): lightmaps at the same resolution")
+    figure.tight_layout()
+    figure.savefig(os.path.join(out_dir, "lightmaps.png"), dpi=110)
+    plt.close(figure)
+
+    figure, axis = plt.subplots(figsize=(8, 8))
+    axis.add_collection(LineCollection(_edges(data["uvs"], data["triangles"]), colors="0.65", linewidths=0.3))
+    axis.add_collection(LineCollection(_edges(data["refined_uvs"], data["triangles"]), colors="tab:red",
+                                       linewidths=0.3))
+    _uv_axes(axis, f"{result['scene']} ({result['variant']}): refined layout (red) over the original (grey)")
+    figure.tight_layout()
+    figure.savefig(os.path.join(out_dir, "layout.png"), dpi=150)
+    plt.close(figure)
+
+    figure, axis = plt.subplots(figsize=(8.6, 8))
+    ratio = np.log2(np.clip(data["density_ratio"], 1 / 64, 64))
+    limit = max(1.0, float(np.abs(ratio).max()))
+    uv = np.asarray(data["refined_uvs"])
+    shading = axis.tripcolor(Triangulation(uv[:, 0], uv[:, 1], data["triangles"]), facecolors=ratio,
+                             cmap="RdBu_r", norm=TwoSlopeNorm(0.0, -limit, limit))
+    bar = figure.colorbar(shading, ax=axis, fraction=0.046)
+    bar.set_label("log2(texel density refined / baseline)")
+    _uv_axes(axis, f"texel density change (transition widening {result['transition_widening']:.2f}x)"
+             if result["transition_widening"] is not None else "texel density change")
+    figure.tight_layout()
+    figure.savefig(os.path.join(out_dir, "density.png"), dpi=110)
+    plt.close(figure)
+
+    figure, axes = plt.subplots(1, 2, figsize=(13, 6.4))
+    vmax = float(np.percentile(np.concatenate([data["error_baseline"], data["error_refined"]]), 99.5)) or 1.0
+    points = data["uv_points"]
+    for axis, key, rmse in ((axes[0], "error_baseline", result["rmse_baseline"]),
+                            (axes[1], "error_refined", result["rmse_refined"])):
+        order = np.argsort(data[key])  # large errors drawn last, on top
+        shading = axis.scatter(points[order, 0], points[order, 1], c=data[key][order], s=1.5, cmap="inferno",
+                               vmin=0, vmax=vmax, linewidths=0)
+        _uv_axes(axis, f"{key.replace('error_', '')}: RMSE {rmse:.4g} (points at their original UVs)")
+        axis.set_facecolor("0.85")
+    figure.colorbar(shading, ax=axes, fraction=0.03).set_label("mean absolute error (RGB) at the point")
+    figure.suptitle(f"{result['scene']} ({result['variant']}): world-space error against the ground truth")
+    figure.savefig(os.path.join(out_dir, "error.png"), dpi=110)
+    plt.close(figure)
+
+    figure, axis = plt.subplots(figsize=(7.5, 5))
+    sweep = result["resolution_sweep"]
+    sizes = [s["resolution"] for s in sweep]
+    for key, refined_key, ratio_key, colour, label in (
+            ("rmse", "rmse_refined", "equal_error_resolution_ratio", "tab:blue", "all points"),
+            ("transition_rmse", "transition_rmse_refined", "transition_equal_error_resolution_ratio",
+             "tab:orange", "transition points")):
+        values = [s[key] for s in sweep]
+        axis.plot(sizes, values, "o-", color=colour, label=f"uniform baseline, {label}")
+        refined = result[refined_key]
+        if refined is not None:
+            axis.plot([resolution], [refined], "*", color=colour, markersize=14, markeredgecolor="k",
+                      label=f"refined at {resolution}, {label}")
+            ratio = result[ratio_key]
+            if ratio is not None:
+                axis.plot([resolution, resolution * ratio], [refined, refined], "--", color=colour, linewidth=1)
+                axis.annotate(f"{ratio:.2f}x", (resolution * ratio, refined), textcoords="offset points",
+                              xytext=(4, 4), color=colour)
+    axis.set_xscale("log", base=2)
+    axis.set_xticks(sizes)
+    axis.set_xticklabels([str(s) for s in sizes])
+    axis.set_xlabel("lightmap resolution (texels per side)")
+    axis.set_ylabel("RMSE against the ground truth")
+    axis.set_title(f"{result['scene']} ({result['variant']}): error against resolution")
+    axis.grid(True, alpha=0.3)
+    axis.legend(fontsize=8)
+    figure.tight_layout()
+    figure.savefig(os.path.join(out_dir, "error_vs_resolution.png"), dpi=110)
+    plt.close(figure)
+
+
+def _number(value, digits=4):
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return "n/a"
+    return f"{value:.{digits}g}"
+
+
+def _change(before, after):
+    if before is None or after is None or not before:
+        return "n/a"
+    return f"{(after / before - 1) * 100:+.1f}%"
+
+
+def equal_error_text(ratio, status):
+    if ratio is None:
+        return "n/a"
+    if status == "above":
+        return f">= {ratio:.2f}x (better than the baseline at the largest resolution tested)"
+    if status == "flat":
+        return "undefined (the baseline's error hardly falls with resolution: noise-limited)"
+    if status == "below":
+        return f"{ratio:.2f}x (below 1: worse than the baseline at the same resolution)"
+    return f"{ratio:.2f}x"
+
+
+def _backoff_text(refine):
+    kept = refine.get("backoff", 1.0)
+    if kept >= 1.0:
+        return "kept its full deformation everywhere"
+    area = refine.get("backoff_area")
+    where = f" over {area * 100:.0f}% of the grid" if area is not None else ""
+    return f"backed off{where}, down to {kept * 100:.0f}% of the full deformation"
+
+
+def scene_markdown(result):
+    r = result
+    lines = [
+        f"# {r['scene']} ({r['variant']} UVs) at {r['resolution']}x{r['resolution']}",
+        "",
+        r.get("description", ""),
+        "",
+        f"Pass `{r['pass']}`, {r['bake_samples']} bake samples per texel, ground truth from "
+        f"{r['truth_samples']} samples (twice) at {r['points']} surface points ({r['transition_points']} transition "
+        f"points: top decile of the surface gradient, step {r['gradient_step_m'] * 1000:.1f} mm); the ground truth's "
+        f"own noise is {_number(r['truth_noise_rmse'], 3)} RMS.",
+        "",
+        "| | baseline | refined | change |",
+        "|---|---|---|---|",
+    ]
+    for label, key in (("RMSE, all points", "rmse"), ("MAE, all points", "mae"),
+                       ("RMSE, transition points", "transition_rmse"), ("MAE, transition points", "transition_mae")):
+        before, after = r[f"{key}_baseline"], r[f"{key}_refined"]
+        lines.append(f"| {label} | {_number(before)} | {_number(after)} | {_change(before, after)} |")
+    lines += [
+        "",
+        f"- Transition widening (texel density at transition points, refined / baseline): "
+        f"**{_number(r['transition_widening'], 3)}x** in area, {_number(r['transition_widening_linear'], 3)}x "
+        "in texels across an edge.",
+        f"- Equal-error resolution (the uniform baseline needs this times the resolution to match the refined "
+        f"map): **{equal_error_text(r['equal_error_resolution_ratio'], r['equal_error_status'])}** over all points, "
+        f"{equal_error_text(r['transition_equal_error_resolution_ratio'], r['transition_equal_error_status'])} "
+        "on transition points.",
+        f"- Refiner: {_backoff_text(r['refine'])}, limited by: "
+        f"{', '.join(r['refine'].get('limited_by') or []) or 'nothing'}.",
+        "",
+    ]
+    if r["gain"]:
+        lines.append(f"**Gain**: transition-point RMSE {_change(r['transition_rmse_baseline'], r['transition_rmse_refined'])}.")
+        lines += [f"- {note}" for note in r["notes"]]
+    else:
+        lines.append("**No gain on this scene.** Why:")
+        lines += [f"- {note}" for note in r["notes"]]
+    lines += ["", "## Error against resolution (uniform baseline)", "",
+              "| resolution | RMSE | transition RMSE |", "|---|---|---|"]
+    for s in r["resolution_sweep"]:
+        lines.append(f"| {s['resolution']} | {_number(s['rmse'])} | {_number(s['transition_rmse'])} |")
+    lines += ["", "## Per object", "",
+              "| object | points | transition points | RMSE base | RMSE refined | transition RMSE base | "
+              "transition RMSE refined | widening | equal-error ratio |", "|---|---|---|---|---|---|---|---|---|"]
+    for o in r["objects"]:
+        ratio = o["equal_error_resolution_ratio"]
+        lines.append(
+            f"| {o['object']} | {o['points']} | {o['transition_points']} | {_number(o['rmse_baseline'])} | "
+            f"{_number(o['rmse_refined'])} | {_number(o['transition_rmse_baseline'])} | "
+            f"{_number(o['transition_rmse_refined'])} | {_number(o['transition_widening'], 3)} | "
+            f"{'n/a' if ratio is None else ('>=' if o['equal_error_status'] == 'above' else '') + f'{ratio:.2f}'} |")
+    lines += ["", "## Time per stage (seconds)", "", "| stage | seconds |", "|---|---|"]
+    lines += [f"| {stage} | {seconds:.2f} |" for stage, seconds in r["timings"].items()]
+    lines += ["", "## Pictures", ""]
+    lines += [f"![{name}]({name})" for name in PICTURES]
+    lines.append("")
+    return "\n".join(lines)
+
+
+def write_scene_report(out_dir, result):
+    with open(os.path.join(out_dir, "report.json"), "w") as handle:
+        json.dump(result, handle, indent=2)
+    with open(os.path.join(out_dir, "report.md"), "w") as handle:
+        handle.write(scene_markdown(result))
+
+
+def summary_table(summary):
+    """The Markdown table of every evaluated scene (also printed by the CLI)."""
+    lines = ["| scene | UVs | R | RMSE base -> refined | transition RMSE base -> refined | widening | "
+             "equal-error ratio | gain | seconds |", "|---|---|---|---|---|---|---|---|---|"]
+    for r in summary["scenes"]:
+        ratio = r["equal_error_resolution_ratio"]
+        ratio_text = "n/a" if ratio is None else {"above": ">=", "below": ""}.get(r["equal_error_status"], "") + \
+            f"{ratio:.2f}x"
+        if r["equal_error_status"] == "flat":
+            ratio_text = "noise-limited"
+        lines.append(
+            f"| {r['scene']} | {r['variant']} | {r['resolution']} | {_number(r['rmse_baseline'])} -> "
+            f"{_number(r['rmse_refined'])} ({_change(r['rmse_baseline'], r['rmse_refined'])}) | "
+            f"{_number(r['transition_rmse_baseline'])} -> {_number(r['transition_rmse_refined'])} "
+            f"({_change(r['transition_rmse_baseline'], r['transition_rmse_refined'])}) | "
+            f"{_number(r['transition_widening'], 3)}x | {ratio_text} | {'yes' if r['gain'] else 'NO'} | "
+            f"{r['timings']['total']:.1f} |")
+    return "\n".join(lines)
+
+
+def write_summary(out_dir, summary):
+    with open(os.path.join(out_dir, "report.json"), "w") as handle:
+        json.dump(summary, handle, indent=2)
+    lines = ["# lmrefine evaluation", "",
+             f"Uniform baseline against refined layout at the same resolution; baseline also at "
+             f"{', '.join(f'{m:g}' for m in summary['multipliers'])} x R for the equal-error resolution. "
+             f"{summary['bake_samples']} bake samples per texel, ground truth from {summary['truth_samples']} "
+             f"samples at {summary['points']} surface points per scene. Definitions: docs/evaluation.md.", "",
+             summary_table(summary), ""]
+    for r in summary["scenes"]:
+        if not r["gain"]:
+            lines.append(f"- **{r['scene']} ({r['variant']}) shows no gain**: " + "; ".join(r["notes"]) + ".")
+        elif r["notes"]:
+            lines.append(f"- {r['scene']} ({r['variant']}): " + "; ".join(r["notes"]) + ".")
+    lines += ["", "Per scene: " + ", ".join(f"[{r['scene']}_{r['variant']}]({r['scene']}_{r['variant']}/report.md)"
+                                            for r in summary["scenes"]), ""]
+    with open(os.path.join(out_dir, "report.md"), "w") as handle:
+        handle.write("\n".join(lines))

@@ -1,0 +1,257 @@
+"""Quality metrics of a baked lightmap, measured in world space (no bpy).
+
+Definitions (docs/evaluation.md gives the reasoning):
+
+* **Surface samples**: points drawn uniformly by world area over the receiver
+  triangles with a fixed seed (:func:`sample_surface`); each keeps its
+  triangle and barycentric coordinates, so its UV in any layout of the same
+  triangles is known.
+* **Lightmap value at a point**: bilinear lookup at the point's UV with the
+  texel_space convention (row 0 = top = v=1; texel (i, j) centred at
+  ((j+.5)/W, 1-(i+.5)/H); clamped at the image border), what a GPU sampler
+  does at run time (:func:`bilinear_lookup`).
+* **Error**: RMSE and MAE over all colour channels of all points, against a
+  ground truth evaluated at the points themselves (lmrefine.evaluate with many
+  samples).
+* **Transition points**: the top decile of the ground truth's gradient
+  magnitude along the surface (luminance; finite differences over a step of
+  about half a baseline texel inside the point's own triangle, so no step
+  crosses a crease into a wall; :func:`surface_gradient`,
+  :func:`transition_mask`).
+* **Texel density**: texels per square metre of each triangle, UV area x R^2
+  over world area; **transition widening**: refined density over baseline
+  density, averaged over the transition points (the thesis' figure of merit,
+  in area; its square root is the widening of an edge in texels).
+* **Equal-error resolution**: the resolution (as a multiple of R) at which the
+  uniform baseline's error equals the refined map's error at R, interpolated
+  linearly in error against log-resolution (:func:`equal_error_resolution`);
+  undefined when the baseline's error hardly falls with resolution (noise).
+* **Ground-truth noise**: the truth is the mean of two independent
+  evaluations; half the RMS of their difference is its own noise
+  (:func:`truth_noise`).
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+# Rec. 709 luminance weights: the transition detector looks at brightness.
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722], np.float32)
+TRANSITION_FRACTION = 0.1
+
+
+@dataclass
+class SurfaceSamples:
+    triangle: np.ndarray     # (P,) int triangle index
+    bary: np.ndarray         # (P, 3) float64 barycentric coordinates
+    points: np.ndarray       # (P, 3) float32 world positions
+    normals: np.ndarray      # (P, 3) float32 unit shading normals
+
+    def __len__(self):
+        return len(self.triangle)
+
+
+def triangle_areas(positions, triangles):
+    p = np.asarray(positions, np.float64)[np.asarray(triangles)]
+    return 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+
+
+def uv_areas(uvs, triangles):
+    """(T,) area of every UV triangle, in units of the whole atlas."""
+    uv = np.asarray(uvs, np.float64)[np.asarray(triangles)]
+    e1, e2 = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
+    return 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+
+
+def interpolate_corners(per_corner, triangle, bary):
+    """Values given per corner (3T, K) (corner k of triangle t at 3t+k) at
+    points (triangle, barycentric coordinates)."""
+    values = np.asarray(per_corner, np.float64).reshape(-1, 3, np.shape(per_corner)[-1])[triangle]
+    return np.einsum("pk,pkc->pc", bary, values)
+
+
+def sample_surface(positions, triangles, count, normals=None, seed=0):
+    """`count` points uniformly distributed by area over the triangles (fixed
+    `seed`: the same points for every layout and resolution). `normals` are
+    per corner (3T, 3) and interpolated; without them, face normals."""
+    positions = np.asarray(positions, np.float64)
+    triangles = np.asarray(triangles)
+    if count <= 0:
+        raise ValueError(f"count must be positive, got {count}")
+    areas = triangle_areas(positions, triangles)
+    if not np.isfinite(areas).all() or areas.sum() <= 0:
+        raise ValueError("the triangles have no area to sample; check positions and triangles")
+    rng = np.random.default_rng(seed)
+    triangle = rng.choice(len(triangles), size=count, p=areas / areas.sum())
+    r1, r2 = rng.random(count), rng.random(count)
+    s = np.sqrt(r1)
+    bary = np.stack([1 - s, s * (1 - r2), s * r2], axis=1)
+    corners = positions[triangles[triangle]]
+    points = np.einsum("pk,pkc->pc", bary, corners)
+    if normals is not None:
+        shading = interpolate_corners(normals, triangle, bary)
+    else:
+        shading = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    shading /= np.maximum(np.linalg.norm(shading, axis=1, keepdims=True), 1e-30)
+    return SurfaceSamples(triangle, bary, points.astype(np.float32), shading.astype(np.float32))
+
+
+def bilinear_lookup(image, uv):
+    """Bilinear sample of an (H, W[, C]) image at UVs (P, 2), texel centres at
+    ((j+.5)/W, 1-(i+.5)/H), clamped to the border. Returns (P, C) float64."""
+    image = np.asarray(image)
+    if image.ndim == 2:
+        image = image[..., None]
+    uv = np.asarray(uv, np.float64)
+    height, width = image.shape[:2]
+    x = np.clip(uv[:, 0] * width - 0.5, 0.0, width - 1.0)
+    y = np.clip((1.0 - uv[:, 1]) * height - 0.5, 0.0, height - 1.0)
+    j0 = np.minimum(np.floor(x).astype(np.int64), width - 2) if width > 1 else np.zeros(len(x), np.int64)
+    i0 = np.minimum(np.floor(y).astype(np.int64), height - 2) if height > 1 else np.zeros(len(y), np.int64)
+    fx = (x - j0)[:, None] if width > 1 else np.zeros((len(x), 1))
+    fy = (y - i0)[:, None] if height > 1 else np.zeros((len(y), 1))
+    j1 = np.minimum(j0 + 1, width - 1)
+    i1 = np.minimum(i0 + 1, height - 1)
+    top = image[i0, j0] * (1 - fx) + image[i0, j1] * fx
+    bottom = image[i1, j0] * (1 - fx) + image[i1, j1] * fx
+    return top * (1 - fy) + bottom * fy
+
+
+def error_stats(values, truth, where=None):
+    """{"rmse", "mae"} over every colour channel of the selected points."""
+    difference = np.asarray(values, np.float64) - np.asarray(truth, np.float64)
+    if where is not None:
+        difference = difference[where]
+    if difference.size == 0:
+        return {"rmse": float("nan"), "mae": float("nan")}
+    return {"rmse": float(np.sqrt(np.mean(difference ** 2))), "mae": float(np.mean(np.abs(difference)))}
+
+
+def truth_noise(first, second):
+    """RMS noise of the mean of two independent, equally noisy estimates
+    (P, C) of the same values: half the RMS of their difference."""
+    difference = np.asarray(first, np.float64) - np.asarray(second, np.float64)
+    return float(np.sqrt(np.mean(difference ** 2)) / 2) if difference.size else float("nan")
+
+
+def luminance(rgb):
+    return np.asarray(rgb, np.float64)[:, :3] @ LUMINANCE.astype(np.float64)
+
+
+def gradient_stencil(positions, triangles, samples, step, normals=None):
+    """Two neighbours of every sample point along two orthogonal directions of
+    its triangle's plane, at most `step` away and always inside the same
+    triangle (forwards, or backwards when that leaves more room), so a step
+    never crosses a crease (floor into wall). Returns (points (2P, 3), normals
+    (2P, 3), distances (2P,)) for :func:`surface_gradient`."""
+    positions = np.asarray(positions, np.float64)
+    triangles = np.asarray(triangles)
+    corners = positions[triangles[samples.triangle]]
+    e1, e2 = corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
+    face_normal = np.cross(e1, e2)
+    face_normal /= np.linalg.norm(face_normal, axis=1, keepdims=True)
+    t1 = e1 / np.linalg.norm(e1, axis=1, keepdims=True)
+    t2 = np.cross(face_normal, t1)
+    # Barycentric change per unit move along a direction d in the plane:
+    # solve [e1 e2] (b1, b2) = d by least squares (exact in the plane).
+    basis = np.stack([e1, e2], axis=2)                       # (P, 3, 2)
+    gram_inv = np.linalg.inv(np.einsum("pci,pcj->pij", basis, basis))
+    out_points, out_normals, out_dist = [], [], []
+    for direction in (t1, t2):
+        db12 = np.einsum("pij,pcj,pc->pi", gram_inv, basis, direction)
+        db = np.stack([-db12[:, 0] - db12[:, 1], db12[:, 0], db12[:, 1]], axis=1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            room_forward = np.where(db < 0, -samples.bary / db, np.inf).min(axis=1)
+            room_backward = np.where(db > 0, samples.bary / db, np.inf).min(axis=1)
+        sign = np.where(room_forward >= room_backward, 1.0, -1.0)
+        distance = np.minimum(step, np.maximum(room_forward, room_backward))
+        bary = samples.bary + (sign * distance)[:, None] * db
+        bary = np.clip(bary, 0.0, 1.0)
+        bary /= bary.sum(axis=1, keepdims=True)
+        out_points.append(np.einsum("pk,pkc->pc", bary, corners))
+        if normals is not None:
+            n = interpolate_corners(normals, samples.triangle, bary)
+            n /= np.linalg.norm(n, axis=1, keepdims=True)
+        else:
+            n = face_normal
+        out_normals.append(n)
+        out_dist.append(distance)
+    return (np.concatenate(out_points).astype(np.float32), np.concatenate(out_normals).astype(np.float32),
+            np.concatenate(out_dist))
+
+
+def surface_gradient(truth, neighbour_truth, distances):
+    """Gradient magnitude of the luminance along the surface (per metre) from
+    the truth at the points (P, 3) and at their two stencil neighbours (2P, 3)."""
+    count = len(truth)
+    base = luminance(truth)
+    neighbours = luminance(neighbour_truth).reshape(2, count)
+    d = np.maximum(np.asarray(distances, np.float64).reshape(2, count), 1e-12)
+    return np.sqrt((((neighbours - base) / d) ** 2).sum(axis=0))
+
+
+def transition_mask(gradient, fraction=TRANSITION_FRACTION):
+    """The points in the top `fraction` of gradient magnitude (ties at the
+    threshold included; points where the light does not change at all are
+    never transitions). At least one point when any gradient is non-zero."""
+    gradient = np.asarray(gradient, np.float64)
+    if not 0 < fraction <= 1:
+        raise ValueError(f"fraction must be in (0, 1], got {fraction}")
+    if gradient.size == 0 or gradient.max() <= 0:
+        return np.zeros(gradient.shape, bool)
+    threshold = np.quantile(gradient, 1.0 - fraction)
+    return (gradient >= threshold) & (gradient > 0)
+
+
+def texel_density(uvs, triangles, world_areas, resolution):
+    """(T,) texels per square metre of every triangle at `resolution`
+    (int or (height, width)): UV area x H x W over world area."""
+    height, width = (resolution, resolution) if np.isscalar(resolution) else resolution
+    world_areas = np.asarray(world_areas, np.float64)
+    return uv_areas(uvs, triangles) * height * width / np.maximum(world_areas, 1e-30)
+
+
+def transition_widening(density_baseline, density_refined, point_triangle, transitions):
+    """Refined over baseline texel density at the transition points, averaged
+    (area ratio; its square root is the gain in texels across an edge).
+    NaN when there are no transition points."""
+    ratio = np.asarray(density_refined, np.float64) / np.maximum(np.asarray(density_baseline, np.float64), 1e-30)
+    selected = ratio[np.asarray(point_triangle)[np.asarray(transitions, bool)]]
+    return float(selected.mean()) if selected.size else float("nan")
+
+
+def equal_error_resolution(multipliers, errors, target, min_drop=0.1):
+    """Where does the uniform baseline's error, measured at resolutions
+    R x `multipliers` (ascending, the first one 1), reach `target` (the
+    refined map's error at R)? Linear interpolation of error against
+    log-resolution at the first crossing.
+
+    Returns (ratio, status): status "within" (ratio in the tested range),
+    "below" (the refined map is worse than the baseline at R: ratio < 1,
+    extrapolated along the first segment, at least multipliers[0] / 4) or
+    "above" (better than the baseline at the largest multiplier: ratio is
+    that multiplier, a lower bound). When the baseline's error drops by less
+    than `min_drop` (a fraction) over the whole range, resolution is not what
+    limits it (noise is): (NaN, "flat")."""
+    m = np.asarray(multipliers, np.float64)
+    e = np.asarray(errors, np.float64)
+    if m.ndim != 1 or m.shape != e.shape or len(m) < 2 or np.any(np.diff(m) <= 0) or m[0] <= 0:
+        raise ValueError("multipliers must be ascending positive numbers, at least two, one error per multiplier")
+    if not np.isfinite(target) or not np.isfinite(e).all():
+        return float("nan"), "undefined"
+    log_m = np.log(m)
+    if e[-1] > (1.0 - min_drop) * e[0]:
+        return float("nan"), "flat"
+    if target > e[0]:
+        slope = (e[1] - e[0]) / (log_m[1] - log_m[0])
+        if slope >= 0:
+            return float(m[0] / 4), "below"
+        ratio = float(np.exp(log_m[0] + (target - e[0]) / slope))
+        return max(ratio, float(m[0] / 4)), "below"
+    for k in range(1, len(m)):
+        if e[k] <= target:
+            if e[k - 1] == e[k]:
+                return float(m[k - 1]), "within"
+            t = (e[k - 1] - target) / (e[k - 1] - e[k])
+            return float(np.exp(log_m[k - 1] + t * (log_m[k] - log_m[k - 1]))), "within"
+    return float(m[-1]), "above"

@@ -1,0 +1,273 @@
+"""refine_uvs: the whole refinement of a lightmap UV layout (method §4, §5, §7).
+
+gradient map -> energy -> cellular automaton (native, coarse-to-fine) ->
+warp of every UV through the deformed grid -> validity check, backing off
+towards the original layout until the result is valid. See docs/refiner.md.
+"""
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import _native, backoff
+
+BORDER_MODES = ("same", "border_rule", "extra_ring")
+
+# Energy normalization: the gradient map's energy is divided by its 99th
+# percentile over covered texels (a few outliers do not set the scale), but by
+# at least a quarter of its maximum (so plain noise is not blown up to 1).
+_SCALE_PERCENTILE = 99.0
+_SCALE_MIN_FRACTION_OF_MAX = 0.25
+
+
+@dataclass
+class RefineResult:
+    """What refine_uvs returns.
+
+    uvs: (N, 2) float32, the refined per-corner UVs.
+    grid: (H + 1, W + 1, 2) float32, the deformed grid's nodes in UV space
+        (identity: node (i, j) at u = j / W, v = 1 - i / H).
+    report: dict, see refine_uvs.
+    """
+
+    uvs: np.ndarray
+    grid: np.ndarray
+    report: dict = field(default_factory=dict)
+
+
+def _resolution(resolution):
+    if isinstance(resolution, (int, np.integer)):
+        height = width = int(resolution)
+    else:
+        try:
+            height, width = (int(x) for x in resolution)
+        except (TypeError, ValueError):
+            raise ValueError(f"resolution must be an int or (height, width), got {resolution!r}") from None
+    if height <= 0 or width <= 0:
+        raise ValueError(f"resolution must be positive, got {height}x{width}")
+    return height, width
+
+
+def _layout(uvs, triangles):
+    uvs = np.asarray(uvs)
+    triangles = np.asarray(triangles)
+    if uvs.ndim != 2 or uvs.shape[1] != 2 or uvs.shape[0] == 0:
+        raise ValueError(f"uvs must have shape (N, 2) with N > 0, got {uvs.shape}")
+    if triangles.ndim != 2 or triangles.shape[1] != 3:
+        raise ValueError(f"triangles must have shape (T, 3), got {triangles.shape}")
+    if not np.issubdtype(triangles.dtype, np.integer):
+        raise ValueError(f"triangles must hold integer indices, got dtype {triangles.dtype}")
+    uvs = uvs.astype(np.float32)  # a copy: the caller's array is never touched
+    if not np.isfinite(uvs).all():
+        bad = int(np.flatnonzero(~np.isfinite(uvs).all(axis=1))[0])
+        raise ValueError(f"uvs[{bad}] is NaN or Inf; fix or remove the broken UVs before refining")
+    if triangles.size and (triangles.min() < 0 or triangles.max() >= len(uvs)):
+        bad = int(np.flatnonzero((triangles < 0).any(axis=1) | (triangles >= len(uvs)).any(axis=1))[0])
+        raise ValueError(f"triangles[{bad}] = {triangles[bad].tolist()} refers to a UV outside "
+                         f"[0, {len(uvs)}); indices must point into uvs")
+    outside = (uvs < 0) | (uvs > 1)
+    if outside.any():
+        bad = int(np.flatnonzero(outside.any(axis=1))[0])
+        raise ValueError(f"uvs[{bad}] = {uvs[bad].tolist()} is outside [0, 1]: a lightmap layout must lie "
+                         f"inside the unit square (repack it, e.g. Blender's Lightmap Pack)")
+    return uvs, np.ascontiguousarray(triangles, dtype=np.int32)
+
+
+def _gradient(lightmap, gradient, mask, shape, wavelet, progress):
+    if gradient is not None:
+        gradient = np.asarray(gradient)
+        if gradient.dtype != np.float32 or gradient.shape != shape + (4,):
+            raise ValueError(f"gradient must be a float32 (H, W, 4) gradient map of the resolution "
+                             f"{shape[0]}x{shape[1]}, got {gradient.dtype} {gradient.shape}")
+        if not np.isfinite(gradient).all():
+            raise ValueError("gradient holds NaN or Inf values")
+        return np.where(mask[..., None], np.abs(gradient), 0).astype(np.float32)
+    if lightmap is None:
+        raise ValueError("pass a lightmap, or a gradient map with gradient=")
+    lightmap = np.asarray(lightmap)
+    if lightmap.shape[:2] != shape:
+        raise ValueError(f"the lightmap is {lightmap.shape[0]}x{lightmap.shape[1]} but the resolution is "
+                         f"{shape[0]}x{shape[1]}; refine at the resolution the lightmap was baked at")
+    if lightmap.dtype != np.float32:
+        raise ValueError(f"the lightmap must be float32, got {lightmap.dtype}; convert it with "
+                         f"lightmap.astype(numpy.float32)")
+    if not mask.any():
+        return np.zeros(shape + (4,), np.float32)  # nothing covered: nothing to refine
+    return _native.gradient_map(lightmap, mask, wavelet=wavelet, progress=progress)
+
+
+def _energy(gradient, mask, strength, directional):
+    """Energy in [1 / (1 + strength), 1]: 1 where light changes fastest.
+    Returns (energy, the gradient energy per texel: the channel sum)."""
+    total = gradient.sum(axis=2)
+    raw = gradient if directional else total
+    covered = raw[mask]
+    scale = 0.0
+    if covered.size:
+        scale = max(float(np.percentile(covered, _SCALE_PERCENTILE)),
+                    _SCALE_MIN_FRACTION_OF_MAX * float(covered.max()))
+    normalized = np.clip(raw / scale, 0, 1) if scale > 0 else np.zeros_like(raw)
+    return ((1 + strength * normalized) / (1 + strength)).astype(np.float32), total
+
+
+def identity_grid(resolution):
+    """The undeformed (H + 1, W + 1, 2) grid: node (i, j) at u = j / W, v = 1 - i / H."""
+    height, width = _resolution(resolution)
+    u = np.arange(width + 1) / width
+    v = 1 - np.arange(height + 1) / height
+    return np.stack(np.broadcast_arrays(u[None, :], v[:, None]), axis=-1).astype(np.float32)
+
+
+def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gradient=None, strength=6.0,
+               max_magnification=8.0, min_shrink=0.25, delta=0.02, passes=1, border="same",
+               directional=False, wavelet="d4", diffusion=0.05, max_steps=8, progress=None):
+    """Refine a lightmap UV layout: more texels where light changes fast.
+
+    Args:
+        lightmap: (H, W[, C]) float32 baked lightmap, or None with gradient=.
+        uvs: (N, 2) per-corner UVs inside [0, 1]; never modified.
+        triangles: (T, 3) integer indices into uvs.
+        resolution: the lightmap's int or (height, width).
+        padding: the gutter between charts, in texels, the result must
+            keep; a chart pair the original packed closer keeps its
+            original distance instead (method §7).
+        mask: (H, W) bool chart coverage; default coverage_mask(uvs, ...).
+        gradient: a (H, W, 4) float32 gradient map to use instead of
+            computing one from the lightmap.
+        strength: >= 0; a texel of the strongest light change wants
+            (1 + strength) times the area of a flat one. 0 = identity.
+        max_magnification, min_shrink: bounds on a covered texel's area
+            change (texel-density ratio).
+        delta: the automaton stops when neighbour densities differ by less
+            than delta (relative to the mean).
+        passes: >= 1; each extra pass reruns the finest level with fresh
+            energies, deforming further.
+        border: 'same' (default), 'border_rule' or 'extra_ring'.
+        directional: use the four-spring variant (one energy per channel).
+        wavelet: passed to gradient_map.
+        diffusion, max_steps: automaton details (see run_automaton).
+        progress: callable progress(fraction, stage); returning False cancels.
+
+    Returns:
+        RefineResult with uvs, grid and report. report holds:
+        transition_widening (mean texel-density ratio over covered texels in
+        the top decile of gradient energy), density_min, density_max (over
+        covered texels), triangle_density (T,) new / old UV area, steps,
+        levels, converged, backoff (the smallest fraction of the full
+        deformation kept anywhere; 1.0 = none backed off), backoff_area
+        (fraction of grid nodes that backed off), strength_used (strength x
+        backoff), limited_by (list of what held the result back: 'flipped',
+        'overlapping', 'gutter', 'degenerate', 'grid' (a blend made a cell
+        invalid), 'step_cap', 'max_magnification', 'min_shrink',
+        'original_gutter' (the original is tighter than padding); empty if
+        nothing), notes (list of sentences, e.g. on the original's gutter),
+        passes,
+        border, seconds (timings: setup, gradient_map, automaton,
+        warp_and_check), original_check and check (check_layout reports).
+
+    Raises:
+        ValueError: bad shapes, indices out of range, NaN UVs, UVs outside
+            [0, 1], zero resolution, bad options.
+    """
+    start = time.perf_counter()
+    shape = _resolution(resolution)
+    uvs, triangles = _layout(uvs, triangles)
+    if not strength >= 0:
+        raise ValueError(f"strength must be >= 0, got {strength}")
+    if border not in BORDER_MODES:
+        raise ValueError(f"border must be one of {BORDER_MODES}, got {border!r}")
+    if not (isinstance(passes, (int, np.integer)) and passes >= 1):
+        raise ValueError(f"passes must be an integer >= 1, got {passes!r}")
+    if mask is None:
+        mask = _native.coverage_mask(uvs, triangles, shape)
+    else:
+        mask = np.asarray(mask)
+        if mask.shape != shape:
+            raise ValueError(f"mask must have shape {shape} (the resolution), got {mask.shape}")
+        mask = mask.astype(bool)
+
+    timings = {"setup": time.perf_counter() - start}
+    clock = time.perf_counter()
+    gradient = _gradient(lightmap, gradient, mask, shape, wavelet, progress)
+    energy, scalar_energy = _energy(gradient, mask, float(strength), directional)
+    timings["gradient_map"] = time.perf_counter() - clock
+    clock = time.perf_counter()
+    # Texels between charts only shift: chart pairs keep their distance.
+    rigid = _native.gutter_texels(uvs, triangles, shape)
+    run = _native.run_automaton(energy, mask, rigid=rigid, diffusion=diffusion, delta=delta, max_steps=max_steps,
+                                min_shrink=min_shrink, max_magnification=max_magnification, border=border,
+                                passes=int(passes), progress=progress)
+    identity = identity_grid(shape)
+    full = run["grid"]
+    timings["automaton"] = time.perf_counter() - clock
+    clock = time.perf_counter()
+
+    original = _native.check_layout(uvs, triangles, shape, padding)
+    limited_by, notes = [], []
+    if not run["converged"]:
+        limited_by.append("step_cap")
+    if original["min_gutter_texels"] < padding:
+        # method §7: keep the gutter the original had; pairs packed tighter
+        # than the padding keep their own distance (backoff.accept).
+        limited_by.append("original_gutter")
+        notes.append(f"original gutter {original['min_gutter_texels']:.2f} texels < padding {padding:g}: "
+                     f"chart pairs closer than the padding keep their original distance")
+
+    if np.array_equal(full, identity):
+        grid, new_uvs, check, kept = identity, uvs.copy(), original, np.ones(identity.shape[:2], np.float32)
+    else:
+        grid, new_uvs, check, kept, failed = backoff.accept(full, identity, uvs, triangles, shape, padding, original)
+        limited_by += failed
+
+    timings["warp_and_check"] = time.perf_counter() - clock
+    areas = _native.grid_cell_areas(grid)
+    covered_areas = areas[mask] if mask.any() else np.ones(1, np.float32)
+    if covered_areas.max() >= max_magnification * 0.999:
+        limited_by.append("max_magnification")
+    if covered_areas.min() <= min_shrink * 1.001:
+        limited_by.append("min_shrink")
+
+    report = {
+        "transition_widening": _transition_widening(areas, scalar_energy, mask),
+        "density_min": float(covered_areas.min()),
+        "density_max": float(covered_areas.max()),
+        "triangle_density": _triangle_density(uvs, new_uvs, triangles),
+        "steps": int(run["steps"]),
+        "levels": run["levels"],
+        "converged": bool(run["converged"]),
+        "strength_used": float(strength) * float(kept.min()),
+        "backoff": float(kept.min()),
+        "backoff_area": float((kept < 1).mean()),
+        "limited_by": limited_by,
+        "notes": notes,
+        "passes": int(passes),
+        "border": border,
+        "seconds": time.perf_counter() - start,
+        "timings": timings,
+        "original_check": original,
+        "check": check,
+    }
+    return RefineResult(uvs=new_uvs, grid=grid, report=report)
+
+
+def _transition_widening(areas, energy, mask):
+    """Mean texel-density ratio (deformed cell area, in texels) over the
+    covered texels whose gradient energy is in the top decile; 1.0 if no
+    covered texel has any gradient energy."""
+    covered = energy[mask]
+    if covered.size == 0 or covered.max() <= 0:
+        return 1.0
+    threshold = np.percentile(covered, 90.0)
+    top = mask & (energy >= threshold) & (energy > 0)
+    return float(areas[top].mean())
+
+
+def _triangle_density(old, new, triangles):
+    """New UV area / old UV area per triangle (NaN where the old area is 0)."""
+    def area(uv):
+        a, b, c = (uv[triangles[:, k]].astype(np.float64) for k in range(3))
+        return 0.5 * ((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
+    before, after = area(old), area(new)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(before != 0, after / before, np.nan)

@@ -1,0 +1,756 @@
+"""Checks of the lmrefine add-on inside ONE headless Blender; prints facts as JSON for pytest to assert.
+
+    blender -b --factory-startup --python-exit-code 1 --python addon_checks.py -- REPO OUT_JSON WORK_DIR
+
+Every check rebuilds its scene, so checks do not depend on each other. A
+check that raises is recorded with its traceback (pytest shows it). The add-on
+is loaded from the repository (addon/ and python/ on sys.path), never from an
+installed copy.
+"""
+
+import hashlib
+import json
+import os
+import sys
+import traceback
+
+REPO, OUT_JSON, WORK_DIR = sys.argv[sys.argv.index("--") + 1:][:3]
+sys.path[:0] = [os.path.join(REPO, "python"), os.path.join(REPO, "addon"), os.path.dirname(__file__)]
+
+import bpy  # noqa: E402
+import numpy as np  # noqa: E402
+
+import lmrefine  # noqa: E402
+import lmrefine_blender  # noqa: E402
+import scenes  # noqa: E402
+from lmrefine_blender import bridge, cycles_bake, pipeline  # noqa: E402
+from lmrefine_blender.journal import Journal  # noqa: E402
+
+HAS_REFINE = hasattr(lmrefine, "refine_uvs") and hasattr(lmrefine, "check_layout")
+HAS_BAKE = hasattr(lmrefine, "bake") and hasattr(lmrefine, "Scene")
+RESOLUTION = 64  # small: the whole group must stay fast
+
+results = {"api": {"refine_uvs": HAS_REFINE, "bake": HAS_BAKE}}
+
+
+def check(*needs):
+    """Run the decorated check now and record its facts (or why it was skipped, or its traceback)."""
+    available = {"refine": HAS_REFINE, "bake": HAS_BAKE}
+
+    def run(function):
+        missing = [name for name in needs if not available[name]]
+        if missing:
+            results[function.__name__] = {"skipped": f"lmrefine lacks {', '.join(missing)} (not merged yet)"}
+            return function
+        try:
+            results[function.__name__] = function()
+        except Exception:
+            results[function.__name__] = {"exception": traceback.format_exc()}
+        return function
+
+    return run
+
+
+def register():
+    if not hasattr(bpy.types.Scene, "lmrefine"):
+        lmrefine_blender.register()
+
+
+# --------------------------------------------------------------- utilities
+
+def _digest(*items):
+    h = hashlib.sha256()
+    for item in items:
+        h.update(item.tobytes() if isinstance(item, np.ndarray) else repr(item).encode())
+    return h.hexdigest()[:16]
+
+
+def _array(collection, attribute, width, dtype=np.float32):
+    values = np.empty(len(collection) * width, dtype=dtype)
+    collection.foreach_get(attribute, values)
+    return values
+
+
+def fingerprint():
+    """Digests of everything the add-on may touch, by part, so a failing test says which part changed."""
+    parts = {}
+    for mesh in bpy.data.meshes:
+        layers = [(layer.name, layer.active, layer.active_render, _digest(_array(layer.data, "uv", 2)))
+                  for layer in mesh.uv_layers]
+        parts[f"mesh:{mesh.name}"] = _digest(
+            _array(mesh.vertices, "co", 3), _array(mesh.loops, "vertex_index", 1, np.int32),
+            _array(mesh.polygons, "loop_start", 1, np.int32), layers, mesh.uv_layers.active_index,
+            [m.name if m else None for m in mesh.materials])
+    for material in bpy.data.materials:
+        tree = material.node_tree
+        nodes = [(n.name, n.bl_idname, getattr(n, "image", None) and n.image.name) for n in tree.nodes] if tree else []
+        links = [(l.from_node.name, l.to_node.name) for l in tree.links] if tree else []
+        active = tree.nodes.active.name if tree and tree.nodes.active else None
+        parts[f"material:{material.name}"] = _digest(nodes, links, active)
+    parts["images"] = _digest(sorted(image.name for image in bpy.data.images))
+    parts["materials"] = _digest(sorted(m.name for m in bpy.data.materials))
+    view_layer = bpy.context.view_layer
+    parts["selection"] = _digest(sorted(o.name for o in view_layer.objects if o.select_get()),
+                                 view_layer.objects.active.name if view_layer.objects.active else None)
+    scene = bpy.context.scene
+    parts["render"] = _digest(scene.render.engine)
+    parts["result"] = _digest(scene.lmrefine.result.valid, scene.lmrefine.result.message)
+    return parts
+
+
+def geometry_digest(mesh):
+    """Vertices, topology, normals and material indices: what a refinement must never touch."""
+    return _digest(_array(mesh.vertices, "co", 3), _array(mesh.loops, "vertex_index", 1, np.int32),
+                   _array(mesh.polygons, "loop_start", 1, np.int32), _array(mesh.polygons, "loop_total", 1, np.int32),
+                   _array(mesh.polygons, "material_index", 1, np.int32), _array(mesh.polygons, "use_smooth", 1, bool))
+
+
+def changed(before, after):
+    return sorted(key for key in set(before) | set(after) if before.get(key) != after.get(key))
+
+
+def refine(undo=False, how='EXEC_DEFAULT'):
+    """Run the operator like a script does; returns ('FINISHED'|'CANCELLED', error message or None)."""
+    window = bpy.context.window_manager.windows[0]
+    with bpy.context.temp_override(window=window):
+        try:
+            result = bpy.ops.object.lmrefine_refine_uvs(how, undo)
+        except RuntimeError as error:  # an ERROR report raises
+            return "CANCELLED", str(error)
+    return sorted(result)[0], None
+
+
+def settings(**values):
+    target = bpy.context.scene.lmrefine
+    for key, value in values.items():
+        setattr(target, key, value)
+    return target
+
+
+def fresh_shadow_scene(**values):
+    scenes.shadow_scene()
+    register()
+    settings(resolution=RESOLUTION, padding=2, samples=4, **values)
+
+
+@check()
+def registration():
+    """register() adds the operators, the panels and Scene.lmrefine; unregister() removes all of them."""
+    register()
+    names = ("LMREFINE_PT_refine", "LMREFINE_PT_refine_options", "LMREFINE_PT_refine_bake",
+             "LMREFINE_PT_refine_result")
+    registered = {
+        "panels": [name for name in names if hasattr(bpy.types, name)],
+        "category": bpy.types.LMREFINE_PT_refine.bl_category,
+        "space": bpy.types.LMREFINE_PT_refine.bl_space_type,
+        "operators": [hasattr(bpy.ops.object, "lmrefine_refine_uvs"),
+                      hasattr(bpy.ops.object, "lmrefine_remove_preview")],
+        "label": bpy.ops.object.lmrefine_refine_uvs.get_rna_type().name,
+        "scene_property": hasattr(bpy.types.Scene, "lmrefine"),
+    }
+    # Panels are only drawn with a window; at least every icon they name must exist in this Blender.
+    import inspect
+    import re
+    from lmrefine_blender import panels
+    icons = bpy.types.UILayout.bl_rna.functions["prop"].parameters["icon"].enum_items.keys()
+    used = set(re.findall(r"icon='(\w+)'", inspect.getsource(panels)))
+    used |= set(re.findall(r"else '(\w+)'", inspect.getsource(panels)))
+    registered["icons_used"] = sorted(used)
+    registered["icons_missing"] = sorted(used - set(icons))
+    lmrefine_blender.unregister()
+    unregistered = {
+        "panels": [name for name in names if hasattr(bpy.types, name)],
+        "scene_property": hasattr(bpy.types.Scene, "lmrefine"),
+        "operator": "lmrefine_refine_uvs" in dir(bpy.ops.object),
+    }
+    lmrefine_blender.register()
+    return {"registered": registered, "unregistered": unregistered}
+
+
+# ------------------------------------------------------------ error cases
+
+def _error_case(prepare):
+    fresh_shadow_scene(first_lightmap='EMBREE', backend='EMBREE')
+    prepare()
+    before = fingerprint()
+    outcome, message = refine()
+    return {"outcome": outcome, "message": message, "changed": changed(before, fingerprint())}
+
+
+@check()
+def error_no_mesh():
+    return _error_case(lambda: scenes.select_only())
+
+
+@check()
+def error_only_light_selected():
+    return _error_case(lambda: scenes.select_only(bpy.data.objects["Sun"]))
+
+
+@check()
+def error_no_uv_layer():
+    return _error_case(lambda: scenes.select_only(scenes.bare_mesh()))
+
+
+@check()
+def error_missing_source_layer():
+    return _error_case(lambda: settings(source_layer="NoSuchMap"))
+
+
+@check()
+def error_edit_mode():
+    def prepare():
+        bpy.ops.object.mode_set(mode='EDIT')
+    result = _error_case(prepare)
+    bpy.ops.object.mode_set(mode='OBJECT')
+    return result
+
+
+@check()
+def error_zero_area_faces():
+    return _error_case(lambda: scenes.select_only(scenes.degenerate_mesh()))
+
+
+@check()
+def error_hidden_object():
+    """Hiding deselects in the UI, but the batch entry names objects: validation must catch it."""
+    fresh_shadow_scene()
+    floor = bpy.data.objects["Floor"]
+    floor.hide_set(True)
+    before = fingerprint()
+    try:
+        pipeline.validate(bpy.context, [floor], pipeline.settings_snapshot(bpy.context.scene.lmrefine))
+        message = None
+    except pipeline.UserError as error:
+        message = str(error)
+    return {"outcome": "CANCELLED", "message": message, "changed": changed(before, fingerprint())}
+
+
+@check()
+def error_linked_library():
+    library_path = os.path.join(WORK_DIR, "library.blend")
+
+    def prepare():
+        floor = bpy.data.objects["Floor"]
+        bpy.data.libraries.write(library_path, {floor}, fake_user=True)
+        floor.name = "LocalFloor"
+        with bpy.data.libraries.load(library_path, link=True) as (source, target):
+            target.objects = ["Floor"]
+        linked = target.objects[0]
+        bpy.context.scene.collection.objects.link(linked)
+        scenes.select_only(linked)
+
+    return _error_case(prepare)
+
+
+@check()
+def error_shared_mesh():
+    def prepare():
+        floor = bpy.data.objects["Floor"]
+        twin = bpy.data.objects.new("FloorTwin", floor.data)
+        bpy.context.scene.collection.objects.link(twin)
+        scenes.select_only(floor, twin)
+
+    return _error_case(prepare)
+
+
+@check()
+def error_image_not_found():
+    return _error_case(lambda: settings(first_lightmap='IMAGE'))
+
+
+@check()
+def error_image_file_missing():
+    def prepare():
+        image = bpy.data.images.load(os.path.join(WORK_DIR, "lightmap.exr"), check_existing=False) \
+            if os.path.exists(os.path.join(WORK_DIR, "lightmap.exr")) else bpy.data.images.new("Gone", 4, 4)
+        image.source = 'FILE'
+        image.filepath = os.path.join(WORK_DIR, "does_not_exist.exr")
+        settings(first_lightmap='IMAGE', lightmap_image=image)
+
+    return _error_case(prepare)
+
+
+@check()
+def error_image_wrong_size():
+    def prepare():
+        image = bpy.data.images.new("SmallLightmap", 16, 16, float_buffer=True)
+        settings(first_lightmap='IMAGE', lightmap_image=image)
+
+    return _error_case(prepare)
+
+
+@check()
+def error_uvs_outside_unit_square():
+    def prepare():
+        layer = bpy.data.objects["Floor"].data.uv_layers["Lightmap"]
+        layer.data[0].uv = (1.5, 0.5)
+
+    return _error_case(prepare)
+
+
+@check()
+def error_image_from_refined_bake():
+    def prepare():
+        image = bpy.data.images.new("Floor_lightmap_direct", RESOLUTION, RESOLUTION, float_buffer=True)
+        image["lmrefine_object"] = "Floor"
+        settings(first_lightmap='IMAGE', lightmap_image=image)
+
+    return _error_case(prepare)
+
+
+@check()
+def error_no_bake_pass():
+    return _error_case(lambda: settings(bake_passes=set()))
+
+
+# ----------------------------------------------------------------- bridge
+
+@check()
+def bridge_export():
+    fresh_shadow_scene()
+    floor = bpy.data.objects["Floor"]
+    floor.location = (1.0, 2.0, 3.0)
+    floor.scale = (2.0, 1.0, 1.0)
+    bpy.context.view_layer.update()
+    receivers, occluders = bridge.export_scene(bpy.context, [floor], {"Floor": "Lightmap"})
+    export = receivers[0]
+    layout = bridge.read_layout(floor.data, "Lightmap")
+    kind, sun = bridge.scene_lights(bpy.context)[0]
+    hidden = bpy.data.objects["Blocker"]
+    hidden.hide_render = True
+    _, occluders_hidden = bridge.export_scene(bpy.context, [floor], {"Floor": "Lightmap"})
+    return {
+        "default_source": bridge.default_source_layer(floor.data),
+        "occluders": sorted(e.name for e in occluders),
+        "occluders_when_hidden": sorted(e.name for e in occluders_hidden),
+        "x_range": [float(export.positions[:, 0].min()), float(export.positions[:, 0].max())],
+        "y_range": [float(export.positions[:, 1].min()), float(export.positions[:, 1].max())],
+        "z_range": [float(export.positions[:, 2].min()), float(export.positions[:, 2].max())],
+        "normal_mean": export.normals.mean(axis=0).tolist(),
+        "uvs_match_layout": bool(np.array_equal(export.uvs, bridge.read_uv_layer(floor.data, "Lightmap"))),
+        "triangles_match_layout": bool(np.array_equal(export.triangles, layout.triangles)),
+        "triangle_count": int(len(export.triangles)),
+        "base_color": export.base_color[0].tolist(),
+        "blocker_z_range": [float(occluders[0].positions[:, 2].min()), float(occluders[0].positions[:, 2].max())],
+        "light_kind": kind,
+        "sun": sun,
+        "world": list(bridge.world_color(bpy.context.scene)),
+    }
+
+
+@check()
+def bridge_welds_blender_layouts():
+    """Blender's grid primitive stores corner UVs of one vertex that differ in the last bits."""
+    fresh_shadow_scene()
+    mesh = bpy.data.objects["Floor"].data
+    raw = bridge.read_uv_layer(mesh, "UVMap")
+    layout = bridge.read_layout(mesh, "UVMap")
+    return {
+        "raw_charts": int(lmrefine.find_charts(raw, layout.triangles).max() + 1),
+        "raw_out_of_bounds": int(((raw < 0) | (raw > 1)).any(axis=1).sum()),
+        "welded_charts": int(lmrefine.find_charts(layout.uvs, layout.triangles).max() + 1),
+        "welded_max_shift": float(np.abs(layout.uvs - raw).max()),
+        "welded_in_bounds": bool(((layout.uvs >= 0) & (layout.uvs <= 1)).all()),
+        "raw_unchanged": bool(np.array_equal(raw, bridge.read_uv_layer(mesh, "UVMap"))),
+    }
+
+
+@check()
+def bridge_lights():
+    """Each Blender light type in the baker's terms: Blender's names and units, world-space pose."""
+    scenes.reset()
+    made = {}
+    for kind in ('POINT', 'SPOT', 'SUN', 'AREA'):
+        bpy.ops.object.light_add(type=kind, location=(1.0, 2.0, 3.0), rotation=(np.pi / 2, 0.0, 0.0))
+        light = bpy.context.active_object
+        light.name = kind
+        made[kind] = light
+    made['POINT'].data.shadow_soft_size = 0.3
+    made['SPOT'].data.spot_size = 0.8
+    made['SPOT'].data.spot_blend = 0.25
+    made['SUN'].data.angle = 0.1
+    made['AREA'].data.shape = 'RECTANGLE'
+    made['AREA'].data.size, made['AREA'].data.size_y = 2.0, 0.5
+    made['AREA'].scale = (3.0, 2.0, 1.0)
+    made['AREA'].data.color = (1.0, 0.5, 0.25)
+    dark = made['POINT'].copy()
+    dark.data = made['POINT'].data.copy()
+    dark.data.energy = 0.0
+    dark.name = "Dark"
+    bpy.context.scene.collection.objects.link(dark)
+    bpy.context.view_layer.update()
+    return {kind: params for kind, params in bridge.scene_lights(bpy.context)} | {
+        "count": len(bridge.scene_lights(bpy.context))}
+
+
+@check()
+def bridge_default_layers():
+    mesh = bpy.data.meshes.new("Layers")
+    mesh.from_pydata([(0, 0, 0), (1, 0, 0), (1, 1, 0)], [], [(0, 1, 2)])
+    answers = {}
+    for names in (["UVMap"], ["UVMap", "UVMap.001"], ["UVMap", "Detail", "LightmapUV"], ["A", "B", "C"],
+                  ["UVMap", "UVMap.001", "UVMap.001_refined"]):
+        while mesh.uv_layers:
+            mesh.uv_layers.remove(mesh.uv_layers[0])
+        for name in names:
+            mesh.uv_layers.new(name=name)
+        answers["+".join(names)] = bridge.default_source_layer(mesh)
+    return answers
+
+
+@check()
+def bridge_image_roundtrip():
+    image = bpy.data.images.new("Roundtrip", 8, 4, alpha=True, float_buffer=True)
+    array = np.random.default_rng(5).random((4, 8, 4), dtype=np.float32)
+    bridge.array_to_image(image, array)
+    back = bridge.image_to_array(image)
+    raw = np.empty(8 * 4 * 4, np.float32)
+    image.pixels.foreach_get(raw)
+    return {
+        "roundtrip_equal": bool(np.array_equal(back, array)),
+        # Blender's first pixel row is the bottom of the image: our last row.
+        "bottom_row_first": bool(np.array_equal(raw.reshape(4, 8, 4)[0], array[-1])),
+    }
+
+
+# ------------------------------------------------------------ Cycles bake
+
+@check()
+def cycles_first_bake():
+    fresh_shadow_scene()
+    floor = bpy.data.objects["Floor"]
+    before = fingerprint()
+    engine_before = bpy.context.scene.render.engine
+    with cycles_bake.render_settings(bpy.context, 4):
+        image = cycles_bake.bake_object(bpy.context, floor, "Lightmap", "direct", RESOLUTION, 2)
+    layout = bridge.read_layout(floor.data, "Lightmap")
+    covered = lmrefine.coverage_mask(layout.uvs, layout.triangles, RESOLUTION)
+    light = image[..., :3].mean(axis=2)[covered]
+    # Save the bake for the 'existing image' checks and the batch tests.
+    saved = bridge.new_float_image("FloorLightmap", RESOLUTION)
+    bridge.array_to_image(saved, image)
+    saved.filepath_raw = os.path.join(WORK_DIR, "lightmap.exr")
+    saved.file_format = 'OPEN_EXR'
+    saved.save()
+    bpy.data.images.remove(saved)
+    return {
+        "shape": list(image.shape),
+        "covered_texels": int(covered.sum()),
+        "light_min": float(light.min()),
+        "light_max": float(light.max()),
+        "lit_fraction": float(np.mean(light > 0.5 * light.max())),
+        "changed": changed(before, fingerprint()),
+        "engine_restored": bpy.context.scene.render.engine == engine_before,
+    }
+
+
+# ----------------------------------------------------- end to end (needs API)
+
+@check("refine")
+def refine_defaults_match_the_library():
+    """The panel's defaults are refine_uvs' own, so the add-on and the Python API agree out of the box."""
+    import inspect
+
+    fresh_shadow_scene()
+    options = pipeline.settings_snapshot(bpy.context.scene.lmrefine)["refine_options"]
+    signature = inspect.signature(lmrefine.refine_uvs).parameters
+    ours = {key: value for key, value in options.items()}
+    theirs = {key: signature[key].default for key in options if key in signature}
+    return {"ours": ours, "theirs": theirs,
+            "missing": sorted(key for key in options if key not in signature)}
+
+
+def _image_stats(name, layout_uvs, triangles):
+    image = bpy.data.images.get(name)
+    if image is None:
+        return None
+    pixels = bridge.image_to_array(image)
+    covered = lmrefine.coverage_mask(layout_uvs, triangles, RESOLUTION)
+    light = pixels[..., :3].mean(axis=2)[covered]
+    return {"size": list(image.size), "is_float": image.is_float, "packed": image.packed_file is not None,
+            "min": float(light.min()), "max": float(light.max()), "std": float(light.std())}
+
+
+def _end_to_end(first, backend, passes):
+    fresh_shadow_scene(first_lightmap=first, backend=backend, bake_passes=passes)
+    floor = bpy.data.objects["Floor"]
+    mesh = floor.data
+    if first == 'IMAGE':
+        _hook_existing_lightmap(floor)
+    layout = bridge.read_layout(mesh, "Lightmap")
+    texture_uvs = bridge.read_uv_layer(mesh, "UVMap")
+    source_uvs = bridge.read_uv_layer(mesh, "Lightmap")
+    geometry = geometry_digest(mesh)
+    window = bpy.context.window_manager.windows[0]
+    with bpy.context.temp_override(window=window):
+        bpy.ops.ed.undo_push(message="before refine")
+    before = fingerprint()
+    outcome, message = refine(undo=True)
+    if outcome != "FINISHED":
+        return {"outcome": outcome, "message": message}
+    after = fingerprint()
+    refined = bridge.read_uv_layer(mesh, "Lightmap_refined")
+    check = lmrefine.check_layout(refined, layout.triangles, RESOLUTION, padding=2)
+    nodes = bpy.data.materials["FloorMaterial"].node_tree.nodes
+    preview = [(n.bl_idname, getattr(n, "uv_map", None)) for n in nodes if n.get("lmrefine_role")]
+    result = bpy.context.scene.lmrefine.result
+    facts = {
+        "outcome": outcome,
+        "changed": changed(before, after),
+        "layers": [layer.name for layer in mesh.uv_layers],
+        "active_layer": mesh.uv_layers.active.name,
+        "render_layer": next(layer.name for layer in mesh.uv_layers if layer.active_render),
+        "check_layout": {k: (bool(v) if isinstance(v, (bool, np.bool_)) else float(v)) for k, v in check.items()},
+        "uv_max_move": float(np.abs(refined - layout.uvs).max()),
+        "source_identical": bool(np.array_equal(bridge.read_uv_layer(mesh, "Lightmap"), source_uvs)),
+        "texture_uvs_identical": bool(np.array_equal(bridge.read_uv_layer(mesh, "UVMap"), texture_uvs)),
+        "geometry_identical": geometry_digest(mesh) == geometry,
+        "images": {p.lower(): _image_stats(f"Floor_lightmap_{p.lower()}", refined, layout.triangles)
+                   for p in passes},
+        "preview_nodes": sorted(preview, key=str),
+        "result_valid": result.valid,
+        "transition_widening": result.transition_widening,
+        "density_range": [result.density_min, result.density_max],
+        "timings": result.timings,
+    }
+    with bpy.context.temp_override(window=window):
+        facts["can_undo"] = bpy.ops.ed.undo.poll()
+        bpy.ops.ed.undo()
+        facts["changed_after_undo"] = changed(before, fingerprint())
+        # Only the 'before refine' step is left: the run was exactly one undo step.
+        facts["can_undo_further"] = bpy.ops.ed.undo.poll()
+    return facts
+
+
+def _hook_existing_lightmap(floor):
+    """Give the floor's material the Cycles-baked lightmap through a UV Map node set to 'Lightmap'."""
+    image = bpy.data.images.load(os.path.join(WORK_DIR, "lightmap.exr"))
+    tree = bpy.data.materials["FloorMaterial"].node_tree
+    uv_node = tree.nodes.new("ShaderNodeUVMap")
+    uv_node.uv_map = "Lightmap"
+    image_node = tree.nodes.new("ShaderNodeTexImage")
+    image_node.image = image
+    tree.links.new(uv_node.outputs["UV"], image_node.inputs["Vector"])
+
+
+@check("refine", "bake")
+def end_to_end_embree():
+    return _end_to_end('EMBREE', 'EMBREE', {'DIRECT', 'AO'})
+
+
+@check("refine")
+def end_to_end_cycles():
+    return _end_to_end('CYCLES', 'CYCLES', {'DIRECT', 'AO'})
+
+
+@check("refine", "bake")
+def end_to_end_two_objects():
+    """Floor and box at once: each its own refined map and images; the box's six charts keep their gutters."""
+    fresh_shadow_scene(first_lightmap='EMBREE', backend='EMBREE', bake_passes={'DIRECT'})
+    floor, box = bpy.data.objects["Floor"], bpy.data.objects["Blocker"]
+    scenes.select_only(floor, box)
+    source = {obj.name: bridge.read_layout(obj.data, "Lightmap") for obj in (floor, box)}
+    outcome, message = refine()
+    facts = {"outcome": outcome, "message": message}
+    for obj in (floor, box):
+        layout = source[obj.name]
+        refined = bridge.read_uv_layer(obj.data, "Lightmap_refined")
+        check = lmrefine.check_layout(refined, layout.triangles, RESOLUTION, padding=2)
+        facts[obj.name] = {
+            "charts": int(lmrefine.find_charts(refined, layout.triangles).max() + 1),
+            "valid": bool(check["valid"]), "min_gutter_texels": float(check["min_gutter_texels"]),
+            "image": _image_stats(f"{obj.name}_lightmap_direct", refined, layout.triangles),
+        }
+    return facts
+
+
+@check("refine")
+def black_first_lightmap_warns():
+    """No light at all: the run succeeds, says why nothing moved, and the layout is the source's."""
+    fresh_shadow_scene(first_lightmap='CYCLES', backend='CYCLES', bake_passes={'DIRECT'})
+    bpy.data.objects["Sun"].hide_render = True
+    floor = bpy.data.objects["Floor"]
+    options = pipeline.settings_snapshot(bpy.context.scene.lmrefine)
+    targets = pipeline.validate(bpy.context, [floor], options)
+    outcome = pipeline.run_blocking(pipeline.run(bpy.context, targets, options, Journal()))
+    refined = bridge.read_uv_layer(floor.data, "Lightmap_refined")
+    return {"warnings": outcome.warnings,
+            "max_move": float(np.abs(refined - targets[0].layout.uvs).max())}
+
+
+@check("refine")
+def modal_events():
+    """The modal operator's own code (invoke's set-up, modal, Esc, the end) fed with timer and key events.
+
+    Background Blender has no event loop, so the events are handed to modal()
+    directly, and the operator's methods run on a stand-in `self` (reports are
+    collected); everything else (driver, worker thread, journal, window
+    manager, timer) is the real thing.
+    """
+    import time as clock
+    from types import SimpleNamespace
+
+    from lmrefine_blender.operators import LMREFINE_OT_refine_uvs as Operator
+
+    facts = {}
+    for mode in ("run", "escape"):
+        fresh_shadow_scene(first_lightmap='CYCLES', backend='CYCLES', bake_passes={'DIRECT'})
+        window = bpy.context.window_manager.windows[0]  # a fresh scene comes with a new window
+        before = fingerprint()
+        reports = []
+        operator = SimpleNamespace(report=lambda kind, text: reports.append([sorted(kind), text]),
+                                   _started=clock.perf_counter())
+        for name in ("_prepare", "_begin_modal", "modal", "_status", "_end"):
+            setattr(operator, name, getattr(Operator, name).__get__(operator))
+        with bpy.context.temp_override(window=window):
+            options, targets = operator._prepare(bpy.context)
+            operator._begin_modal(bpy.context, options, targets)
+            returned = {'RUNNING_MODAL'}
+            events = 0
+            while returned == {'RUNNING_MODAL'} and events < 10000:
+                if mode == "escape" and operator._driver.label.startswith("Refining"):
+                    operator.modal(bpy.context, SimpleNamespace(type='ESC', value='PRESS'))
+                returned = operator.modal(bpy.context, SimpleNamespace(type='TIMER', value='NOTHING'))
+                ignored = operator.modal(bpy.context, SimpleNamespace(type='LEFTMOUSE', value='PRESS'))
+                assert ignored == {'RUNNING_MODAL'}
+                events += 1
+                clock.sleep(0.005)
+        facts[mode] = {"returned": sorted(returned), "reports": reports, "changed": changed(before, fingerprint()),
+                       "result_valid": bpy.context.scene.lmrefine.result.valid}
+    return facts
+
+
+@check("refine")
+def invoke_in_background_runs_blocking():
+    """INVOKE_DEFAULT (a button press) in background Blender has no event loop for the modal run."""
+    fresh_shadow_scene(first_lightmap='CYCLES', backend='CYCLES', bake_passes={'DIRECT'})
+    outcome, message = refine(how='INVOKE_DEFAULT')
+    return {"outcome": outcome, "message": message,
+            "has_layer": "Lightmap_refined" in bpy.data.objects["Floor"].data.uv_layers}
+
+
+@check("refine")
+def end_to_end_existing_image():
+    return _end_to_end('IMAGE', 'CYCLES', {'DIRECT'})
+
+
+@check("refine")
+def remove_preview_restores_materials():
+    """Remove Lightmap Preview takes out exactly the nodes the run added."""
+    fresh_shadow_scene(first_lightmap='CYCLES', backend='CYCLES', bake_passes={'DIRECT'})
+    material_before = fingerprint()["material:FloorMaterial"]
+    outcome, message = refine()
+    material_after_run = fingerprint()["material:FloorMaterial"]
+    with bpy.context.temp_override(window=bpy.context.window_manager.windows[0]):
+        removed = sorted(bpy.ops.object.lmrefine_remove_preview())
+        again = sorted(bpy.ops.object.lmrefine_remove_preview())
+    return {"outcome": outcome, "message": message, "removed": removed, "again": again,
+            "changed_by_run": material_after_run != material_before,
+            "restored": fingerprint()["material:FloorMaterial"] == material_before}
+
+
+@check("refine")
+def rerun_failure_restores_previous_run():
+    """A second run that fails at its very last step (writing the EXRs) restores the first run's result:
+    the refined map's UVs, the images' pixels and the preview nodes."""
+    fresh_shadow_scene(first_lightmap='CYCLES', backend='CYCLES', bake_passes={'DIRECT'})
+    first_outcome, message = refine()
+    floor = bpy.data.objects["Floor"]
+    settings(strength=2.0)  # a different layout and different pixels the second time
+    before = fingerprint()
+    refined_before = bridge.read_uv_layer(floor.data, "Lightmap_refined")
+    pixels_before = bridge.image_to_array(bpy.data.images["Floor_lightmap_direct"])
+    options = pipeline.settings_snapshot(bpy.context.scene.lmrefine)
+    targets = pipeline.validate(bpy.context, [floor], options)
+    journal = Journal()
+    unwritable = os.path.join(WORK_DIR, "lightmap.exr", "inside_a_file")  # a folder Blender cannot create
+    try:
+        pipeline.run_blocking(pipeline.run(bpy.context, targets, options, journal, image_dir=unwritable))
+        raised = None
+    except Exception as error:
+        raised = type(error).__name__
+        journal.rollback()
+    return {
+        "first_outcome": first_outcome, "message": message, "raised": raised,
+        "changed": changed(before, fingerprint()),
+        "refined_restored": bool(np.array_equal(bridge.read_uv_layer(floor.data, "Lightmap_refined"),
+                                                refined_before)),
+        "pixels_restored": bool(np.array_equal(bridge.image_to_array(bpy.data.images["Floor_lightmap_direct"]),
+                                               pixels_before)),
+    }
+
+
+@check("refine")
+def rollback_on_failure():
+    """A Cycles second bake that fails after the refined layer was written leaves nothing behind."""
+    fresh_shadow_scene(first_lightmap='IMAGE', backend='CYCLES', bake_passes={'DIRECT'})
+    settings(lightmap_image=bpy.data.images.load(os.path.join(WORK_DIR, "lightmap.exr")))
+    bpy.data.materials["FloorMaterial"].use_nodes = False  # the second bake refuses this material
+    before = fingerprint()
+    outcome, message = refine()
+    return {"outcome": outcome, "message": message, "changed": changed(before, fingerprint())}
+
+
+@check("refine")
+def rollback_on_cancel():
+    """Cancelled during the second bake (after the layer was written): the scene is as before."""
+    fresh_shadow_scene(first_lightmap='CYCLES', backend='CYCLES', bake_passes={'DIRECT', 'AO'})
+    mesh = bpy.data.objects["Floor"].data
+    options = pipeline.settings_snapshot(bpy.context.scene.lmrefine)
+    before = fingerprint()
+    targets = pipeline.validate(bpy.context, [bpy.data.objects["Floor"]], options)
+    journal = Journal()
+    stop = lambda: "Lightmap_refined" in mesh.uv_layers  # noqa: E731
+    job = pipeline.run(bpy.context, targets, options, journal)
+    try:
+        pipeline.run_blocking(job, should_stop=stop)
+        raised = None
+    except Exception as error:
+        raised = type(error).__name__
+        journal.rollback()
+    return {"raised": raised, "changed": changed(before, fingerprint())}
+
+
+@check("refine")
+def threaded_driver_runs_and_cancels():
+    """The modal operator's driver (worker thread + poll), which Esc cancels; no event loop needed."""
+    import time as clock
+
+    facts = {}
+    for mode in ("run", "cancel"):
+        fresh_shadow_scene(first_lightmap='CYCLES', backend='CYCLES', bake_passes={'DIRECT'})
+        floor = bpy.data.objects["Floor"]
+        options = pipeline.settings_snapshot(bpy.context.scene.lmrefine)
+        before = fingerprint()
+        targets = pipeline.validate(bpy.context, [floor], options)
+        journal = Journal()
+        driver = pipeline.ThreadedDriver(pipeline.run(bpy.context, targets, options, journal))
+        labels = []
+        while True:
+            state = driver.poll()
+            if state is not None:
+                break
+            labels.append(driver.label)
+            if mode == "cancel" and driver.label.startswith("Refining"):
+                driver.cancel()  # what Esc does, while the native refinement runs on the worker thread
+            clock.sleep(0.01)
+        kind, value = state
+        if kind == "error":
+            journal.rollback()
+        facts[mode] = {"kind": kind, "value": type(value).__name__, "labels": sorted(set(labels)),
+                       "has_layer": "Lightmap_refined" in floor.data.uv_layers,
+                       "changed": changed(before, fingerprint())}
+    return facts
+
+
+@check()
+def save_scene_for_batch():
+    fresh_shadow_scene()
+    path = os.path.join(WORK_DIR, "shadow.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    return {"path": path}
+
+
+with open(OUT_JSON, "w", encoding="utf-8") as stream:
+    json.dump(results, stream, indent=1, default=str)

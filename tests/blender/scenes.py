@@ -1,0 +1,110 @@
+"""Small scenes the add-on tests build inside headless Blender (no .blend files checked in)."""
+
+import bpy
+import numpy as np
+
+
+def reset():
+    """An empty scene (factory startup has a cube, camera and light)."""
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    world = bpy.data.worlds.new("World")
+    world.use_nodes = False
+    world.color = (0.0, 0.0, 0.0)
+    scene.world = world
+    return scene
+
+
+def _material(name, color):
+    material = bpy.data.materials.new(name)
+    material.use_nodes = True
+    material.node_tree.nodes["Principled BSDF"].inputs["Base Color"].default_value = (*color, 1.0)
+    return material
+
+
+def _set_lightmap_layer(mesh, name="Lightmap", margin=0.05):
+    """A second UV map: the first map squeezed into [margin, 1 - margin] (one chart with a gutter)."""
+    uvs = np.empty(len(mesh.loops) * 2, dtype=np.float32)
+    mesh.uv_layers[0].data.foreach_get("uv", uvs)
+    layer = mesh.uv_layers.new(name=name)
+    layer.data.foreach_set("uv", margin + uvs * (1.0 - 2.0 * margin))
+    return layer
+
+
+def _set_face_charts_layer(mesh, name="Lightmap", columns=3, rows=2, margin=0.05):
+    """A lightmap UV map with every (quad) face its own chart in a grid of cells, like Lightmap Pack."""
+    uvs = np.zeros((len(mesh.loops), 2), dtype=np.float32)
+    corners = np.array([(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0)])
+    for index, polygon in enumerate(mesh.polygons):
+        cell = np.array([index % columns, index // columns], dtype=np.float64)
+        size = np.array([1.0 / columns, 1.0 / rows])
+        quad = (cell + margin / size + corners * (1.0 - 2.0 * margin / size)) * size
+        uvs[polygon.loop_start:polygon.loop_start + 4] = quad[:polygon.loop_total]
+    layer = mesh.uv_layers.new(name=name)
+    layer.data.foreach_set("uv", uvs.ravel())
+    return layer
+
+
+def shadow_scene():
+    """A finely tessellated floor 'Floor' (UVMap + Lightmap), a box 'Blocker' above it, a sun.
+
+    The box's Lightmap map has six charts (one per face) with gutters of
+    6 texels at 64 x 64, like a Lightmap Pack.
+
+    The box's shadow draws a hard edge across the floor: where a refinement
+    should put more texels.
+    """
+    scene = reset()
+    bpy.ops.mesh.primitive_grid_add(x_subdivisions=24, y_subdivisions=24, size=4.0)
+    floor = bpy.context.active_object
+    floor.name = "Floor"
+    floor.data.name = "FloorMesh"
+    _set_lightmap_layer(floor.data)
+    floor.data.materials.append(_material("FloorMaterial", (0.8, 0.8, 0.8)))
+
+    bpy.ops.mesh.primitive_cube_add(size=1.0, location=(0.3, 0.2, 1.0))
+    blocker = bpy.context.active_object
+    blocker.name = "Blocker"
+    _set_face_charts_layer(blocker.data)
+    blocker.data.materials.append(_material("BlockerMaterial", (0.5, 0.5, 0.5)))
+
+    bpy.ops.object.light_add(type='SUN', location=(0.0, 0.0, 5.0))
+    sun = bpy.context.active_object
+    sun.name = "Sun"
+    sun.data.energy = 3.0
+    sun.data.angle = 0.02
+    sun.rotation_euler = (0.3, 0.2, 0.0)
+
+    select_only(floor)
+    return scene
+
+
+def select_only(*objects):
+    for obj in bpy.context.view_layer.objects:
+        obj.select_set(obj in objects)
+    bpy.context.view_layer.objects.active = objects[0] if objects else None
+
+
+def degenerate_mesh():
+    """A mesh 'Sliver' whose second face has zero area (three collinear vertices)."""
+    mesh = bpy.data.meshes.new("SliverMesh")
+    vertices = [(0, 0, 0), (1, 0, 0), (1, 1, 0), (2, 0, 0), (3, 0, 0)]
+    mesh.from_pydata(vertices, [], [(0, 1, 2), (1, 3, 4)])
+    mesh.update()
+    mesh.uv_layers.new(name="UVMap")
+    layer = mesh.uv_layers.new(name="Lightmap")
+    corners = np.array([(0.1, 0.1), (0.4, 0.1), (0.4, 0.4), (0.5, 0.5), (0.9, 0.5), (0.7, 0.9)], np.float32)
+    layer.data.foreach_set("uv", corners.ravel())
+    obj = bpy.data.objects.new("Sliver", mesh)
+    bpy.context.scene.collection.objects.link(obj)
+    return obj
+
+
+def bare_mesh():
+    """A mesh 'Bare' with no UV map at all."""
+    mesh = bpy.data.meshes.new("BareMesh")
+    mesh.from_pydata([(0, 0, 0), (1, 0, 0), (1, 1, 0)], [], [(0, 1, 2)])
+    mesh.update()
+    obj = bpy.data.objects.new("Bare", mesh)
+    bpy.context.scene.collection.objects.link(obj)
+    return obj

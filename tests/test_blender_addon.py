@@ -1,0 +1,399 @@
+"""The Blender add-on, driven through real headless Blender.
+
+One Blender process runs every in-Blender check (tests/blender/addon_checks.py)
+and writes facts as JSON; the tests below assert on them. The batch entry gets
+its own processes because it is its own command line. Undo is tested in
+background mode by pushing a step before the run (ed.undo_push with a window
+in the context), calling the operator as a script with undo=True, then one
+ed.undo: it must restore the scene, and no further step may remain, which
+shows the whole run was a single undo step.
+"""
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+
+import pytest
+
+pytestmark = [pytest.mark.blender, pytest.mark.slow]  # each group starts Blender (~1.5 s)
+
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+BLENDER = shutil.which("blender")
+BATCH = os.path.join(REPO, "addon", "lmrefine_blender", "batch.py")
+
+if BLENDER is None:
+    pytest.skip("Blender is not installed", allow_module_level=True)
+
+
+def run_blender(*args, timeout=600):
+    return subprocess.run([BLENDER, "-b", "--factory-startup", "--python-exit-code", "1", *args],
+                          capture_output=True, text=True, timeout=timeout)
+
+
+@pytest.fixture(scope="module")
+def work_dir(tmp_path_factory):
+    return tmp_path_factory.mktemp("blender_addon")
+
+
+@pytest.fixture(scope="module")
+def facts(work_dir):
+    out = work_dir / "facts.json"
+    process = run_blender("--python", os.path.join(REPO, "tests", "blender", "addon_checks.py"), "--",
+                          REPO, str(out), str(work_dir))
+    assert process.returncode == 0, process.stdout[-3000:] + process.stderr[-3000:]
+    return json.loads(out.read_text())
+
+
+def fact(facts, name):
+    value = facts[name]
+    if "exception" in value:
+        pytest.fail(f"check {name} raised inside Blender:\n{value['exception']}")
+    if "skipped" in value:
+        pytest.skip(value["skipped"])
+    return value
+
+
+def test_register_and_unregister(facts):
+    value = fact(facts, "registration")
+    registered, unregistered = value["registered"], value["unregistered"]
+    assert len(registered["panels"]) == 4
+    assert registered["category"] == "Lightmap" and registered["space"] == "VIEW_3D"
+    assert registered["operators"] == [True, True] and registered["label"] == "Refine Lightmap UVs"
+    assert registered["scene_property"]
+    assert len(registered["icons_used"]) >= 4 and registered["icons_missing"] == []
+    assert unregistered == {"panels": [], "scene_property": False, "operator": False}
+
+
+# ------------------------------------------------------------ error cases
+
+ERRORS = {
+    "error_no_mesh": "No mesh selected",
+    "error_only_light_selected": "No mesh selected",
+    "error_no_uv_layer": "'Bare' has no UV map",
+    "error_missing_source_layer": "has no UV map 'NoSuchMap'",
+    "error_edit_mode": "works in Object Mode, not Edit Mesh",
+    "error_zero_area_faces": "1 faces of zero area",
+    "error_linked_library": "is linked from",
+    "error_hidden_object": "'Floor' is hidden",
+    "error_shared_mesh": "share mesh 'FloorMesh'",
+    "error_image_not_found": "No lightmap image found for 'Floor'",
+    "error_image_file_missing": "has no pixels",
+    "error_image_wrong_size": "is 16x16 but Resolution is 64",
+    "error_no_bake_pass": "No bake pass chosen",
+    "error_image_from_refined_bake": "was baked with a refined UV map",
+    "error_uvs_outside_unit_square": "has 1 UVs outside [0, 1]",
+}
+
+
+@pytest.mark.parametrize("name", sorted(ERRORS))
+def test_error_is_reported_and_changes_nothing(facts, name):
+    value = fact(facts, name)
+    assert value["outcome"] == "CANCELLED"
+    assert value["message"] is not None and ERRORS[name] in value["message"]
+    assert value["changed"] == []
+
+
+def test_refine_defaults_match_the_library(facts):
+    value = fact(facts, "refine_defaults_match_the_library")
+    assert value["missing"] == []
+    for key, default in value["theirs"].items():
+        assert value["ours"][key] == pytest.approx(default), key
+
+
+# ----------------------------------------------------------------- bridge
+
+def test_bridge_exports_world_space_geometry_and_lights(facts):
+    value = fact(facts, "bridge_export")
+    assert value["default_source"] == "Lightmap"
+    # Floor: a 4 m grid moved to (1, 2, 3) and scaled 2x along x.
+    assert value["x_range"] == pytest.approx([-3.0, 5.0], abs=1e-5)
+    assert value["y_range"] == pytest.approx([0.0, 4.0], abs=1e-5)
+    assert value["z_range"] == pytest.approx([3.0, 3.0], abs=1e-5)
+    assert value["normal_mean"] == pytest.approx([0.0, 0.0, 1.0], abs=1e-6)
+    assert value["uvs_match_layout"] and value["triangles_match_layout"]
+    assert value["triangle_count"] == 24 * 24 * 2
+    assert value["base_color"] == pytest.approx([0.8, 0.8, 0.8], abs=1e-6)
+    # The blocker (1 m cube at z = 1) is an occluder until it is hidden from render.
+    assert value["occluders"] == ["Blocker"] and value["occluders_when_hidden"] == []
+    assert value["blocker_z_range"] == pytest.approx([0.5, 1.5], abs=1e-5)
+    assert value["light_kind"] == "sun"
+    sun = value["sun"]
+    assert sun["energy"] == 3.0 and sun["angle"] == pytest.approx(0.02)
+    # Rotation (0.3, 0.2, 0) applied to -Z.
+    assert sun["direction"] == pytest.approx([-0.18980, 0.29552, -0.93629], abs=1e-4)
+    assert value["world"] == [0.0, 0.0, 0.0]
+
+
+def test_lights_in_blender_units_and_world_space(facts):
+    value = fact(facts, "bridge_lights")
+    assert value["count"] == 4  # the zero-energy light is left out
+    # Rotated 90 degrees about x, a light's -Z (where it points) becomes +Y.
+    for kind in ("point", "spot", "sun", "area"):
+        assert value[kind]["position"] == pytest.approx([1.0, 2.0, 3.0], abs=1e-6)
+        assert value[kind]["direction"] == pytest.approx([0.0, 1.0, 0.0], abs=1e-6)
+    assert value["point"]["shadow_soft_size"] == pytest.approx(0.3)
+    assert value["spot"]["spot_size"] == pytest.approx(0.8) and value["spot"]["spot_blend"] == pytest.approx(0.25)
+    assert value["sun"]["angle"] == pytest.approx(0.1)
+    area = value["area"]
+    assert area["shape"] == "RECTANGLE"
+    assert area["size"] == pytest.approx(6.0) and area["size_y"] == pytest.approx(1.0)  # times the object scale
+    assert area["color"] == pytest.approx([1.0, 0.5, 0.25])
+    assert area["energy"] == pytest.approx(10.0)  # Blender's default area light power, in W
+
+
+def test_layout_is_welded_within_blenders_connect_limit(facts):
+    value = fact(facts, "bridge_welds_blender_layouts")
+    # The premise: Blender's own grid reads as several bit-identical-UV charts, a few UVs past 1.
+    assert value["raw_charts"] > 1 and value["raw_out_of_bounds"] > 0
+    assert value["welded_charts"] == 1 and value["welded_in_bounds"]
+    assert value["welded_max_shift"] < 1e-4
+    assert value["raw_unchanged"]
+
+
+def test_default_source_layer(facts):
+    assert fact(facts, "bridge_default_layers") == {
+        "UVMap": "UVMap",
+        "UVMap+UVMap.001": "UVMap.001",
+        "UVMap+Detail+LightmapUV": "LightmapUV",
+        "A+B+C": "B",
+        "UVMap+UVMap.001+UVMap.001_refined": "UVMap.001",
+    }
+
+
+def test_image_rows_are_flipped_once(facts):
+    assert fact(facts, "bridge_image_roundtrip") == {"roundtrip_equal": True, "bottom_row_first": True}
+
+
+def test_cycles_bake_matches_lambert_and_restores_scene(facts):
+    value = fact(facts, "cycles_first_bake")
+    assert value["shape"] == [64, 64, 4]
+    assert value["covered_texels"] > 0.8 * 64 * 64
+    # Diffuse direct with colour off is irradiance / pi: sun 3 W/m^2 at cos 0.93629.
+    assert value["light_max"] == pytest.approx(3.0 * 0.93629 / 3.14159265, rel=0.03)
+    assert value["light_min"] < 0.05  # the blocker's umbra
+    assert 0.5 < value["lit_fraction"] < 0.98
+    assert value["changed"] == [] and value["engine_restored"]
+
+
+# ------------------------------------------------------------- end to end
+
+@pytest.mark.parametrize("name", ["end_to_end_embree", "end_to_end_cycles", "end_to_end_existing_image"])
+def test_operator_end_to_end(facts, name):
+    value = fact(facts, name)
+    assert value["outcome"] == "FINISHED", value.get("message")
+    assert value["layers"] == ["UVMap", "Lightmap", "Lightmap_refined"]
+    # The user's active and render UV maps keep their roles; source and mesh are bit-identical.
+    assert value["active_layer"] == "UVMap" and value["render_layer"] == "UVMap"
+    assert value["source_identical"] and value["texture_uvs_identical"] and value["geometry_identical"]
+    assert value["check_layout"]["valid"] is True
+    assert value["check_layout"]["min_gutter_texels"] >= 2
+    assert value["uv_max_move"] > 0.5 / 64  # the shadow edge pulled UVs by more than half a texel
+    changed = set(value["changed"])
+    assert "mesh:FloorMesh" in changed and "mesh:Cube" not in changed
+    for name_, stats in value["images"].items():
+        assert stats is not None, f"no image for pass {name_}"
+        assert stats["size"] == [64, 64] and stats["is_float"] and stats["packed"]
+        assert stats["std"] > 0.01 and stats["max"] > 0.1, f"pass {name_} looks unbaked: {stats}"
+    assert ("ShaderNodeUVMap", "Lightmap_refined") in [tuple(node) for node in value["preview_nodes"]]
+    assert value["result_valid"] and value["transition_widening"] > 1.0
+    assert 0.0 < value["density_range"][0] <= value["density_range"][1]
+    assert "refine" in value["timings"]
+
+
+@pytest.mark.parametrize("name", ["end_to_end_embree", "end_to_end_cycles", "end_to_end_existing_image"])
+def test_operator_is_one_undo_step(facts, name):
+    value = fact(facts, name)
+    assert value["can_undo"]
+    assert value["changed_after_undo"] == []
+    assert value["can_undo_further"] is False
+
+
+def test_two_objects_in_one_run(facts):
+    value = fact(facts, "end_to_end_two_objects")
+    assert value["outcome"] == "FINISHED", value["message"]
+    assert value["Floor"]["charts"] == 1 and value["Blocker"]["charts"] == 6
+    for name in ("Floor", "Blocker"):
+        assert value[name]["valid"] and value[name]["min_gutter_texels"] >= 2
+        assert value[name]["image"] is not None and value[name]["image"]["max"] > 0.1
+    # The floor gets the box's shadow: dark and lit texels on the same map.
+    assert value["Floor"]["image"]["min"] < 0.05 and value["Floor"]["image"]["max"] > 0.5
+
+
+def test_black_first_lightmap_warns_and_keeps_the_layout(facts):
+    value = fact(facts, "black_first_lightmap_warns")
+    assert len(value["warnings"]) == 1 and "the first lightmap is black" in value["warnings"][0]
+    assert value["max_move"] < 1e-6
+
+
+def test_modal_run_and_escape(facts):
+    value = fact(facts, "modal_events")
+    run, escape = value["run"], value["escape"]
+    assert run["returned"] == ["FINISHED"] and run["result_valid"]
+    assert run["reports"][-1][0] == ["INFO"] and "Refined 1 object(s)" in run["reports"][-1][1]
+    assert "mesh:FloorMesh" in run["changed"]
+    assert escape["returned"] == ["CANCELLED"] and not escape["result_valid"]
+    assert escape["reports"] == [[["WARNING"], "Cancelled: the scene was left unchanged"]]
+    assert escape["changed"] == []
+
+
+def test_invoke_in_background_runs_blocking(facts):
+    value = fact(facts, "invoke_in_background_runs_blocking")
+    assert value["outcome"] == "FINISHED", value["message"]
+    assert value["has_layer"]
+
+
+def test_remove_preview_restores_materials(facts):
+    value = fact(facts, "remove_preview_restores_materials")
+    assert value["outcome"] == "FINISHED", value["message"]
+    assert value["changed_by_run"] and value["restored"]
+    assert value["removed"] == ["FINISHED"] and value["again"] == ["CANCELLED"]
+
+
+def test_failed_rerun_restores_the_previous_result(facts):
+    value = fact(facts, "rerun_failure_restores_previous_run")
+    assert value["first_outcome"] == "FINISHED", value["message"]
+    assert value["raised"] == "RuntimeError"  # Blender could not write the EXR
+    assert value["changed"] == [] and value["refined_restored"] and value["pixels_restored"]
+
+
+def test_failure_mid_run_rolls_back(facts):
+    value = fact(facts, "rollback_on_failure")
+    assert value["outcome"] == "CANCELLED"
+    assert "does not use nodes" in value["message"]
+    assert value["changed"] == []
+
+
+def test_cancel_mid_run_rolls_back(facts):
+    value = fact(facts, "rollback_on_cancel")
+    assert value["raised"] == "Cancelled"
+    assert value["changed"] == []
+
+
+def test_threaded_driver_runs_and_cancels(facts):
+    value = fact(facts, "threaded_driver_runs_and_cancels")
+    run, cancel = value["run"], value["cancel"]
+    assert run["kind"] == "done" and run["value"] == "Outcome" and run["has_layer"]
+    assert "Refining Floor" in run["labels"]
+    # Cancelled while refining: either the native call saw the stop (CancelledError) or the
+    # job stopped before its next step (Cancelled); the scene is untouched either way.
+    assert cancel["kind"] == "error" and cancel["value"] in ("Cancelled", "CancelledError")
+    assert cancel["changed"] == [] and not cancel["has_layer"]
+
+
+# ------------------------------------------------------------------ batch
+
+def run_batch(blend, *flags):
+    return run_blender(str(blend), "--python", BATCH, "--", *flags)
+
+
+def test_batch_help_documents_flags():
+    process = run_blender("--python", BATCH, "--", "--help")
+    assert process.returncode == 0, process.stderr[-2000:]
+    for flag in ("--objects", "--resolution", "--out", "--backend", "--bake-passes", "--first-lightmap"):
+        assert flag in process.stdout
+
+
+def test_batch_fails_with_message_and_report(facts, work_dir):
+    blend = fact(facts, "save_scene_for_batch")["path"]
+    out = work_dir / "batch_fail"
+    process = run_batch(blend, "--objects", "Floor,NoSuchObject", "--resolution", "64", "--out", str(out))
+    assert process.returncode == 1
+    assert "no object(s) named NoSuchObject" in process.stderr
+    report = json.loads((out / "report.json").read_text())
+    assert report["ok"] is False and "NoSuchObject" in report["error"]
+
+
+def test_batch_never_overwrites_its_input(facts):
+    blend = fact(facts, "save_scene_for_batch")["path"]
+    before = os.path.getmtime(blend)
+    process = run_batch(blend, "--objects", "Floor", "--out", os.path.dirname(blend))
+    assert process.returncode == 1
+    assert "would overwrite it" in process.stderr
+    assert os.path.getmtime(blend) == before
+
+
+def test_batch_refuses_objects_that_are_not_meshes(facts, work_dir):
+    blend = fact(facts, "save_scene_for_batch")["path"]
+    process = run_batch(blend, "--objects", "Floor,Sun", "--out", str(work_dir / "not_mesh"))
+    assert process.returncode == 1
+    assert "not meshes: 'Sun' (light)" in process.stderr
+
+
+def test_batch_rejects_bad_flags(facts, work_dir):
+    blend = fact(facts, "save_scene_for_batch")["path"]
+    process = run_batch(blend, "--objects", "Floor", "--out", str(work_dir / "bad"), "--bake-passes", "glow")
+    assert process.returncode == 2
+    assert "unknown pass" in process.stderr
+
+
+def test_batch_refines_bakes_and_reports(facts, work_dir):
+    if not (facts["api"]["refine_uvs"] and facts["api"]["bake"]):
+        pytest.skip("lmrefine lacks refine_uvs/bake (not merged yet)")
+    blend = fact(facts, "save_scene_for_batch")["path"]
+    out = work_dir / "batch_ok"
+    process = run_batch(blend, "--objects", "Floor", "--resolution", "64", "--samples", "4",
+                        "--bake-passes", "direct,ao", "--out", str(out))
+    assert process.returncode == 0, process.stderr[-3000:]
+    report = json.loads((out / "report.json").read_text())
+    assert report["ok"] is True
+    floor = report["objects"]["Floor"]
+    assert floor["refined_layer"] == "Lightmap_refined"
+    assert floor["report"]["check_layout"]["valid"] is True
+    for pass_name in ("direct", "ao"):
+        path = floor["images"][pass_name]
+        assert os.path.dirname(path) == str(out) and os.path.getsize(path) > 0
+    assert os.path.isfile(report["blend"]) and os.path.dirname(report["blend"]) == str(out)
+    assert sorted(os.listdir(out)) == ["Floor_lightmap_ao.exr", "Floor_lightmap_direct.exr", "report.json",
+                                       os.path.basename(blend)]
+    # The saved copy opens with the refined map and finds its lightmaps through relative paths.
+    probe = (
+        "import bpy, json\n"
+        "mesh = bpy.data.objects['Floor'].data\n"
+        "images = {i.name: [i.filepath, i.size[0], i.has_data] for i in bpy.data.images if i.get('lmrefine_object')}\n"
+        "print('PROBE', json.dumps({'layers': [l.name for l in mesh.uv_layers], 'images': images}))\n"
+    )
+    process = run_blender(report["blend"], "--python-expr", probe)
+    assert process.returncode == 0, process.stderr[-2000:]
+    saved = json.loads(next(line for line in process.stdout.splitlines() if line.startswith("PROBE"))[6:])
+    assert saved["layers"] == ["UVMap", "Lightmap", "Lightmap_refined"]
+    assert saved["images"] == {
+        "Floor_lightmap_direct": ["//Floor_lightmap_direct.exr", 64, True],
+        "Floor_lightmap_ao": ["//Floor_lightmap_ao.exr", 64, True],
+    }
+
+
+# -------------------------------------------------------------- packaging
+
+def test_zip_installs_enables_and_carries_the_core(tmp_path):
+    """The release zip installs like a user would (Preferences operators), in a throwaway user folder."""
+    archive = tmp_path / "lmrefine_blender.zip"
+    built = subprocess.run([sys.executable, os.path.join(REPO, "addon", "build_zip.py"), "--out", str(archive)],
+                           capture_output=True, text=True)
+    assert built.returncode == 0, built.stderr
+    env = dict(os.environ, BLENDER_USER_SCRIPTS=str(tmp_path / "scripts"),
+               BLENDER_USER_CONFIG=str(tmp_path / "config"))
+    env.pop("PYTHONPATH", None)
+    install = (
+        "import bpy\n"
+        f"bpy.ops.preferences.addon_install(filepath={str(archive)!r})\n"
+        "bpy.ops.preferences.addon_enable(module='lmrefine_blender')\n"
+        "bpy.ops.wm.save_userpref()\n"
+    )
+    process = subprocess.run([BLENDER, "-b", "--factory-startup", "--python-exit-code", "1",
+                              "--python-expr", install], capture_output=True, text=True, env=env, timeout=120)
+    assert process.returncode == 0, process.stderr[-2000:]
+    # A later session (user preferences read) has the add-on enabled, and the core loads from the zip's copy.
+    probe = (
+        "import bpy, lmrefine\n"
+        "print('PROBE', hasattr(bpy.types.Scene, 'lmrefine'), lmrefine.__file__, "
+        "bpy.ops.object.lmrefine_refine_uvs.idname())\n"
+    )
+    process = subprocess.run([BLENDER, "-b", "--python-exit-code", "1", "--python-expr", probe],
+                             capture_output=True, text=True, env=env, timeout=120)
+    assert process.returncode == 0, process.stderr[-2000:]
+    line = next(line for line in process.stdout.splitlines() if line.startswith("PROBE"))
+    enabled, location, idname = line.split()[1:]
+    assert enabled == "True" and idname == "OBJECT_OT_lmrefine_refine_uvs"
+    assert location.startswith(str(tmp_path / "scripts" / "addons" / "lmrefine_blender" / "lib"))

@@ -1,0 +1,140 @@
+"""The evaluation pipeline end to end on a tiny scene (bake, refine, re-bake,
+ground truth, metrics, report), and its CLI."""
+
+import json
+
+import numpy as np
+import pytest
+
+import lmrefine
+from lmrefine import cli
+from lmrefine.sample_scenes import SampleScene, load_sample
+
+needs_pipeline = pytest.mark.skipif(
+    not all(hasattr(lmrefine, name) for name in ("bake", "refine_uvs", "check_layout"))
+    or not hasattr(lmrefine._native, "gradient_map"),
+    reason="needs the baker, the refiner and the gradient map")
+
+FIGURES = ("resolution", "rmse_baseline", "rmse_refined", "transition_rmse_baseline", "transition_rmse_refined",
+           "transition_widening", "equal_error_resolution_ratio", "timings")
+
+
+def tiny_scene(cells=24):
+    """A 3 x 3 m floor of cells x cells quads (two objects: west and east
+    halves) under a sun, a floating slab casting a hard shadow across it; the
+    floor is one chart filling [0.05, 0.95]^2 of the atlas."""
+    xs = np.linspace(-1.5, 1.5, cells + 1)
+    positions = np.array([(x, y, 0.0) for y in xs for x in xs], np.float32)
+    triangles = []
+    for j in range(cells):
+        for i in range(cells):
+            a, b = j * (cells + 1) + i, j * (cells + 1) + i + 1
+            c, d = (j + 1) * (cells + 1) + i + 1, (j + 1) * (cells + 1) + i
+            triangles += [(a, b, c), (a, c, d)]
+    triangles = np.array(triangles, np.int32)
+    corners = positions[triangles.reshape(-1)]
+    uvs = (0.05 + 0.9 * (corners[:, :2] + 1.5) / 3.0).astype(np.float32)
+    east = (positions[triangles].mean(axis=1)[:, 0] > 0).astype(np.int32)
+    slab = np.array([(-0.6, -0.5, 1.0), (0.5, -0.5, 1.0), (0.5, 0.6, 1.0), (-0.6, 0.6, 1.0)], np.float32)
+    return SampleScene(
+        name="tiny", positions=positions, triangles=triangles,
+        normals=np.tile(np.array([0, 0, 1], np.float32), (3 * len(triangles), 1)),
+        uvs={"smart": uvs, "lightmap": uvs.copy()},
+        base_color=np.full((len(triangles), 3), 0.7, np.float32), object_id=east, objects=["West", "East"],
+        lights=[{"name": "Sun", "kind": "sun", "energy": 3.0, "color": [1, 1, 1],
+                 "direction": [0.3, 0.2, -1.0], "angle": 0.01}],
+        world=(0.05, 0.05, 0.05), passes=("direct",),
+        occluder_positions=slab, occluder_triangles=np.array([(0, 1, 2), (0, 2, 3)], np.int32),
+        description="a floor and a floating slab")
+
+
+def test_a_saved_scene_loads_back(tmp_path):
+    scene = tiny_scene(4)
+    scene.save(tmp_path / "tiny.npz")
+    loaded = load_sample(str(tmp_path / "tiny.npz"))
+    for key in ("positions", "triangles", "normals", "base_color", "object_id", "occluder_triangles"):
+        np.testing.assert_array_equal(getattr(loaded, key), getattr(scene, key))
+    np.testing.assert_array_equal(loaded.uvs["smart"], scene.uvs["smart"])
+    assert loaded.lights == scene.lights and loaded.objects == ["West", "East"] and loaded.passes == ("direct",)
+
+
+@needs_pipeline
+@pytest.mark.slow
+def test_the_pipeline_reports_every_figure_with_sensible_values(tmp_path):
+    scene = tiny_scene()
+    scene.save(tmp_path / "tiny.npz")
+    out = tmp_path / "out"
+    assert cli.main(["evaluate", str(tmp_path / "tiny.npz"), "--resolution", "48", "--points", "3000",
+                     "--samples", "8", "--truth-samples", "64", "--multipliers", "1,1.5,2,3,4",
+                     "--out", str(out)]) == 0
+    summary = json.loads((out / "report.json").read_text())
+    assert summary["resolution"] == 48 and len(summary["scenes"]) == 1
+    report = json.loads((out / "tiny_smart" / "report.json").read_text())
+    assert report == summary["scenes"][0]
+    for key in FIGURES:
+        assert report[key] is not None, key
+    assert report["resolution"] == 48
+    # Errors are positive; the shadow edge is where the error is.
+    for key in ("rmse_baseline", "rmse_refined", "transition_rmse_baseline", "transition_rmse_refined"):
+        assert 0 < report[key] < 1, key
+    assert report["transition_rmse_baseline"] > 2 * report["rmse_baseline"]
+    # A top decile of the points are transitions, all on the edge of the shadow.
+    assert 0.05 * 3000 < report["transition_points"] <= 0.1 * 3000 + 1
+    # More texels, less error: the uniform baseline improves with resolution.
+    sweep = [s["rmse"] for s in report["resolution_sweep"]]
+    assert [s["resolution"] for s in report["resolution_sweep"]] == [48, 72, 96, 144, 192]
+    assert sweep[-1] < 0.7 * sweep[0]
+    # The refiner gave the transitions more texels, and the equal-error
+    # search places the refined map where its error says.
+    assert report["transition_widening"] > 1.05
+    ratio, status = report["equal_error_resolution_ratio"], report["equal_error_status"]
+    # The baseline is limited by resolution here, not noise: a ratio exists.
+    assert status in ("within", "below", "above") and ratio > 0
+    if report["rmse_refined"] < report["rmse_baseline"]:
+        assert ratio > 1
+    # The ground truth is much less noisy than the errors it measures.
+    assert 0 <= report["truth_noise_rmse"] < 0.2 * report["rmse_baseline"]
+    for stage in ("bake baseline", "refine", "bake refined", "ground truth", "bake resolution sweep", "metrics",
+                  "pictures"):
+        assert report["timings"][stage] >= 0
+    assert report["timings"]["total"] == pytest.approx(sum(v for k, v in report["timings"].items() if k != "total"))
+    # Per object: both halves, each with the same figures.
+    assert [o["object"] for o in report["objects"]] == ["West", "East"]
+    assert sum(o["points"] for o in report["objects"]) == 3000
+    for o in report["objects"]:
+        assert o["rmse_baseline"] > 0 and "transition_widening" in o and "equal_error_resolution_ratio" in o
+    if not report["gain"]:
+        assert report["notes"]
+    for name in ("report.md", "lightmaps.png", "layout.png", "density.png", "error.png", "error_vs_resolution.png",
+                 "baseline.exr", "refined.exr", "refined_layout.npz"):
+        assert (out / "tiny_smart" / name).stat().st_size > 0, name
+    layout = np.load(out / "tiny_smart" / "refined_layout.npz")
+    assert lmrefine.check_layout(layout["uvs"], layout["triangles"], 48)["valid"]
+    text = (out / "report.md").read_text()
+    assert "tiny" in text and "equal-error" in text
+
+
+@needs_pipeline
+@pytest.mark.slow
+def test_demo_runs_the_pipeline_on_the_bundled_courtyard(tmp_path, capsys):
+    assert cli.main(["demo", "--resolution", "64", "--points", "2000", "--samples", "4", "--truth-samples", "32",
+                     "--multipliers", "1,2", "--out", str(tmp_path)]) == 0
+    printed = capsys.readouterr().out
+    assert "| courtyard | smart | 64 |" in printed
+    report = json.loads((tmp_path / "courtyard_smart" / "report.json").read_text())
+    assert report["scene"] == "courtyard" and all(report[key] is not None for key in FIGURES)
+    assert {o["object"] for o in report["objects"]} >= {"Floor", "ArcadeNorth"}
+    # Stage 1 pictures: the gradient map of the baseline bake.
+    assert (tmp_path / "gradient" / "gradient_direction.png").exists()
+    summary = json.loads((tmp_path / "gradient" / "summary.json").read_text())
+    assert summary["width"] == 64 and summary["channels"]["r"]["max"] > 0
+
+
+@needs_pipeline
+def test_evaluate_rejects_bad_arguments(tmp_path, capsys):
+    assert cli.main(["evaluate", "no_such_scene", "--out", str(tmp_path)]) == 2
+    assert "no sample scene" in capsys.readouterr().err
+    assert cli.main(["evaluate", "courtyard", "--multipliers", "2,1", "--out", str(tmp_path)]) == 2
+    assert "multipliers" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        cli.main(["evaluate", "--multipliers", "a,b"])

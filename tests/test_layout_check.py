@@ -1,0 +1,146 @@
+"""check_layout: flips, degenerate and overlapping triangles, out-of-bounds
+UVs and the gutter between charts, at a lightmap resolution."""
+
+import numpy as np
+import pytest
+
+import lmrefine
+from layouts import grid_chart, lightmap_pack, merge, plane, smart_uv
+
+R = 64
+
+
+def square(x0, y0, size, n=1):
+    return grid_chart(n, (x0, y0), (x0 + size, y0 + size))
+
+
+def test_a_clean_plane_is_valid():
+    uvs, tris = plane(16)
+    report = lmrefine.check_layout(uvs, tris, R)
+    assert report == {"flipped": 0, "degenerate": 0, "overlapping": 0, "out_of_bounds": 0,
+                      "min_gutter_texels": float("inf"), "charts": 1, "valid": True}
+
+
+def test_gutter_is_the_exact_distance_between_charts_in_texels():
+    uvs, tris = merge(square(0.1, 0.1, 0.3, n=3), square(0.4 + 3 / R, 0.1, 0.3, n=2))
+    report = lmrefine.check_layout(uvs, tris, R, padding=2)
+    assert report["charts"] == 2
+    assert report["min_gutter_texels"] == pytest.approx(3.0, abs=1e-4)
+    assert report["valid"]
+    assert not lmrefine.check_layout(uvs, tris, R, padding=4)["valid"]
+    # Rectangular lightmaps measure each axis in its own texels.
+    assert lmrefine.check_layout(uvs, tris, (R, 2 * R))["min_gutter_texels"] == pytest.approx(6.0, abs=1e-4)
+
+
+def test_far_apart_charts_report_their_true_gutter():
+    uvs, tris = merge(square(0.0, 0.0, 0.1), square(0.8, 0.8, 0.1))
+    gap = np.hypot(0.7, 0.7) * R
+    assert lmrefine.check_layout(uvs, tris, R)["min_gutter_texels"] == pytest.approx(gap, rel=1e-5)
+
+
+def test_overlapping_charts_are_counted_touching_ones_are_not():
+    uvs, tris = merge(square(0.1, 0.1, 0.3), square(0.3, 0.3, 0.3))
+    report = lmrefine.check_layout(uvs, tris, R)
+    assert report["overlapping"] == 4 and not report["valid"]
+    assert report["min_gutter_texels"] == 0
+    touching = merge(square(0.1, 0.1, 0.3), square(0.4 + 1e-7, 0.1, 0.3))
+    report = lmrefine.check_layout(*touching, R, padding=0)
+    assert report["overlapping"] == 0
+    assert report["min_gutter_texels"] < 1e-3
+
+
+def test_a_chart_inside_another_overlaps():
+    uvs, tris = merge(square(0.1, 0.1, 0.6, n=4), square(0.3, 0.3, 0.05))
+    assert lmrefine.check_layout(uvs, tris, R)["overlapping"] == 2 + 2 * 1  # the small chart and what it lies on
+
+
+def test_flips_against_the_chart_majority_and_against_a_reference():
+    uvs, tris = plane(4)
+    one_flipped = tris.copy()
+    one_flipped[5] = one_flipped[5][[0, 2, 1]]
+    assert lmrefine.check_layout(uvs, one_flipped, R)["flipped"] == 1
+    mirrored = uvs.copy()
+    mirrored[:, 0] = 1 - mirrored[:, 0]  # a wholly mirrored chart is consistent ...
+    assert lmrefine.check_layout(mirrored, tris, R)["flipped"] == 0
+    # ... but every triangle turned over relative to the original.
+    assert lmrefine.check_layout(mirrored, tris, R, reference_uvs=uvs)["flipped"] == len(tris)
+
+
+def test_degenerate_and_out_of_bounds():
+    uvs, tris = plane(4)
+    uvs = uvs.copy()
+    uvs[tris[3, 2]] = 0.5 * (uvs[tris[3, 0]] + uvs[tris[3, 1]])  # collinear corners
+    uvs[0] = (-0.01, 0.5)
+    uvs[1] = (0.5, 1.01)
+    report = lmrefine.check_layout(uvs, tris, R)
+    assert report["degenerate"] == 1
+    assert report["out_of_bounds"] == 2
+    assert not report["valid"]
+
+
+@pytest.mark.parametrize("layout", [lightmap_pack(charts_across=16, margin_texels=2, resolution=256),
+                                    smart_uv(256, margin_texels=4)])
+def test_packed_layouts_keep_their_margin(layout):
+    report = lmrefine.check_layout(*layout, 256, padding=2)
+    assert report["valid"]
+    assert report["min_gutter_texels"] >= 2
+
+
+def test_bad_input_raises_value_errors():
+    uvs, tris = plane(2)
+    with pytest.raises(ValueError, match="resolution"):
+        lmrefine.check_layout(uvs, tris, 0)
+    with pytest.raises(ValueError, match="refers to UV"):
+        lmrefine.check_layout(uvs, tris + len(uvs), R)
+    bad = uvs.copy()
+    bad[3, 1] = np.nan
+    with pytest.raises(ValueError, match="NaN"):
+        lmrefine.check_layout(bad, tris, R)
+    with pytest.raises(ValueError, match=r"\(N, 2\)"):
+        lmrefine.check_layout(uvs[:, :1], tris, R)
+    with pytest.raises(ValueError, match="reference_uvs"):
+        lmrefine.check_layout(uvs, tris, R, reference_uvs=uvs[:-1])
+
+
+def test_failing_charts_names_the_charts_to_fix():
+    uvs, tris = merge(square(0.1, 0.1, 0.2), square(0.3 + 1 / R, 0.1, 0.2),  # 1 texel apart
+                      square(0.7, 0.7, 0.2), square(0.75, 0.75, 0.1))        # overlapping
+    report = lmrefine.check_layout(uvs, tris, R, padding=2, failing_charts=True)
+    np.testing.assert_array_equal(report["failing_charts"], [0, 1, 2, 3])
+    report = lmrefine.check_layout(uvs, tris, R, padding=0.5, failing_charts=True)
+    np.testing.assert_array_equal(report["failing_charts"], [2, 3])
+    assert "failing_charts" not in lmrefine.check_layout(uvs, tris, R)
+
+
+def test_relative_gutter_judges_each_chart_pair_against_its_original_distance():
+    # Charts 0-1 packed 1.5 texels apart, 1-2 5 texels apart; padding 2.
+    R = 64
+    def layout(gap01, gap12):
+        return merge(grid_chart(2, (0.1, 0.4), (0.3, 0.6)),
+                     grid_chart(2, (0.3 + gap01 / R, 0.4), (0.5, 0.6)),
+                     grid_chart(2, (0.5 + gap12 / R, 0.4), (0.7, 0.6)))
+    reference, tris = layout(1.5, 5.0)
+    def check(gap01, gap12):
+        uvs, _ = layout(gap01, gap12)
+        return lmrefine.check_layout(uvs, tris, R, 2, reference_uvs=reference, relative_gutter=True,
+                                     failing_charts=True)
+    kept = check(1.5, 2.5)  # the tight pair kept its gutter, the wide one stays above the padding
+    assert kept["gutter_violations"] == 0 and list(kept["failing_charts"]) == []
+    assert not kept["valid"]  # valid stays absolute: 1.5 < padding
+    tighter = check(1.3, 5.0)  # the tight pair got tighter
+    assert tighter["gutter_violations"] == 1 and list(tighter["failing_charts"]) == [0, 1]
+    thinned = check(1.5, 1.8)  # the wide pair fell below the padding
+    assert thinned["gutter_violations"] == 1 and list(thinned["failing_charts"]) == [1, 2]
+    assert "gutter_violations" not in lmrefine.check_layout(reference, tris, R, 2)
+    with pytest.raises(ValueError, match="reference_uvs"):
+        lmrefine.check_layout(reference, tris, R, 2, relative_gutter=True)
+
+
+def test_gutter_texels_mark_the_texels_between_charts():
+    R = 32
+    uvs, tris = merge(grid_chart(2, (0.0, 0.0), (0.5, 1.0)), grid_chart(2, (0.5 + 0.4 / R, 0.0), (1.0, 1.0)))
+    gutter = lmrefine._native.gutter_texels(uvs, tris, R)
+    # No uncovered texel between the charts (0.4 texel apart): the texels on
+    # both sides of the seam still are gutter, the rest of each chart not.
+    assert lmrefine.coverage_mask(uvs, tris, R).all()
+    assert gutter[:, 15:17].all() and not gutter[:, :14].any() and not gutter[:, 18:].any()

@@ -1,0 +1,161 @@
+"""Metrics on constructed cases with known answers (no baker, no Blender)."""
+
+import numpy as np
+import pytest
+
+from lmrefine import metrics
+
+
+def plane(n=8, size=2.0):
+    """An n x n grid of quads (2 triangles each) in z = 0, per-corner UVs
+    mapping it onto [0.1, 0.9]^2 (one chart)."""
+    xs = np.linspace(0, size, n + 1)
+    positions = np.array([(x, y, 0.0) for y in xs for x in xs], np.float32)
+    triangles = []
+    for j in range(n):
+        for i in range(n):
+            a, b, c, d = j * (n + 1) + i, j * (n + 1) + i + 1, (j + 1) * (n + 1) + i + 1, (j + 1) * (n + 1) + i
+            triangles += [(a, b, c), (a, c, d)]
+    triangles = np.array(triangles, np.int32)
+    corners = positions[triangles.reshape(-1)]
+    uvs = (0.1 + 0.8 * corners[:, :2] / size).astype(np.float32)
+    return positions, triangles, uvs
+
+
+def test_surface_samples_are_uniform_by_area_and_reproducible():
+    positions = np.array([(0, 0, 0), (1, 0, 0), (0, 1, 0), (0, 0, 5), (3, 0, 5), (0, 3, 5)], np.float32)
+    triangles = np.array([(0, 1, 2), (3, 4, 5)], np.int32)  # areas 0.5 and 4.5
+    samples = metrics.sample_surface(positions, triangles, 20000, seed=3)
+    assert abs(np.mean(samples.triangle == 1) - 0.9) < 0.01
+    np.testing.assert_allclose(samples.bary.sum(axis=1), 1.0)
+    assert (samples.bary >= 0).all()
+    np.testing.assert_allclose(samples.normals[:, 2], 1.0, atol=1e-6)
+    # Uniform inside a triangle: the mean is the centroid.
+    first = samples.points[samples.triangle == 0]
+    np.testing.assert_allclose(first.mean(axis=0), [1 / 3, 1 / 3, 0], atol=0.01)
+    again = metrics.sample_surface(positions, triangles, 20000, seed=3)
+    np.testing.assert_array_equal(samples.points, again.points)
+    with pytest.raises(ValueError, match="no area"):
+        metrics.sample_surface(np.zeros((3, 3), np.float32), np.array([(0, 1, 2)]), 10)
+
+
+def test_bilinear_lookup_follows_the_texel_space_convention():
+    image = np.zeros((4, 8, 1), np.float32)
+    image[0, 0] = 1.0                      # top-left texel: centre (1/16, 7/8)
+    assert metrics.bilinear_lookup(image, np.array([[1 / 16, 7 / 8]]))[0, 0] == pytest.approx(1.0)
+    assert metrics.bilinear_lookup(image, np.array([[1 / 16, 1 / 8]]))[0, 0] == pytest.approx(0.0)
+    # Halfway between texel centres (0, 0) and (0, 1): 0.5.
+    assert metrics.bilinear_lookup(image, np.array([[2 / 16, 7 / 8]]))[0, 0] == pytest.approx(0.5)
+    # A linear ramp along u is reproduced exactly between the first and last texel centres.
+    ramp = np.tile(np.arange(8, dtype=np.float32), (4, 1))
+    u = np.linspace(1 / 16, 15 / 16, 11)
+    values = metrics.bilinear_lookup(ramp, np.stack([u, np.full_like(u, 0.5)], axis=1))[:, 0]
+    np.testing.assert_allclose(values, u * 8 - 0.5, atol=1e-6)
+    # Clamped beyond the border.
+    assert metrics.bilinear_lookup(ramp, np.array([[0.0, 0.5], [1.0, 0.5]]))[:, 0] == pytest.approx([0, 7])
+
+
+def test_a_perfect_lightmap_gives_zero_error():
+    # Light that is linear in u (hence in x) is reproduced exactly by a
+    # bilinear lookup of its texel-centre samples: zero error everywhere.
+    positions, triangles, uvs = plane()
+    samples = metrics.sample_surface(positions, triangles, 5000, seed=1)
+    resolution = 64
+    u_centres = (np.arange(resolution) + 0.5) / resolution
+    light = np.repeat(np.tile(3.0 * u_centres, (resolution, 1))[..., None], 3, axis=2)
+    point_uv = metrics.interpolate_corners(uvs, samples.triangle, samples.bary)
+    truth = np.repeat(3.0 * point_uv[:, :1], 3, axis=1)
+    stats = metrics.error_stats(metrics.bilinear_lookup(light, point_uv), truth)
+    assert stats["rmse"] < 1e-5 and stats["mae"] < 1e-5
+    # And a known offset gives exactly that error.
+    stats = metrics.error_stats(metrics.bilinear_lookup(light + 0.25, point_uv), truth)
+    assert stats["rmse"] == pytest.approx(0.25, abs=1e-5) and stats["mae"] == pytest.approx(0.25, abs=1e-5)
+    assert np.isnan(metrics.error_stats(truth, truth, where=np.zeros(len(truth), bool))["rmse"])
+
+
+def test_transitions_are_found_at_a_shadow_edge_and_never_across_a_crease():
+    positions, triangles, _ = plane(n=16)
+    samples = metrics.sample_surface(positions, triangles, 4000, seed=2)
+    step = 0.02
+    points, normals, distances = metrics.gradient_stencil(positions, triangles, samples, step)
+    # Neighbours stay on the plane, inside the point's own triangle, within `step`.
+    assert np.abs(points[:, 2]).max() < 1e-6
+    assert distances.max() <= step + 1e-12 and distances.min() > 0
+    moved = np.linalg.norm(points.astype(np.float64) - np.tile(samples.points, (2, 1)), axis=1)
+    np.testing.assert_allclose(moved, distances, atol=1e-5)
+
+    def shade(p):  # a soft shadow edge 0.1 m wide at x = 1
+        return np.repeat(np.clip((p[:, :1] - 0.95) / 0.1, 0, 1), 3, axis=1)
+
+    gradient = metrics.surface_gradient(shade(samples.points), shade(points), distances)
+    transitions = metrics.transition_mask(gradient)
+    assert 0.03 < transitions.mean() <= 0.1 + 1e-9
+    near_edge = np.abs(samples.points[:, 0] - 1.0) < 0.06 + step
+    assert near_edge[transitions].all()
+    # The gradient inside the ramp is its slope (10 per metre).
+    inside = np.abs(samples.points[:, 0] - 1.0) < 0.03
+    np.testing.assert_allclose(gradient[inside], 10.0, rtol=0.02)
+    # Flat light: no transitions at all.
+    flat = metrics.surface_gradient(np.ones((len(samples), 3)), np.ones((2 * len(samples), 3)), distances)
+    assert not metrics.transition_mask(flat).any()
+
+
+def test_uniform_density_change_of_two_gives_widening_two():
+    positions, triangles, uvs = plane()
+    corner_triangles = np.arange(len(uvs), dtype=np.int32).reshape(-1, 3)
+    world = metrics.triangle_areas(positions, triangles)
+    base = metrics.texel_density(uvs, corner_triangles, world, 64)
+    # Scaling UVs by sqrt(2) doubles every UV area: density doubles everywhere.
+    refined_uvs = 0.05 + (uvs - 0.1) * np.sqrt(2.0)
+    refined = metrics.texel_density(refined_uvs, corner_triangles, world, 64)
+    np.testing.assert_allclose(refined / base, 2.0, rtol=1e-5)
+    # 0.8^2 of the atlas over 4 m^2 at 64^2 texels.
+    np.testing.assert_allclose(base, 0.64 * 64 * 64 / 4.0, rtol=1e-5)
+    samples = metrics.sample_surface(positions, triangles, 1000, seed=0)
+    transitions = np.zeros(1000, bool)
+    transitions[::7] = True
+    assert metrics.transition_widening(base, refined, samples.triangle, transitions) == pytest.approx(2.0, rel=1e-5)
+    assert np.isnan(metrics.transition_widening(base, refined, samples.triangle, np.zeros(1000, bool)))
+    # Only the transition points count: doubling there, halving elsewhere.
+    mixed = base.copy()
+    hot = np.zeros(len(base), bool)
+    hot[samples.triangle[transitions]] = True
+    mixed[hot] *= 2
+    mixed[~hot] *= 0.5
+    assert metrics.transition_widening(base, mixed, samples.triangle, transitions) == pytest.approx(2.0)
+
+
+def test_equal_error_search_finds_a_known_crossing():
+    multipliers = [1, 1.5, 2, 3, 4]
+    # Error linear in log-resolution: e = 1 - 0.4 ln(m); e = 0.6 at m = e^1.
+    errors = [1 - 0.4 * np.log(m) for m in multipliers]
+    ratio, status = metrics.equal_error_resolution(multipliers, errors, 0.6)
+    assert status == "within" and ratio == pytest.approx(np.e, rel=1e-9)
+    # Exactly at a tested point.
+    ratio, status = metrics.equal_error_resolution(multipliers, [8, 6, 4, 2, 1], 4.0)
+    assert status == "within" and ratio == pytest.approx(2.0)
+    # The refined map equals the baseline at R: ratio 1.
+    assert metrics.equal_error_resolution(multipliers, [8, 6, 4, 2, 1], 8.0) == (1.0, "within")
+    # Better than the baseline at 4R: a lower bound, flagged.
+    assert metrics.equal_error_resolution(multipliers, [8, 6, 4, 2, 1], 0.5) == (4.0, "above")
+    # Worse than the baseline at R: below 1, flagged.
+    ratio, status = metrics.equal_error_resolution(multipliers, [8, 6, 4, 2, 1], 9.0)
+    assert status == "below" and ratio < 1.0
+    # Noisy, non-monotone baseline: the first crossing counts.
+    ratio, status = metrics.equal_error_resolution(multipliers, [8, 5, 6, 2, 1], 5.5)
+    assert status == "within" and 1.0 < ratio < 1.5
+    # A baseline whose error hardly falls with resolution (noise-limited): no answer.
+    ratio, status = metrics.equal_error_resolution(multipliers, [0.22, 0.22, 0.215, 0.21, 0.205], 0.2)
+    assert status == "flat" and np.isnan(ratio)
+    with pytest.raises(ValueError, match="ascending"):
+        metrics.equal_error_resolution([2, 1], [1, 2], 1.5)
+
+
+def test_truth_noise_is_the_noise_of_the_mean_of_two_estimates(rng):
+    truth = rng.random((200000, 3))
+    first = truth + rng.normal(0, 0.1, truth.shape)
+    second = truth + rng.normal(0, 0.1, truth.shape)
+    # Each estimate has noise 0.1; their mean has 0.1 / sqrt(2).
+    assert metrics.truth_noise(first, second) == pytest.approx(0.1 / np.sqrt(2), rel=0.01)
+    measured = metrics.error_stats((first + second) / 2, truth)["rmse"]
+    assert metrics.truth_noise(first, second) == pytest.approx(measured, rel=0.01)

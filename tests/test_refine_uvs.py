@@ -1,0 +1,235 @@
+"""refine_uvs: the whole refinement, from a gradient map to a valid refined
+layout (method §4, §5, §7)."""
+
+import numpy as np
+import pytest
+
+import lmrefine
+from layouts import (finite_difference_gradient, grid_chart, lightmap_pack, merge, plane, shadow_edge_lightmap,
+                     smart_uv)
+
+R = 128
+
+
+def edge_scene(resolution=R, quads=64, angle=0.3):
+    uvs, tris = plane(quads)
+    mask = lmrefine.coverage_mask(uvs, tris, resolution)
+    gradient = finite_difference_gradient(shadow_edge_lightmap(resolution, angle=angle), mask)
+    return uvs, tris, gradient
+
+
+def assert_valid(result, uvs, tris, resolution, padding):
+    check = lmrefine.check_layout(result.uvs, tris, resolution, padding, reference_uvs=uvs)
+    original = lmrefine.check_layout(uvs, tris, resolution, padding)
+    assert check["flipped"] == 0 and check["out_of_bounds"] == 0
+    assert check["overlapping"] <= original["overlapping"]
+    assert check["degenerate"] <= original["degenerate"]
+    assert check["min_gutter_texels"] >= min(padding, original["min_gutter_texels"]) - 1e-4
+    pairs = lmrefine.check_layout(result.uvs, tris, resolution, padding, reference_uvs=uvs, relative_gutter=True)
+    assert pairs["gutter_violations"] == 0  # no chart pair closer than min(padding, its original distance)
+    areas = lmrefine.grid_cell_areas(result.grid)
+    mask = lmrefine.coverage_mask(uvs, tris, resolution)
+    if (~mask).any():
+        assert areas[~mask].min() >= 1 - 1e-4  # the gutter is shifted, never compressed
+    return check
+
+
+def test_flat_lightmap_gives_the_identity_layout():
+    uvs, tris = plane(16)
+    result = lmrefine.refine_uvs(None, uvs, tris, 64, gradient=np.zeros((64, 64, 4), np.float32))
+    np.testing.assert_array_equal(result.uvs, uvs)
+    np.testing.assert_array_equal(result.grid, lmrefine.identity_grid(64))
+    assert result.report["transition_widening"] == 1.0
+    assert result.report["limited_by"] == []
+    np.testing.assert_allclose(result.report["triangle_density"], 1.0)
+
+
+def test_strength_zero_is_the_identity():
+    uvs, tris, gradient = edge_scene()
+    result = lmrefine.refine_uvs(None, uvs, tris, R, gradient=gradient, strength=0)
+    np.testing.assert_array_equal(result.uvs, uvs)
+
+
+def test_hard_shadow_edge_gets_three_times_the_texels_and_flat_areas_shrink():
+    uvs, tris, gradient = edge_scene()
+    result = lmrefine.refine_uvs(None, uvs, tris, R, gradient=gradient)
+    report = result.report
+    assert report["transition_widening"] >= 3.0
+    # Triangles on the edge (in pixel space: x cos a + y sin a = R / 2).
+    centroids = uvs[tris].mean(axis=1)
+    x, y = centroids[:, 0] * R, (1 - centroids[:, 1]) * R
+    distance = np.abs((x - R / 2) * np.cos(0.3) + (y - R / 2) * np.sin(0.3))
+    density = report["triangle_density"]
+    assert density[distance < 1.0].mean() >= 3.0
+    # Flat areas shrink (less than they could: the margin around the chart
+    # and the chart's edge texels only shift, they give no room).
+    assert np.median(density[distance > 20]) < 0.95
+    assert report["density_min"] < 1.0 < 3.0 < report["density_max"] <= 8.0 + 1e-3
+    assert_valid(result, uvs, tris, R, 2)
+    assert report["check"]["valid"]
+
+
+def test_input_arrays_are_never_modified():
+    uvs, tris, gradient = edge_scene(64, 16)
+    copies = uvs.copy(), tris.copy(), gradient.copy()
+    lmrefine.refine_uvs(None, uvs, tris, 64, gradient=gradient)
+    for before, after in zip(copies, (uvs, tris, gradient)):
+        np.testing.assert_array_equal(before, after)
+
+
+@pytest.mark.parametrize("border", ["same", "border_rule", "extra_ring"])
+@pytest.mark.parametrize("directional", [False, True])
+def test_every_option_returns_a_valid_layout(border, directional):
+    uvs, tris, gradient = edge_scene(64, 24, angle=1.1)
+    result = lmrefine.refine_uvs(None, uvs, tris, 64, gradient=gradient, border=border,
+                                 directional=directional, passes=2)
+    assert_valid(result, uvs, tris, 64, 2)
+    assert result.report["transition_widening"] > 1.5
+    assert result.grid.shape == (65, 65, 2)
+
+
+def test_lightmap_pack_layout_stays_valid():
+    uvs, tris = lightmap_pack(charts_across=16, margin_texels=3, resolution=256, quads=2)
+    mask = lmrefine.coverage_mask(uvs, tris, 256)
+    gradient = finite_difference_gradient(shadow_edge_lightmap(256), mask)
+    result = lmrefine.refine_uvs(None, uvs, tris, 256, padding=2, gradient=gradient)
+    check = assert_valid(result, uvs, tris, 256, 2)
+    assert check["charts"] == 256 and check["valid"]
+
+
+def test_smart_uv_layout_stays_valid_and_is_refined():
+    uvs, tris = smart_uv(256, margin_texels=4)
+    mask = lmrefine.coverage_mask(uvs, tris, 256)
+    gradient = finite_difference_gradient(shadow_edge_lightmap(256, angle=0.8), mask)
+    result = lmrefine.refine_uvs(None, uvs, tris, 256, padding=2, gradient=gradient)
+    assert assert_valid(result, uvs, tris, 256, 2)["valid"]
+    assert result.report["transition_widening"] > 2.0
+
+
+def test_a_layout_packed_tighter_than_the_padding_is_still_refined():
+    # Packed with a 1.2-texel margin but refined at the default padding 2:
+    # every chart pair keeps at least its original distance (method §7),
+    # and the shadow edge still gets more texels.
+    resolution = 128
+    uvs, tris = lightmap_pack(charts_across=4, margin_texels=1.2, resolution=resolution, quads=6)
+    mask = lmrefine.coverage_mask(uvs, tris, resolution)
+    gradient = finite_difference_gradient(shadow_edge_lightmap(resolution), mask)
+    result = lmrefine.refine_uvs(None, uvs, tris, resolution, padding=2, gradient=gradient)
+    report = result.report
+    original = report["original_check"]["min_gutter_texels"]
+    assert original < 2
+    assert report["transition_widening"] > 1.3
+    assert report["backoff"] == 1.0
+    check = lmrefine.check_layout(result.uvs, tris, resolution, 2, reference_uvs=uvs, relative_gutter=True)
+    assert check["gutter_violations"] == 0 and check["flipped"] == 0 and check["overlapping"] == 0
+    assert check["min_gutter_texels"] >= original - 1e-4
+    assert "original_gutter" in report["limited_by"]
+    assert any("original gutter" in note for note in report["notes"])
+
+
+def test_random_layouts_and_gradient_maps_always_give_valid_layouts(rng):
+    for trial in range(6):
+        resolution = int(rng.choice([48, 64, 100, 128]))
+        margin = float(rng.uniform(1.5, 4))
+        uvs, tris = lightmap_pack(charts_across=int(rng.integers(2, 9)), margin_texels=margin,
+                                  resolution=resolution, quads=int(rng.integers(1, 4)), seed=trial)
+        mask = lmrefine.coverage_mask(uvs, tris, resolution)
+        lightmap = (rng.random((resolution // 8, resolution // 8)) > 0.5).astype(np.float32)
+        lightmap = np.kron(lightmap, np.ones((8, 8), np.float32))[:resolution, :resolution]
+        gradient = finite_difference_gradient(np.pad(lightmap, ((0, resolution - lightmap.shape[0]),
+                                                                (0, resolution - lightmap.shape[1]))), mask)
+        padding = float(rng.uniform(0.5, margin))
+        result = lmrefine.refine_uvs(None, uvs, tris, resolution, padding=padding, gradient=gradient,
+                                     strength=float(rng.uniform(1, 12)), directional=bool(rng.random() < 0.3))
+        assert_valid(result, uvs, tris, resolution, padding)
+        assert 0 <= result.report["backoff"] <= 1
+        assert result.report["density_min"] >= 0.25 - 1e-4 and result.report["density_max"] <= 8 + 1e-3
+
+
+def test_report_fields():
+    uvs, tris, gradient = edge_scene(64, 16)
+    report = lmrefine.refine_uvs(None, uvs, tris, 64, gradient=gradient).report
+    for key in ("transition_widening", "density_min", "density_max", "steps", "limited_by",
+                "triangle_density", "strength_used", "passes", "levels", "seconds"):
+        assert key in report
+    assert report["triangle_density"].shape == (len(tris),)
+    assert report["steps"] == sum(level["steps"] for level in report["levels"])
+
+
+@pytest.mark.skipif(not hasattr(lmrefine, "gradient_map"), reason="gradient_map lands with the wavelet branch")
+def test_lightmap_path_uses_the_wavelet_gradient_map():
+    uvs, tris = plane(48)
+    result = lmrefine.refine_uvs(shadow_edge_lightmap(R), uvs, tris, R)
+    assert result.report["transition_widening"] > 2.0
+    assert_valid(result, uvs, tris, R, 2)
+
+
+def test_bad_input_raises_value_errors():
+    uvs, tris, gradient = edge_scene(64, 4)
+    refine = lmrefine.refine_uvs
+    with pytest.raises(ValueError, match="resolution"):
+        refine(None, uvs, tris, 0, gradient=gradient)
+    with pytest.raises(ValueError, match=r"\(N, 2\)"):
+        refine(None, uvs[:, :1], tris, 64, gradient=gradient)
+    with pytest.raises(ValueError, match=r"\(T, 3\)"):
+        refine(None, uvs, tris[:, :2], 64, gradient=gradient)
+    with pytest.raises(ValueError, match="refers to a UV"):
+        refine(None, uvs, tris + 1, 64, gradient=gradient)
+    bad = uvs.copy()
+    bad[2, 0] = np.nan
+    with pytest.raises(ValueError, match="NaN"):
+        refine(None, bad, tris, 64, gradient=gradient)
+    bad = uvs.copy()
+    bad[2, 0] = 1.5
+    with pytest.raises(ValueError, match="outside"):
+        refine(None, bad, tris, 64, gradient=gradient)
+    with pytest.raises(ValueError, match="gradient"):
+        refine(None, uvs, tris, 32, gradient=gradient)
+    with pytest.raises(ValueError, match="lightmap"):
+        refine(None, uvs, tris, 64)
+    with pytest.raises(ValueError, match="lightmap is"):
+        refine(np.zeros((32, 32), np.float32), uvs, tris, 64)
+    with pytest.raises(ValueError, match="mask"):
+        refine(None, uvs, tris, 64, gradient=gradient, mask=np.ones((8, 8), bool))
+    with pytest.raises(ValueError, match="border"):
+        refine(None, uvs, tris, 64, gradient=gradient, border="mirror")
+    with pytest.raises(ValueError, match="strength"):
+        refine(None, uvs, tris, 64, gradient=gradient, strength=-1)
+
+
+def test_a_tight_spot_backs_off_only_around_itself():
+    from lmrefine import backoff
+    resolution = 64
+    gap = 2.5 / resolution
+    uvs, tris = merge(grid_chart(4, (0.1, 0.4), (0.3, 0.6)), grid_chart(4, (0.3 + gap, 0.4), (0.5, 0.6)),
+                      grid_chart(4, (0.7, 0.7), (0.9, 0.9)))
+    identity = lmrefine.identity_grid(resolution)
+    # Two smooth bumps of node displacement (in texels, along +u): one just
+    # left of the gap pushes chart 0 into it; one inside chart 2 harms nothing.
+    y, x = np.mgrid[0:resolution + 1, 0:resolution + 1].astype(np.float64)
+    def bump(cx, cy):
+        return 3.0 * np.exp(-((x - cx) ** 2 + (y - cy) ** 2) / (2 * 4.0 ** 2))
+    shift = bump(0.3 * resolution - 3, 0.5 * resolution) + bump(0.8 * resolution, 0.2 * resolution)
+    full = identity.copy()
+    full[..., 0] += (shift / resolution).astype(np.float32)
+    original = lmrefine.check_layout(uvs, tris, resolution, 2)
+    assert lmrefine.check_layout(lmrefine.warp_uvs(uvs, full), tris, resolution, 2)["min_gutter_texels"] < 2
+    grid, new_uvs, check, kept, limited_by = backoff.accept(full, identity, uvs, tris, (resolution, resolution),
+                                                            2, original)
+    assert check["valid"] and limited_by == ["gutter"]
+    assert kept[int(0.5 * resolution), int(0.3 * resolution)] < 1  # backed off at the gap ...
+    assert kept[int(0.2 * resolution), int(0.8 * resolution)] == 1  # ... not around chart 2
+    np.testing.assert_array_equal(new_uvs, lmrefine.warp_uvs(uvs, grid))
+    assert not np.array_equal(new_uvs[-len(uvs) // 3:], uvs[-len(uvs) // 3:])
+
+
+@pytest.mark.parametrize("shape", [(48, 96), (100, 37)])
+def test_rectangular_lightmaps(shape):
+    uvs, tris = plane(32)
+    mask = lmrefine.coverage_mask(uvs, tris, shape)
+    lightmap = np.zeros(shape, np.float32)
+    lightmap[:, shape[1] // 2:] = 1.0
+    result = lmrefine.refine_uvs(None, uvs, tris, shape, gradient=finite_difference_gradient(lightmap, mask))
+    assert result.grid.shape == (shape[0] + 1, shape[1] + 1, 2)
+    assert result.report["transition_widening"] > 2.0
+    assert_valid(result, uvs, tris, shape, 2)

@@ -1,0 +1,88 @@
+import json
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import lmrefine
+from lmrefine import sample_scenes
+
+ROOT = Path(__file__).resolve().parents[1]
+NAMES = ("courtyard", "room", "fence_and_tree", "game_level")
+
+
+def test_every_bundled_scene_loads_with_consistent_arrays():
+    assert set(NAMES) <= set(sample_scenes.sample_names())
+    for name in NAMES:
+        scene = sample_scenes.load_sample(name)
+        triangles = len(scene.triangles)
+        assert 2000 < triangles < 20000, name
+        assert scene.triangles.min() >= 0 and scene.triangles.max() < len(scene.positions)
+        assert scene.normals.shape == (3 * triangles, 3)
+        np.testing.assert_allclose(np.linalg.norm(scene.normals, axis=1), 1.0, atol=1e-4)
+        for variant in ("smart", "lightmap"):
+            uvs, corner_triangles = scene.layout(variant)
+            assert uvs.shape == (3 * triangles, 2) and corner_triangles.shape == (triangles, 3)
+            assert uvs.min() >= 0.0 and uvs.max() <= 1.0
+            # Every receiver triangle has lightmap area (no zero-area UVs).
+            uv = uvs.reshape(-1, 3, 2)
+            area = np.abs(np.cross(uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0])) / 2
+            assert (area > 0).all(), (name, variant)
+        assert (scene.triangle_areas() > 0).all()
+        assert scene.base_color.shape == (triangles, 3) and 0 <= scene.base_color.min() <= scene.base_color.max() <= 1
+        assert set(np.unique(scene.object_id)) == set(range(len(scene.objects)))
+        assert scene.lights and all(light["kind"] in sample_scenes.LIGHT_PROPERTIES for light in scene.lights)
+
+
+def test_receivers_are_tessellated_finely_enough_to_move_texels():
+    # The method moves vertices only (method.md section 5): the big receivers
+    # must be cut into cells of about 0.3 m, not one quad.
+    for name in NAMES:
+        scene = sample_scenes.load_sample(name)
+        edges = scene.positions[scene.triangles]
+        longest = np.linalg.norm(edges - np.roll(edges, 1, axis=1), axis=2).max(axis=1)
+        weights = scene.triangle_areas()
+        assert np.average(longest, weights=weights) < 0.75, name
+
+
+def test_unknown_sample_names_the_known_ones():
+    with pytest.raises(ValueError, match="courtyard"):
+        sample_scenes.load_sample("no_such_scene")
+
+
+@pytest.mark.skipif(not hasattr(lmrefine, "Scene"), reason="needs the baker (lmrefine.Scene)")
+def test_to_scene_builds_a_bakeable_scene():
+    scene = sample_scenes.load_sample("fence_and_tree")
+    uvs, _ = scene.layout("smart")
+    built = scene.to_scene(uvs)
+    assert built is not None
+    with pytest.raises(ValueError, match="per corner"):
+        scene.to_scene(uvs[:10])
+
+
+@pytest.mark.blender
+def test_blend_files_hold_the_exported_scenes(tmp_path):
+    script = tmp_path / "check.py"
+    script.write_text(
+        "import bpy, json, sys\n"
+        "out = {}\n"
+        f"for name in {list(NAMES)!r}:\n"
+        f"    bpy.ops.wm.open_mainfile(filepath=r'{ROOT / 'blend_samples'}/' + name + '.blend')\n"
+        "    receivers = [o for o in bpy.data.objects if o.type == 'MESH' and o.get('lmrefine_receiver', True)]\n"
+        "    for o in receivers: o.data.calc_loop_triangles()\n"
+        "    out[name] = {'triangles': sum(len(o.data.loop_triangles) for o in receivers),\n"
+        "                 'layers': sorted({l.name for o in receivers for l in o.data.uv_layers}),\n"
+        "                 'lights': len([o for o in bpy.data.objects if o.type == 'LIGHT']),\n"
+        "                 'packed': len([i for i in bpy.data.images if i.packed_file])}\n"
+        f"open(r'{tmp_path / 'out.json'}', 'w').write(json.dumps(out))\n")
+    subprocess.run(["blender", "-b", "--factory-startup", "--python-exit-code", "1", "--python", str(script)],
+                   check=True, capture_output=True)
+    found = json.loads((tmp_path / "out.json").read_text())
+    for name in NAMES:
+        scene = sample_scenes.load_sample(name)
+        assert found[name]["triangles"] == len(scene.triangles)
+        assert found[name]["layers"] == ["Lightmap", "LightmapSmart"]
+        assert found[name]["lights"] == len(scene.lights)
+        assert found[name]["packed"] == 0
+        assert (ROOT / "blend_samples" / f"{name}.blend").stat().st_size < 400_000
