@@ -412,13 +412,18 @@ int fit_to_bounds(Level& level) {
         const glm::dvec2 thin = thickness(q, now.area);
         return thin.x < grid.xs[j + 1] - grid.xs[j] || thin.y < grid.ys[i + 1] - grid.ys[i];
     };
+    // Nodes moved in the previous round: only their cells need checking again.
+    std::vector<uint8_t> lower(carried.size(), 0);
     for (int round = 0;; ++round) {
         std::vector<uint8_t> any_bad(size_t(rows), 0);
         parallel_for(rows, kRowGrain, [&](int64_t begin, int64_t end) {
             for (int i = int(begin); i < int(end); ++i) {
                 for (int j = 0; j < cols; ++j) {
-                    bad[level.cell(i, j)] = out_of_bounds(i, j);
-                    any_bad[size_t(i)] |= bad[level.cell(i, j)];
+                    const size_t c = level.cell(i, j);
+                    const bool moved = round == 0 || lower[level.node(i, j)] || lower[level.node(i, j + 1)] ||
+                                       lower[level.node(i + 1, j)] || lower[level.node(i + 1, j + 1)];
+                    if (moved) bad[c] = out_of_bounds(i, j);
+                    any_bad[size_t(i)] |= bad[c];
                 }
             }
         });
@@ -426,7 +431,7 @@ int fit_to_bounds(Level& level) {
         // Halve the move of every node within kFitMargin nodes of a bad
         // cell (once per round), to 0 below kFitSnap: a cell whose nodes
         // are all back at rest is the identity, inside every bound.
-        std::vector<uint8_t> lower(carried.size(), 0);
+        std::fill(lower.begin(), lower.end(), uint8_t(0));
         for (int i = 0; i < rows; ++i) {
             if (!any_bad[size_t(i)]) continue;
             for (int j = 0; j < cols; ++j) {
