@@ -100,7 +100,7 @@ class LMREFINE_PG_settings(bpy.types.PropertyGroup):
         name="Strength",
         description="How much texels at the strongest light change may grow: such a texel wants (1 + strength) "
                     "times the area of one in flat light. 0 leaves the layout unchanged",
-        default=6.0, min=0.0, soft_max=20.0,
+        default=24.0, min=0.0, soft_max=40.0,
     )
     max_magnification: FloatProperty(
         name="Max Magnification", description="Largest growth of a texel's area (texel-density ratio)",

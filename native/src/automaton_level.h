@@ -58,8 +58,9 @@ void prepare_level(Level& level, const AutomatonOptions& options, bool ring);
 
 // The finest level starts from a grid interpolated from the level above,
 // where cells of one coarse cell differ in size: some may start outside
-// their bounds (area, a rigid cell's width and height). Blends the nodes
-// around every such cell back towards rest until every cell is inside, so
+// their bounds (area, a rigid cell's width and height). Smooths the nodes
+// around every such cell for a few rounds, then blends them back towards
+// rest until every cell is inside, so
 // the steps' guards keep every bound from the start. Returns the rounds.
 int fit_to_bounds(Level& level);
 

@@ -119,7 +119,7 @@ def identity_grid(resolution):
     return np.stack(np.broadcast_arrays(u[None, :], v[:, None]), axis=-1).astype(np.float32)
 
 
-def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gradient=None, strength=6.0,
+def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gradient=None, strength=24.0,
                max_magnification=8.0, min_shrink=0.25, delta=0.02, passes=1, border="same",
                directional=False, wavelet="d4", diffusion=0.05, max_steps=8, progress=None):
     """Refine a lightmap UV layout: more texels where light changes fast.
