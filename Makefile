@@ -23,7 +23,7 @@ deps:
 	if [ -n "$$missing" ]; then \
 		echo "Installing Debian packages:" $$missing; \
 		if [ "$$(id -u)" != 0 ]; then echo "error: run as root (or install: $$missing)"; exit 1; fi; \
-		apt-get update -q && DEBIAN_FRONTEND=noninteractive apt-get install -y -q --no-install-recommends $$missing; \
+		apt-get update -q && DEBIAN_FRONTEND=noninteractive apt-get install -y -q $$missing; \
 	fi
 
 $(BUILD_DIR)/CMakeCache.txt: | deps
