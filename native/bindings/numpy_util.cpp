@@ -110,4 +110,20 @@ std::pair<int, int> parse_resolution(const py::handle& resolution) {
     return {height, width};
 }
 
+py::array_t<bool> layout_mask(
+    const py::handle& uvs_in, const py::handle& triangles_in, const py::handle& resolution,
+    const std::function<std::vector<uint8_t>(const UvLayout&, int, int)>& compute) {
+    auto uvs = require_points(uvs_in, "uvs", 2);
+    auto triangles = require_indices(triangles_in, "triangles", 3, /*allow_empty=*/true);
+    const auto [height, width] = parse_resolution(resolution);
+    UvLayout layout{uvs.data(), uvs.shape(0), triangles.data(), triangles.shape(0)};
+    std::vector<uint8_t> mask;
+    {
+        py::gil_scoped_release release;
+        mask = compute(layout, width, height);
+    }
+    auto bytes = to_numpy(std::move(mask), {height, width});
+    return bytes.attr("view")(py::dtype::of<bool>()).cast<py::array_t<bool>>();
+}
+
 }  // namespace lmrefine::py_util

@@ -4,11 +4,14 @@
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 
+#include <functional>
 #include <initializer_list>
 #include <memory>
 #include <string>
 #include <utility>
 #include <vector>
+
+#include "lmrefine/coverage.h"
 
 namespace lmrefine::py_util {
 
@@ -39,6 +42,13 @@ IndexArray require_indices(const py::handle& object, const char* name, int colum
 // A lightmap resolution: an int (square) or (height, width); both > 0.
 // Returns (height, width).
 std::pair<int, int> parse_resolution(const py::handle& resolution);
+
+// A per-texel byte mask computed from a UV layout (uvs (N, 2), triangles
+// (T, 3), resolution) with the GIL released, returned as (H, W) bool without
+// a copy (bool and uint8 share a layout).
+py::array_t<bool> layout_mask(
+    const py::handle& uvs, const py::handle& triangles, const py::handle& resolution,
+    const std::function<std::vector<uint8_t>(const UvLayout& layout, int width, int height)>& compute);
 
 // Moves a vector into a numpy array of the given shape without copying; the
 // array owns the storage through a capsule.

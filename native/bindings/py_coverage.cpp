@@ -9,19 +9,8 @@ namespace py = pybind11;
 namespace lmrefine::bindings {
 namespace {
 
-py::array_t<bool> coverage(const py::handle& uvs_in, const py::handle& triangles_in, const py::handle& resolution) {
-    auto uvs = py_util::require_points(uvs_in, "uvs", 2);
-    auto triangles = py_util::require_indices(triangles_in, "triangles", 3, /*allow_empty=*/true);
-    const auto [height, width] = py_util::parse_resolution(resolution);
-    UvLayout layout{uvs.data(), uvs.shape(0), triangles.data(), triangles.shape(0)};
-    std::vector<uint8_t> mask;
-    {
-        py::gil_scoped_release release;
-        mask = coverage_mask(layout, width, height);
-    }
-    // bool and uint8 share a layout; numpy reads the bytes as bool without a copy.
-    auto bytes = py_util::to_numpy(std::move(mask), {height, width});
-    return bytes.attr("view")(py::dtype::of<bool>()).cast<py::array_t<bool>>();
+py::array_t<bool> coverage(const py::handle& uvs, const py::handle& triangles, const py::handle& resolution) {
+    return py_util::layout_mask(uvs, triangles, resolution, coverage_mask);
 }
 
 }  // namespace

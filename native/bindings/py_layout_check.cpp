@@ -47,18 +47,8 @@ py::dict check(const py::handle& uvs_in, const py::handle& triangles_in, const p
     return out;
 }
 
-py::array_t<bool> gutter(const py::handle& uvs_in, const py::handle& triangles_in, const py::handle& resolution) {
-    auto uvs = py_util::require_points(uvs_in, "uvs", 2);
-    auto triangles = py_util::require_indices(triangles_in, "triangles", 3, /*allow_empty=*/true);
-    const auto [height, width] = py_util::parse_resolution(resolution);
-    UvLayout layout{uvs.data(), uvs.shape(0), triangles.data(), triangles.shape(0)};
-    std::vector<uint8_t> texels;
-    {
-        py::gil_scoped_release release;
-        texels = gutter_texels(layout, width, height);
-    }
-    auto bytes = py_util::to_numpy(std::move(texels), {height, width});
-    return bytes.attr("view")(py::dtype::of<bool>()).cast<py::array_t<bool>>();
+py::array_t<bool> gutter(const py::handle& uvs, const py::handle& triangles, const py::handle& resolution) {
+    return py_util::layout_mask(uvs, triangles, resolution, gutter_texels);
 }
 
 }  // namespace
