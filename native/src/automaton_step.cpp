@@ -60,6 +60,10 @@ struct Shape {
     double quality2;
 };
 
+// Two doubles divided at once (SSE2 divpd, in every x86-64): the divisions
+// were most of a step's time, and IEEE division rounds the same either way.
+typedef double Pair __attribute__((vector_size(16)));
+
 Shape shape(const glm::dvec2 q[4]) {
     glm::dvec2 e[4];
     double l2[4];
@@ -67,13 +71,21 @@ Shape shape(const glm::dvec2 q[4]) {
         e[k] = q[(k + 1) % 4] - q[k];
         l2[k] = glm::dot(e[k], e[k]);
     }
-    double r2 = std::numeric_limits<double>::infinity(), sin2 = 1.0;
+    // At corner k, between its two edges: c^2 over the radius' and the
+    // sine's denominators.
+    Pair ratio[4];
     for (int k = 0; k < 4; ++k) {
         const int p = (k + 3) % 4;
-        const double c = cross(e[p], e[k]);  // at corner k, between its two edges
+        const double c = cross(e[p], e[k]);
         if (!(c > 0)) return {quad_area(q), 0.0, -1.0};
-        r2 = std::min(r2, c * c / (8 * (l2[p] + l2[k])));
-        sin2 = std::min(sin2, c * c / (l2[p] * l2[k]));
+        const Pair numerator = {c * c, c * c};
+        const Pair denominator = {8 * (l2[p] + l2[k]), l2[p] * l2[k]};
+        ratio[k] = numerator / denominator;
+    }
+    double r2 = std::numeric_limits<double>::infinity(), sin2 = 1.0;
+    for (int k = 0; k < 4; ++k) {
+        r2 = std::min(r2, ratio[k][0]);
+        sin2 = std::min(sin2, ratio[k][1]);
     }
     const double shortest = std::min({l2[0], l2[1], l2[2], l2[3]});
     const double longest = std::max({l2[0], l2[1], l2[2], l2[3]});
@@ -92,7 +104,7 @@ glm::dvec2 thickness(const glm::dvec2 q[4], double area) {
 struct Facing {
     int down, right, up, left;
 };
-Facing facing(int channels) { return channels == 4 ? Facing{0, 1, 2, 3} : Facing{0, 0, 0, 0}; }
+constexpr Facing facing(int channels) { return channels == 4 ? Facing{0, 1, 2, 3} : Facing{0, 0, 0, 0}; }
 
 // Relative pressure difference in [-1, 1]; > 0 moves the edge towards b.
 double push(double a, double b) { return a + b > 0 ? (a - b) / (a + b) : 0.0; }
@@ -168,56 +180,73 @@ void prepare_level(Level& level, const AutomatonOptions& options, bool ring) {
 
     level.next_nodes = level.grid.nodes;
     level.next_energy = level.energy;
-    level.area.resize(cells);
-    level.safe_radius.resize(cells);
-    level.quality.resize(cells);
+    for (auto* v : {&level.area, &level.safe_radius, &level.quality, &level.next_area, &level.next_safe_radius,
+                    &level.next_quality}) {
+        v->resize(cells);
+    }
     level.diffusion_density.resize(cells * channels);
+    level.next_diffusion_density.resize(cells * channels);
     level.pressure_density.resize(cells * (channels == 4 ? 2 : 1));
-    level.push_v.assign(size_t(rows) * (cols + 1), 0.0);
-    level.flux_v.assign(size_t(rows) * (cols + 1), 0.0);
-    level.push_h.assign(size_t(rows + 1) * cols, 0.0);
-    level.flux_h.assign(size_t(rows + 1) * cols, 0.0);
+    level.next_pressure_density.resize(cells * (channels == 4 ? 2 : 1));
     level.row_difference.assign(size_t(rows + 1), 0.0);
+    level.row_moved.assign(size_t(rows + 1), 0.0);
+    level.suspect_round.assign(cells, 0);
+    level.revert_round = 0;
 }
 
-StepStats step(Level& level, const AutomatonOptions& options) {
-    const int rows = level.rows(), cols = level.cols(), channels = level.channels;
-    const Facing face = facing(channels);
-    const int axes = channels == 4 ? 2 : 1;  // pressure: y (and x) axis
-    const std::vector<glm::dvec2>& nodes = level.grid.nodes;
+namespace {
 
-    // 1. Cell state: area, how far its corners may move, densities.
-    parallel_for(rows, kRowGrain, [&](int64_t begin, int64_t end) {
+// The state of cell c from its corners q and its energies e, written to the
+// given arrays: area, corner move radius, quality, densities. Pressure per
+// axis: a cell's springs along an axis push both its edges across that axis
+// (four channels: y from r + b, x from g + a). Uncovered texels weigh as the
+// mean density.
+template <int channels>
+void write_cell_state(const Level& level, size_t c, const Shape& now, const double* e, double* area, double* radius,
+                      double* quality, double* diffusion_density, double* pressure_density) {
+    constexpr int axes = channels == 4 ? 2 : 1;
+    const double a = now.area;
+    area[c] = a;
+    radius[c] = now.radius;
+    quality[c] = now.quality2;
+    const bool material = level.kind[c] == CellKind::Material;
+    for (int k = 0; k < channels; ++k) diffusion_density[c * channels + k] = material ? e[k] / a : 0.0;
+    for (int axis = 0; axis < axes; ++axis) {
+        double sum = 0.0, reference = 0.0;
+        for (int k = axis; k < channels; k += axes) {
+            sum += e[k];
+            reference += level.reference_density[k];
+        }
+        pressure_density[c * axes + axis] = (sum + reference * level.uncovered_area[c]) / a;
+    }
+}
+
+template <int channels>
+void measure_cells_of(Level& level) {
+    parallel_for(level.rows(), kRowGrain, [&](int64_t begin, int64_t end) {
         for (int i = int(begin); i < int(end); ++i) {
-            for (int j = 0; j < cols; ++j) {
+            for (int j = 0; j < level.cols(); ++j) {
                 const size_t c = level.cell(i, j);
                 glm::dvec2 q[4];
-                corners(level, nodes, i, j, q);
-                const Shape now = shape(q);
-                const double a = now.area;
-                level.area[c] = a;
-                level.safe_radius[c] = now.radius;
-                level.quality[c] = now.quality2;
-                const bool material = level.kind[c] == CellKind::Material;
-                for (int k = 0; k < channels; ++k) {
-                    level.diffusion_density[c * channels + k] = material ? level.energy[c * channels + k] / a : 0.0;
-                }
-                // Pressure per axis: a cell's springs along an axis push both
-                // its edges across that axis (four channels: y from r + b,
-                // x from g + a). Uncovered texels weigh as the mean density.
-                for (int axis = 0; axis < axes; ++axis) {
-                    double e = 0.0, reference = 0.0;
-                    for (int k = axis; k < channels; k += axes) {
-                        e += level.energy[c * channels + k];
-                        reference += level.reference_density[k];
-                    }
-                    level.pressure_density[c * axes + axis] = (e + reference * level.uncovered_area[c]) / a;
-                }
+                corners(level, level.grid.nodes, i, j, q);
+                write_cell_state<channels>(level, c, shape(q), &level.energy[c * channels], level.area.data(),
+                                 level.safe_radius.data(), level.quality.data(), level.diffusion_density.data(),
+                                 level.pressure_density.data());
             }
         }
     });
+}
 
-    // 2. Edges: energy flux (only between covered cells, from the denser to
+// The step for one or four channels (constants let the compiler unroll the
+// per-channel loops of the inner kernels).
+template <int channels>
+StepStats step_of(Level& level, const AutomatonOptions& options) {
+    const int rows = level.rows(), cols = level.cols();
+    constexpr Facing face = facing(channels);
+    constexpr int axes = channels == 4 ? 2 : 1;  // pressure: y (and x) axis
+    const std::vector<glm::dvec2>& nodes = level.grid.nodes;
+
+    // 1. Edges: energy flux (only between covered cells, from the denser to
     // the less dense; the border and the gutter are adiabatic) and the push
     // that moves the edge towards the less dense cell.
     auto edge = [&](size_t a, int ka, size_t b, int kb, int axis, double& push_out, double& flux_out) {
@@ -235,42 +264,68 @@ StepStats step(Level& level, const AutomatonOptions& options) {
         }
         return difference;
     };
-    parallel_for(rows + 1, kRowGrain, [&](int64_t begin, int64_t end) {
-        for (int i = int(begin); i < int(end); ++i) {
-            double largest = 0.0;
-            if (i < rows) {
-                for (int j = 1; j < cols; ++j) {
-                    const size_t e = size_t(i) * (cols + 1) + j;
-                    largest = std::max(largest, edge(level.cell(i, j - 1), face.right, level.cell(i, j), face.left,
-                                                     axes - 1, level.push_v[e], level.flux_v[e]));
-                }
+    // Edge row r: the vertical edges between the cells of row r (r < rows)
+    // and the horizontal edges along node row r (between cell rows r - 1 and
+    // r); border edges stay 0. Written to a chunk's own rows of scratch: the
+    // energies and nodes of node rows [begin, end) need edge rows
+    // [begin - 1, end], so each chunk computes those (the two halo rows
+    // twice) while they are in cache, and only its own rows' differences.
+    auto edge_row = [&](int r, double* push_v, double* flux_v, double* push_h, double* flux_h) {
+        double largest = 0.0;
+        push_v[0] = flux_v[0] = push_v[cols] = flux_v[cols] = 0.0;
+        if (r < rows) {
+            for (int j = 1; j < cols; ++j) {
+                largest = std::max(largest, edge(level.cell(r, j - 1), face.right, level.cell(r, j), face.left,
+                                                 axes - 1, push_v[j], flux_v[j]));
             }
-            if (i > 0 && i < rows) {
-                for (int j = 0; j < cols; ++j) {
-                    const size_t e = size_t(i) * cols + j;
-                    largest = std::max(largest, edge(level.cell(i - 1, j), face.down, level.cell(i, j), face.up, 0,
-                                                     level.push_h[e], level.flux_h[e]));
-                }
-            }
-            level.row_difference[i] = largest;
+        } else {
+            std::fill(push_v, push_v + cols + 1, 0.0);
+            std::fill(flux_v, flux_v + cols + 1, 0.0);
         }
-    });
-    const double difference = *std::max_element(level.row_difference.begin(), level.row_difference.end());
+        if (r > 0 && r < rows) {
+            for (int j = 0; j < cols; ++j) {
+                largest = std::max(largest, edge(level.cell(r - 1, j), face.down, level.cell(r, j), face.up, 0,
+                                                 push_h[j], flux_h[j]));
+            }
+        } else {
+            std::fill(push_h, push_h + cols, 0.0);
+            std::fill(flux_h, flux_h + cols, 0.0);
+        }
+        return largest;
+    };
 
-    // 3. New energies (each edge's flux leaves one cell and enters the other,
+    // 2. New energies (each edge's flux leaves one cell and enters the other,
     // so the total is conserved) and proposed node positions.
     parallel_for(rows + 1, kRowGrain, [&](int64_t begin, int64_t end) {
+        const int first = std::max(0, int(begin) - 1), last = std::min(rows, int(end));
+        const size_t stride = size_t(cols) + 1;
+        thread_local std::vector<double> scratch;
+        scratch.resize(4 * stride * size_t(last - first + 1));
+        double* const pv = scratch.data();
+        double* const fv = pv + stride * size_t(last - first + 1);
+        double* const ph = fv + stride * size_t(last - first + 1);
+        double* const fh = ph + stride * size_t(last - first + 1);
+        for (int r = first; r <= last; ++r) {
+            const size_t o = stride * size_t(r - first);
+            const double largest = edge_row(r, pv + o, fv + o, ph + o, fh + o);
+            if (r >= begin && r < end) level.row_difference[size_t(r)] = largest;
+        }
+        // Edge values by edge row and column, as in the whole-grid arrays.
+        auto push_v = [&](int r, int j) { return pv[stride * size_t(r - first) + j]; };
+        auto flux_v = [&](int r, int j) { return fv[stride * size_t(r - first) + j]; };
+        auto push_h = [&](int r, int j) { return ph[stride * size_t(r - first) + j]; };
+        auto flux_h = [&](int r, int j) { return fh[stride * size_t(r - first) + j]; };
         for (int i = int(begin); i < int(end); ++i) {
+            double largest_move = 0.0;
             if (i < rows) {
                 for (int j = 0; j < cols; ++j) {
                     const size_t c = level.cell(i, j);
                     double* e = &level.next_energy[c * channels];
                     for (int k = 0; k < channels; ++k) e[k] = level.energy[c * channels + k];
-                    const size_t v = size_t(i) * (cols + 1) + j, h = size_t(i) * cols + j;
-                    e[face.left] += level.flux_v[v];
-                    e[face.right] -= level.flux_v[v + 1];
-                    e[face.up] += level.flux_h[h];
-                    e[face.down] -= level.flux_h[h + cols];
+                    e[face.left] += flux_v(i, j);
+                    e[face.right] -= flux_v(i, j + 1);
+                    e[face.up] += flux_h(i, j);
+                    e[face.down] -= flux_h(i + 1, j);
                     // Rounding can leave -1e-17 where a cell gave all it had.
                     for (int k = 0; k < channels; ++k) e[k] = std::max(e[k], 0.0);
                 }
@@ -285,35 +340,52 @@ StepStats step(Level& level, const AutomatonOptions& options) {
                     // edge (at the border) contributes nothing.
                     double fx = 0, fy = 0, area_sum = 0, radius = std::numeric_limits<double>::infinity();
                     int adjacent = 0;
-                    if (i > 0) fx += level.push_v[size_t(i - 1) * (cols + 1) + j];
-                    if (i < rows) fx += level.push_v[size_t(i) * (cols + 1) + j];
-                    if (j > 0) fy += level.push_h[size_t(i) * cols + j - 1];
-                    if (j < cols) fy += level.push_h[size_t(i) * cols + j];
-                    for (int di = -1; di <= 0; ++di) {
-                        for (int dj = -1; dj <= 0; ++dj) {
-                            const int ci = i + di, cj = j + dj;
-                            if (ci < 0 || cj < 0 || ci >= rows || cj >= cols) continue;
-                            area_sum += level.area[level.cell(ci, cj)];
-                            radius = std::min(radius, level.safe_radius[level.cell(ci, cj)]);
-                            ++adjacent;
+                    if (i > 0 && i < rows && j > 0 && j < cols) {
+                        // Inside (nearly every node): all four edges and cells, in
+                        // the order of the general case below (same rounding).
+                        const size_t up = size_t(i - 1) * cols + j, down = up + cols;
+                        fx = push_v(i - 1, j) + push_v(i, j);
+                        fy = push_h(i, j - 1) + push_h(i, j);
+                        area_sum = level.area[up - 1] + level.area[up] + level.area[down - 1] + level.area[down];
+                        radius = std::min(std::min(level.safe_radius[up - 1], level.safe_radius[up]),
+                                          std::min(level.safe_radius[down - 1], level.safe_radius[down]));
+                        adjacent = 4;
+                    } else {
+                        if (i > 0) fx += push_v(i - 1, j);
+                        if (i < rows) fx += push_v(i, j);
+                        if (j > 0) fy += push_h(i, j - 1);
+                        if (j < cols) fy += push_h(i, j);
+                        for (int di = -1; di <= 0; ++di) {
+                            for (int dj = -1; dj <= 0; ++dj) {
+                                const int ci = i + di, cj = j + dj;
+                                if (ci < 0 || cj < 0 || ci >= rows || cj >= cols) continue;
+                                area_sum += level.area[level.cell(ci, cj)];
+                                radius = std::min(radius, level.safe_radius[level.cell(ci, cj)]);
+                                ++adjacent;
+                            }
                         }
                     }
                     const double size = std::sqrt(area_sum / adjacent);
                     glm::dvec2 move = 0.5 * options.rate * size * glm::dvec2(fx, fy);
                     if (mode == NodeMode::SlideX) move.y = 0;
                     if (mode == NodeMode::SlideY) move.x = 0;
-                    const double length = glm::length(move);
-                    if (length > radius) move *= radius / length;
+                    // Squared first: the root is only needed to shorten a move.
+                    const double length2 = glm::dot(move, move);
+                    if (length2 > radius * radius) move *= radius / std::sqrt(length2);
                     p += move;
                     p.x = std::clamp(p.x, level.grid.xs.front(), level.grid.xs.back());
                     p.y = std::clamp(p.y, level.grid.ys.front(), level.grid.ys.back());
+                    const glm::dvec2 d = p - nodes[n];
+                    largest_move = std::max(largest_move, glm::dot(d, d));
                 }
                 level.next_nodes[n] = p;
             }
+            level.row_moved[size_t(i)] = largest_move;
         }
     });
+    const double difference = *std::max_element(level.row_difference.begin(), level.row_difference.end());
 
-    // 4. Shape bounds: a cell may not leave [min_area, max_area], get a corner
+    // 3. Shape bounds: a cell may not leave [min_area, max_area], get a corner
     // sharper or an edge shorter than kMinQuality allows (which includes
     // turning concave or inside out), or (a cell of rigid texels only) get
     // thinner than its original width or height; nor move further out of a
@@ -324,14 +396,20 @@ StepStats step(Level& level, const AutomatonOptions& options) {
     // checks every cell in parallel; later rounds only the cells around the
     // corners just put back (rounds are whole sets, so the order within a
     // round does not matter).
+    // Every cell is measured here for its new corners and energies (the next
+    // step's state): a cell whose corners did not move keeps its shape.
     auto breaks_bound = [&](int i, int j) {
         const size_t c = level.cell(i, j);
         glm::dvec2 q[4];
         corners(level, level.next_nodes, i, j, q);
         glm::dvec2 old[4];
         corners(level, nodes, i, j, old);
-        if (q[0] == old[0] && q[1] == old[1] && q[2] == old[2] && q[3] == old[3]) return false;  // unchanged
-        const Shape now = shape(q);
+        const bool unchanged = q[0] == old[0] && q[1] == old[1] && q[2] == old[2] && q[3] == old[3];
+        const Shape now = unchanged ? Shape{level.area[c], level.safe_radius[c], level.quality[c]} : shape(q);
+        write_cell_state<channels>(level, c, now, &level.next_energy[c * channels], level.next_area.data(),
+                                   level.next_safe_radius.data(), level.next_quality.data(),
+                                   level.next_diffusion_density.data(), level.next_pressure_density.data());
+        if (unchanged) return false;
         const double a = now.area, before = level.area[c];
         if ((a < level.min_area[c] && a < before) || (a > level.max_area[c] && a > before)) return true;
         if (now.quality2 < kMinQuality * kMinQuality && now.quality2 < level.quality[c]) return true;
@@ -353,23 +431,30 @@ StepStats step(Level& level, const AutomatonOptions& options) {
     std::vector<int32_t> breaking;
     for (const auto& r : row_breaking) breaking.insert(breaking.end(), r.begin(), r.end());
     std::vector<int32_t> suspects;
+    std::vector<int> reverted_rows;  // node rows with a node put back: their largest move changes
     while (!breaking.empty()) {
+        // Each cell once per round (a stamp, not a sort: within a round the
+        // order does not matter, every cell is judged on the same nodes).
+        const uint32_t round = ++level.revert_round;
         suspects.clear();
         for (int32_t c : breaking) {
             const int i = c / cols, j = c % cols;
+            reverted_rows.push_back(i);
+            reverted_rows.push_back(i + 1);
             for (int ni = i; ni <= i + 1; ++ni) {
                 for (int nj = j; nj <= j + 1; ++nj) {
                     level.next_nodes[level.node(ni, nj)] = nodes[level.node(ni, nj)];
                     for (int ci = std::max(0, ni - 1); ci <= std::min(rows - 1, ni); ++ci) {
                         for (int cj = std::max(0, nj - 1); cj <= std::min(cols - 1, nj); ++cj) {
-                            suspects.push_back(int32_t(level.cell(ci, cj)));
+                            const size_t cell = level.cell(ci, cj);
+                            if (level.suspect_round[cell] == round) continue;
+                            level.suspect_round[cell] = round;
+                            suspects.push_back(int32_t(cell));
                         }
                     }
                 }
             }
         }
-        std::sort(suspects.begin(), suspects.end());
-        suspects.erase(std::unique(suspects.begin(), suspects.end()), suspects.end());
         breaking.clear();
         for (int32_t c : suspects) {
             if (breaks_bound(c / cols, c % cols)) breaking.push_back(c);
@@ -377,22 +462,41 @@ StepStats step(Level& level, const AutomatonOptions& options) {
     }
 
     // The largest node move actually made, in cell sizes of this level.
-    const double block = level.grid.xs[1] - level.grid.xs[0];
-    parallel_for(rows + 1, kRowGrain, [&](int64_t begin, int64_t end) {
-        for (int i = int(begin); i < int(end); ++i) {
+    std::sort(reverted_rows.begin(), reverted_rows.end());
+    reverted_rows.erase(std::unique(reverted_rows.begin(), reverted_rows.end()), reverted_rows.end());
+    parallel_for(int64_t(reverted_rows.size()), kRowGrain, [&](int64_t begin, int64_t end) {
+        for (int64_t r = begin; r < end; ++r) {
+            const int i = reverted_rows[size_t(r)];
             double largest = 0.0;
             for (int j = 0; j <= cols; ++j) {
                 const glm::dvec2 d = level.next_nodes[level.node(i, j)] - nodes[level.node(i, j)];
                 largest = std::max(largest, glm::dot(d, d));
             }
-            level.row_difference[size_t(i)] = largest;
+            level.row_moved[size_t(i)] = largest;
         }
     });
-    const double moved = std::sqrt(*std::max_element(level.row_difference.begin(), level.row_difference.end()));
+    const double block = level.grid.xs[1] - level.grid.xs[0];
+    const double moved = std::sqrt(*std::max_element(level.row_moved.begin(), level.row_moved.end()));
 
     level.grid.nodes.swap(level.next_nodes);
     level.energy.swap(level.next_energy);
+    level.area.swap(level.next_area);
+    level.safe_radius.swap(level.next_safe_radius);
+    level.quality.swap(level.next_quality);
+    level.diffusion_density.swap(level.next_diffusion_density);
+    level.pressure_density.swap(level.next_pressure_density);
     return {difference, moved / block};
+}
+
+}  // namespace
+
+void measure_cells(Level& level) {
+    if (level.channels == 4) return measure_cells_of<4>(level);
+    measure_cells_of<1>(level);
+}
+
+StepStats step(Level& level, const AutomatonOptions& options) {
+    return level.channels == 4 ? step_of<4>(level, options) : step_of<1>(level, options);
 }
 
 int fit_to_bounds(Level& level) {
