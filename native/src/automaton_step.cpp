@@ -17,6 +17,7 @@ namespace lmrefine::automaton_detail {
 namespace {
 
 constexpr int64_t kRowGrain = 8;
+constexpr int64_t kSuspectGrain = 256;  // cells judged again after a revert, per chunk
 // fit_to_bounds: nodes this many around an out-of-bounds cell back off with
 // it; below kFitSnap of its move a node goes back to rest; after kFitRounds
 // rounds every node still lowered goes back to rest.
@@ -451,7 +452,8 @@ StepStats step_of(Level& level, const AutomatonOptions& options) {
     std::vector<int32_t> breaking;
     for (const auto& r : row_breaking) breaking.insert(breaking.end(), r.begin(), r.end());
     std::vector<int32_t> suspects;
-    std::vector<int> reverted_rows;  // node rows with a node put back: their largest move changes
+    std::vector<uint8_t> verdicts;
+    std::vector<uint8_t> reverted_rows(size_t(rows) + 1, 0);  // node rows with a node put back
     while (!breaking.empty()) {
         // Each cell once per round (a stamp, not a sort: within a round the
         // order does not matter, every cell is judged on the same nodes).
@@ -459,8 +461,7 @@ StepStats step_of(Level& level, const AutomatonOptions& options) {
         suspects.clear();
         for (int32_t c : breaking) {
             const int i = c / cols, j = c % cols;
-            reverted_rows.push_back(i);
-            reverted_rows.push_back(i + 1);
+            reverted_rows[size_t(i)] = reverted_rows[size_t(i) + 1] = 1;
             for (int ni = i; ni <= i + 1; ++ni) {
                 for (int nj = j; nj <= j + 1; ++nj) {
                     level.next_nodes[level.node(ni, nj)] = nodes[level.node(ni, nj)];
@@ -475,18 +476,23 @@ StepStats step_of(Level& level, const AutomatonOptions& options) {
                 }
             }
         }
+        // Judged in parallel: each suspect once, writing only its own state.
+        verdicts.assign(suspects.size(), 0);
+        parallel_for(int64_t(suspects.size()), kSuspectGrain, [&](int64_t begin, int64_t end) {
+            for (int64_t k = begin; k < end; ++k) {
+                verdicts[size_t(k)] = breaks_bound(suspects[size_t(k)] / cols, suspects[size_t(k)] % cols);
+            }
+        });
         breaking.clear();
-        for (int32_t c : suspects) {
-            if (breaks_bound(c / cols, c % cols)) breaking.push_back(c);
+        for (size_t k = 0; k < suspects.size(); ++k) {
+            if (verdicts[k]) breaking.push_back(suspects[k]);
         }
     }
 
     // The largest node move actually made, in cell sizes of this level.
-    std::sort(reverted_rows.begin(), reverted_rows.end());
-    reverted_rows.erase(std::unique(reverted_rows.begin(), reverted_rows.end()), reverted_rows.end());
-    parallel_for(int64_t(reverted_rows.size()), kRowGrain, [&](int64_t begin, int64_t end) {
-        for (int64_t r = begin; r < end; ++r) {
-            const int i = reverted_rows[size_t(r)];
+    parallel_for(rows + 1, kRowGrain, [&](int64_t begin, int64_t end) {
+        for (int i = int(begin); i < int(end); ++i) {
+            if (!reverted_rows[size_t(i)]) continue;
             double largest = 0.0;
             for (int j = 0; j <= cols; ++j) {
                 const glm::dvec2 d = level.next_nodes[level.node(i, j)] - nodes[level.node(i, j)];
@@ -515,9 +521,6 @@ StepStats step(Level& level, const AutomatonOptions& options) {
 int fit_to_bounds(Level& level) {
     const int rows = level.rows(), cols = level.cols();
     const NodeGrid& grid = level.grid;
-    std::vector<glm::dvec2> carried = grid.nodes;
-    std::vector<double> kept(carried.size(), 1.0);
-    std::vector<uint8_t> bad(size_t(rows) * cols, 0);
     auto out_of_bounds = [&](int i, int j) {
         const size_t c = level.cell(i, j);
         glm::dvec2 q[4];
@@ -529,34 +532,41 @@ int fit_to_bounds(Level& level) {
         const glm::dvec2 thin = thickness(q, now.area);
         return thin.x < grid.xs[j + 1] - grid.xs[j] || thin.y < grid.ys[i + 1] - grid.ys[i];
     };
-    // Nodes moved in the previous round: only their cells need checking again.
-    std::vector<uint8_t> lower(carried.size(), 0);
-    for (int round = 0;; ++round) {
-        std::vector<uint8_t> any_bad(size_t(rows), 0);
-        parallel_for(rows, kRowGrain, [&](int64_t begin, int64_t end) {
-            for (int i = int(begin); i < int(end); ++i) {
-                for (int j = 0; j < cols; ++j) {
-                    const size_t c = level.cell(i, j);
-                    const bool moved = round == 0 || lower[level.node(i, j)] || lower[level.node(i, j + 1)] ||
-                                       lower[level.node(i + 1, j)] || lower[level.node(i + 1, j + 1)];
-                    if (moved) bad[c] = out_of_bounds(i, j);
-                    any_bad[size_t(i)] |= bad[c];
-                }
+    // Round 0 checks every cell; later rounds only the cells around the
+    // nodes moved in the round before (a bad cell's own corners are among
+    // them, so every bad cell is checked again). Rounds work on lists: the
+    // bad region is small next to the grid, and there can be dozens.
+    std::vector<int32_t> checked, bad;
+    std::vector<uint8_t> verdicts(size_t(rows), 0);
+    std::vector<std::vector<int32_t>> row_bad(static_cast<size_t>(rows));
+    parallel_for(rows, kRowGrain, [&](int64_t begin, int64_t end) {
+        for (int i = int(begin); i < int(end); ++i) {
+            for (int j = 0; j < cols; ++j) {
+                if (out_of_bounds(i, j)) row_bad[size_t(i)].push_back(int32_t(level.cell(i, j)));
             }
-        });
-        if (std::find(any_bad.begin(), any_bad.end(), 1) == any_bad.end()) return round;
+        }
+    });
+    for (const auto& r : row_bad) bad.insert(bad.end(), r.begin(), r.end());
+    if (bad.empty()) return 0;
+
+    std::vector<glm::dvec2> carried;  // blended towards rest from round kFitSmoothRounds on
+    std::vector<double> kept(grid.nodes.size(), 1.0);
+    std::vector<uint32_t> lowered_round(grid.nodes.size(), 0);
+    std::vector<int32_t> lowered;
+    std::vector<glm::dvec2> smoothed;
+    for (int round = 0;; ++round) {
         // Halve the move of every node within kFitMargin nodes of a bad
         // cell (once per round), to 0 below kFitSnap: a cell whose nodes
         // are all back at rest is the identity, inside every bound.
-        std::fill(lower.begin(), lower.end(), uint8_t(0));
-        for (int i = 0; i < rows; ++i) {
-            if (!any_bad[size_t(i)]) continue;
-            for (int j = 0; j < cols; ++j) {
-                if (!bad[level.cell(i, j)]) continue;
-                for (int ni = std::max(0, i - kFitMargin); ni <= std::min(rows, i + 1 + kFitMargin); ++ni) {
-                    for (int nj = std::max(0, j - kFitMargin); nj <= std::min(cols, j + 1 + kFitMargin); ++nj) {
-                        lower[level.node(ni, nj)] = 1;
-                    }
+        lowered.clear();
+        for (int32_t c : bad) {
+            const int i = c / cols, j = c % cols;
+            for (int ni = std::max(0, i - kFitMargin); ni <= std::min(rows, i + 1 + kFitMargin); ++ni) {
+                for (int nj = std::max(0, j - kFitMargin); nj <= std::min(cols, j + 1 + kFitMargin); ++nj) {
+                    const size_t n = level.node(ni, nj);
+                    if (lowered_round[n] == uint32_t(round + 1)) continue;
+                    lowered_round[n] = uint32_t(round + 1);
+                    lowered.push_back(int32_t(n));
                 }
             }
         }
@@ -566,37 +576,63 @@ int fit_to_bounds(Level& level) {
             // differ in size, and smoothing evens them out without giving
             // up the deformation; blending towards rest (below) cascades
             // through a strongly compressed region and undoes it.
-            const std::vector<glm::dvec2> before = level.grid.nodes;
-            for (int i = 0; i <= rows; ++i) {
-                for (int j = 0; j <= cols; ++j) {
-                    const size_t n = level.node(i, j);
-                    const NodeMode mode = level.node_mode[n];
-                    if (!lower[n] || mode == NodeMode::Fixed) continue;
-                    glm::dvec2 sum(0.0);
-                    int count = 0;
-                    if (i > 0) sum += before[level.node(i - 1, j)], ++count;
-                    if (i < rows) sum += before[level.node(i + 1, j)], ++count;
-                    if (j > 0) sum += before[level.node(i, j - 1)], ++count;
-                    if (j < cols) sum += before[level.node(i, j + 1)], ++count;
-                    glm::dvec2 move = 0.5 * (sum / double(count) - before[n]);
-                    if (mode == NodeMode::SlideX) move.y = 0;
-                    if (mode == NodeMode::SlideY) move.x = 0;
-                    level.grid.nodes[n] = before[n] + move;
-                }
+            const std::vector<glm::dvec2>& before = level.grid.nodes;
+            smoothed.resize(lowered.size());
+            for (size_t k = 0; k < lowered.size(); ++k) {
+                const size_t n = size_t(lowered[k]);
+                const int i = int(n / size_t(cols + 1)), j = int(n % size_t(cols + 1));
+                const NodeMode mode = level.node_mode[n];
+                smoothed[k] = before[n];
+                if (mode == NodeMode::Fixed) continue;
+                glm::dvec2 sum(0.0);
+                int count = 0;
+                if (i > 0) sum += before[level.node(i - 1, j)], ++count;
+                if (i < rows) sum += before[level.node(i + 1, j)], ++count;
+                if (j > 0) sum += before[level.node(i, j - 1)], ++count;
+                if (j < cols) sum += before[level.node(i, j + 1)], ++count;
+                glm::dvec2 move = 0.5 * (sum / double(count) - before[n]);
+                if (mode == NodeMode::SlideX) move.y = 0;
+                if (mode == NodeMode::SlideY) move.x = 0;
+                smoothed[k] = before[n] + move;
             }
-            continue;
-        }
-        if (round == kFitSmoothRounds) carried = level.grid.nodes;  // blend towards rest from here
-        const bool last = round >= kFitRounds + kFitSmoothRounds;
-        for (int i = 0; i <= rows; ++i) {
-            for (int j = 0; j <= cols; ++j) {
-                const size_t n = level.node(i, j);
-                if (!lower[n]) continue;
+            for (size_t k = 0; k < lowered.size(); ++k) level.grid.nodes[size_t(lowered[k])] = smoothed[k];
+        } else {
+            if (round == kFitSmoothRounds) carried = level.grid.nodes;
+            const bool last = round >= kFitRounds + kFitSmoothRounds;
+            for (int32_t node : lowered) {
+                const size_t n = size_t(node);
+                const int i = int(n / size_t(cols + 1)), j = int(n % size_t(cols + 1));
                 kept[n] = last || kept[n] < kFitSnap ? 0.0 : kFitFactor * kept[n];
                 const glm::dvec2 rest(grid.xs[j], grid.ys[i]);
                 level.grid.nodes[n] = rest + kept[n] * (carried[n] - rest);
             }
         }
+
+        // Check the cells around the moved nodes again.
+        const uint32_t stamp = ++level.revert_round;
+        checked.clear();
+        for (int32_t node : lowered) {
+            const int ni = int(size_t(node) / size_t(cols + 1)), nj = int(size_t(node) % size_t(cols + 1));
+            for (int ci = std::max(0, ni - 1); ci <= std::min(rows - 1, ni); ++ci) {
+                for (int cj = std::max(0, nj - 1); cj <= std::min(cols - 1, nj); ++cj) {
+                    const size_t c = level.cell(ci, cj);
+                    if (level.suspect_round[c] == stamp) continue;
+                    level.suspect_round[c] = stamp;
+                    checked.push_back(int32_t(c));
+                }
+            }
+        }
+        verdicts.assign(checked.size(), 0);
+        parallel_for(int64_t(checked.size()), kSuspectGrain, [&](int64_t begin, int64_t end) {
+            for (int64_t k = begin; k < end; ++k) {
+                verdicts[size_t(k)] = out_of_bounds(checked[size_t(k)] / cols, checked[size_t(k)] % cols);
+            }
+        });
+        bad.clear();
+        for (size_t k = 0; k < checked.size(); ++k) {
+            if (verdicts[k]) bad.push_back(checked[k]);
+        }
+        if (bad.empty()) return round + 1;
     }
 }
 
