@@ -47,6 +47,8 @@ struct Level {
     std::vector<double> row_difference;  // per row of edges, the largest density difference
     std::vector<double> row_moved;       // per row of nodes, the largest squared node move
     std::vector<uint32_t> suspect_round;  // per cell, the last revert round that queued it
+    std::vector<uint8_t> breaking_cell;   // per cell: breaks a bound (dense revert rounds)
+    std::vector<uint8_t> reverted_node;   // per node: put back in this dense round
     uint32_t revert_round = 0;
 
     int rows() const { return grid.rows; }

@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <numeric>
 #include <string>
 
 #include <glm/common.hpp>
@@ -18,6 +19,9 @@ namespace {
 
 constexpr int64_t kRowGrain = 8;
 constexpr int64_t kSuspectGrain = 256;  // cells judged again after a revert, per chunk
+// Guard reverts run over the whole grid while more than 1/this of the cells
+// break a bound, over lists of cells below.
+constexpr int64_t kDenseRevertFraction = 32;
 // fit_to_bounds: nodes this many around an out-of-bounds cell back off with
 // it; below kFitSnap of its move a node goes back to rest; after kFitRounds
 // rounds every node still lowered goes back to rest.
@@ -189,6 +193,8 @@ void prepare_level(Level& level, const AutomatonOptions& options, bool ring) {
     level.row_moved.assign(size_t(rows + 1), 0.0);
     level.suspect_round.assign(cells, 0);
     level.revert_round = 0;
+    level.breaking_cell.assign(cells, 0);
+    level.reverted_node.assign(size_t(rows + 1) * (cols + 1), 0);
 }
 
 namespace {
@@ -435,25 +441,82 @@ StepStats step_of(Level& level, const AutomatonOptions& options) {
         if ((a < level.min_area[c] && a < before) || (a > level.max_area[c] && a > before)) return true;
         if (now.quality2 < kMinQuality * kMinQuality && now.quality2 < level.quality[c]) return true;
         if (level.rigid_area[c] < level.original_area[c]) return false;
-        const glm::dvec2 thin = thickness(q, a), was = thickness(old, before);
+        const glm::dvec2 thin = thickness(q, a);
         const double w0 = level.grid.xs[j + 1] - level.grid.xs[j];
         const double h0 = level.grid.ys[i + 1] - level.grid.ys[i];
+        if (!(thin.x < w0) && !(thin.y < h0)) return false;  // as thick as at rest: the usual case
+        const glm::dvec2 was = thickness(old, before);
         return (thin.x < w0 && thin.x < was.x) || (thin.y < h0 && thin.y < was.y);
     };
+    // Every cell judged in parallel; its verdict goes to breaking_cell.
+    std::vector<uint8_t>& breaking_cell = level.breaking_cell;
+    std::vector<int64_t> row_count(size_t(rows), 0);
+    parallel_for(rows, kRowGrain, [&](int64_t begin, int64_t end) {
+        for (int i = int(begin); i < int(end); ++i) {
+            int64_t count = 0;
+            for (int j = 0; j < cols; ++j) {
+                const bool breaks = breaks_bound(i, j);
+                breaking_cell[level.cell(i, j)] = breaks;
+                count += breaks;
+            }
+            row_count[size_t(i)] = count;
+        }
+    });
+    std::vector<uint8_t> reverted_rows(size_t(rows) + 1, 0);  // node rows with a node put back
+    // Dense rounds, while many cells break (a tenth of the finest level's
+    // cells on a Lightmap Pack layout): two passes over the whole grid, in
+    // parallel. Nodes of breaking cells go back; the cells around them are
+    // judged again. The same sets as the sparse rounds below.
+    auto total = [&] { return std::accumulate(row_count.begin(), row_count.end(), int64_t(0)); };
+    while (total() > int64_t(rows) * cols / kDenseRevertFraction) {
+        parallel_for(rows + 1, kRowGrain, [&](int64_t begin, int64_t end) {
+            for (int i = int(begin); i < int(end); ++i) {
+                for (int j = 0; j <= cols; ++j) {
+                    bool revert = false;
+                    for (int ci = std::max(0, i - 1); ci <= std::min(rows - 1, i); ++ci) {
+                        for (int cj = std::max(0, j - 1); cj <= std::min(cols - 1, j); ++cj) {
+                            revert = revert || breaking_cell[level.cell(ci, cj)];
+                        }
+                    }
+                    const size_t n = level.node(i, j);
+                    level.reverted_node[n] = revert;
+                    if (!revert) continue;
+                    level.next_nodes[n] = nodes[n];
+                    reverted_rows[size_t(i)] = 1;
+                }
+            }
+        });
+        parallel_for(rows, kRowGrain, [&](int64_t begin, int64_t end) {
+            for (int i = int(begin); i < int(end); ++i) {
+                int64_t count = 0;
+                for (int j = 0; j < cols; ++j) {
+                    const bool suspect = level.reverted_node[level.node(i, j)] ||
+                                         level.reverted_node[level.node(i, j + 1)] ||
+                                         level.reverted_node[level.node(i + 1, j)] ||
+                                         level.reverted_node[level.node(i + 1, j + 1)];
+                    const bool breaks = suspect && breaks_bound(i, j);
+                    breaking_cell[level.cell(i, j)] = breaks;
+                    count += breaks;
+                }
+                row_count[size_t(i)] = count;
+            }
+        });
+    }
     std::vector<std::vector<int32_t>> row_breaking(static_cast<size_t>(rows));
     parallel_for(rows, kRowGrain, [&](int64_t begin, int64_t end) {
         for (int i = int(begin); i < int(end); ++i) {
             row_breaking[size_t(i)].clear();
+            if (!row_count[size_t(i)]) continue;
             for (int j = 0; j < cols; ++j) {
-                if (breaks_bound(i, j)) row_breaking[size_t(i)].push_back(int32_t(level.cell(i, j)));
+                if (breaking_cell[level.cell(i, j)]) row_breaking[size_t(i)].push_back(int32_t(level.cell(i, j)));
             }
         }
     });
     std::vector<int32_t> breaking;
     for (const auto& r : row_breaking) breaking.insert(breaking.end(), r.begin(), r.end());
+    // Sparse rounds: lists of the breaking cells and their neighbours.
     std::vector<int32_t> suspects;
     std::vector<uint8_t> verdicts;
-    std::vector<uint8_t> reverted_rows(size_t(rows) + 1, 0);  // node rows with a node put back
     while (!breaking.empty()) {
         // Each cell once per round (a stamp, not a sort: within a round the
         // order does not matter, every cell is judged on the same nodes).
