@@ -471,12 +471,15 @@ StepStats step_of(Level& level, const AutomatonOptions& options) {
     while (total() > int64_t(rows) * cols / kDenseRevertFraction) {
         parallel_for(rows + 1, kRowGrain, [&](int64_t begin, int64_t end) {
             for (int i = int(begin); i < int(end); ++i) {
+                // The cell rows above and below node row i, where they exist.
+                const uint8_t* above = i > 0 ? &breaking_cell[level.cell(i - 1, 0)] : nullptr;
+                const uint8_t* below = i < rows ? &breaking_cell[level.cell(i, 0)] : nullptr;
                 for (int j = 0; j <= cols; ++j) {
-                    bool revert = false;
-                    for (int ci = std::max(0, i - 1); ci <= std::min(rows - 1, i); ++ci) {
-                        for (int cj = std::max(0, j - 1); cj <= std::min(cols - 1, j); ++cj) {
-                            revert = revert || breaking_cell[level.cell(ci, cj)];
-                        }
+                    uint8_t revert = 0;
+                    for (const uint8_t* row : {above, below}) {
+                        if (!row) continue;
+                        if (j > 0) revert |= row[j - 1];
+                        if (j < cols) revert |= row[j];
                     }
                     const size_t n = level.node(i, j);
                     level.reverted_node[n] = revert;
