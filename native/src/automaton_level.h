@@ -38,13 +38,11 @@ struct Level {
     std::array<double, 4> reference_density{};  // covered energy / covered area, per channel
     double initial_total = 0;                   // sum of all energies, for the conservation check
 
-    // Cell state derived from the nodes and energies (measure_cells), kept
+    // Cell shapes derived from the nodes (measure_cells), kept
     // double-buffered like them: a step measures the cells it moved while
     // checking their bounds, so the next step need not measure them again.
     std::vector<double> area, safe_radius, quality;
-    std::vector<double> diffusion_density;  // cells * channels
-    std::vector<double> pressure_density;   // cells * axes: one, or y and x for four channels
-    std::vector<double> next_area, next_safe_radius, next_quality, next_diffusion_density, next_pressure_density;
+    std::vector<double> next_area, next_safe_radius, next_quality;
     // Scratch, rebuilt every step.
     std::vector<double> row_difference;  // per row of edges, the largest density difference
     std::vector<double> row_moved;       // per row of nodes, the largest squared node move
@@ -69,9 +67,9 @@ void prepare_level(Level& level, const AutomatonOptions& options, bool ring);
 // the steps' guards keep every bound from the start. Returns the rounds.
 int fit_to_bounds(Level& level);
 
-// Measures every cell (area, shape, densities) from the current nodes and
-// energies; run before the first step of a level, after any change to the
-// nodes that step() did not make.
+// Measures every cell (area, move radius, quality) from the current nodes;
+// run before the first step of a level, after any change to the nodes that
+// step() did not make.
 void measure_cells(Level& level);
 
 struct StepStats {

@@ -17,6 +17,7 @@ namespace lmrefine::automaton_detail {
 namespace {
 
 constexpr int64_t kRowGrain = 8;
+constexpr int64_t kSuspectGrain = 256;  // cells judged again after a revert, per chunk
 // fit_to_bounds: nodes this many around an out-of-bounds cell back off with
 // it; below kFitSnap of its move a node goes back to rest; after kFitRounds
 // rounds every node still lowered goes back to rest.
@@ -184,10 +185,6 @@ void prepare_level(Level& level, const AutomatonOptions& options, bool ring) {
                     &level.next_quality}) {
         v->resize(cells);
     }
-    level.diffusion_density.resize(cells * channels);
-    level.next_diffusion_density.resize(cells * channels);
-    level.pressure_density.resize(cells * (channels == 4 ? 2 : 1));
-    level.next_pressure_density.resize(cells * (channels == 4 ? 2 : 1));
     level.row_difference.assign(size_t(rows + 1), 0.0);
     level.row_moved.assign(size_t(rows + 1), 0.0);
     level.suspect_round.assign(cells, 0);
@@ -196,46 +193,54 @@ void prepare_level(Level& level, const AutomatonOptions& options, bool ring) {
 
 namespace {
 
-// The state of cell c from its corners q and its energies e, written to the
-// given arrays: area, corner move radius, quality, densities. Pressure per
-// axis: a cell's springs along an axis push both its edges across that axis
-// (four channels: y from r + b, x from g + a). Uncovered texels weigh as the
-// mean density.
-template <int channels>
-void write_cell_state(const Level& level, size_t c, const Shape& now, const double* e, double* area, double* radius,
-                      double* quality, double* diffusion_density, double* pressure_density) {
-    constexpr int axes = channels == 4 ? 2 : 1;
-    const double a = now.area;
-    area[c] = a;
+// A cell's shape state, written to the given arrays.
+void write_shape(size_t c, const Shape& now, double* area, double* radius, double* quality) {
+    area[c] = now.area;
     radius[c] = now.radius;
     quality[c] = now.quality2;
-    const bool material = level.kind[c] == CellKind::Material;
-    for (int k = 0; k < channels; ++k) diffusion_density[c * channels + k] = material ? e[k] / a : 0.0;
-    for (int axis = 0; axis < axes; ++axis) {
-        double sum = 0.0, reference = 0.0;
-        for (int k = axis; k < channels; k += axes) {
-            sum += e[k];
-            reference += level.reference_density[k];
+}
+
+// Densities of the cells of row i from their energies and areas: energy /
+// area for diffusion (0 outside material cells); pressure per axis: a
+// cell's springs along an axis push both its edges across that axis (four
+// channels: y from r + b, x from g + a), uncovered texels weighing as the
+// mean density.
+template <int channels>
+void row_densities(const Level& level, int i, double* diffusion, double* pressure) {
+    constexpr int axes = channels == 4 ? 2 : 1;
+    for (int j = 0; j < level.cols(); ++j) {
+        const size_t c = level.cell(i, j);
+        const double a = level.area[c];
+        const double* e = &level.energy[c * channels];
+        const bool material = level.kind[c] == CellKind::Material;
+        for (int k = 0; k < channels; ++k) diffusion[j * channels + k] = material ? e[k] / a : 0.0;
+        for (int axis = 0; axis < axes; ++axis) {
+            double sum = 0.0, reference = 0.0;
+            for (int k = axis; k < channels; k += axes) {
+                sum += e[k];
+                reference += level.reference_density[k];
+            }
+            pressure[j * axes + axis] = (sum + reference * level.uncovered_area[c]) / a;
         }
-        pressure_density[c * axes + axis] = (sum + reference * level.uncovered_area[c]) / a;
     }
 }
 
-template <int channels>
-void measure_cells_of(Level& level) {
+}  // namespace
+
+void measure_cells(Level& level) {
     parallel_for(level.rows(), kRowGrain, [&](int64_t begin, int64_t end) {
         for (int i = int(begin); i < int(end); ++i) {
             for (int j = 0; j < level.cols(); ++j) {
-                const size_t c = level.cell(i, j);
                 glm::dvec2 q[4];
                 corners(level, level.grid.nodes, i, j, q);
-                write_cell_state<channels>(level, c, shape(q), &level.energy[c * channels], level.area.data(),
-                                 level.safe_radius.data(), level.quality.data(), level.diffusion_density.data(),
-                                 level.pressure_density.data());
+                write_shape(level.cell(i, j), shape(q), level.area.data(), level.safe_radius.data(),
+                            level.quality.data());
             }
         }
     });
 }
+
+namespace {
 
 // The step for one or four channels (constants let the compiler unroll the
 // per-channel loops of the inner kernels).
@@ -249,14 +254,13 @@ StepStats step_of(Level& level, const AutomatonOptions& options) {
     // 1. Edges: energy flux (only between covered cells, from the denser to
     // the less dense; the border and the gutter are adiabatic) and the push
     // that moves the edge towards the less dense cell.
-    auto edge = [&](size_t a, int ka, size_t b, int kb, int axis, double& push_out, double& flux_out) {
-        const double pa = level.pressure_density[a * axes + axis], pb = level.pressure_density[b * axes + axis];
+    // Cells a and b with their densities (da, pa: diffusion, pressure).
+    auto edge = [&](size_t a, double da, double pa, size_t b, double db, double pb, int axis, double& push_out,
+                    double& flux_out) {
         push_out = push(pa, pb);
         flux_out = 0.0;
         double difference = 0.0;
         if (level.kind[a] == CellKind::Material && level.kind[b] == CellKind::Material) {
-            const double da = level.diffusion_density[a * channels + ka];
-            const double db = level.diffusion_density[b * channels + kb];
             flux_out = options.diffusion * std::min(level.area[a], level.area[b]) * (da - db);
             double reference = 0.0;
             for (int k = axis; k < channels; k += axes) reference += level.reference_density[k];
@@ -266,16 +270,19 @@ StepStats step_of(Level& level, const AutomatonOptions& options) {
     };
     // Edge row r: the vertical edges between the cells of row r (r < rows)
     // and the horizontal edges along node row r (between cell rows r - 1 and
-    // r); border edges stay 0. Written to a chunk's own rows of scratch: the
-    // energies and nodes of node rows [begin, end) need edge rows
-    // [begin - 1, end], so each chunk computes those (the two halo rows
-    // twice) while they are in cache, and only its own rows' differences.
-    auto edge_row = [&](int r, double* push_v, double* flux_v, double* push_h, double* flux_h) {
+    // r); border edges stay 0. `above` and `here`: the densities of cell
+    // rows r - 1 and r (diffusion, then pressure), where they exist.
+    auto edge_row = [&](int r, const double* above, const double* here, double* push_v, double* flux_v,
+                        double* push_h, double* flux_h) {
+        const double* pressure_above = above + size_t(cols) * channels;
+        const double* pressure_here = here + size_t(cols) * channels;
         double largest = 0.0;
         push_v[0] = flux_v[0] = push_v[cols] = flux_v[cols] = 0.0;
         if (r < rows) {
             for (int j = 1; j < cols; ++j) {
-                largest = std::max(largest, edge(level.cell(r, j - 1), face.right, level.cell(r, j), face.left,
+                largest = std::max(largest, edge(level.cell(r, j - 1), here[(j - 1) * channels + face.right],
+                                                 pressure_here[(j - 1) * axes + axes - 1], level.cell(r, j),
+                                                 here[j * channels + face.left], pressure_here[j * axes + axes - 1],
                                                  axes - 1, push_v[j], flux_v[j]));
             }
         } else {
@@ -284,7 +291,9 @@ StepStats step_of(Level& level, const AutomatonOptions& options) {
         }
         if (r > 0 && r < rows) {
             for (int j = 0; j < cols; ++j) {
-                largest = std::max(largest, edge(level.cell(r - 1, j), face.down, level.cell(r, j), face.up, 0,
+                largest = std::max(largest, edge(level.cell(r - 1, j), above[j * channels + face.down],
+                                                 pressure_above[j * axes], level.cell(r, j),
+                                                 here[j * channels + face.up], pressure_here[j * axes], 0,
                                                  push_h[j], flux_h[j]));
             }
         } else {
@@ -297,17 +306,31 @@ StepStats step_of(Level& level, const AutomatonOptions& options) {
     // 2. New energies (each edge's flux leaves one cell and enters the other,
     // so the total is conserved) and proposed node positions.
     parallel_for(rows + 1, kRowGrain, [&](int64_t begin, int64_t end) {
+        // The energies and nodes of node rows [begin, end) need edge rows
+        // [begin - 1, end], and those the densities of cell rows
+        // [begin - 2, end]: each chunk computes its own (the halo rows
+        // twice) into scratch that stays in cache, and only its own rows'
+        // differences.
         const int first = std::max(0, int(begin) - 1), last = std::min(rows, int(end));
-        const size_t stride = size_t(cols) + 1;
+        const int first_cells = std::max(0, first - 1), last_cells = std::min(rows - 1, last);
+        const size_t stride = size_t(cols) + 1, edge_rows = size_t(last - first + 1);
+        const size_t density_stride = size_t(cols) * (channels + axes);
         thread_local std::vector<double> scratch;
-        scratch.resize(4 * stride * size_t(last - first + 1));
+        scratch.resize(4 * stride * edge_rows + density_stride * size_t(last_cells - first_cells + 1));
         double* const pv = scratch.data();
-        double* const fv = pv + stride * size_t(last - first + 1);
-        double* const ph = fv + stride * size_t(last - first + 1);
-        double* const fh = ph + stride * size_t(last - first + 1);
+        double* const fv = pv + stride * edge_rows;
+        double* const ph = fv + stride * edge_rows;
+        double* const fh = ph + stride * edge_rows;
+        double* const densities = fh + stride * edge_rows;
+        auto density_row = [&](int i) {  // rows outside the grid are never read: any row will do
+            return densities + density_stride * size_t(std::clamp(i, first_cells, last_cells) - first_cells);
+        };
+        for (int i = first_cells; i <= last_cells; ++i) {
+            row_densities<channels>(level, i, density_row(i), density_row(i) + size_t(cols) * channels);
+        }
         for (int r = first; r <= last; ++r) {
             const size_t o = stride * size_t(r - first);
-            const double largest = edge_row(r, pv + o, fv + o, ph + o, fh + o);
+            const double largest = edge_row(r, density_row(r - 1), density_row(r), pv + o, fv + o, ph + o, fh + o);
             if (r >= begin && r < end) level.row_difference[size_t(r)] = largest;
         }
         // Edge values by edge row and column, as in the whole-grid arrays.
@@ -406,9 +429,7 @@ StepStats step_of(Level& level, const AutomatonOptions& options) {
         corners(level, nodes, i, j, old);
         const bool unchanged = q[0] == old[0] && q[1] == old[1] && q[2] == old[2] && q[3] == old[3];
         const Shape now = unchanged ? Shape{level.area[c], level.safe_radius[c], level.quality[c]} : shape(q);
-        write_cell_state<channels>(level, c, now, &level.next_energy[c * channels], level.next_area.data(),
-                                   level.next_safe_radius.data(), level.next_quality.data(),
-                                   level.next_diffusion_density.data(), level.next_pressure_density.data());
+        write_shape(c, now, level.next_area.data(), level.next_safe_radius.data(), level.next_quality.data());
         if (unchanged) return false;
         const double a = now.area, before = level.area[c];
         if ((a < level.min_area[c] && a < before) || (a > level.max_area[c] && a > before)) return true;
@@ -431,7 +452,8 @@ StepStats step_of(Level& level, const AutomatonOptions& options) {
     std::vector<int32_t> breaking;
     for (const auto& r : row_breaking) breaking.insert(breaking.end(), r.begin(), r.end());
     std::vector<int32_t> suspects;
-    std::vector<int> reverted_rows;  // node rows with a node put back: their largest move changes
+    std::vector<uint8_t> verdicts;
+    std::vector<uint8_t> reverted_rows(size_t(rows) + 1, 0);  // node rows with a node put back
     while (!breaking.empty()) {
         // Each cell once per round (a stamp, not a sort: within a round the
         // order does not matter, every cell is judged on the same nodes).
@@ -439,8 +461,7 @@ StepStats step_of(Level& level, const AutomatonOptions& options) {
         suspects.clear();
         for (int32_t c : breaking) {
             const int i = c / cols, j = c % cols;
-            reverted_rows.push_back(i);
-            reverted_rows.push_back(i + 1);
+            reverted_rows[size_t(i)] = reverted_rows[size_t(i) + 1] = 1;
             for (int ni = i; ni <= i + 1; ++ni) {
                 for (int nj = j; nj <= j + 1; ++nj) {
                     level.next_nodes[level.node(ni, nj)] = nodes[level.node(ni, nj)];
@@ -455,18 +476,23 @@ StepStats step_of(Level& level, const AutomatonOptions& options) {
                 }
             }
         }
+        // Judged in parallel: each suspect once, writing only its own state.
+        verdicts.assign(suspects.size(), 0);
+        parallel_for(int64_t(suspects.size()), kSuspectGrain, [&](int64_t begin, int64_t end) {
+            for (int64_t k = begin; k < end; ++k) {
+                verdicts[size_t(k)] = breaks_bound(suspects[size_t(k)] / cols, suspects[size_t(k)] % cols);
+            }
+        });
         breaking.clear();
-        for (int32_t c : suspects) {
-            if (breaks_bound(c / cols, c % cols)) breaking.push_back(c);
+        for (size_t k = 0; k < suspects.size(); ++k) {
+            if (verdicts[k]) breaking.push_back(suspects[k]);
         }
     }
 
     // The largest node move actually made, in cell sizes of this level.
-    std::sort(reverted_rows.begin(), reverted_rows.end());
-    reverted_rows.erase(std::unique(reverted_rows.begin(), reverted_rows.end()), reverted_rows.end());
-    parallel_for(int64_t(reverted_rows.size()), kRowGrain, [&](int64_t begin, int64_t end) {
-        for (int64_t r = begin; r < end; ++r) {
-            const int i = reverted_rows[size_t(r)];
+    parallel_for(rows + 1, kRowGrain, [&](int64_t begin, int64_t end) {
+        for (int i = int(begin); i < int(end); ++i) {
+            if (!reverted_rows[size_t(i)]) continue;
             double largest = 0.0;
             for (int j = 0; j <= cols; ++j) {
                 const glm::dvec2 d = level.next_nodes[level.node(i, j)] - nodes[level.node(i, j)];
@@ -483,17 +509,10 @@ StepStats step_of(Level& level, const AutomatonOptions& options) {
     level.area.swap(level.next_area);
     level.safe_radius.swap(level.next_safe_radius);
     level.quality.swap(level.next_quality);
-    level.diffusion_density.swap(level.next_diffusion_density);
-    level.pressure_density.swap(level.next_pressure_density);
     return {difference, moved / block};
 }
 
 }  // namespace
-
-void measure_cells(Level& level) {
-    if (level.channels == 4) return measure_cells_of<4>(level);
-    measure_cells_of<1>(level);
-}
 
 StepStats step(Level& level, const AutomatonOptions& options) {
     return level.channels == 4 ? step_of<4>(level, options) : step_of<1>(level, options);
@@ -502,9 +521,6 @@ StepStats step(Level& level, const AutomatonOptions& options) {
 int fit_to_bounds(Level& level) {
     const int rows = level.rows(), cols = level.cols();
     const NodeGrid& grid = level.grid;
-    std::vector<glm::dvec2> carried = grid.nodes;
-    std::vector<double> kept(carried.size(), 1.0);
-    std::vector<uint8_t> bad(size_t(rows) * cols, 0);
     auto out_of_bounds = [&](int i, int j) {
         const size_t c = level.cell(i, j);
         glm::dvec2 q[4];
@@ -516,34 +532,41 @@ int fit_to_bounds(Level& level) {
         const glm::dvec2 thin = thickness(q, now.area);
         return thin.x < grid.xs[j + 1] - grid.xs[j] || thin.y < grid.ys[i + 1] - grid.ys[i];
     };
-    // Nodes moved in the previous round: only their cells need checking again.
-    std::vector<uint8_t> lower(carried.size(), 0);
-    for (int round = 0;; ++round) {
-        std::vector<uint8_t> any_bad(size_t(rows), 0);
-        parallel_for(rows, kRowGrain, [&](int64_t begin, int64_t end) {
-            for (int i = int(begin); i < int(end); ++i) {
-                for (int j = 0; j < cols; ++j) {
-                    const size_t c = level.cell(i, j);
-                    const bool moved = round == 0 || lower[level.node(i, j)] || lower[level.node(i, j + 1)] ||
-                                       lower[level.node(i + 1, j)] || lower[level.node(i + 1, j + 1)];
-                    if (moved) bad[c] = out_of_bounds(i, j);
-                    any_bad[size_t(i)] |= bad[c];
-                }
+    // Round 0 checks every cell; later rounds only the cells around the
+    // nodes moved in the round before (a bad cell's own corners are among
+    // them, so every bad cell is checked again). Rounds work on lists: the
+    // bad region is small next to the grid, and there can be dozens.
+    std::vector<int32_t> checked, bad;
+    std::vector<uint8_t> verdicts(size_t(rows), 0);
+    std::vector<std::vector<int32_t>> row_bad(static_cast<size_t>(rows));
+    parallel_for(rows, kRowGrain, [&](int64_t begin, int64_t end) {
+        for (int i = int(begin); i < int(end); ++i) {
+            for (int j = 0; j < cols; ++j) {
+                if (out_of_bounds(i, j)) row_bad[size_t(i)].push_back(int32_t(level.cell(i, j)));
             }
-        });
-        if (std::find(any_bad.begin(), any_bad.end(), 1) == any_bad.end()) return round;
+        }
+    });
+    for (const auto& r : row_bad) bad.insert(bad.end(), r.begin(), r.end());
+    if (bad.empty()) return 0;
+
+    std::vector<glm::dvec2> carried;  // blended towards rest from round kFitSmoothRounds on
+    std::vector<double> kept(grid.nodes.size(), 1.0);
+    std::vector<uint32_t> lowered_round(grid.nodes.size(), 0);
+    std::vector<int32_t> lowered;
+    std::vector<glm::dvec2> smoothed;
+    for (int round = 0;; ++round) {
         // Halve the move of every node within kFitMargin nodes of a bad
         // cell (once per round), to 0 below kFitSnap: a cell whose nodes
         // are all back at rest is the identity, inside every bound.
-        std::fill(lower.begin(), lower.end(), uint8_t(0));
-        for (int i = 0; i < rows; ++i) {
-            if (!any_bad[size_t(i)]) continue;
-            for (int j = 0; j < cols; ++j) {
-                if (!bad[level.cell(i, j)]) continue;
-                for (int ni = std::max(0, i - kFitMargin); ni <= std::min(rows, i + 1 + kFitMargin); ++ni) {
-                    for (int nj = std::max(0, j - kFitMargin); nj <= std::min(cols, j + 1 + kFitMargin); ++nj) {
-                        lower[level.node(ni, nj)] = 1;
-                    }
+        lowered.clear();
+        for (int32_t c : bad) {
+            const int i = c / cols, j = c % cols;
+            for (int ni = std::max(0, i - kFitMargin); ni <= std::min(rows, i + 1 + kFitMargin); ++ni) {
+                for (int nj = std::max(0, j - kFitMargin); nj <= std::min(cols, j + 1 + kFitMargin); ++nj) {
+                    const size_t n = level.node(ni, nj);
+                    if (lowered_round[n] == uint32_t(round + 1)) continue;
+                    lowered_round[n] = uint32_t(round + 1);
+                    lowered.push_back(int32_t(n));
                 }
             }
         }
@@ -553,37 +576,63 @@ int fit_to_bounds(Level& level) {
             // differ in size, and smoothing evens them out without giving
             // up the deformation; blending towards rest (below) cascades
             // through a strongly compressed region and undoes it.
-            const std::vector<glm::dvec2> before = level.grid.nodes;
-            for (int i = 0; i <= rows; ++i) {
-                for (int j = 0; j <= cols; ++j) {
-                    const size_t n = level.node(i, j);
-                    const NodeMode mode = level.node_mode[n];
-                    if (!lower[n] || mode == NodeMode::Fixed) continue;
-                    glm::dvec2 sum(0.0);
-                    int count = 0;
-                    if (i > 0) sum += before[level.node(i - 1, j)], ++count;
-                    if (i < rows) sum += before[level.node(i + 1, j)], ++count;
-                    if (j > 0) sum += before[level.node(i, j - 1)], ++count;
-                    if (j < cols) sum += before[level.node(i, j + 1)], ++count;
-                    glm::dvec2 move = 0.5 * (sum / double(count) - before[n]);
-                    if (mode == NodeMode::SlideX) move.y = 0;
-                    if (mode == NodeMode::SlideY) move.x = 0;
-                    level.grid.nodes[n] = before[n] + move;
-                }
+            const std::vector<glm::dvec2>& before = level.grid.nodes;
+            smoothed.resize(lowered.size());
+            for (size_t k = 0; k < lowered.size(); ++k) {
+                const size_t n = size_t(lowered[k]);
+                const int i = int(n / size_t(cols + 1)), j = int(n % size_t(cols + 1));
+                const NodeMode mode = level.node_mode[n];
+                smoothed[k] = before[n];
+                if (mode == NodeMode::Fixed) continue;
+                glm::dvec2 sum(0.0);
+                int count = 0;
+                if (i > 0) sum += before[level.node(i - 1, j)], ++count;
+                if (i < rows) sum += before[level.node(i + 1, j)], ++count;
+                if (j > 0) sum += before[level.node(i, j - 1)], ++count;
+                if (j < cols) sum += before[level.node(i, j + 1)], ++count;
+                glm::dvec2 move = 0.5 * (sum / double(count) - before[n]);
+                if (mode == NodeMode::SlideX) move.y = 0;
+                if (mode == NodeMode::SlideY) move.x = 0;
+                smoothed[k] = before[n] + move;
             }
-            continue;
-        }
-        if (round == kFitSmoothRounds) carried = level.grid.nodes;  // blend towards rest from here
-        const bool last = round >= kFitRounds + kFitSmoothRounds;
-        for (int i = 0; i <= rows; ++i) {
-            for (int j = 0; j <= cols; ++j) {
-                const size_t n = level.node(i, j);
-                if (!lower[n]) continue;
+            for (size_t k = 0; k < lowered.size(); ++k) level.grid.nodes[size_t(lowered[k])] = smoothed[k];
+        } else {
+            if (round == kFitSmoothRounds) carried = level.grid.nodes;
+            const bool last = round >= kFitRounds + kFitSmoothRounds;
+            for (int32_t node : lowered) {
+                const size_t n = size_t(node);
+                const int i = int(n / size_t(cols + 1)), j = int(n % size_t(cols + 1));
                 kept[n] = last || kept[n] < kFitSnap ? 0.0 : kFitFactor * kept[n];
                 const glm::dvec2 rest(grid.xs[j], grid.ys[i]);
                 level.grid.nodes[n] = rest + kept[n] * (carried[n] - rest);
             }
         }
+
+        // Check the cells around the moved nodes again.
+        const uint32_t stamp = ++level.revert_round;
+        checked.clear();
+        for (int32_t node : lowered) {
+            const int ni = int(size_t(node) / size_t(cols + 1)), nj = int(size_t(node) % size_t(cols + 1));
+            for (int ci = std::max(0, ni - 1); ci <= std::min(rows - 1, ni); ++ci) {
+                for (int cj = std::max(0, nj - 1); cj <= std::min(cols - 1, nj); ++cj) {
+                    const size_t c = level.cell(ci, cj);
+                    if (level.suspect_round[c] == stamp) continue;
+                    level.suspect_round[c] = stamp;
+                    checked.push_back(int32_t(c));
+                }
+            }
+        }
+        verdicts.assign(checked.size(), 0);
+        parallel_for(int64_t(checked.size()), kSuspectGrain, [&](int64_t begin, int64_t end) {
+            for (int64_t k = begin; k < end; ++k) {
+                verdicts[size_t(k)] = out_of_bounds(checked[size_t(k)] / cols, checked[size_t(k)] % cols);
+            }
+        });
+        bad.clear();
+        for (size_t k = 0; k < checked.size(); ++k) {
+            if (verdicts[k]) bad.push_back(checked[k]);
+        }
+        if (bad.empty()) return round + 1;
     }
 }
 
