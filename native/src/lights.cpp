@@ -206,8 +206,10 @@ void place_light(Light& light, const glm::mat4& matrix) {
     if (light.kind == LightKind::Area) {
         // Cycles' sync_light: axisu = column 0 * size, axisv = column 1 * size_y
         // (size for a square or disk), so the object's scale stretches the light.
-        if (light.shape == AreaShape::Square) light.shape = AreaShape::Rectangle, light.size_y = light.size;
-        if (light.shape == AreaShape::Disk) light.shape = AreaShape::Ellipse, light.size_y = light.size;
+        if (light.shape == AreaShape::Square || light.shape == AreaShape::Disk) {
+            light.shape = light.shape == AreaShape::Square ? AreaShape::Rectangle : AreaShape::Ellipse;
+            light.size_y = light.size;
+        }
         light.size *= sx;
         light.size_y *= sy;
     }
