@@ -14,7 +14,7 @@ namespace lmrefine::bindings {
 namespace {
 
 py::dict run(const py::handle& energy_in, const py::handle& mask_in, const py::handle& rigid_in, double diffusion, double rate, double delta,
-             int max_steps, double min_shrink, double max_magnification, const std::string& border,
+             int max_steps, double min_shrink, double max_magnification, double edge_shrink, const std::string& border,
              bool coarse_to_fine, int passes, bool check_invariants, py::object progress_callback) {
     auto energy = py_util::require_float32(energy_in, "energy", {2, 3});
     AutomatonInput input;
@@ -47,6 +47,7 @@ py::dict run(const py::handle& energy_in, const py::handle& mask_in, const py::h
     options.max_steps = max_steps;
     options.min_area = min_shrink;
     options.max_area = max_magnification;
+    options.edge_shrink = edge_shrink;
     options.border = parse_border_mode(border);
     options.coarse_to_fine = coarse_to_fine;
     options.passes = passes;
@@ -88,7 +89,8 @@ void bind_automaton(py::module_& m) {
           py::arg("rigid") = py::none(),
           py::arg("diffusion") = d.diffusion, py::arg("rate") = d.rate, py::arg("delta") = d.delta,
           py::arg("max_steps") = d.max_steps, py::arg("min_shrink") = d.min_area,
-          py::arg("max_magnification") = d.max_area, py::arg("border") = "same",
+          py::arg("max_magnification") = d.max_area, py::arg("edge_shrink") = d.edge_shrink,
+          py::arg("border") = "same",
           py::arg("coarse_to_fine") = d.coarse_to_fine, py::arg("passes") = d.passes,
           py::arg("check_invariants") = false, py::arg("progress") = py::none(),
           R"doc(Run the cellular automaton on an energy map (see docs/refiner.md).
@@ -101,7 +103,7 @@ Args:
     rigid (numpy.ndarray | None): (H, W) bool, more texels whose cells may
         shift but never shrink below their original area, width or height
         (e.g. gutter_texels(uvs, triangles, resolution)); uncovered texels
-        and covered ones next to them always are.
+        always are.
     diffusion (float): energy moved per step per unit density difference, <= 0.25.
     rate (float): node move per step, in cell sizes, at full contrast.
     delta (float): stop when every neighbour density difference, relative
@@ -109,6 +111,9 @@ Args:
     max_steps (int): step cap per pyramid level.
     min_shrink, max_magnification (float): bounds on a covered cell's area
         relative to its original area.
+    edge_shrink (float): in (0, 1]; a chart's edge texels facing the gutter
+        (covered, next to an uncovered texel, not rigid) shrink to at most
+        this times their area, keeping no width or height; 1 = rigid.
     border (str): 'same', 'border_rule' or 'extra_ring'.
     coarse_to_fine (bool): run on a pyramid (False: one level, for comparison).
     passes (int): extra passes rerun the finest level with fresh energies.

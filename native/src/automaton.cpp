@@ -44,12 +44,17 @@ int level_count(int width, int height, bool coarse_to_fine) {
     return levels;
 }
 
+// Texel kinds of rigid_texels(): free, a chart's edge facing the gutter, rigid.
+constexpr uint8_t kFreeTexel = 0, kEdgeTexel = 1, kRigidTexel = 2;
+
 // A level of `block`-texel cells: energies summed over the block, the
-// uncovered texels counted, nodes carried from the coarser grid (or at rest).
+// uncovered texels counted, the rigid area (a chart edge texel counting
+// edge_shrink), nodes carried from the coarser grid (or at rest).
 // With a ring, one extra ring of cells (one block wide) surrounds the grid,
 // its outer nodes one block outside the inner border nodes.
-Level make_level(const AutomatonInput& input, const std::vector<uint8_t>& rigid, int block,
+Level make_level(const AutomatonInput& input, const std::vector<uint8_t>& rigid, double edge_shrink, int block,
                  const NodeGrid* coarser, bool ring) {
+    const double texel_rigid_area[3] = {0.0, edge_shrink, 1.0};
     const NodeGrid inner = identity_grid(input.width, input.height, block);
     const int pad = ring ? 1 : 0;
     Level level;
@@ -102,7 +107,7 @@ Level make_level(const AutomatonInput& input, const std::vector<uint8_t>& rigid,
                 for (int y = bi * block; y < std::min((bi + 1) * block, input.height); ++y) {
                     for (int x = bj * block; x < std::min((bj + 1) * block, input.width); ++x) {
                         const size_t t = size_t(y) * input.width + x;
-                        level.rigid_area[c] += rigid[t];
+                        level.rigid_area[c] += texel_rigid_area[rigid[t]];
                         if (input.mask && !input.mask[t]) {
                             level.uncovered_area[c] += 1.0;
                             continue;
@@ -118,11 +123,14 @@ Level make_level(const AutomatonInput& input, const std::vector<uint8_t>& rigid,
     return level;
 }
 
-// Texels whose cells keep their size: uncovered ones (the gutter) and
-// covered ones next to an uncovered texel (a chart's edge), so the gutter
-// between charts keeps its width in texels.
+// Per texel: rigid (uncovered: the gutter keeps its width in texels, and the
+// texels input.rigid marks), a chart's edge (covered, next to an uncovered
+// texel: shrinks only to edge_shrink) or free.
 std::vector<uint8_t> rigid_texels(const AutomatonInput& input) {
-    std::vector<uint8_t> rigid(size_t(input.width) * input.height, 0);
+    std::vector<uint8_t> rigid(size_t(input.width) * input.height, kFreeTexel);
+    if (input.rigid) {
+        for (size_t t = 0; t < rigid.size(); ++t) rigid[t] = input.rigid[t] ? kRigidTexel : kFreeTexel;
+    }
     if (!input.mask) return rigid;
     parallel_for(input.height, 16, [&](int64_t begin, int64_t end) {
         for (int i = int(begin); i < int(end); ++i) {
@@ -133,7 +141,9 @@ std::vector<uint8_t> rigid_texels(const AutomatonInput& input) {
                         near_gutter = near_gutter || !input.mask[size_t(y) * input.width + x];
                     }
                 }
-                rigid[size_t(i) * input.width + j] = near_gutter;
+                uint8_t& kind = rigid[size_t(i) * input.width + j];
+                if (!input.mask[size_t(i) * input.width + j]) kind = kRigidTexel;
+                else if (near_gutter && kind == kFreeTexel) kind = kEdgeTexel;
             }
         }
     });
@@ -219,6 +229,9 @@ AutomatonResult run_automaton(const AutomatonInput& input, const AutomatonOption
     LMREFINE_REQUIRE(options.min_area > 0 && options.min_area <= 1,
                      "min_shrink must be in (0, 1]: the smallest allowed cell area relative to its original area");
     LMREFINE_REQUIRE(options.max_area >= 1, "max_magnification must be >= 1");
+    LMREFINE_REQUIRE(options.edge_shrink > 0 && options.edge_shrink <= 1,
+                     "edge_shrink must be in (0, 1]: the smallest area of a chart's edge texel relative to its "
+                     "original area (1 = rigid)");
     LMREFINE_REQUIRE(options.passes >= 1, "passes must be >= 1");
     const int64_t values = int64_t(input.width) * input.height * input.channels;
     for (int64_t k = 0; k < values; ++k) {
@@ -235,10 +248,7 @@ AutomatonResult run_automaton(const AutomatonInput& input, const AutomatonOption
     for (int l = 0; l < levels; ++l) budget += uint64_t(level_step_budget(1 << l, options));
     if (progress) progress->begin("automaton", budget);
 
-    std::vector<uint8_t> rigid = rigid_texels(input);
-    if (input.rigid) {
-        for (size_t t = 0; t < rigid.size(); ++t) rigid[t] = rigid[t] | (input.rigid[t] != 0);
-    }
+    const std::vector<uint8_t> rigid = rigid_texels(input);
     AutomatonResult result;
     NodeGrid carried;
     Level level;
@@ -246,7 +256,7 @@ AutomatonResult run_automaton(const AutomatonInput& input, const AutomatonOption
     for (int l = levels - 1; l >= 0; --l) {
         const Clock::time_point start = Clock::now();
         const int block = 1 << l;
-        level = make_level(input, rigid, block, l == levels - 1 ? nullptr : &carried, ring);
+        level = make_level(input, rigid, options.edge_shrink, block, l == levels - 1 ? nullptr : &carried, ring);
         LevelStats stats;
         stats.block = block;
         stats.rows = level.rows() - (ring ? 2 : 0);
@@ -258,7 +268,7 @@ AutomatonResult run_automaton(const AutomatonInput& input, const AutomatonOption
     }
     for (int pass = 1; pass < options.passes; ++pass) {
         const Clock::time_point start = Clock::now();
-        level = make_level(input, rigid, 1, &carried, ring);
+        level = make_level(input, rigid, options.edge_shrink, 1, &carried, ring);
         LevelStats stats;
         stats.rows = input.height;
         stats.cols = input.width;

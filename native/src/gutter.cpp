@@ -28,7 +28,8 @@ std::vector<uint8_t> gutter_texels(const UvLayout& layout, int width, int height
                 bool edge = o < 0;
                 for (int y = std::max(0, i - 1); y <= std::min(height - 1, i + 1) && !edge; ++y) {
                     for (int x = std::max(0, j - 1); x <= std::min(width - 1, j + 1); ++x) {
-                        edge = edge || owner[size_t(y) * width + x] != o;
+                        const int32_t other = owner[size_t(y) * width + x];
+                        edge = edge || (other != o && other != kUncovered);
                     }
                 }
                 gutter[size_t(i) * width + j] = edge;

@@ -120,7 +120,7 @@ def identity_grid(resolution):
 
 
 def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gradient=None, strength=24.0,
-               max_magnification=8.0, min_shrink=0.25, delta=0.02, passes=1, border="same",
+               max_magnification=8.0, min_shrink=0.25, edge_shrink=0.8, delta=0.02, passes=1, border="same",
                directional=False, wavelet="d4", diffusion=0.05, max_steps=8, progress=None):
     """Refine a lightmap UV layout: more texels where light changes fast.
 
@@ -139,6 +139,8 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
             (1 + strength) times the area of a flat one. 0 = identity.
         max_magnification, min_shrink: bounds on a covered texel's area
             change (texel-density ratio).
+        edge_shrink: in (0, 1]; a chart's edge texels facing the gutter
+            shrink to at most this times their area (1 = rigid).
         delta: the automaton stops when neighbour densities differ by less
             than delta (relative to the mean).
         passes: >= 1; each extra pass reruns the finest level with fresh
@@ -193,10 +195,12 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
     energy, scalar_energy = _energy(gradient, mask, float(strength), directional)
     timings["gradient_map"] = time.perf_counter() - clock
     clock = time.perf_counter()
-    # Texels between charts only shift: chart pairs keep their distance.
+    # Texels between charts only shift, chart edges facing the gutter shrink to
+    # edge_shrink at most: chart pairs keep (nearly) their distance.
     rigid = _native.gutter_texels(uvs, triangles, shape)
     run = _native.run_automaton(energy, mask, rigid=rigid, diffusion=diffusion, delta=delta, max_steps=max_steps,
-                                min_shrink=min_shrink, max_magnification=max_magnification, border=border,
+                                min_shrink=min_shrink, max_magnification=max_magnification,
+                                edge_shrink=edge_shrink, border=border,
                                 passes=int(passes), progress=progress)
     identity = identity_grid(shape)
     full = run["grid"]

@@ -38,6 +38,11 @@ struct AutomatonOptions {
     int max_steps = 8;           // step cap per pyramid level (and per extra pass)
     double min_area = 0.25;      // a covered cell never shrinks below this times its original area
     double max_area = 8.0;       // ... nor grows above this
+    // A chart's edge texels facing the gutter (covered, next to an uncovered
+    // texel, not rigid) may shrink to this times their area (never below
+    // min_area) and need not keep their width and height; 1 = rigid. 0.8:
+    // the best equal-error ratio on the bundled scenes (docs/refiner.md).
+    double edge_shrink = 0.8;
     BorderMode border = BorderMode::Same;
     bool coarse_to_fine = true;  // false: a single level (needs O(L^2) steps; for comparison)
     int passes = 1;              // extra passes rerun the finest level with energies reset
@@ -51,8 +56,9 @@ struct AutomatonInput {
     const float* energy = nullptr;  // height * width * channels, >= 0
     const uint8_t* mask = nullptr;  // height * width, 1 = covered; null = all covered
     // height * width, 1 = rigid: the cell may shift, never get smaller than
-    // its original area, width or height (the gutter). Null: uncovered
-    // texels and covered ones next to them.
+    // its original area, width or height (the gutter). Uncovered texels
+    // always are; covered ones next to them (a chart's edge) shrink only to
+    // edge_shrink unless rigid here.
     const uint8_t* rigid = nullptr;
     int height = 0;
     int width = 0;

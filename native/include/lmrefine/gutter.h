@@ -9,11 +9,13 @@
 
 namespace lmrefine {
 
-// (height * width) bytes, 1 for texels no chart covers and for texels next
-// to (8-neighbourhood) a texel of another owner: uncovered, another chart,
-// or covered by two charts. Every straight path between two charts crosses
-// only such texels near its ends, so if their cells do not contract, chart
-// pairs do not get closer. Charts as find_charts.
+// (height * width) bytes, 1 for texels no chart covers or two charts cover,
+// and for texels next to (8-neighbourhood) a texel of another chart or of
+// two. Every straight path between two charts crosses only such texels and
+// chart edges facing the gutter (covered, next to an uncovered texel: the
+// automaton lets them shrink only to edge_shrink), so chart pairs keep
+// nearly their distance; the layout check judges the rest. Charts as
+// find_charts.
 std::vector<uint8_t> gutter_texels(const UvLayout& layout, int width, int height);
 
 }  // namespace lmrefine
