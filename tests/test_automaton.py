@@ -117,6 +117,26 @@ def test_rigid_cells_keep_their_width_and_height(rng):
     assert width[rigid].min() >= 1 - 1e-3
 
 
+def test_chart_edges_facing_the_gutter_shrink_only_to_edge_shrink(rng):
+    # A chart with a flat middle and the gutter around it: its edge texels
+    # (covered, next to an uncovered texel) give room down to edge_shrink,
+    # not to min_shrink; with edge_shrink 1 they are rigid as before.
+    shape = (48, 48)
+    mask = np.zeros(shape, bool)
+    mask[4:44, 4:44] = True
+    energy = np.full(shape, 0.05, np.float32)
+    energy[20:28, 20:28] = 1.0
+    edge = mask & ~np.pad(mask, 1)[:-2, 1:-1] | mask & ~np.pad(mask, 1)[2:, 1:-1]
+    edge |= mask & ~np.pad(mask, 1)[1:-1, :-2] | mask & ~np.pad(mask, 1)[1:-1, 2:]
+    soft = lmrefine.run_automaton(energy, mask, edge_shrink=0.8, check_invariants=True)["cell_area"]
+    rigid = lmrefine.run_automaton(energy, mask, edge_shrink=1.0, check_invariants=True)["cell_area"]
+    assert edge.sum() == 4 * 39
+    assert soft[edge].min() >= 0.8 - 1e-4 and soft[edge].min() < 0.95
+    assert rigid[edge].min() >= 1 - 1e-4
+    assert soft[~mask].min() >= 1 - 1e-4  # the gutter stays rigid either way
+    assert soft[mask & ~edge].min() < 0.5  # the flat middle shrinks further
+
+
 def test_invariants_hold_for_the_directional_variant(rng):
     for shape in [(9, 13), (40, 40)]:
         energy = (rng.random(shape + (4,)) ** 4).astype(np.float32)
@@ -163,6 +183,8 @@ def test_bad_arguments_raise_value_errors():
         lmrefine.run_automaton(energy, np.ones((3, 4), bool))
     with pytest.raises(ValueError, match="border"):
         lmrefine.run_automaton(energy, border="wrap")
+    with pytest.raises(ValueError, match="edge_shrink"):
+        lmrefine.run_automaton(np.ones((4, 4), np.float32), edge_shrink=0.0)
     with pytest.raises(ValueError, match="diffusion"):
         lmrefine.run_automaton(energy, diffusion=0.5)
     with pytest.raises(ValueError, match="channel"):

@@ -104,6 +104,7 @@ def test_smart_uv_layout_stays_valid_and_is_refined():
     result = lmrefine.refine_uvs(None, uvs, tris, 256, padding=2, gradient=gradient)
     assert assert_valid(result, uvs, tris, 256, 2)["valid"]
     assert result.report["transition_widening"] > 2.0
+    assert result.report["edge_shrink"] == 0.8  # 4-texel margin: chart edges may give room
 
 
 def test_a_layout_packed_tighter_than_the_padding_is_still_refined():
@@ -120,6 +121,7 @@ def test_a_layout_packed_tighter_than_the_padding_is_still_refined():
     assert original < 2
     assert report["transition_widening"] > 1.3
     assert report["backoff"] == 1.0
+    assert report["edge_shrink"] == 1.0  # too tight for chart edges to give room
     check = lmrefine.check_layout(result.uvs, tris, resolution, 2, reference_uvs=uvs, relative_gutter=True)
     assert check["gutter_violations"] == 0 and check["flipped"] == 0 and check["overlapping"] == 0
     assert check["min_gutter_texels"] >= original - 1e-4
@@ -195,6 +197,8 @@ def test_bad_input_raises_value_errors():
         refine(None, uvs, tris, 64, gradient=gradient, border="mirror")
     with pytest.raises(ValueError, match="strength"):
         refine(None, uvs, tris, 64, gradient=gradient, strength=-1)
+    with pytest.raises(ValueError, match="edge_shrink"):
+        refine(None, uvs, tris, 64, gradient=gradient, edge_shrink=1.5)
 
 
 def test_a_tight_spot_backs_off_only_around_itself():
