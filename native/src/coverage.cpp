@@ -16,32 +16,92 @@ namespace {
 // edge that lies exactly on a texel border does not claim the next texel.
 constexpr double kTouch = 1e-7;
 
-// Separating-axis test of a triangle against the unit square at (x0, y0).
-bool overlaps_texel(const glm::dvec2 p[3], double x0, double y0) {
-    const glm::dvec2 corners[4] = {{x0, y0}, {x0 + 1, y0}, {x0, y0 + 1}, {x0 + 1, y0 + 1}};
+// The smallest index in [lo, hi) where `holds` is true, or hi; `holds` must
+// be false then true along the range (monotone).
+template <class Holds>
+int first_true(int lo, int hi, Holds&& holds) {
+    while (lo < hi) {
+        const int mid = lo + (hi - lo) / 2;
+        if (holds(mid)) hi = mid;
+        else lo = mid + 1;
+    }
+    return lo;
+}
+
+}  // namespace
+
+TriangleCover::TriangleCover(const glm::dvec2 p[3], int width, int height) {
+    const double xmin = std::min({p[0].x, p[1].x, p[2].x}), xmax = std::max({p[0].x, p[1].x, p[2].x});
+    const double ymin = std::min({p[0].y, p[1].y, p[2].y}), ymax = std::max({p[0].y, p[1].y, p[2].y});
+    c0_ = std::max(0, int(std::floor(xmin)));
+    c1_ = std::min(width - 1, int(std::ceil(xmax)));
+    r0_ = std::max(0, int(std::floor(ymin)));
+    r1_ = std::min(height - 1, int(std::ceil(ymax)));
+    empty_ = c0_ > c1_ || r0_ > r1_;
     for (int e = 0; e < 3; ++e) {
         const glm::dvec2 a = p[e], b = p[(e + 1) % 3];
-        const glm::dvec2 axis(a.y - b.y, b.x - a.x);
-        const double scale = glm::length(axis);
-        if (scale == 0.0) return false;
-        double tmin = glm::dot(axis, p[0]), tmax = tmin;
+        axis_[e] = glm::dvec2(a.y - b.y, b.x - a.x);
+        const double scale = glm::length(axis_[e]);
+        if (scale == 0.0) empty_ = true;  // zero area: touches nothing
+        tmin_[e] = tmax_[e] = glm::dot(axis_[e], p[0]);
         for (int k = 1; k < 3; ++k) {
-            const double t = glm::dot(axis, p[k]);
-            tmin = std::min(tmin, t);
-            tmax = std::max(tmax, t);
+            const double t = glm::dot(axis_[e], p[k]);
+            tmin_[e] = std::min(tmin_[e], t);
+            tmax_[e] = std::max(tmax_[e], t);
         }
-        double smin = glm::dot(axis, corners[0]), smax = smin;
-        for (int k = 1; k < 4; ++k) {
-            const double s = glm::dot(axis, corners[k]);
-            smin = std::min(smin, s);
-            smax = std::max(smax, s);
-        }
-        if (tmax <= smin + kTouch * scale || smax <= tmin + kTouch * scale) return false;
+        touch_[e] = kTouch * scale;
+    }
+}
+
+TriangleCover::TriangleCover(const UvLayout& layout, int64_t t, int width, int height) {
+    glm::dvec2 p[3];
+    for (int k = 0; k < 3; ++k) {
+        const int32_t index = layout.triangles[3 * t + k];
+        p[k] = uv_to_pixel({layout.uvs[2 * index], layout.uvs[2 * index + 1]}, width, height);
+    }
+    *this = TriangleCover(p, width, height);
+}
+
+// Separating-axis test of the triangle against the texel's unit square, per
+// edge normal: the square's projection is [smin, smax]. Since a + b rounds
+// monotonically in a and b, the smallest of the four corners' dot products
+// (a.x * x + a.y * y) is the sum of the smallest x and y terms, bit for bit.
+bool TriangleCover::overlaps(int row, int col) const {
+    if (empty_ || row < r0_ || row > r1_ || col < c0_ || col > c1_) return false;
+    for (int e = 0; e < 3; ++e) {
+        const double x0 = axis_[e].x * col, x1 = axis_[e].x * (col + 1.0);
+        const double y0 = axis_[e].y * row, y1 = axis_[e].y * (row + 1.0);
+        const double smin = std::min(x0, x1) + std::min(y0, y1), smax = std::max(x0, x1) + std::max(y0, y1);
+        if (tmax_[e] <= smin + touch_[e] || smax <= tmin_[e] + touch_[e]) return false;
     }
     return true;
 }
 
-}  // namespace
+// Each of the six half-tests of `overlaps` is monotone along a row (smin and
+// smax move one way with the column), so each bounds the span from one side:
+// a binary search per half-test finds exactly the texels `overlaps` accepts.
+std::pair<int, int> TriangleCover::columns(int row) const {
+    int begin = c0_, end = c1_ + 1;
+    for (int e = 0; e < 3 && begin < end; ++e) {
+        const double ax = axis_[e].x;
+        const double y0 = axis_[e].y * row, y1 = axis_[e].y * (row + 1.0);
+        const double ymin = std::min(y0, y1), ymax = std::max(y0, y1);
+        const double tmax = tmax_[e], tmin_touch = tmin_[e] + touch_[e], touch = touch_[e];
+        // below(col): the triangle reaches past the square's low end; above(col): past its high end.
+        auto below = [&](int col) { return tmax > std::min(ax * col, ax * (col + 1.0)) + ymin + touch; };
+        auto above = [&](int col) { return std::max(ax * col, ax * (col + 1.0)) + ymax > tmin_touch; };
+        if (ax > 0) {  // smin, smax grow with the column
+            begin = std::max(begin, first_true(begin, end, above));
+            end = first_true(begin, end, [&](int col) { return !below(col); });
+        } else if (ax < 0) {  // they shrink with it
+            begin = std::max(begin, first_true(begin, end, below));
+            end = first_true(begin, end, [&](int col) { return !above(col); });
+        } else if (!below(begin) || !above(begin)) {  // the same for every column
+            end = begin;
+        }
+    }
+    return empty_ || begin >= end ? std::pair<int, int>(c0_, c0_) : std::pair<int, int>(begin, end);
+}
 
 void validate_layout(const UvLayout& layout) {
     LMREFINE_REQUIRE(layout.uv_count >= 0 && layout.triangle_count >= 0, "negative layout size");
@@ -58,26 +118,6 @@ void validate_layout(const UvLayout& layout) {
                            "triangles[" + std::to_string(i / 3) + "] refers to UV " + std::to_string(index) +
                                ", but there are only " + std::to_string(layout.uv_count) +
                                " UVs (indices must be in [0, len(uvs)))");
-        }
-    }
-}
-
-void for_each_covered_texel(const UvLayout& layout, int width, int height,
-                            const std::function<void(int64_t, int, int)>& visit) {
-    for (int64_t t = 0; t < layout.triangle_count; ++t) {
-        glm::dvec2 p[3];
-        for (int k = 0; k < 3; ++k) {
-            const int32_t index = layout.triangles[3 * t + k];
-            p[k] = uv_to_pixel({layout.uvs[2 * index], layout.uvs[2 * index + 1]}, width, height);
-        }
-        const double xmin = std::min({p[0].x, p[1].x, p[2].x}), xmax = std::max({p[0].x, p[1].x, p[2].x});
-        const double ymin = std::min({p[0].y, p[1].y, p[2].y}), ymax = std::max({p[0].y, p[1].y, p[2].y});
-        const int c0 = std::max(0, int(std::floor(xmin))), c1 = std::min(width - 1, int(std::ceil(xmax)));
-        const int r0 = std::max(0, int(std::floor(ymin))), r1 = std::min(height - 1, int(std::ceil(ymax)));
-        for (int row = r0; row <= r1; ++row) {
-            for (int col = c0; col <= c1; ++col) {
-                if (overlaps_texel(p, col, row)) visit(t, row, col);
-            }
         }
     }
 }
