@@ -7,6 +7,7 @@
 #include <glm/geometric.hpp>
 
 #include "lmrefine/error.h"
+#include "lmrefine/layout_raster.h"
 #include "lmrefine/texel_space.h"
 
 namespace lmrefine {
@@ -126,10 +127,7 @@ std::vector<uint8_t> coverage_mask(const UvLayout& layout, int width, int height
     LMREFINE_REQUIRE(width > 0 && height > 0, "resolution must be positive, got " + std::to_string(width) +
                                                   "x" + std::to_string(height));
     validate_layout(layout);
-    std::vector<uint8_t> mask(size_t(width) * height, 0);
-    for_each_covered_texel(layout, width, height,
-                           [&](int64_t, int row, int col) { mask[size_t(row) * width + col] = 1; });
-    return mask;
+    return coverage_mask(LayoutRaster(layout, width, height));
 }
 
 }  // namespace lmrefine

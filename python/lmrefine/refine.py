@@ -179,8 +179,11 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
         raise ValueError(f"border must be one of {BORDER_MODES}, got {border!r}")
     if not (isinstance(passes, (int, np.integer)) and passes >= 1):
         raise ValueError(f"passes must be an integer >= 1, got {passes!r}")
+    # The original is analysed once (charts, rasterization, chart distances)
+    # for its coverage, gutter texels and check and every back-off round.
+    checker = _native.LayoutChecker(uvs, triangles, shape, padding)
     if mask is None:
-        mask = _native.coverage_mask(uvs, triangles, shape)
+        mask = checker.coverage_mask()
     else:
         mask = np.asarray(mask)
         if mask.shape != shape:
@@ -194,7 +197,7 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
     timings["gradient_map"] = time.perf_counter() - clock
     clock = time.perf_counter()
     # Texels between charts only shift: chart pairs keep their distance.
-    rigid = _native.gutter_texels(uvs, triangles, shape)
+    rigid = checker.gutter_texels()
     run = _native.run_automaton(energy, mask, rigid=rigid, diffusion=diffusion, delta=delta, max_steps=max_steps,
                                 min_shrink=min_shrink, max_magnification=max_magnification, border=border,
                                 passes=int(passes), progress=progress)
@@ -203,7 +206,7 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
     timings["automaton"] = time.perf_counter() - clock
     clock = time.perf_counter()
 
-    original = _native.check_layout(uvs, triangles, shape, padding)
+    original = checker.check()
     limited_by, notes = [], []
     if not run["converged"]:
         limited_by.append("step_cap")
@@ -217,7 +220,8 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
     if np.array_equal(full, identity):
         grid, new_uvs, check, kept = identity, uvs.copy(), original, np.ones(identity.shape[:2], np.float32)
     else:
-        grid, new_uvs, check, kept, failed = backoff.accept(full, identity, uvs, triangles, shape, padding, original)
+        grid, new_uvs, check, kept, failed = backoff.accept(full, identity, uvs, triangles, shape, padding, original,
+                                                          checker)
         limited_by += failed
 
     timings["warp_and_check"] = time.perf_counter() - clock
