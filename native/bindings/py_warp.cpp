@@ -77,6 +77,33 @@ Returns:
 )doc");
 
     m.def(
+        "grid_invalid_cells",
+        [](const py::handle& grid_in) {
+            auto grid = py_util::require_float32(grid_in, "grid", {3});
+            if (grid.shape(2) != 2 || grid.shape(0) < 2 || grid.shape(1) < 2) {
+                throw py::value_error("grid must have shape (H + 1, W + 1, 2), got " + py_util::shape_string(grid));
+            }
+            const int rows = int(grid.shape(0)) - 1, cols = int(grid.shape(1)) - 1;
+            std::vector<uint8_t> bad;
+            {
+                py::gil_scoped_release release;
+                bad = invalid_cells(grid.data(), rows, cols);
+            }
+            auto bytes = py_util::to_numpy(std::move(bad), {rows, cols});
+            return bytes.attr("view")(py::dtype::of<bool>()).cast<py::array_t<bool>>();
+        },
+        py::arg("grid"),
+        R"doc(Cells of a deformed grid that are not convex, non-inverted quadrilaterals.
+
+Args:
+    grid (numpy.ndarray): float32 (H + 1, W + 1, 2) node positions in UV space.
+
+Returns:
+    numpy.ndarray: bool (H, W), True where a corner's cross product (float32,
+    UV space, v up: a valid cell turns clockwise) is >= 0.
+)doc");
+
+    m.def(
         "grid_cell_areas",
         [](const py::handle& grid_in) {
             const NodeGrid grid = py_util::grid_from_numpy(grid_in, "grid");

@@ -18,15 +18,14 @@ namespace {
 constexpr double kTouch = 1e-7;
 
 // The smallest index in [lo, hi) where `holds` is true, or hi; `holds` must
-// be false then true along the range (monotone).
+// be false then true along the range (monotone). Starts from `guess` (any
+// value: it only decides how many steps the walk takes).
 template <class Holds>
-int first_true(int lo, int hi, Holds&& holds) {
-    while (lo < hi) {
-        const int mid = lo + (hi - lo) / 2;
-        if (holds(mid)) hi = mid;
-        else lo = mid + 1;
-    }
-    return lo;
+int first_true(int lo, int hi, double guess, Holds&& holds) {
+    int k = int(std::clamp(guess, double(lo), double(hi)));
+    while (k > lo && holds(k - 1)) --k;
+    while (k < hi && !holds(k)) ++k;
+    return k;
 }
 
 }  // namespace
@@ -79,8 +78,10 @@ bool TriangleCover::overlaps(int row, int col) const {
 }
 
 // Each of the six half-tests of `overlaps` is monotone along a row (smin and
-// smax move one way with the column), so each bounds the span from one side:
-// a binary search per half-test finds exactly the texels `overlaps` accepts.
+// smax move one way with the column), so each bounds the span from one side.
+// The bound is guessed from the real-valued crossing and then walked to the
+// exact column where the (rounded) half-test flips: the span holds exactly
+// the texels `overlaps` accepts.
 std::pair<int, int> TriangleCover::columns(int row) const {
     int begin = c0_, end = c1_ + 1;
     for (int e = 0; e < 3 && begin < end; ++e) {
@@ -91,12 +92,15 @@ std::pair<int, int> TriangleCover::columns(int row) const {
         // below(col): the triangle reaches past the square's low end; above(col): past its high end.
         auto below = [&](int col) { return tmax > std::min(ax * col, ax * (col + 1.0)) + ymin + touch; };
         auto above = [&](int col) { return std::max(ax * col, ax * (col + 1.0)) + ymax > tmin_touch; };
+        auto not_below = [&](int col) { return !below(col); };
+        auto not_above = [&](int col) { return !above(col); };
+        const double low = (tmax - ymin - touch) / ax, high = (tmin_touch - ymax) / ax;
         if (ax > 0) {  // smin, smax grow with the column
-            begin = std::max(begin, first_true(begin, end, above));
-            end = first_true(begin, end, [&](int col) { return !below(col); });
+            begin = first_true(begin, end, std::floor(high), above);
+            end = first_true(begin, end, std::ceil(low), not_below);
         } else if (ax < 0) {  // they shrink with it
-            begin = std::max(begin, first_true(begin, end, below));
-            end = first_true(begin, end, [&](int col) { return !above(col); });
+            begin = first_true(begin, end, std::floor(low), below);
+            end = first_true(begin, end, std::ceil(high), not_above);
         } else if (!below(begin) || !above(begin)) {  // the same for every column
             end = begin;
         }

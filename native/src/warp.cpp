@@ -89,3 +89,37 @@ std::vector<float> cell_areas(const NodeGrid& grid) {
 }
 
 }  // namespace lmrefine
+
+namespace lmrefine {
+
+std::vector<uint8_t> invalid_cells(const float* g, int rows, int cols) {
+    std::vector<uint8_t> bad(size_t(rows) * cols);
+    const size_t stride = size_t(cols + 1) * 2;
+    parallel_for(rows, 16, [&](int64_t begin, int64_t end) {
+        for (int64_t i = begin; i < end; ++i) {
+            const float* top = g + size_t(i) * stride;
+            const float* bottom = top + stride;
+            for (int j = 0; j < cols; ++j) {
+                // Around the cell: top-left, top-right, bottom-right, bottom-left.
+                const float* q[4] = {top + 2 * j, top + 2 * j + 2, bottom + 2 * j + 2, bottom + 2 * j};
+                bool invalid = false;
+                for (int k = 0; k < 4; ++k) {
+                    const float* p = q[k];
+                    const float* next = q[(k + 1) % 4];
+                    const float* prev = q[(k + 3) % 4];
+                    const float ax = next[0] - p[0], ay = next[1] - p[1];
+                    const float bx = prev[0] - p[0], by = prev[1] - p[1];
+                    // A float product is exact in double, so rounding it to
+                    // float is float32 multiplication even if the compiler
+                    // would fuse a*b - c*d into an FMA.
+                    const float c = float(double(ax) * by) - float(double(ay) * bx);
+                    invalid = invalid || c >= 0;
+                }
+                bad[size_t(i) * cols + j] = invalid;
+            }
+        }
+    });
+    return bad;
+}
+
+}  // namespace lmrefine

@@ -50,14 +50,8 @@ def allowed_gutter(padding, original):
 
 def invalid_cells(grid):
     """(H, W) bool: cells that are not convex, non-inverted quadrilaterals
-    (UV space, v up, so a valid cell turns clockwise)."""
-    q = [grid[:-1, :-1], grid[:-1, 1:], grid[1:, 1:], grid[1:, :-1]]
-    bad = np.zeros(grid.shape[:2] - np.array([1, 1]), bool)
-    for k in range(4):
-        a = q[(k + 1) % 4] - q[k]
-        b = q[(k + 3) % 4] - q[k]
-        bad |= (a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]) >= 0
-    return bad
+    (UV space, v up, so a valid cell turns clockwise; float32 cross products)."""
+    return _native.grid_invalid_cells(np.asarray(grid, np.float32))
 
 
 def chart_boxes(uvs, triangles, shape, charts=None):

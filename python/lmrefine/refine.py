@@ -189,6 +189,8 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
         if mask.shape != shape:
             raise ValueError(f"mask must have shape {shape} (the resolution), got {mask.shape}")
         mask = mask.astype(bool)
+    # Texels between charts only shift: chart pairs keep their distance.
+    rigid = checker.gutter_texels()
 
     timings = {"setup": time.perf_counter() - start}
     clock = time.perf_counter()
@@ -196,8 +198,6 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
     energy, scalar_energy = _energy(gradient, mask, float(strength), directional)
     timings["gradient_map"] = time.perf_counter() - clock
     clock = time.perf_counter()
-    # Texels between charts only shift: chart pairs keep their distance.
-    rigid = checker.gutter_texels()
     run = _native.run_automaton(energy, mask, rigid=rigid, diffusion=diffusion, delta=delta, max_steps=max_steps,
                                 min_shrink=min_shrink, max_magnification=max_magnification, border=border,
                                 passes=int(passes), progress=progress)

@@ -49,4 +49,11 @@ namespace lmrefine {
 // for a pixel-space grid).
 std::vector<float> cell_areas(const NodeGrid& grid);
 
+// Cells (rows * cols bytes, row-major) of a float32 UV-space grid, nodes
+// (rows + 1) x (cols + 1) of (u, v) with v up, that are not convex,
+// non-inverted quadrilaterals: some corner's cross product, computed in
+// float32 (the grid's own precision, as the refiner's numpy code did), is
+// >= 0. Reads the float32 nodes in place: no NodeGrid conversion.
+std::vector<uint8_t> invalid_cells(const float* uv_nodes, int rows, int cols);
+
 }  // namespace lmrefine
