@@ -20,17 +20,21 @@ std::vector<uint8_t> gutter_texels(const std::vector<int32_t>& owner, int width,
     std::vector<uint8_t> gutter(size_t(width) * height, 0);
     parallel_for(height, 16, [&](int64_t begin, int64_t end) {
         for (int i = int(begin); i < int(end); ++i) {
-            const int y0 = std::max(0, i - 1), y1 = std::min(height - 1, i + 1);
-            for (int j = 0; j < width; ++j) {
-                const int32_t o = owner[size_t(i) * width + j];
-                const int x0 = std::max(0, j - 1), x1 = std::min(width - 1, j + 1);
-                bool edge = o < 0;
-                for (int y = y0; y <= y1 && !edge; ++y) {
-                    const int32_t* row = owner.data() + size_t(y) * width;
-                    for (int x = x0; x <= x1; ++x) edge = edge || row[x] != o;
-                }
-                gutter[size_t(i) * width + j] = edge;
-            }
+            // Neighbours outside the image are clamped onto the border: a
+            // texel compared with itself or with a neighbour it already has
+            // changes nothing, and the loop needs no bounds tests.
+            const int32_t* up = owner.data() + size_t(std::max(0, i - 1)) * width;
+            const int32_t* mid = owner.data() + size_t(i) * width;
+            const int32_t* down = owner.data() + size_t(std::min(height - 1, i + 1)) * width;
+            uint8_t* out = gutter.data() + size_t(i) * width;
+            auto edge = [&](int j, int left, int right) {
+                const int32_t o = mid[j];
+                return uint8_t((o < 0) | (mid[left] != o) | (mid[right] != o) | (up[left] != o) | (up[j] != o) |
+                               (up[right] != o) | (down[left] != o) | (down[j] != o) | (down[right] != o));
+            };
+            out[0] = edge(0, 0, std::min(1, width - 1));
+            for (int j = 1; j < width - 1; ++j) out[j] = edge(j, j - 1, j + 1);
+            if (width > 1) out[width - 1] = edge(width - 1, width - 2, width - 1);
         }
     });
     return gutter;

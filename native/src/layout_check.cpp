@@ -15,6 +15,7 @@
 
 #include "lmrefine/chart.h"
 #include "lmrefine/error.h"
+#include "lmrefine/parallel.h"
 #include "lmrefine/texel_space.h"
 
 namespace lmrefine {
@@ -297,14 +298,26 @@ LayoutReport LayoutChecker::check_against(const UvLayout& layout, const LayoutRa
     // Overlap: first mark texels reached by more than one chart, then test
     // the triangle pairs of different charts inside those texels only.
     const std::vector<int32_t> owner = texel_owners(raster, charts.triangle_chart, skip.data());
-    std::vector<std::pair<int32_t, int32_t>> shared;  // (texel, triangle)
-    raster.for_each_span([&](int64_t t, int row, int begin, int end) {
-        if (skip[size_t(t)]) return;
-        for (int col = begin; col < end; ++col) {
-            const size_t texel = size_t(row) * width + col;
-            if (owner[texel] == kShared) shared.emplace_back(int32_t(texel), int32_t(t));
+    // (texel, triangle) for every shared texel, gathered per row band in
+    // parallel; sorting makes the order independent of the bands.
+    const int bands = (height + LayoutRaster::kBandRows - 1) / LayoutRaster::kBandRows;
+    std::vector<std::vector<std::pair<int32_t, int32_t>>> shared_in_band(static_cast<size_t>(bands));
+    parallel_for(bands, 1, [&](int64_t band_begin, int64_t band_end) {
+        for (int64_t band = band_begin; band < band_end; ++band) {
+            auto& found = shared_in_band[size_t(band)];
+            const int row0 = int(band) * LayoutRaster::kBandRows;
+            raster.for_each_span_in_rows(row0, std::min(height, row0 + LayoutRaster::kBandRows),
+                                         [&](int64_t t, int row, int begin, int end) {
+                                             if (skip[size_t(t)]) return;
+                                             for (int col = begin; col < end; ++col) {
+                                                 const size_t texel = size_t(row) * width + col;
+                                                 if (owner[texel] == kShared) found.emplace_back(int32_t(texel), int32_t(t));
+                                             }
+                                         });
         }
     });
+    std::vector<std::pair<int32_t, int32_t>> shared;  // (texel, triangle)
+    for (const auto& found : shared_in_band) shared.insert(shared.end(), found.begin(), found.end());
     std::sort(shared.begin(), shared.end());
     std::vector<uint8_t> overlapping(T, 0);
     for (size_t begin = 0; begin < shared.size();) {

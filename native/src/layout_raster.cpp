@@ -34,8 +34,10 @@ LayoutRaster::LayoutRaster(const UvLayout& layout, int width, int height)
 
 std::vector<uint8_t> coverage_mask(const LayoutRaster& raster) {
     std::vector<uint8_t> mask(size_t(raster.width()) * raster.height(), 0);
-    raster.for_each_span([&](int64_t, int row, int begin, int end) {
-        std::fill_n(mask.data() + size_t(row) * raster.width() + begin, end - begin, uint8_t(1));
+    parallel_for(raster.height(), LayoutRaster::kBandRows, [&](int64_t rows_begin, int64_t rows_end) {
+        raster.for_each_span_in_rows(int(rows_begin), int(rows_end), [&](int64_t, int row, int begin, int end) {
+            std::fill_n(mask.data() + size_t(row) * raster.width() + begin, end - begin, uint8_t(1));
+        });
     });
     return mask;
 }
@@ -43,11 +45,15 @@ std::vector<uint8_t> coverage_mask(const LayoutRaster& raster) {
 std::vector<int32_t> texel_owners(const LayoutRaster& raster, const std::vector<int32_t>& triangle_chart,
                                   const int8_t* skip) {
     std::vector<int32_t> owner(size_t(raster.width()) * raster.height(), kUncovered);
-    raster.for_each_span([&](int64_t t, int row, int begin, int end) {
-        if (skip && skip[t]) return;
-        const int32_t chart = triangle_chart[size_t(t)];
-        int32_t* o = owner.data() + size_t(row) * raster.width();
-        for (int col = begin; col < end; ++col) o[col] = o[col] == kUncovered || o[col] == chart ? chart : kShared;
+    // Which triangle reaches a texel first does not matter: the owner is a
+    // function of the set of charts that cover it.
+    parallel_for(raster.height(), LayoutRaster::kBandRows, [&](int64_t rows_begin, int64_t rows_end) {
+        raster.for_each_span_in_rows(int(rows_begin), int(rows_end), [&](int64_t t, int row, int begin, int end) {
+            if (skip && skip[t]) return;
+            const int32_t chart = triangle_chart[size_t(t)];
+            int32_t* o = owner.data() + size_t(row) * raster.width();
+            for (int col = begin; col < end; ++col) o[col] = o[col] == kUncovered || o[col] == chart ? chart : kShared;
+        });
     });
     return owner;
 }

@@ -4,6 +4,7 @@
 // spans is cheaper than rasterizing per use.
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
 #include <utility>
 #include <vector>
@@ -35,6 +36,24 @@ public:
             if (begin < end) visit(t, first_row_[size_t(t)] + int(k - offsets_[size_t(t)]), int(begin), int(end));
         }
     }
+
+    // The spans in rows [row_begin, row_end) only, in the same order: disjoint
+    // row bands can be visited in parallel without sharing a texel.
+    template <class Visit>
+    void for_each_span_in_rows(int row_begin, int row_end, Visit&& visit) const {
+        for (int64_t t = 0; t < triangle_count(); ++t) {
+            const int first = first_row_[size_t(t)];
+            const int64_t offset = offsets_[size_t(t)];
+            const int lo = std::max(row_begin, first), hi = std::min<int64_t>(row_end, first + offsets_[size_t(t) + 1] - offset);
+            for (int row = lo; row < hi; ++row) {
+                const auto [begin, end] = columns_[size_t(offset + (row - first))];
+                if (begin < end) visit(t, row, int(begin), int(end));
+            }
+        }
+    }
+
+    // Row bands for for_each_span_in_rows: about this many rows each.
+    static constexpr int kBandRows = 64;
 
 private:
     int width_, height_;
