@@ -19,10 +19,10 @@ constexpr double kTouch = 1e-7;
 
 // The smallest index in [lo, hi) where `holds` is true, or hi; `holds` must
 // be false then true along the range (monotone). Starts from `guess` (any
-// value: it only decides how many steps the walk takes).
+// value, NaN too: it only decides how many steps the walk takes).
 template <class Holds>
 int first_true(int lo, int hi, double guess, Holds&& holds) {
-    int k = int(std::clamp(guess, double(lo), double(hi)));
+    int k = guess > lo ? (guess < hi ? int(guess) : hi) : lo;
     while (k > lo && holds(k - 1)) --k;
     while (k < hi && !holds(k)) ++k;
     return k;
@@ -50,6 +50,7 @@ TriangleCover::TriangleCover(const glm::dvec2 p[3], int width, int height) {
             tmax_[e] = std::max(tmax_[e], t);
         }
         touch_[e] = kTouch * scale;
+        inverse_ax_[e] = axis_[e].x != 0.0 ? 1.0 / axis_[e].x : 0.0;
     }
 }
 
@@ -79,33 +80,37 @@ bool TriangleCover::overlaps(int row, int col) const {
 
 // Each of the six half-tests of `overlaps` is monotone along a row (smin and
 // smax move one way with the column), so each bounds the span from one side.
-// The bound is guessed from the real-valued crossing and then walked to the
-// exact column where the (rounded) half-test flips: the span holds exactly
-// the texels `overlaps` accepts.
+// The bound is guessed from the real-valued crossing (rounded up to the
+// next column) and then walked to the exact column where the rounded
+// half-test flips: the span holds exactly the texels `overlaps` accepts.
 std::pair<int, int> TriangleCover::columns(int row) const {
     int begin = c0_, end = c1_ + 1;
+    if (empty_) return {c0_, c0_};
     for (int e = 0; e < 3 && begin < end; ++e) {
         const double ax = axis_[e].x;
         const double y0 = axis_[e].y * row, y1 = axis_[e].y * (row + 1.0);
         const double ymin = std::min(y0, y1), ymax = std::max(y0, y1);
         const double tmax = tmax_[e], tmin_touch = tmin_[e] + touch_[e], touch = touch_[e];
-        // below(col): the triangle reaches past the square's low end; above(col): past its high end.
-        auto below = [&](int col) { return tmax > std::min(ax * col, ax * (col + 1.0)) + ymin + touch; };
-        auto above = [&](int col) { return std::max(ax * col, ax * (col + 1.0)) + ymax > tmin_touch; };
-        auto not_below = [&](int col) { return !below(col); };
-        auto not_above = [&](int col) { return !above(col); };
-        const double low = (tmax - ymin - touch) / ax, high = (tmin_touch - ymax) / ax;
-        if (ax > 0) {  // smin, smax grow with the column
-            begin = first_true(begin, end, std::floor(high), above);
-            end = first_true(begin, end, std::ceil(low), not_below);
-        } else if (ax < 0) {  // they shrink with it
-            begin = first_true(begin, end, std::floor(low), below);
-            end = first_true(begin, end, std::ceil(high), not_above);
-        } else if (!below(begin) || !above(begin)) {  // the same for every column
+        // below(col): the triangle reaches past the square's low end
+        // (tmax > smin + touch); above(col): past its high end (smax > tmin
+        // + touch). With ax > 0 the square's low end is at its left column
+        // edge (ax * col), else at its right one: the same rounded values
+        // as the min / max in `overlaps`.
+        if (ax > 0) {
+            auto above = [&](int col) { return ax * (col + 1.0) + ymax > tmin_touch; };
+            auto not_below = [&](int col) { return !(tmax > ax * col + ymin + touch); };
+            begin = first_true(begin, end, (tmin_touch - ymax) * inverse_ax_[e], above);
+            end = first_true(begin, end, (tmax - ymin - touch) * inverse_ax_[e] + 1.0, not_below);
+        } else if (ax < 0) {
+            auto below = [&](int col) { return tmax > ax * (col + 1.0) + ymin + touch; };
+            auto not_above = [&](int col) { return !(ax * col + ymax > tmin_touch); };
+            begin = first_true(begin, end, (tmax - ymin - touch) * inverse_ax_[e], below);
+            end = first_true(begin, end, (tmin_touch - ymax) * inverse_ax_[e] + 1.0, not_above);
+        } else if (!(tmax > ymin + touch) || !(ymax > tmin_touch)) {  // the same for every column
             end = begin;
         }
     }
-    return empty_ || begin >= end ? std::pair<int, int>(c0_, c0_) : std::pair<int, int>(begin, end);
+    return begin >= end ? std::pair<int, int>(c0_, c0_) : std::pair<int, int>(begin, end);
 }
 
 void validate_layout(const UvLayout& layout) {

@@ -47,6 +47,7 @@ public:
 private:
     glm::dvec2 axis_[3];  // edge normals (not normalized)
     double tmin_[3], tmax_[3], touch_[3];
+    double inverse_ax_[3];  // 1 / axis_.x (0 if 0): the guess of a span's end, not its exact test
     int c0_, c1_, r0_, r1_;
     bool empty_ = false;
 };
