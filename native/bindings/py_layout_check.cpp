@@ -92,8 +92,7 @@ private:
 std::vector<uint8_t> checker_coverage(const LayoutChecker& checker) { return coverage_mask(checker.raster()); }
 
 std::vector<uint8_t> checker_gutter(const LayoutChecker& checker) {
-    const LayoutRaster& raster = checker.raster();
-    return gutter_texels(texel_owners(raster, checker.charts().triangle_chart), raster.width(), raster.height());
+    return gutter_texels(checker.owners(), checker.raster().width(), checker.raster().height());
 }
 
 py::dict check(const py::handle& uvs_in, const py::handle& triangles_in, const py::handle& resolution,

@@ -228,6 +228,11 @@ const LayoutRaster& LayoutChecker::raster() const {
     return *raster_;
 }
 
+const std::vector<int32_t>& LayoutChecker::owners() const {
+    std::call_once(owners_once_, [&] { owners_ = texel_owners(raster(), charts_.triangle_chart); });
+    return owners_;
+}
+
 const LayoutChecker::Gutter& LayoutChecker::original_gutter() const {
     std::call_once(gutter_once_, [&] {
         auto gutter = std::make_unique<Gutter>();
@@ -297,23 +302,29 @@ LayoutReport LayoutChecker::check_against(const UvLayout& layout, const LayoutRa
 
     // Overlap: first mark texels reached by more than one chart, then test
     // the triangle pairs of different charts inside those texels only.
-    const std::vector<int32_t> owner = texel_owners(raster, charts.triangle_chart, skip.data());
+    // The original's owners (every triangle) serve when no triangle is skipped.
+    std::vector<int32_t> own_owner;
+    if (with_reference || report.degenerate) own_owner = texel_owners(raster, charts.triangle_chart, skip.data());
+    const std::vector<int32_t>& owner = with_reference || report.degenerate ? own_owner : owners();
     // (texel, triangle) for every shared texel, gathered per row band in
     // parallel; sorting makes the order independent of the bands.
-    const int bands = (height + LayoutRaster::kBandRows - 1) / LayoutRaster::kBandRows;
-    std::vector<std::vector<std::pair<int32_t, int32_t>>> shared_in_band(static_cast<size_t>(bands));
-    parallel_for(bands, 1, [&](int64_t band_begin, int64_t band_end) {
+    std::vector<std::vector<std::pair<int32_t, int32_t>>> shared_in_band(static_cast<size_t>(raster.band_count()));
+    parallel_for(raster.band_count(), 1, [&](int64_t band_begin, int64_t band_end) {
         for (int64_t band = band_begin; band < band_end; ++band) {
+            // Most bands have no texel of two charts (charts a gutter apart): skip them.
+            const int row0 = int(band) * LayoutRaster::kBandRows, row1 = std::min(height, row0 + LayoutRaster::kBandRows);
+            if (std::find(owner.begin() + ptrdiff_t(row0) * width, owner.begin() + ptrdiff_t(row1) * width, kShared) ==
+                owner.begin() + ptrdiff_t(row1) * width) {
+                continue;
+            }
             auto& found = shared_in_band[size_t(band)];
-            const int row0 = int(band) * LayoutRaster::kBandRows;
-            raster.for_each_span_in_rows(row0, std::min(height, row0 + LayoutRaster::kBandRows),
-                                         [&](int64_t t, int row, int begin, int end) {
-                                             if (skip[size_t(t)]) return;
-                                             for (int col = begin; col < end; ++col) {
-                                                 const size_t texel = size_t(row) * width + col;
-                                                 if (owner[texel] == kShared) found.emplace_back(int32_t(texel), int32_t(t));
-                                             }
-                                         });
+            raster.for_each_span_in_band(int(band), [&](int64_t t, int row, int begin, int end) {
+                if (skip[size_t(t)]) return;
+                for (int col = begin; col < end; ++col) {
+                    const size_t texel = size_t(row) * width + col;
+                    if (owner[texel] == kShared) found.emplace_back(int32_t(texel), int32_t(t));
+                }
+            });
         }
     });
     std::vector<std::pair<int32_t, int32_t>> shared;  // (texel, triangle)

@@ -61,6 +61,8 @@ public:
     const Charts& charts() const { return charts_; }
     // The original's rasterization (computed on first use).
     const LayoutRaster& raster() const;
+    // texel_owners of the original, every triangle counted (computed on first use).
+    const std::vector<int32_t>& owners() const;
 
     // check_layout(original, width, height, padding, nullptr, list_failing_charts).
     LayoutReport check_original(bool list_failing_charts = false) const;
@@ -79,8 +81,9 @@ private:
     double padding_;
     Charts charts_;
     std::vector<int8_t> orientation_;  // of the original, per triangle
-    mutable std::once_flag raster_once_, gutter_once_;
+    mutable std::once_flag raster_once_, owners_once_, gutter_once_;
     mutable std::unique_ptr<LayoutRaster> raster_;
+    mutable std::vector<int32_t> owners_;
     mutable std::unique_ptr<Gutter> gutter_;
 };
 

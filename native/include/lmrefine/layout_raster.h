@@ -37,29 +37,35 @@ public:
         }
     }
 
-    // The spans in rows [row_begin, row_end) only, in the same order: disjoint
-    // row bands can be visited in parallel without sharing a texel.
+    // Row bands of kBandRows rows: disjoint bands can be visited in parallel
+    // without sharing a texel. Each band lists the triangles that reach it.
+    static constexpr int kBandRows = 64;
+    int band_count() const { return int(band_offsets_.size()) - 1; }
+
+    // The spans inside one band, in for_each_span's order.
     template <class Visit>
-    void for_each_span_in_rows(int row_begin, int row_end, Visit&& visit) const {
-        for (int64_t t = 0; t < triangle_count(); ++t) {
+    void for_each_span_in_band(int band, Visit&& visit) const {
+        const int row_begin = band * kBandRows, row_end = row_begin + kBandRows;
+        for (int64_t k = band_offsets_[size_t(band)]; k < band_offsets_[size_t(band) + 1]; ++k) {
+            const int32_t t = band_triangles_[size_t(k)];
             const int first = first_row_[size_t(t)];
             const int64_t offset = offsets_[size_t(t)];
-            const int lo = std::max(row_begin, first), hi = std::min<int64_t>(row_end, first + offsets_[size_t(t) + 1] - offset);
+            const int lo = std::max(row_begin, first);
+            const int hi = int(std::min<int64_t>(row_end, first + (offsets_[size_t(t) + 1] - offset)));
             for (int row = lo; row < hi; ++row) {
                 const auto [begin, end] = columns_[size_t(offset + (row - first))];
-                if (begin < end) visit(t, row, int(begin), int(end));
+                if (begin < end) visit(int64_t(t), row, int(begin), int(end));
             }
         }
     }
-
-    // Row bands for for_each_span_in_rows: about this many rows each.
-    static constexpr int kBandRows = 64;
 
 private:
     int width_, height_;
     std::vector<int32_t> first_row_;                     // per triangle
     std::vector<int64_t> offsets_;                       // per triangle, its first row's span; + total
     std::vector<std::pair<int32_t, int32_t>> columns_;   // per row of each triangle: [begin, end)
+    std::vector<int64_t> band_offsets_;                  // per band, its first entry in band_triangles_; + total
+    std::vector<int32_t> band_triangles_;                // per band, the triangles reaching it, in order
 };
 
 // (height * width) bytes, 1 where some triangle covers the texel.
