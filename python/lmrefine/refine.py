@@ -163,8 +163,9 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
         'original_gutter' (the original is tighter than padding); empty if
         nothing), notes (list of sentences, e.g. on the original's gutter),
         passes,
-        border, seconds (timings: setup, gradient_map, automaton,
-        warp_and_check), original_check and check (check_layout reports).
+        border, seconds (timings: setup (the original's coverage and
+        gutter texels), gradient_map, automaton, warp_and_check),
+        original_check and check (check_layout reports).
 
     Raises:
         ValueError: bad shapes, indices out of range, NaN UVs, UVs outside
