@@ -66,6 +66,27 @@ def whole_refinement():
                            for k in ("setup", "gradient_map", "automaton", "warp_and_check")))
 
 
+def lightmap_pack_layout(resolution=1024, runs=2):
+    """The bundled Cycles sample (blend_samples/courtyard_layout.npz: 618
+    Lightmap Pack charts, about 45% of the texels rigid gutter or chart
+    edge) at 1024^2, its 256^2 lightmap scaled up: a harder case for the
+    automaton's guards than the plane (many reverts, fit_to_bounds rounds)."""
+    here = os.path.dirname(os.path.abspath(__file__))
+    samples = os.path.join(here, "..", "blend_samples")
+    layout = np.load(os.path.join(samples, "courtyard_layout.npz"))
+    image = lmrefine.read_image(os.path.join(samples, "courtyard_lightmap.exr"))[..., :3]
+    factor = resolution // image.shape[0]
+    lightmap = np.ascontiguousarray(np.kron(image, np.ones((factor, factor, 1))), dtype=np.float32)
+    seconds, result = best_of(runs, lambda: lmrefine.refine_uvs(lightmap, layout["uvs"], layout["triangles"],
+                                                                   lightmap.shape[:2]))
+    report = result.report
+    print(f"\nLightmap Pack layout (courtyard sample, 618 charts) at {resolution}^2: {seconds:.3f} s, "
+          f"{report['steps']} steps, widening {report['transition_widening']:.2f}, valid {report['check']['valid']}")
+    print("  " + " / ".join(f"{k} {v:.3f}" for k, v in report["timings"].items()))
+    print("  automaton levels (block: seconds/steps): "
+          + " ".join(f"{level['block']}: {level['seconds']:.3f}/{level['steps']}" for level in report["levels"]))
+
+
 def coarse_to_fine_against_one_level(resolution=256):
     energy = np.full((resolution, resolution), 1 / 7, np.float32)
     energy[:, resolution // 2 - 2:resolution // 2 + 2] = 1.0  # a 4-texel band, as strength 6 makes it
@@ -102,5 +123,6 @@ def border_modes(resolution=256):
 
 if __name__ == "__main__":
     whole_refinement()
+    lightmap_pack_layout()
     coarse_to_fine_against_one_level()
     border_modes()

@@ -17,7 +17,8 @@ Writes, per scene, ``<name>.blend`` (small: no images, compressed) and
     occluder_positions (U, 3), occluder_triangles (S, 3): casters without a
                   lightmap (foliage, fence), same conventions
     meta          JSON string: objects, lights (Blender's light properties,
-                  world position and direction), world colour, passes, the
+                  world position and direction, and matrix_world, which
+                  places them for the baker), world colour, passes, the
                   resolution the atlases' margins were made for
 
 Every scene has two UV layers on its receivers, "Lightmap" (Lightmap Pack,
@@ -396,6 +397,8 @@ def light_description(obj):
         "color": list(data.color),
         "position": list(obj.matrix_world.translation),
         "direction": list((rotation @ Vector((0, 0, -1))).normalized()),
+        # What the baker reads (as Cycles does): spin and scale included.
+        "matrix": [list(row) for row in obj.matrix_world],
     }
     if data.type in ("POINT", "SPOT"):
         light["shadow_soft_size"] = float(data.shadow_soft_size)
@@ -405,7 +408,7 @@ def light_description(obj):
     if data.type == "SUN":
         light["angle"] = float(data.angle)
     if data.type == "AREA":
-        light.update(shape=data.shape.lower(), size=float(data.size), size_y=float(data.size_y))
+        light.update(shape=data.shape, size=float(data.size), size_y=float(data.size_y))
     return light
 
 

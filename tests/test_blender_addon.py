@@ -15,6 +15,7 @@ import shutil
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 pytestmark = [pytest.mark.blender, pytest.mark.slow]  # each group starts Blender (~1.5 s)
@@ -121,26 +122,36 @@ def test_bridge_exports_world_space_geometry_and_lights(facts):
     assert value["light_kind"] == "sun"
     sun = value["sun"]
     assert sun["energy"] == 3.0 and sun["angle"] == pytest.approx(0.02)
-    # Rotation (0.3, 0.2, 0) applied to -Z.
-    assert sun["direction"] == pytest.approx([-0.18980, 0.29552, -0.93629], abs=1e-4)
+    # Rotation (0.3, 0.2, 0) applied to -Z: where the sun points is the matrix's -Z column.
+    assert (-np.array(sun["matrix"])[:3, 2]).tolist() == pytest.approx([-0.18980, 0.29552, -0.93629], abs=1e-4)
     assert value["world"] == [0.0, 0.0, 0.0]
 
 
 def test_lights_in_blender_units_and_world_space(facts):
     value = fact(facts, "bridge_lights")
-    assert value["count"] == 4  # the zero-energy light is left out
-    # Rotated 90 degrees about x, a light's -Z (where it points) becomes +Y.
+    assert value["count"] == 5  # the zero-energy light is left out
+    # Each light is placed by its world matrix (rows). Rotated 90 degrees about
+    # x, a light's -Z (where it points) becomes +Y and its X stays +X.
     for kind in ("point", "spot", "sun", "area"):
-        assert value[kind]["position"] == pytest.approx([1.0, 2.0, 3.0], abs=1e-6)
-        assert value[kind]["direction"] == pytest.approx([0.0, 1.0, 0.0], abs=1e-6)
+        matrix = np.array(value[kind]["matrix"])
+        assert matrix[:3, 3] == pytest.approx([1.0, 2.0, 3.0], abs=1e-6)
+        assert -matrix[:3, 2] / np.linalg.norm(matrix[:3, 2]) == pytest.approx([0.0, 1.0, 0.0], abs=1e-6)
+        assert matrix[:3, 0] / np.linalg.norm(matrix[:3, 0]) == pytest.approx([1.0, 0.0, 0.0], abs=1e-6)
     assert value["point"]["shadow_soft_size"] == pytest.approx(0.3)
     assert value["spot"]["spot_size"] == pytest.approx(0.8) and value["spot"]["spot_blend"] == pytest.approx(0.25)
     assert value["sun"]["angle"] == pytest.approx(0.1)
     area = value["area"]
     assert area["shape"] == "RECTANGLE"
-    assert area["size"] == pytest.approx(6.0) and area["size_y"] == pytest.approx(1.0)  # times the object scale
+    # Blender's own sizes; the object's scale (3, 2, 1) rides in the matrix,
+    # and the baker stretches the light by it as Cycles does.
+    assert area["size"] == pytest.approx(2.0) and area["size_y"] == pytest.approx(0.5)
+    assert np.linalg.norm(np.array(area["matrix"])[:3, :3], axis=0) == pytest.approx([3.0, 2.0, 1.0])
     assert area["color"] == pytest.approx([1.0, 0.5, 0.25])
     assert area["energy"] == pytest.approx(10.0)  # Blender's default area light power, in W
+    # A square scaled (1.5, 0.3, 1) and spun: lit as a 1.5 x 0.3 m rectangle along its own axes.
+    from_bridge, explicit = (np.array(v) for v in value["strip_values"])
+    assert explicit.min() > 0.05
+    np.testing.assert_allclose(from_bridge, explicit, rtol=1e-5)
 
 
 def test_layout_is_welded_within_blenders_connect_limit(facts):

@@ -86,3 +86,41 @@ def test_blend_files_hold_the_exported_scenes(tmp_path):
         assert found[name]["lights"] == len(scene.lights)
         assert found[name]["packed"] == 0
         assert (ROOT / "blend_samples" / f"{name}.blend").stat().st_size < 400_000
+
+
+@pytest.mark.skipif(not hasattr(lmrefine, "Scene"), reason="needs the baker (lmrefine.Scene)")
+def test_scene_files_place_lights_by_matrix_and_older_files_still_load(tmp_path):
+    """A light's matrix (make_samples.py writes matrix_world) places it with
+    its spin and scale; a file without one (older) keeps Blender's default
+    spin, and its lower-case shape still loads."""
+    positions = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], np.float32)
+    triangles = np.array([[0, 1, 2], [0, 2, 3]], np.int32)
+    uvs = np.array([[0, 0], [1, 0], [1, 1], [0, 0], [1, 1], [0, 1]], np.float32) * 0.9 + 0.05
+    spun = np.eye(4)
+    spun[:3, :3] = [[0, -2, 0], [1, 0, 0], [0, 0, 1]]  # local X along world y; local Y scaled 2
+    spun[:3, 3] = [0, 0, 0.6]
+    strip = dict(kind="area", name="Strip", energy=20.0, shape="RECTANGLE", size=1.0, size_y=0.1,
+                 position=[0, 0, 0.6], direction=[0, 0, -1], matrix=spun.tolist())
+    old = dict(kind="area", name="Old", energy=20.0, shape="rectangle", size=1.0, size_y=0.1,
+               position=[0, 0, 0.6], direction=[0, 0, -1])
+    points = np.array([[0.5, 0, 0], [0, 0.5, 0]], np.float32)
+    normals = np.tile(np.float32([0, 0, 1]), (2, 1))
+    values = {}
+    for light in (strip, old):
+        scene = sample_scenes.SampleScene(
+            name="strip", positions=positions, triangles=triangles, normals=np.tile(normals[:1], (6, 1)),
+            uvs={"smart": uvs}, base_color=np.full((2, 3), 0.8, np.float32), object_id=np.zeros(2, np.int32),
+            objects=["Floor"], lights=[light])
+        scene.save(tmp_path / "strip.npz")
+        loaded = sample_scenes.load_sample(str(tmp_path / "strip.npz"))
+        built = loaded.to_scene(loaded.uvs["smart"])
+        values[light["name"]] = lmrefine.evaluate(built, points, normals, samples=1024, seed=1)[:, 0]
+    expected = {}
+    for name, params in (("Strip", dict(size=1.0, size_y=0.2, axis_x=(0, 1, 0))), ("Old", dict(size=1.0, size_y=0.1))):
+        scene = lmrefine.Scene()
+        scene.add_light("area", energy=20.0, shape="RECTANGLE", position=(0, 0, 0.6), direction=(0, 0, -1), **params)
+        expected[name] = lmrefine.evaluate(scene, points, normals, samples=1024, seed=1)[:, 0]
+    np.testing.assert_allclose(values["Strip"], expected["Strip"], rtol=1e-5)
+    np.testing.assert_allclose(values["Old"], expected["Old"], rtol=1e-5)
+    # The spun strip runs along y, the old one along x.
+    assert values["Strip"][1] > 1.3 * values["Strip"][0] and values["Old"][0] > 1.3 * values["Old"][1]

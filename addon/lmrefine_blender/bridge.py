@@ -263,15 +263,17 @@ def export_scene(context, receivers, uv_name_of):
 # ------------------------------------------------------------------- lights
 
 def light_params(obj):
-    """A Blender light object as (kind, params) in Blender's own names and units."""
+    """A Blender light object as (kind, params) in Blender's own names and units.
+
+    The light is placed by its world matrix (rows, as lmrefine.Scene.add_light's
+    `matrix` takes it), which the baker reads as Cycles does: position, where
+    it points (-Z), its spin (+X), and an area light's size stretched by the
+    object's scale. Sizes stay Blender's unscaled properties."""
     light = obj.data
-    matrix = obj.matrix_world
-    direction = -(matrix.to_3x3() @ _z_axis())
     params = {
         "energy": float(light.energy),
         "color": tuple(float(c) for c in light.color),
-        "position": tuple(float(c) for c in matrix.translation),
-        "direction": tuple(float(c) for c in direction.normalized()),
+        "matrix": tuple(tuple(float(c) for c in row) for row in obj.matrix_world),
     }
     kind = light.type
     if kind == 'POINT':
@@ -283,19 +285,12 @@ def light_params(obj):
     elif kind == 'SUN':
         params["angle"] = float(light.angle)
     elif kind == 'AREA':
-        # Blender scales an area light's size with its object's scale.
-        scale = matrix.to_scale()
         params["shape"] = light.shape  # SQUARE, RECTANGLE, DISK or ELLIPSE, as the baker takes them
-        params["size"] = float(light.size * abs(scale.x))
-        params["size_y"] = float(light.size_y * abs(scale.y))
+        params["size"] = float(light.size)
+        params["size_y"] = float(light.size_y)
     else:
         raise UserError(f"light '{obj.name}' has unknown type {kind}: delete it or change its type")
     return kind.lower(), params
-
-
-def _z_axis():
-    from mathutils import Vector
-    return Vector((0.0, 0.0, 1.0))
 
 
 def scene_lights(context):

@@ -19,6 +19,20 @@ glm::vec3 vec3_param(const py::handle& value, const char* name) {
     return {array.data()[0], array.data()[1], array.data()[2]};
 }
 
+// Blender's matrix_world as rows (np.array(obj.matrix_world) or nested
+// lists); glm is column-major.
+glm::mat4 matrix_param(const py::handle& value) {
+    auto array = py::array_t<float, py::array::c_style | py::array::forcecast>::ensure(value);
+    if (!array || array.ndim() != 2 || array.shape(0) != 4 || array.shape(1) != 4) {
+        throw py::value_error("matrix must be a 4x4 world matrix (Blender's obj.matrix_world, row by row)");
+    }
+    glm::mat4 m;
+    for (int r = 0; r < 4; ++r) {
+        for (int c = 0; c < 4; ++c) m[c][r] = array.at(r, c);
+    }
+    return m;
+}
+
 AreaShape parse_shape(const std::string& shape) {
     if (shape == "SQUARE") return AreaShape::Square;
     if (shape == "RECTANGLE") return AreaShape::Rectangle;
@@ -72,13 +86,27 @@ int add_light(Scene& scene, const std::string& kind, const py::kwargs& params) {
     if (!params.contains("energy")) {
         throw py::value_error("add_light needs energy= (W, or W/m^2 for a sun), as Blender's light property");
     }
+    const py::handle matrix = params.contains("matrix") ? params["matrix"] : py::handle();
     for (const auto& item : params) {
         const std::string key = py::str(item.first);
         const py::handle value = item.second;
+        if (matrix && (key == "position" || key == "direction" || key == "axis_x")) {
+            throw py::value_error("pass either matrix= or position/direction/axis_x, not both: the matrix "
+                                  "already places the light (got matrix and " + key + ")");
+        }
         if (key == "energy") light.energy = value.cast<float>();
         else if (key == "color") light.color = vec3_param(value, "color");
         else if (key == "position") light.position = vec3_param(value, "position");
         else if (key == "direction") light.direction = vec3_param(value, "direction");
+        else if (key == "axis_x") {
+            light.axis_x = vec3_param(value, "axis_x");
+            // Zero means "derive it" inside the core; a caller passing zero made a mistake.
+            if (light.axis_x == glm::vec3(0.0f)) {
+                throw py::value_error("axis_x must not be zero: pass the light's local X axis in world space "
+                                      "(Blender: matrix_world column 0), or leave it out for the default");
+            }
+        }
+        else if (key == "matrix") continue;  // applied below, once shape and sizes are known
         else if (key == "shadow_soft_size") light.shadow_soft_size = value.cast<float>();
         else if (key == "angle") light.angle = value.cast<float>();
         else if (key == "spot_size") light.spot_size = value.cast<float>();
@@ -88,9 +116,11 @@ int add_light(Scene& scene, const std::string& kind, const py::kwargs& params) {
         else if (key == "size_y") light.size_y = value.cast<float>();
         else {
             throw py::value_error("unknown light parameter \"" + key + "\"; use energy, color, position, direction, "
-                                  "shadow_soft_size, angle, spot_size, spot_blend, shape, size, size_y");
+                                  "axis_x, matrix, shadow_soft_size, angle, spot_size, spot_blend, shape, size, "
+                                  "size_y");
         }
     }
+    if (matrix) place_light(light, matrix_param(matrix));
     return scene.add_light(light);
 }
 
@@ -131,11 +161,32 @@ Raises:
              R"doc(Add a light with Blender's property names and units; returns its id.
 
 kind: "point", "spot", "sun" or "area". Keyword parameters: energy (W, or
-W/m^2 for a sun; required), color (RGB), position (point, spot, area),
-direction (where the light points; spot, sun, area; default down -Z),
-shadow_soft_size (point/spot radius), angle (sun angular diameter, rad),
-spot_size (cone angle, rad), spot_blend, shape ("SQUARE", "RECTANGLE",
-"DISK", "ELLIPSE"), size, size_y. Defaults are Blender's.
+W/m^2 for a sun; required), color (RGB), shadow_soft_size (point/spot
+radius), angle (sun angular diameter, rad), spot_size (cone angle, rad),
+spot_blend, shape ("SQUARE", "RECTANGLE", "DISK", "ELLIPSE"), size (along
+the light's local X), size_y (along local Y). Defaults are Blender's.
+
+Where the light is, either:
+    position (point, spot, area), direction (where it points = its local
+        -Z; spot, sun, area; default straight down) and axis_x (its local +X
+        in world space; an area light's size runs along it). axis_x is
+        made perpendicular to direction (its spin about direction is kept);
+        without it the light is oriented as Blender's
+        Vector(direction).to_track_quat('-Z', 'Y') (local Y leans to world
+        +Z; a light pointing straight down keeps world X and Y).
+    or matrix: the light object's 4x4 world matrix (Blender's
+        obj.matrix_world), read as Cycles reads it: position = column 3,
+        direction = -column 2, axis_x = column 0, and an area light's size
+        and size_y scaled by the lengths of columns 0 and 1 (the object's
+        scale). Scale does not change point, spot or sun lights (Cycles 3.4).
+
+Spin about direction changes only area lights (rectangles, ellipses):
+point and spot lights are round in Cycles 3.4, whatever their scale.
+
+Raises:
+    ValueError: unknown kind, shape or parameter; NaN/Inf; zero direction or
+        axis_x; axis_x parallel to direction; matrix with zero scale, not
+        4x4 or combined with position/direction/axis_x.
 )doc")
         .def(
             "set_world",

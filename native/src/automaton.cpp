@@ -4,6 +4,7 @@
 #include "lmrefine/automaton.h"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <limits>
 
@@ -176,6 +177,7 @@ void run_level(Level& level, const AutomatonOptions& options, bool ring, LevelSt
     automaton_detail::prepare_level(level, options, ring);
     // The finest level's grid: every bound holds from its start.
     if (level.grid.xs[1] - level.grid.xs[0] == 1) automaton_detail::fit_to_bounds(level);
+    automaton_detail::measure_cells(level);
     if (options.check_invariants) automaton_detail::check_invariants(level, total_steps);
     stats.steps = 0;
     stats.converged = false;
@@ -240,7 +242,9 @@ AutomatonResult run_automaton(const AutomatonInput& input, const AutomatonOption
     AutomatonResult result;
     NodeGrid carried;
     Level level;
+    using Clock = std::chrono::steady_clock;
     for (int l = levels - 1; l >= 0; --l) {
+        const Clock::time_point start = Clock::now();
         const int block = 1 << l;
         level = make_level(input, rigid, block, l == levels - 1 ? nullptr : &carried, ring);
         LevelStats stats;
@@ -249,15 +253,18 @@ AutomatonResult run_automaton(const AutomatonInput& input, const AutomatonOption
         stats.cols = level.cols() - (ring ? 2 : 0);
         run_level(level, options, ring, stats, result.steps, progress);
         carried = inner_grid(level, ring, input.width, input.height);
+        stats.seconds = std::chrono::duration<double>(Clock::now() - start).count();
         result.levels.push_back(stats);
     }
     for (int pass = 1; pass < options.passes; ++pass) {
+        const Clock::time_point start = Clock::now();
         level = make_level(input, rigid, 1, &carried, ring);
         LevelStats stats;
         stats.rows = input.height;
         stats.cols = input.width;
         run_level(level, options, ring, stats, result.steps, progress);
         carried = inner_grid(level, ring, input.width, input.height);
+        stats.seconds = std::chrono::duration<double>(Clock::now() - start).count();
         result.levels.push_back(stats);
     }
     if (progress) progress->finish();

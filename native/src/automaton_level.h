@@ -38,13 +38,18 @@ struct Level {
     std::array<double, 4> reference_density{};  // covered energy / covered area, per channel
     double initial_total = 0;                   // sum of all energies, for the conservation check
 
-    // Scratch, rebuilt every step.
+    // Cell shapes derived from the nodes (measure_cells), kept
+    // double-buffered like them: a step measures the cells it moved while
+    // checking their bounds, so the next step need not measure them again.
     std::vector<double> area, safe_radius, quality;
-    std::vector<double> diffusion_density;  // cells * channels
-    std::vector<double> pressure_density;   // cells * axes: one, or y and x for four channels
-    std::vector<double> push_v, flux_v;  // rows * (cols + 1): edge left of cell (i, j); > 0 pushes right
-    std::vector<double> push_h, flux_h;  // (rows + 1) * cols: edge above cell (i, j); > 0 pushes down
+    std::vector<double> next_area, next_safe_radius, next_quality;
+    // Scratch, rebuilt every step.
     std::vector<double> row_difference;  // per row of edges, the largest density difference
+    std::vector<double> row_moved;       // per row of nodes, the largest squared node move
+    std::vector<uint32_t> suspect_round;  // per cell, the last revert round that queued it
+    std::vector<uint8_t> breaking_cell;   // per cell: breaks a bound (dense revert rounds)
+    std::vector<uint8_t> reverted_node;   // per node: put back in this dense round
+    uint32_t revert_round = 0;
 
     int rows() const { return grid.rows; }
     int cols() const { return grid.cols; }
@@ -64,12 +69,17 @@ void prepare_level(Level& level, const AutomatonOptions& options, bool ring);
 // the steps' guards keep every bound from the start. Returns the rounds.
 int fit_to_bounds(Level& level);
 
+// Measures every cell (area, move radius, quality) from the current nodes;
+// run before the first step of a level, after any change to the nodes that
+// step() did not make.
+void measure_cells(Level& level);
+
 struct StepStats {
     double difference;  // largest neighbour density difference / reference density, before the step
     double moved;       // largest node move made, in cells of this level
 };
 
-// One synchronous step.
+// One synchronous step (needs measure_cells' state, and keeps it current).
 StepStats step(Level& level, const AutomatonOptions& options);
 
 // Throws lmrefine::Error naming the first broken invariant (tests, debugging).

@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <numeric>
 #include <string>
 
 #include <glm/common.hpp>
@@ -17,6 +18,10 @@ namespace lmrefine::automaton_detail {
 namespace {
 
 constexpr int64_t kRowGrain = 8;
+constexpr int64_t kSuspectGrain = 256;  // cells judged again after a revert, per chunk
+// Guard reverts run over the whole grid while more than 1/this of the cells
+// break a bound, over lists of cells below.
+constexpr int64_t kDenseRevertFraction = 32;
 // fit_to_bounds: nodes this many around an out-of-bounds cell back off with
 // it; below kFitSnap of its move a node goes back to rest; after kFitRounds
 // rounds every node still lowered goes back to rest.
@@ -60,6 +65,10 @@ struct Shape {
     double quality2;
 };
 
+// Two doubles divided at once (SSE2 divpd, in every x86-64): the divisions
+// were most of a step's time, and IEEE division rounds the same either way.
+typedef double Pair __attribute__((vector_size(16)));
+
 Shape shape(const glm::dvec2 q[4]) {
     glm::dvec2 e[4];
     double l2[4];
@@ -67,13 +76,21 @@ Shape shape(const glm::dvec2 q[4]) {
         e[k] = q[(k + 1) % 4] - q[k];
         l2[k] = glm::dot(e[k], e[k]);
     }
-    double r2 = std::numeric_limits<double>::infinity(), sin2 = 1.0;
+    // At corner k, between its two edges: c^2 over the radius' and the
+    // sine's denominators.
+    Pair ratio[4];
     for (int k = 0; k < 4; ++k) {
         const int p = (k + 3) % 4;
-        const double c = cross(e[p], e[k]);  // at corner k, between its two edges
+        const double c = cross(e[p], e[k]);
         if (!(c > 0)) return {quad_area(q), 0.0, -1.0};
-        r2 = std::min(r2, c * c / (8 * (l2[p] + l2[k])));
-        sin2 = std::min(sin2, c * c / (l2[p] * l2[k]));
+        const Pair numerator = {c * c, c * c};
+        const Pair denominator = {8 * (l2[p] + l2[k]), l2[p] * l2[k]};
+        ratio[k] = numerator / denominator;
+    }
+    double r2 = std::numeric_limits<double>::infinity(), sin2 = 1.0;
+    for (int k = 0; k < 4; ++k) {
+        r2 = std::min(r2, ratio[k][0]);
+        sin2 = std::min(sin2, ratio[k][1]);
     }
     const double shortest = std::min({l2[0], l2[1], l2[2], l2[3]});
     const double longest = std::max({l2[0], l2[1], l2[2], l2[3]});
@@ -92,7 +109,7 @@ glm::dvec2 thickness(const glm::dvec2 q[4], double area) {
 struct Facing {
     int down, right, up, left;
 };
-Facing facing(int channels) { return channels == 4 ? Facing{0, 1, 2, 3} : Facing{0, 0, 0, 0}; }
+constexpr Facing facing(int channels) { return channels == 4 ? Facing{0, 1, 2, 3} : Facing{0, 0, 0, 0}; }
 
 // Relative pressure difference in [-1, 1]; > 0 moves the edge towards b.
 double push(double a, double b) { return a + b > 0 ? (a - b) / (a + b) : 0.0; }
@@ -168,66 +185,88 @@ void prepare_level(Level& level, const AutomatonOptions& options, bool ring) {
 
     level.next_nodes = level.grid.nodes;
     level.next_energy = level.energy;
-    level.area.resize(cells);
-    level.safe_radius.resize(cells);
-    level.quality.resize(cells);
-    level.diffusion_density.resize(cells * channels);
-    level.pressure_density.resize(cells * (channels == 4 ? 2 : 1));
-    level.push_v.assign(size_t(rows) * (cols + 1), 0.0);
-    level.flux_v.assign(size_t(rows) * (cols + 1), 0.0);
-    level.push_h.assign(size_t(rows + 1) * cols, 0.0);
-    level.flux_h.assign(size_t(rows + 1) * cols, 0.0);
+    for (auto* v : {&level.area, &level.safe_radius, &level.quality, &level.next_area, &level.next_safe_radius,
+                    &level.next_quality}) {
+        v->resize(cells);
+    }
     level.row_difference.assign(size_t(rows + 1), 0.0);
+    level.row_moved.assign(size_t(rows + 1), 0.0);
+    level.suspect_round.assign(cells, 0);
+    level.revert_round = 0;
+    level.breaking_cell.assign(cells, 0);
+    level.reverted_node.assign(size_t(rows + 1) * (cols + 1), 0);
 }
 
-StepStats step(Level& level, const AutomatonOptions& options) {
-    const int rows = level.rows(), cols = level.cols(), channels = level.channels;
-    const Facing face = facing(channels);
-    const int axes = channels == 4 ? 2 : 1;  // pressure: y (and x) axis
-    const std::vector<glm::dvec2>& nodes = level.grid.nodes;
+namespace {
 
-    // 1. Cell state: area, how far its corners may move, densities.
-    parallel_for(rows, kRowGrain, [&](int64_t begin, int64_t end) {
+// A cell's shape state, written to the given arrays.
+void write_shape(size_t c, const Shape& now, double* area, double* radius, double* quality) {
+    area[c] = now.area;
+    radius[c] = now.radius;
+    quality[c] = now.quality2;
+}
+
+// Densities of the cells of row i from their energies and areas: energy /
+// area for diffusion (0 outside material cells); pressure per axis: a
+// cell's springs along an axis push both its edges across that axis (four
+// channels: y from r + b, x from g + a), uncovered texels weighing as the
+// mean density.
+template <int channels>
+void row_densities(const Level& level, int i, double* diffusion, double* pressure) {
+    constexpr int axes = channels == 4 ? 2 : 1;
+    for (int j = 0; j < level.cols(); ++j) {
+        const size_t c = level.cell(i, j);
+        const double a = level.area[c];
+        const double* e = &level.energy[c * channels];
+        const bool material = level.kind[c] == CellKind::Material;
+        for (int k = 0; k < channels; ++k) diffusion[j * channels + k] = material ? e[k] / a : 0.0;
+        for (int axis = 0; axis < axes; ++axis) {
+            double sum = 0.0, reference = 0.0;
+            for (int k = axis; k < channels; k += axes) {
+                sum += e[k];
+                reference += level.reference_density[k];
+            }
+            pressure[j * axes + axis] = (sum + reference * level.uncovered_area[c]) / a;
+        }
+    }
+}
+
+}  // namespace
+
+void measure_cells(Level& level) {
+    parallel_for(level.rows(), kRowGrain, [&](int64_t begin, int64_t end) {
         for (int i = int(begin); i < int(end); ++i) {
-            for (int j = 0; j < cols; ++j) {
-                const size_t c = level.cell(i, j);
+            for (int j = 0; j < level.cols(); ++j) {
                 glm::dvec2 q[4];
-                corners(level, nodes, i, j, q);
-                const Shape now = shape(q);
-                const double a = now.area;
-                level.area[c] = a;
-                level.safe_radius[c] = now.radius;
-                level.quality[c] = now.quality2;
-                const bool material = level.kind[c] == CellKind::Material;
-                for (int k = 0; k < channels; ++k) {
-                    level.diffusion_density[c * channels + k] = material ? level.energy[c * channels + k] / a : 0.0;
-                }
-                // Pressure per axis: a cell's springs along an axis push both
-                // its edges across that axis (four channels: y from r + b,
-                // x from g + a). Uncovered texels weigh as the mean density.
-                for (int axis = 0; axis < axes; ++axis) {
-                    double e = 0.0, reference = 0.0;
-                    for (int k = axis; k < channels; k += axes) {
-                        e += level.energy[c * channels + k];
-                        reference += level.reference_density[k];
-                    }
-                    level.pressure_density[c * axes + axis] = (e + reference * level.uncovered_area[c]) / a;
-                }
+                corners(level, level.grid.nodes, i, j, q);
+                write_shape(level.cell(i, j), shape(q), level.area.data(), level.safe_radius.data(),
+                            level.quality.data());
             }
         }
     });
+}
 
-    // 2. Edges: energy flux (only between covered cells, from the denser to
+namespace {
+
+// The step for one or four channels (constants let the compiler unroll the
+// per-channel loops of the inner kernels).
+template <int channels>
+StepStats step_of(Level& level, const AutomatonOptions& options) {
+    const int rows = level.rows(), cols = level.cols();
+    constexpr Facing face = facing(channels);
+    constexpr int axes = channels == 4 ? 2 : 1;  // pressure: y (and x) axis
+    const std::vector<glm::dvec2>& nodes = level.grid.nodes;
+
+    // 1. Edges: energy flux (only between covered cells, from the denser to
     // the less dense; the border and the gutter are adiabatic) and the push
     // that moves the edge towards the less dense cell.
-    auto edge = [&](size_t a, int ka, size_t b, int kb, int axis, double& push_out, double& flux_out) {
-        const double pa = level.pressure_density[a * axes + axis], pb = level.pressure_density[b * axes + axis];
+    // Cells a and b with their densities (da, pa: diffusion, pressure).
+    auto edge = [&](size_t a, double da, double pa, size_t b, double db, double pb, int axis, double& push_out,
+                    double& flux_out) {
         push_out = push(pa, pb);
         flux_out = 0.0;
         double difference = 0.0;
         if (level.kind[a] == CellKind::Material && level.kind[b] == CellKind::Material) {
-            const double da = level.diffusion_density[a * channels + ka];
-            const double db = level.diffusion_density[b * channels + kb];
             flux_out = options.diffusion * std::min(level.area[a], level.area[b]) * (da - db);
             double reference = 0.0;
             for (int k = axis; k < channels; k += axes) reference += level.reference_density[k];
@@ -235,42 +274,87 @@ StepStats step(Level& level, const AutomatonOptions& options) {
         }
         return difference;
     };
-    parallel_for(rows + 1, kRowGrain, [&](int64_t begin, int64_t end) {
-        for (int i = int(begin); i < int(end); ++i) {
-            double largest = 0.0;
-            if (i < rows) {
-                for (int j = 1; j < cols; ++j) {
-                    const size_t e = size_t(i) * (cols + 1) + j;
-                    largest = std::max(largest, edge(level.cell(i, j - 1), face.right, level.cell(i, j), face.left,
-                                                     axes - 1, level.push_v[e], level.flux_v[e]));
-                }
+    // Edge row r: the vertical edges between the cells of row r (r < rows)
+    // and the horizontal edges along node row r (between cell rows r - 1 and
+    // r); border edges stay 0. `above` and `here`: the densities of cell
+    // rows r - 1 and r (diffusion, then pressure), where they exist.
+    auto edge_row = [&](int r, const double* above, const double* here, double* push_v, double* flux_v,
+                        double* push_h, double* flux_h) {
+        const double* pressure_above = above + size_t(cols) * channels;
+        const double* pressure_here = here + size_t(cols) * channels;
+        double largest = 0.0;
+        push_v[0] = flux_v[0] = push_v[cols] = flux_v[cols] = 0.0;
+        if (r < rows) {
+            for (int j = 1; j < cols; ++j) {
+                largest = std::max(largest, edge(level.cell(r, j - 1), here[(j - 1) * channels + face.right],
+                                                 pressure_here[(j - 1) * axes + axes - 1], level.cell(r, j),
+                                                 here[j * channels + face.left], pressure_here[j * axes + axes - 1],
+                                                 axes - 1, push_v[j], flux_v[j]));
             }
-            if (i > 0 && i < rows) {
-                for (int j = 0; j < cols; ++j) {
-                    const size_t e = size_t(i) * cols + j;
-                    largest = std::max(largest, edge(level.cell(i - 1, j), face.down, level.cell(i, j), face.up, 0,
-                                                     level.push_h[e], level.flux_h[e]));
-                }
-            }
-            level.row_difference[i] = largest;
+        } else {
+            std::fill(push_v, push_v + cols + 1, 0.0);
+            std::fill(flux_v, flux_v + cols + 1, 0.0);
         }
-    });
-    const double difference = *std::max_element(level.row_difference.begin(), level.row_difference.end());
+        if (r > 0 && r < rows) {
+            for (int j = 0; j < cols; ++j) {
+                largest = std::max(largest, edge(level.cell(r - 1, j), above[j * channels + face.down],
+                                                 pressure_above[j * axes], level.cell(r, j),
+                                                 here[j * channels + face.up], pressure_here[j * axes], 0,
+                                                 push_h[j], flux_h[j]));
+            }
+        } else {
+            std::fill(push_h, push_h + cols, 0.0);
+            std::fill(flux_h, flux_h + cols, 0.0);
+        }
+        return largest;
+    };
 
-    // 3. New energies (each edge's flux leaves one cell and enters the other,
+    // 2. New energies (each edge's flux leaves one cell and enters the other,
     // so the total is conserved) and proposed node positions.
     parallel_for(rows + 1, kRowGrain, [&](int64_t begin, int64_t end) {
+        // The energies and nodes of node rows [begin, end) need edge rows
+        // [begin - 1, end], and those the densities of cell rows
+        // [begin - 2, end]: each chunk computes its own (the halo rows
+        // twice) into scratch that stays in cache, and only its own rows'
+        // differences.
+        const int first = std::max(0, int(begin) - 1), last = std::min(rows, int(end));
+        const int first_cells = std::max(0, first - 1), last_cells = std::min(rows - 1, last);
+        const size_t stride = size_t(cols) + 1, edge_rows = size_t(last - first + 1);
+        const size_t density_stride = size_t(cols) * (channels + axes);
+        thread_local std::vector<double> scratch;
+        scratch.resize(4 * stride * edge_rows + density_stride * size_t(last_cells - first_cells + 1));
+        double* const pv = scratch.data();
+        double* const fv = pv + stride * edge_rows;
+        double* const ph = fv + stride * edge_rows;
+        double* const fh = ph + stride * edge_rows;
+        double* const densities = fh + stride * edge_rows;
+        auto density_row = [&](int i) {  // rows outside the grid are never read: any row will do
+            return densities + density_stride * size_t(std::clamp(i, first_cells, last_cells) - first_cells);
+        };
+        for (int i = first_cells; i <= last_cells; ++i) {
+            row_densities<channels>(level, i, density_row(i), density_row(i) + size_t(cols) * channels);
+        }
+        for (int r = first; r <= last; ++r) {
+            const size_t o = stride * size_t(r - first);
+            const double largest = edge_row(r, density_row(r - 1), density_row(r), pv + o, fv + o, ph + o, fh + o);
+            if (r >= begin && r < end) level.row_difference[size_t(r)] = largest;
+        }
+        // Edge values by edge row and column, as in the whole-grid arrays.
+        auto push_v = [&](int r, int j) { return pv[stride * size_t(r - first) + j]; };
+        auto flux_v = [&](int r, int j) { return fv[stride * size_t(r - first) + j]; };
+        auto push_h = [&](int r, int j) { return ph[stride * size_t(r - first) + j]; };
+        auto flux_h = [&](int r, int j) { return fh[stride * size_t(r - first) + j]; };
         for (int i = int(begin); i < int(end); ++i) {
+            double largest_move = 0.0;
             if (i < rows) {
                 for (int j = 0; j < cols; ++j) {
                     const size_t c = level.cell(i, j);
                     double* e = &level.next_energy[c * channels];
                     for (int k = 0; k < channels; ++k) e[k] = level.energy[c * channels + k];
-                    const size_t v = size_t(i) * (cols + 1) + j, h = size_t(i) * cols + j;
-                    e[face.left] += level.flux_v[v];
-                    e[face.right] -= level.flux_v[v + 1];
-                    e[face.up] += level.flux_h[h];
-                    e[face.down] -= level.flux_h[h + cols];
+                    e[face.left] += flux_v(i, j);
+                    e[face.right] -= flux_v(i, j + 1);
+                    e[face.up] += flux_h(i, j);
+                    e[face.down] -= flux_h(i + 1, j);
                     // Rounding can leave -1e-17 where a cell gave all it had.
                     for (int k = 0; k < channels; ++k) e[k] = std::max(e[k], 0.0);
                 }
@@ -285,35 +369,52 @@ StepStats step(Level& level, const AutomatonOptions& options) {
                     // edge (at the border) contributes nothing.
                     double fx = 0, fy = 0, area_sum = 0, radius = std::numeric_limits<double>::infinity();
                     int adjacent = 0;
-                    if (i > 0) fx += level.push_v[size_t(i - 1) * (cols + 1) + j];
-                    if (i < rows) fx += level.push_v[size_t(i) * (cols + 1) + j];
-                    if (j > 0) fy += level.push_h[size_t(i) * cols + j - 1];
-                    if (j < cols) fy += level.push_h[size_t(i) * cols + j];
-                    for (int di = -1; di <= 0; ++di) {
-                        for (int dj = -1; dj <= 0; ++dj) {
-                            const int ci = i + di, cj = j + dj;
-                            if (ci < 0 || cj < 0 || ci >= rows || cj >= cols) continue;
-                            area_sum += level.area[level.cell(ci, cj)];
-                            radius = std::min(radius, level.safe_radius[level.cell(ci, cj)]);
-                            ++adjacent;
+                    if (i > 0 && i < rows && j > 0 && j < cols) {
+                        // Inside (nearly every node): all four edges and cells, in
+                        // the order of the general case below (same rounding).
+                        const size_t up = size_t(i - 1) * cols + j, down = up + cols;
+                        fx = push_v(i - 1, j) + push_v(i, j);
+                        fy = push_h(i, j - 1) + push_h(i, j);
+                        area_sum = level.area[up - 1] + level.area[up] + level.area[down - 1] + level.area[down];
+                        radius = std::min(std::min(level.safe_radius[up - 1], level.safe_radius[up]),
+                                          std::min(level.safe_radius[down - 1], level.safe_radius[down]));
+                        adjacent = 4;
+                    } else {
+                        if (i > 0) fx += push_v(i - 1, j);
+                        if (i < rows) fx += push_v(i, j);
+                        if (j > 0) fy += push_h(i, j - 1);
+                        if (j < cols) fy += push_h(i, j);
+                        for (int di = -1; di <= 0; ++di) {
+                            for (int dj = -1; dj <= 0; ++dj) {
+                                const int ci = i + di, cj = j + dj;
+                                if (ci < 0 || cj < 0 || ci >= rows || cj >= cols) continue;
+                                area_sum += level.area[level.cell(ci, cj)];
+                                radius = std::min(radius, level.safe_radius[level.cell(ci, cj)]);
+                                ++adjacent;
+                            }
                         }
                     }
                     const double size = std::sqrt(area_sum / adjacent);
                     glm::dvec2 move = 0.5 * options.rate * size * glm::dvec2(fx, fy);
                     if (mode == NodeMode::SlideX) move.y = 0;
                     if (mode == NodeMode::SlideY) move.x = 0;
-                    const double length = glm::length(move);
-                    if (length > radius) move *= radius / length;
+                    // Squared first: the root is only needed to shorten a move.
+                    const double length2 = glm::dot(move, move);
+                    if (length2 > radius * radius) move *= radius / std::sqrt(length2);
                     p += move;
                     p.x = std::clamp(p.x, level.grid.xs.front(), level.grid.xs.back());
                     p.y = std::clamp(p.y, level.grid.ys.front(), level.grid.ys.back());
+                    const glm::dvec2 d = p - nodes[n];
+                    largest_move = std::max(largest_move, glm::dot(d, d));
                 }
                 level.next_nodes[n] = p;
             }
+            level.row_moved[size_t(i)] = largest_move;
         }
     });
+    const double difference = *std::max_element(level.row_difference.begin(), level.row_difference.end());
 
-    // 4. Shape bounds: a cell may not leave [min_area, max_area], get a corner
+    // 3. Shape bounds: a cell may not leave [min_area, max_area], get a corner
     // sharper or an edge shorter than kMinQuality allows (which includes
     // turning concave or inside out), or (a cell of rigid texels only) get
     // thinner than its original width or height; nor move further out of a
@@ -324,83 +425,168 @@ StepStats step(Level& level, const AutomatonOptions& options) {
     // checks every cell in parallel; later rounds only the cells around the
     // corners just put back (rounds are whole sets, so the order within a
     // round does not matter).
+    // Every cell is measured here for its new corners and energies (the next
+    // step's state): a cell whose corners did not move keeps its shape.
     auto breaks_bound = [&](int i, int j) {
         const size_t c = level.cell(i, j);
         glm::dvec2 q[4];
         corners(level, level.next_nodes, i, j, q);
         glm::dvec2 old[4];
         corners(level, nodes, i, j, old);
-        if (q[0] == old[0] && q[1] == old[1] && q[2] == old[2] && q[3] == old[3]) return false;  // unchanged
-        const Shape now = shape(q);
+        const bool unchanged = q[0] == old[0] && q[1] == old[1] && q[2] == old[2] && q[3] == old[3];
+        const Shape now = unchanged ? Shape{level.area[c], level.safe_radius[c], level.quality[c]} : shape(q);
+        write_shape(c, now, level.next_area.data(), level.next_safe_radius.data(), level.next_quality.data());
+        if (unchanged) return false;
         const double a = now.area, before = level.area[c];
         if ((a < level.min_area[c] && a < before) || (a > level.max_area[c] && a > before)) return true;
         if (now.quality2 < kMinQuality * kMinQuality && now.quality2 < level.quality[c]) return true;
         if (level.rigid_area[c] < level.original_area[c]) return false;
-        const glm::dvec2 thin = thickness(q, a), was = thickness(old, before);
+        const glm::dvec2 thin = thickness(q, a);
         const double w0 = level.grid.xs[j + 1] - level.grid.xs[j];
         const double h0 = level.grid.ys[i + 1] - level.grid.ys[i];
+        if (!(thin.x < w0) && !(thin.y < h0)) return false;  // as thick as at rest: the usual case
+        const glm::dvec2 was = thickness(old, before);
         return (thin.x < w0 && thin.x < was.x) || (thin.y < h0 && thin.y < was.y);
     };
+    // Every cell judged in parallel; its verdict goes to breaking_cell.
+    std::vector<uint8_t>& breaking_cell = level.breaking_cell;
+    std::vector<int64_t> row_count(size_t(rows), 0);
+    parallel_for(rows, kRowGrain, [&](int64_t begin, int64_t end) {
+        for (int i = int(begin); i < int(end); ++i) {
+            int64_t count = 0;
+            for (int j = 0; j < cols; ++j) {
+                const bool breaks = breaks_bound(i, j);
+                breaking_cell[level.cell(i, j)] = breaks;
+                count += breaks;
+            }
+            row_count[size_t(i)] = count;
+        }
+    });
+    std::vector<uint8_t> reverted_rows(size_t(rows) + 1, 0);  // node rows with a node put back
+    // Dense rounds, while many cells break (a tenth of the finest level's
+    // cells on a Lightmap Pack layout): two passes over the whole grid, in
+    // parallel. Nodes of breaking cells go back; the cells around them are
+    // judged again. The same sets as the sparse rounds below.
+    auto total = [&] { return std::accumulate(row_count.begin(), row_count.end(), int64_t(0)); };
+    while (total() > int64_t(rows) * cols / kDenseRevertFraction) {
+        parallel_for(rows + 1, kRowGrain, [&](int64_t begin, int64_t end) {
+            for (int i = int(begin); i < int(end); ++i) {
+                // The cell rows above and below node row i, where they exist.
+                const uint8_t* above = i > 0 ? &breaking_cell[level.cell(i - 1, 0)] : nullptr;
+                const uint8_t* below = i < rows ? &breaking_cell[level.cell(i, 0)] : nullptr;
+                for (int j = 0; j <= cols; ++j) {
+                    uint8_t revert = 0;
+                    for (const uint8_t* row : {above, below}) {
+                        if (!row) continue;
+                        if (j > 0) revert |= row[j - 1];
+                        if (j < cols) revert |= row[j];
+                    }
+                    const size_t n = level.node(i, j);
+                    level.reverted_node[n] = revert;
+                    if (!revert) continue;
+                    level.next_nodes[n] = nodes[n];
+                    reverted_rows[size_t(i)] = 1;
+                }
+            }
+        });
+        parallel_for(rows, kRowGrain, [&](int64_t begin, int64_t end) {
+            for (int i = int(begin); i < int(end); ++i) {
+                int64_t count = 0;
+                for (int j = 0; j < cols; ++j) {
+                    const bool suspect = level.reverted_node[level.node(i, j)] ||
+                                         level.reverted_node[level.node(i, j + 1)] ||
+                                         level.reverted_node[level.node(i + 1, j)] ||
+                                         level.reverted_node[level.node(i + 1, j + 1)];
+                    const bool breaks = suspect && breaks_bound(i, j);
+                    breaking_cell[level.cell(i, j)] = breaks;
+                    count += breaks;
+                }
+                row_count[size_t(i)] = count;
+            }
+        });
+    }
     std::vector<std::vector<int32_t>> row_breaking(static_cast<size_t>(rows));
     parallel_for(rows, kRowGrain, [&](int64_t begin, int64_t end) {
         for (int i = int(begin); i < int(end); ++i) {
             row_breaking[size_t(i)].clear();
+            if (!row_count[size_t(i)]) continue;
             for (int j = 0; j < cols; ++j) {
-                if (breaks_bound(i, j)) row_breaking[size_t(i)].push_back(int32_t(level.cell(i, j)));
+                if (breaking_cell[level.cell(i, j)]) row_breaking[size_t(i)].push_back(int32_t(level.cell(i, j)));
             }
         }
     });
     std::vector<int32_t> breaking;
     for (const auto& r : row_breaking) breaking.insert(breaking.end(), r.begin(), r.end());
+    // Sparse rounds: lists of the breaking cells and their neighbours.
     std::vector<int32_t> suspects;
+    std::vector<uint8_t> verdicts;
     while (!breaking.empty()) {
+        // Each cell once per round (a stamp, not a sort: within a round the
+        // order does not matter, every cell is judged on the same nodes).
+        const uint32_t round = ++level.revert_round;
         suspects.clear();
         for (int32_t c : breaking) {
             const int i = c / cols, j = c % cols;
+            reverted_rows[size_t(i)] = reverted_rows[size_t(i) + 1] = 1;
             for (int ni = i; ni <= i + 1; ++ni) {
                 for (int nj = j; nj <= j + 1; ++nj) {
                     level.next_nodes[level.node(ni, nj)] = nodes[level.node(ni, nj)];
                     for (int ci = std::max(0, ni - 1); ci <= std::min(rows - 1, ni); ++ci) {
                         for (int cj = std::max(0, nj - 1); cj <= std::min(cols - 1, nj); ++cj) {
-                            suspects.push_back(int32_t(level.cell(ci, cj)));
+                            const size_t cell = level.cell(ci, cj);
+                            if (level.suspect_round[cell] == round) continue;
+                            level.suspect_round[cell] = round;
+                            suspects.push_back(int32_t(cell));
                         }
                     }
                 }
             }
         }
-        std::sort(suspects.begin(), suspects.end());
-        suspects.erase(std::unique(suspects.begin(), suspects.end()), suspects.end());
+        // Judged in parallel: each suspect once, writing only its own state.
+        verdicts.assign(suspects.size(), 0);
+        parallel_for(int64_t(suspects.size()), kSuspectGrain, [&](int64_t begin, int64_t end) {
+            for (int64_t k = begin; k < end; ++k) {
+                verdicts[size_t(k)] = breaks_bound(suspects[size_t(k)] / cols, suspects[size_t(k)] % cols);
+            }
+        });
         breaking.clear();
-        for (int32_t c : suspects) {
-            if (breaks_bound(c / cols, c % cols)) breaking.push_back(c);
+        for (size_t k = 0; k < suspects.size(); ++k) {
+            if (verdicts[k]) breaking.push_back(suspects[k]);
         }
     }
 
     // The largest node move actually made, in cell sizes of this level.
-    const double block = level.grid.xs[1] - level.grid.xs[0];
     parallel_for(rows + 1, kRowGrain, [&](int64_t begin, int64_t end) {
         for (int i = int(begin); i < int(end); ++i) {
+            if (!reverted_rows[size_t(i)]) continue;
             double largest = 0.0;
             for (int j = 0; j <= cols; ++j) {
                 const glm::dvec2 d = level.next_nodes[level.node(i, j)] - nodes[level.node(i, j)];
                 largest = std::max(largest, glm::dot(d, d));
             }
-            level.row_difference[size_t(i)] = largest;
+            level.row_moved[size_t(i)] = largest;
         }
     });
-    const double moved = std::sqrt(*std::max_element(level.row_difference.begin(), level.row_difference.end()));
+    const double block = level.grid.xs[1] - level.grid.xs[0];
+    const double moved = std::sqrt(*std::max_element(level.row_moved.begin(), level.row_moved.end()));
 
     level.grid.nodes.swap(level.next_nodes);
     level.energy.swap(level.next_energy);
+    level.area.swap(level.next_area);
+    level.safe_radius.swap(level.next_safe_radius);
+    level.quality.swap(level.next_quality);
     return {difference, moved / block};
+}
+
+}  // namespace
+
+StepStats step(Level& level, const AutomatonOptions& options) {
+    return level.channels == 4 ? step_of<4>(level, options) : step_of<1>(level, options);
 }
 
 int fit_to_bounds(Level& level) {
     const int rows = level.rows(), cols = level.cols();
     const NodeGrid& grid = level.grid;
-    std::vector<glm::dvec2> carried = grid.nodes;
-    std::vector<double> kept(carried.size(), 1.0);
-    std::vector<uint8_t> bad(size_t(rows) * cols, 0);
     auto out_of_bounds = [&](int i, int j) {
         const size_t c = level.cell(i, j);
         glm::dvec2 q[4];
@@ -412,34 +598,41 @@ int fit_to_bounds(Level& level) {
         const glm::dvec2 thin = thickness(q, now.area);
         return thin.x < grid.xs[j + 1] - grid.xs[j] || thin.y < grid.ys[i + 1] - grid.ys[i];
     };
-    // Nodes moved in the previous round: only their cells need checking again.
-    std::vector<uint8_t> lower(carried.size(), 0);
-    for (int round = 0;; ++round) {
-        std::vector<uint8_t> any_bad(size_t(rows), 0);
-        parallel_for(rows, kRowGrain, [&](int64_t begin, int64_t end) {
-            for (int i = int(begin); i < int(end); ++i) {
-                for (int j = 0; j < cols; ++j) {
-                    const size_t c = level.cell(i, j);
-                    const bool moved = round == 0 || lower[level.node(i, j)] || lower[level.node(i, j + 1)] ||
-                                       lower[level.node(i + 1, j)] || lower[level.node(i + 1, j + 1)];
-                    if (moved) bad[c] = out_of_bounds(i, j);
-                    any_bad[size_t(i)] |= bad[c];
-                }
+    // Round 0 checks every cell; later rounds only the cells around the
+    // nodes moved in the round before (a bad cell's own corners are among
+    // them, so every bad cell is checked again). Rounds work on lists: the
+    // bad region is small next to the grid, and there can be dozens.
+    std::vector<int32_t> checked, bad;
+    std::vector<uint8_t> verdicts(size_t(rows), 0);
+    std::vector<std::vector<int32_t>> row_bad(static_cast<size_t>(rows));
+    parallel_for(rows, kRowGrain, [&](int64_t begin, int64_t end) {
+        for (int i = int(begin); i < int(end); ++i) {
+            for (int j = 0; j < cols; ++j) {
+                if (out_of_bounds(i, j)) row_bad[size_t(i)].push_back(int32_t(level.cell(i, j)));
             }
-        });
-        if (std::find(any_bad.begin(), any_bad.end(), 1) == any_bad.end()) return round;
+        }
+    });
+    for (const auto& r : row_bad) bad.insert(bad.end(), r.begin(), r.end());
+    if (bad.empty()) return 0;
+
+    std::vector<glm::dvec2> carried;  // blended towards rest from round kFitSmoothRounds on
+    std::vector<double> kept(grid.nodes.size(), 1.0);
+    std::vector<uint32_t> lowered_round(grid.nodes.size(), 0);
+    std::vector<int32_t> lowered;
+    std::vector<glm::dvec2> smoothed;
+    for (int round = 0;; ++round) {
         // Halve the move of every node within kFitMargin nodes of a bad
         // cell (once per round), to 0 below kFitSnap: a cell whose nodes
         // are all back at rest is the identity, inside every bound.
-        std::fill(lower.begin(), lower.end(), uint8_t(0));
-        for (int i = 0; i < rows; ++i) {
-            if (!any_bad[size_t(i)]) continue;
-            for (int j = 0; j < cols; ++j) {
-                if (!bad[level.cell(i, j)]) continue;
-                for (int ni = std::max(0, i - kFitMargin); ni <= std::min(rows, i + 1 + kFitMargin); ++ni) {
-                    for (int nj = std::max(0, j - kFitMargin); nj <= std::min(cols, j + 1 + kFitMargin); ++nj) {
-                        lower[level.node(ni, nj)] = 1;
-                    }
+        lowered.clear();
+        for (int32_t c : bad) {
+            const int i = c / cols, j = c % cols;
+            for (int ni = std::max(0, i - kFitMargin); ni <= std::min(rows, i + 1 + kFitMargin); ++ni) {
+                for (int nj = std::max(0, j - kFitMargin); nj <= std::min(cols, j + 1 + kFitMargin); ++nj) {
+                    const size_t n = level.node(ni, nj);
+                    if (lowered_round[n] == uint32_t(round + 1)) continue;
+                    lowered_round[n] = uint32_t(round + 1);
+                    lowered.push_back(int32_t(n));
                 }
             }
         }
@@ -449,37 +642,63 @@ int fit_to_bounds(Level& level) {
             // differ in size, and smoothing evens them out without giving
             // up the deformation; blending towards rest (below) cascades
             // through a strongly compressed region and undoes it.
-            const std::vector<glm::dvec2> before = level.grid.nodes;
-            for (int i = 0; i <= rows; ++i) {
-                for (int j = 0; j <= cols; ++j) {
-                    const size_t n = level.node(i, j);
-                    const NodeMode mode = level.node_mode[n];
-                    if (!lower[n] || mode == NodeMode::Fixed) continue;
-                    glm::dvec2 sum(0.0);
-                    int count = 0;
-                    if (i > 0) sum += before[level.node(i - 1, j)], ++count;
-                    if (i < rows) sum += before[level.node(i + 1, j)], ++count;
-                    if (j > 0) sum += before[level.node(i, j - 1)], ++count;
-                    if (j < cols) sum += before[level.node(i, j + 1)], ++count;
-                    glm::dvec2 move = 0.5 * (sum / double(count) - before[n]);
-                    if (mode == NodeMode::SlideX) move.y = 0;
-                    if (mode == NodeMode::SlideY) move.x = 0;
-                    level.grid.nodes[n] = before[n] + move;
-                }
+            const std::vector<glm::dvec2>& before = level.grid.nodes;
+            smoothed.resize(lowered.size());
+            for (size_t k = 0; k < lowered.size(); ++k) {
+                const size_t n = size_t(lowered[k]);
+                const int i = int(n / size_t(cols + 1)), j = int(n % size_t(cols + 1));
+                const NodeMode mode = level.node_mode[n];
+                smoothed[k] = before[n];
+                if (mode == NodeMode::Fixed) continue;
+                glm::dvec2 sum(0.0);
+                int count = 0;
+                if (i > 0) sum += before[level.node(i - 1, j)], ++count;
+                if (i < rows) sum += before[level.node(i + 1, j)], ++count;
+                if (j > 0) sum += before[level.node(i, j - 1)], ++count;
+                if (j < cols) sum += before[level.node(i, j + 1)], ++count;
+                glm::dvec2 move = 0.5 * (sum / double(count) - before[n]);
+                if (mode == NodeMode::SlideX) move.y = 0;
+                if (mode == NodeMode::SlideY) move.x = 0;
+                smoothed[k] = before[n] + move;
             }
-            continue;
-        }
-        if (round == kFitSmoothRounds) carried = level.grid.nodes;  // blend towards rest from here
-        const bool last = round >= kFitRounds + kFitSmoothRounds;
-        for (int i = 0; i <= rows; ++i) {
-            for (int j = 0; j <= cols; ++j) {
-                const size_t n = level.node(i, j);
-                if (!lower[n]) continue;
+            for (size_t k = 0; k < lowered.size(); ++k) level.grid.nodes[size_t(lowered[k])] = smoothed[k];
+        } else {
+            if (round == kFitSmoothRounds) carried = level.grid.nodes;
+            const bool last = round >= kFitRounds + kFitSmoothRounds;
+            for (int32_t node : lowered) {
+                const size_t n = size_t(node);
+                const int i = int(n / size_t(cols + 1)), j = int(n % size_t(cols + 1));
                 kept[n] = last || kept[n] < kFitSnap ? 0.0 : kFitFactor * kept[n];
                 const glm::dvec2 rest(grid.xs[j], grid.ys[i]);
                 level.grid.nodes[n] = rest + kept[n] * (carried[n] - rest);
             }
         }
+
+        // Check the cells around the moved nodes again.
+        const uint32_t stamp = ++level.revert_round;
+        checked.clear();
+        for (int32_t node : lowered) {
+            const int ni = int(size_t(node) / size_t(cols + 1)), nj = int(size_t(node) % size_t(cols + 1));
+            for (int ci = std::max(0, ni - 1); ci <= std::min(rows - 1, ni); ++ci) {
+                for (int cj = std::max(0, nj - 1); cj <= std::min(cols - 1, nj); ++cj) {
+                    const size_t c = level.cell(ci, cj);
+                    if (level.suspect_round[c] == stamp) continue;
+                    level.suspect_round[c] = stamp;
+                    checked.push_back(int32_t(c));
+                }
+            }
+        }
+        verdicts.assign(checked.size(), 0);
+        parallel_for(int64_t(checked.size()), kSuspectGrain, [&](int64_t begin, int64_t end) {
+            for (int64_t k = begin; k < end; ++k) {
+                verdicts[size_t(k)] = out_of_bounds(checked[size_t(k)] / cols, checked[size_t(k)] % cols);
+            }
+        });
+        bad.clear();
+        for (size_t k = 0; k < checked.size(); ++k) {
+            if (verdicts[k]) bad.push_back(checked[k]);
+        }
+        if (bad.empty()) return round + 1;
     }
 }
 

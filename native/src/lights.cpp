@@ -26,18 +26,17 @@ void frame(const glm::vec3& n, glm::vec3& x, glm::vec3& y) {
     y = {b, sign + n.y * n.y * a, -n.y};
 }
 
-// The light's local X and Y axes as Blender orients a light that points
-// along `direction` with Vector.to_track_quat('-Z', 'Y'): local Y leans to
-// world +Z. A light pointing straight down keeps world X and Y.
-void light_axes(const glm::vec3& direction, glm::vec3& x, glm::vec3& y) {
+// The local X axis Blender gives a light that points along `direction` with
+// Vector.to_track_quat('-Z', 'Y'): local Y leans to world +Z, X = Y x Z. A
+// light pointing straight down keeps world X and Y.
+glm::vec3 default_axis_x(const glm::vec3& direction) {
     const glm::vec3 z = -direction;  // the light's local +Z
     const glm::vec3 up(0, 0, 1);
     glm::vec3 y_axis = up - glm::dot(up, z) * z;
     if (glm::length(y_axis) < 1e-6f) {
         y_axis = z.z > 0 ? glm::vec3(0, 1, 0) : glm::vec3(0, -1, 0);
     }
-    y = glm::normalize(y_axis);
-    x = glm::cross(y, z);
+    return glm::cross(glm::normalize(y_axis), z);
 }
 
 // Uniform point in the unit disk, area preserving (Shirley-Chiu concentric map).
@@ -123,8 +122,9 @@ bool sample_sun(const Light& light, const glm::vec2& u, LightSample& s) {
 }
 
 bool sample_area(const Light& light, const glm::vec3& point, const glm::vec2& u, LightSample& s) {
-    glm::vec3 x, y;
-    light_axes(light.direction, x, y);
+    // Local X and Y = Z x X (Z = -direction); validate_light made them orthonormal.
+    const glm::vec3& x = light.axis_x;
+    const glm::vec3 y = glm::cross(-light.direction, x);
     const bool square = light.shape == AreaShape::Square || light.shape == AreaShape::Disk;
     const float sx = light.size, sy = square ? light.size : light.size_y;
     glm::vec2 local;
@@ -159,10 +159,24 @@ void validate_light(Light& light) {
         require(std::isfinite(light.color[k]) && light.color[k] >= 0.0f, "light color must be finite and >= 0");
         require(std::isfinite(light.position[k]), "light position must be finite");
         require(std::isfinite(light.direction[k]), "light direction must be finite");
+        require(std::isfinite(light.axis_x[k]), "light axis_x must be finite");
     }
     const float length = glm::length(light.direction);
     require(length > 0.0f, "light direction must not be zero: it is where the light points");
     light.direction /= length;
+    const float axis_length = glm::length(light.axis_x);
+    if (axis_length == 0.0f) {
+        light.axis_x = default_axis_x(light.direction);
+    } else {
+        // Gram-Schmidt: keep the spin about `direction`, drop any tilt out of the light's plane.
+        const glm::vec3 x = light.axis_x / axis_length;
+        const glm::vec3 across = x - glm::dot(x, light.direction) * light.direction;
+        const float across_length = glm::length(across);
+        require(across_length > 1e-4f,
+                "light axis_x is parallel to direction; pass the light's local X axis (Blender: "
+                "matrix_world column 0), which is perpendicular to where the light points");
+        light.axis_x = across / across_length;
+    }
     require(std::isfinite(light.shadow_soft_size) && light.shadow_soft_size >= 0.0f,
             "shadow_soft_size must be finite and >= 0");
     require(std::isfinite(light.angle) && light.angle >= 0.0f && light.angle < kPi,
@@ -173,6 +187,32 @@ void validate_light(Light& light) {
             "spot_blend must be in [0, 1]");
     require(std::isfinite(light.size) && light.size > 0.0f, "area light size must be > 0");
     require(std::isfinite(light.size_y) && light.size_y > 0.0f, "area light size_y must be > 0");
+}
+
+void place_light(Light& light, const glm::mat4& matrix) {
+    for (int c = 0; c < 4; ++c) {
+        for (int r = 0; r < 4; ++r) require(std::isfinite(matrix[c][r]), "light matrix must be finite");
+    }
+    require(matrix[0][3] == 0.0f && matrix[1][3] == 0.0f && matrix[2][3] == 0.0f && matrix[3][3] == 1.0f,
+            "light matrix must be an affine 4x4 world matrix with bottom row (0, 0, 0, 1), as Blender's "
+            "matrix_world (rows of the matrix, translation in the last column)");
+    const glm::vec3 x(matrix[0]), y(matrix[1]), z(matrix[2]);
+    const float sx = glm::length(x), sy = glm::length(y), sz = glm::length(z);
+    require(sx > 0.0f && sy > 0.0f && sz > 0.0f,
+            "light matrix has a zero scale on one axis; give the light object a non-zero scale");
+    light.position = glm::vec3(matrix[3]);
+    light.direction = -z / sz;
+    light.axis_x = x / sx;
+    if (light.kind == LightKind::Area) {
+        // Cycles' sync_light: axisu = column 0 * size, axisv = column 1 * size_y
+        // (size for a square or disk), so the object's scale stretches the light.
+        if (light.shape == AreaShape::Square || light.shape == AreaShape::Disk) {
+            light.shape = light.shape == AreaShape::Square ? AreaShape::Rectangle : AreaShape::Ellipse;
+            light.size_y = light.size;
+        }
+        light.size *= sx;
+        light.size_y *= sy;
+    }
 }
 
 bool sample_light(const Light& light, const glm::vec3& point, const glm::vec2& u, LightSample& sample) {

@@ -21,11 +21,30 @@ UV_VARIANTS = {"smart": "uv_smart", "lightmap": "uv_lightmap"}
 
 # Light properties lmrefine.Scene.add_light understands, per kind (Blender's names).
 LIGHT_PROPERTIES = {
-    "point": ("energy", "color", "position", "shadow_soft_size"),
-    "spot": ("energy", "color", "position", "direction", "shadow_soft_size", "spot_size", "spot_blend"),
-    "sun": ("energy", "color", "direction", "angle"),
-    "area": ("energy", "color", "position", "direction", "shape", "size", "size_y"),
+    "point": ("energy", "color", "position", "matrix", "shadow_soft_size"),
+    "spot": ("energy", "color", "position", "direction", "axis_x", "matrix", "shadow_soft_size", "spot_size",
+             "spot_blend"),
+    "sun": ("energy", "color", "direction", "axis_x", "matrix", "angle"),
+    "area": ("energy", "color", "position", "direction", "axis_x", "matrix", "shape", "size", "size_y"),
 }
+# A light's world matrix (make_samples.py writes Blender's matrix_world) places
+# it completely, spin and scale included; these keys stay in the file for
+# readers but must not reach add_light beside it. Files without a matrix
+# (older ones) place lights by position and direction, with Blender's default spin.
+PLACEMENT = ("position", "direction", "axis_x")
+
+
+def light_arguments(light):
+    """(kind, add_light keyword arguments) of one light dict of a scene file."""
+    kind = light["kind"]
+    if kind not in LIGHT_PROPERTIES:
+        raise ValueError(f"light '{light.get('name')}' has unknown kind '{kind}'")
+    skip = PLACEMENT if "matrix" in light else ()
+    params = {k: (tuple(map(tuple, v)) if k == "matrix" else tuple(v) if isinstance(v, list) else v)
+              for k, v in light.items() if k in LIGHT_PROPERTIES[kind] and k not in skip}
+    if "shape" in params:
+        params["shape"] = params["shape"].upper()  # older files wrote Blender's shape in lower case
+    return kind, params
 
 
 @dataclass
@@ -81,11 +100,11 @@ class SampleScene:
         if len(self.occluder_triangles):
             scene.add_mesh(self.occluder_positions, self.occluder_triangles, receiver=False)
         for light in self.lights:
-            kind = light["kind"]
-            if kind not in LIGHT_PROPERTIES:
-                raise ValueError(f"scene '{self.name}': light '{light.get('name')}' has unknown kind '{kind}'")
-            scene.add_light(kind, **{k: (tuple(v) if isinstance(v, list) else v)
-                                     for k, v in light.items() if k in LIGHT_PROPERTIES[kind]})
+            try:
+                kind, params = light_arguments(light)
+            except ValueError as error:
+                raise ValueError(f"scene '{self.name}': {error}") from None
+            scene.add_light(kind, **params)
         if any(c > 0 for c in self.world):
             scene.set_world(tuple(self.world))
         return scene

@@ -379,9 +379,30 @@ def bridge_lights():
     dark.data.energy = 0.0
     dark.name = "Dark"
     bpy.context.scene.collection.objects.link(dark)
+    # A square scaled unevenly and spun about its own axis: a 1.5 x 0.3 m strip.
+    bpy.ops.object.light_add(type='AREA', location=(0.5, -0.5, 2.0), rotation=(0.2, 0.0, 0.9))
+    strip = bpy.context.active_object
+    strip.scale = (1.5, 0.3, 1.0)  # light_add's own scale= argument is not applied to lights
+    strip.name = "Strip"
+    strip.data.shape = 'SQUARE'
+    strip.data.size = 1.0
     bpy.context.view_layer.update()
-    return {kind: params for kind, params in bridge.scene_lights(bpy.context)} | {
-        "count": len(bridge.scene_lights(bpy.context))}
+    facts = dict(bridge.light_params(made[kind]) for kind in made)
+    facts["count"] = len(bridge.scene_lights(bpy.context))
+    # The baker reads the strip as the rectangle Cycles makes of it: 1.5 x 0.3
+    # along the object's own X and Y.
+    strip_params = bridge.light_params(strip)[1]
+    axes = np.array(strip.matrix_world.to_3x3().normalized())
+    points = np.array([(x, y, 0.0) for x in (-0.5, 0.3, 1.2) for y in (-1.2, -0.4, 0.4)])
+    normals = np.tile([0.0, 0.0, 1.0], (len(points), 1))
+    values = []
+    for params in (strip_params, dict(energy=10.0, shape="RECTANGLE", size=1.5, size_y=0.3, position=(0.5, -0.5, 2.0),
+                                      direction=-axes[:, 2], axis_x=axes[:, 0])):
+        scene = lmrefine.Scene()
+        scene.add_light("area", **params)
+        values.append(lmrefine.evaluate(scene, points, normals, samples=256, seed=1)[:, 0])
+    facts["strip_values"] = [v.tolist() for v in values]
+    return facts
 
 
 @check()

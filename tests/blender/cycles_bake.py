@@ -18,7 +18,7 @@ import time
 
 import bpy
 import numpy as np
-from mathutils import Vector
+from mathutils import Matrix, Vector
 
 # Cycles' own bake types for our passes (colour pass off, as lmrefine bakes).
 # Blender 3.4 returns ~0 for DIFFUSE with pass_filter {'INDIRECT'} alone
@@ -79,18 +79,32 @@ def add_mesh(scene, index, spec, resolution):
 
 
 def add_light(scene, index, spec):
+    """A light object placed by `matrix` (its matrix_world, rows), or by
+    position, direction (its -Z) and axis_x (its +X; default: Blender's
+    to_track_quat('-Z', 'Y') orientation), as lmrefine.Scene.add_light takes them."""
     spec = dict(spec)
     kind = spec.pop("kind")
+    matrix = spec.pop("matrix", None)
     position = spec.pop("position", (0.0, 0.0, 0.0))
     direction = spec.pop("direction", (0.0, 0.0, -1.0))
+    axis_x = spec.pop("axis_x", None)
     light = bpy.data.lights.new(f"light{index}", kind.upper())
     for key, value in spec.items():
         setattr(light, key, tuple(value) if isinstance(value, list) else value)
     obj = bpy.data.objects.new(f"light{index}", light)
+    scene.collection.objects.link(obj)
+    if matrix is not None:
+        obj.matrix_world = Matrix(matrix)
+        return
     obj.location = position
     # Blender lights shine down their local -Z axis.
-    obj.rotation_euler = Vector(direction).to_track_quat("-Z", "Y").to_euler()
-    scene.collection.objects.link(obj)
+    if axis_x is None:
+        obj.rotation_euler = Vector(direction).to_track_quat("-Z", "Y").to_euler()
+        return
+    z = -Vector(direction).normalized()
+    x = Vector(axis_x)
+    x = (x - x.dot(z) * z).normalized()
+    obj.rotation_euler = Matrix((x, z.cross(x), z)).transposed().to_euler()
 
 
 def set_world(scene, color, ao_distance):

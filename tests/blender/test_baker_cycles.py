@@ -43,6 +43,19 @@ def corner():
             mesh_spec(wall[0], wall[1], wall[2], base_color=(0.9, 0.2, 0.1))]
 
 
+def strip_matrix():
+    """A strip light's world matrix (Blender's matrix_world, rows): scaled
+    (1.5, 0.8, 1), spun 55 degrees about its own axis, tilted 0.25 rad about
+    x. Cycles folds the scale into the light: a 0.9 x 0.08 m strip."""
+    spin, tilt = np.radians(55.0), 0.25
+    rx = np.array([[1, 0, 0], [0, np.cos(tilt), -np.sin(tilt)], [0, np.sin(tilt), np.cos(tilt)]])
+    rz = np.array([[np.cos(spin), -np.sin(spin), 0], [np.sin(spin), np.cos(spin), 0], [0, 0, 1]])
+    m = np.eye(4)
+    m[:3, :3] = rx @ rz @ np.diag([1.5, 0.8, 1.0])
+    m[:3, 3] = [0.1, 0.25, 1.3]
+    return m.tolist()
+
+
 LIGHT_JOBS = {
     "point": dict(kind="point", energy=60.0, shadow_soft_size=0.1, position=[0.5, 0.3, 1.5]),
     "spot": dict(kind="spot", energy=80.0, shadow_soft_size=0.05, spot_size=1.2, spot_blend=0.4,
@@ -52,6 +65,11 @@ LIGHT_JOBS = {
                  position=[0.0, 0.4, 1.2], direction=[0.3, -0.4, -1.0]),
     "disk": dict(kind="area", energy=40.0, shape="ELLIPSE", size=0.5, size_y=0.3,
                  position=[0.2, -0.3, 1.0], direction=[0.0, 0.0, -1.0]),
+    # Lights spun about their axis: a scaled strip placed by its world
+    # matrix, an ellipse by axis_x (70 degrees off Blender's default spin).
+    "strip": dict(kind="area", energy=40.0, shape="RECTANGLE", size=0.6, size_y=0.1, matrix=strip_matrix()),
+    "spun_ellipse": dict(kind="area", energy=40.0, shape="ELLIPSE", size=0.8, size_y=0.12,
+                         position=[0.2, -0.3, 1.0], direction=[-0.2, 0.1, -1.0], axis_x=[0.35, 0.94, 0.1]),
 }
 
 

@@ -67,6 +67,7 @@ struct LevelStats {
     double max_difference = 0;  // largest neighbour density difference / mean density at the end
     bool converged = false;
     bool settled = false;       // stopped because no node moved any more (guards hold the rest)
+    double seconds = 0;         // wall time of the level, setup included
 };
 
 struct AutomatonResult {
