@@ -50,7 +50,9 @@ public:
     py::dict check(const py::handle& uvs_in, bool failing_charts, bool relative_gutter) {
         LayoutReport r;
         if (uvs_in.is_none()) {
-            if (relative_gutter) throw py::value_error("relative_gutter compares a warped layout with the original: pass uvs");
+            if (relative_gutter) {
+                throw py::value_error("relative_gutter compares a warped layout with the original: pass uvs");
+            }
             py::gil_scoped_release release;
             r = checker_->check_original(failing_charts);
         } else {

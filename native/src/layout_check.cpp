@@ -312,11 +312,10 @@ LayoutReport LayoutChecker::check_against(const UvLayout& layout, const LayoutRa
     parallel_for(raster.band_count(), 1, [&](int64_t band_begin, int64_t band_end) {
         for (int64_t band = band_begin; band < band_end; ++band) {
             // Most bands have no texel of two charts (charts a gutter apart): skip them.
-            const int row0 = int(band) * LayoutRaster::kBandRows, row1 = std::min(height, row0 + LayoutRaster::kBandRows);
-            if (std::find(owner.begin() + ptrdiff_t(row0) * width, owner.begin() + ptrdiff_t(row1) * width, kShared) ==
-                owner.begin() + ptrdiff_t(row1) * width) {
-                continue;
-            }
+            const int row0 = int(band) * LayoutRaster::kBandRows;
+            const auto first = owner.begin() + ptrdiff_t(row0) * width;
+            const auto last = owner.begin() + ptrdiff_t(std::min(height, row0 + LayoutRaster::kBandRows)) * width;
+            if (std::find(first, last, kShared) == last) continue;
             auto& found = shared_in_band[size_t(band)];
             raster.for_each_span_in_band(int(band), [&](int64_t t, int row, int begin, int end) {
                 if (skip[size_t(t)]) return;
