@@ -52,7 +52,7 @@ def whole_refinement():
           f"{os.getloadavg()[0]:.1f} (a shared machine: compare ratios); gradient map: "
           + ("lmrefine.gradient_map (D4)" if HAVE_WAVELET else "finite differences (gradient_map not built in)"))
     print(f"{'size':>6} {'seconds':>8} {'steps':>6} {'ns/texel':>9} {'vs 256^2':>9} {'widening':>9} {'valid':>6}"
-          f"   gradient / automaton / warp+check (s)")
+          f"   setup / gradient / automaton / warp+check (s)")
     base = None
     for resolution in (256, 512, 1024):
         uvs, tris, lightmap = scene(resolution)
@@ -62,7 +62,8 @@ def whole_refinement():
         report = result.report
         print(f"{resolution:>5}^2 {seconds:>8.3f} {report['steps']:>6} {per_texel:>9.1f} {per_texel / base:>8.2f}x "
               f"{report['transition_widening']:>9.2f} {str(report['check']['valid']):>6}   "
-              + " / ".join(f"{report['timings'][k]:.3f}" for k in ("gradient_map", "automaton", "warp_and_check")))
+              + " / ".join(f"{report['timings'][k]:.3f}"
+                           for k in ("setup", "gradient_map", "automaton", "warp_and_check")))
 
 
 def lightmap_pack_layout(resolution=1024, runs=2):

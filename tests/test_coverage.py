@@ -52,3 +52,45 @@ def test_find_charts_joins_per_corner_copies_and_separates_islands():
     charts = lmrefine.find_charts(uvs, tris)
     assert charts.dtype == np.int32
     assert charts.tolist() == [0, 0, 1, 1]
+
+
+def _overlaps_texel(p, col, row, touch=1e-7):
+    """The conservative rasterization's rule, texel by texel: the separating
+    axes of a triangle (pixel space) and the unit square at (col, row)."""
+    corners = [(col, row), (col + 1, row), (col, row + 1), (col + 1, row + 1)]
+    for e in range(3):
+        (ax, ay), (bx, by) = p[e], p[(e + 1) % 3]
+        axis = (ay - by, bx - ax)
+        scale = float(np.hypot(*axis))
+        if scale == 0.0:
+            return False
+        t = [axis[0] * x + axis[1] * y for x, y in p]
+        s = [axis[0] * x + axis[1] * y for x, y in corners]
+        if max(t) <= min(s) + touch * scale or max(s) <= min(t) + touch * scale:
+            return False
+    return True
+
+
+def test_coverage_is_exactly_the_per_texel_separating_axis_test(rng):
+    # The rasterizer finds each row's span by walking to where the test
+    # flips; it must accept exactly the texels the per-texel test accepts,
+    # including triangles on texel corners, slivers and ones leaving the map.
+    height, width = 9, 13
+    cases = []
+    for k in range(120):
+        uv = rng.uniform(-0.2, 1.2, (3, 2))
+        if k % 4 == 1:
+            uv = np.round(uv * [width, height]) / [width, height]  # corners on texel corners
+        if k % 4 == 2:
+            uv[1:] = uv[0] + (uv[1:] - uv[0]) * [1e-3, 1e-6]  # a sliver
+        cases.append(uv.astype(np.float32))
+    for uv in cases:
+        mask = lmrefine.coverage_mask(uv, np.array([[0, 1, 2]]), (height, width))
+        p = [(float(u) * width, (1.0 - float(v)) * height) for u, v in uv]
+        xs, ys = [x for x, _ in p], [y for _, y in p]
+        expected = np.zeros((height, width), bool)
+        for row in range(max(0, int(np.floor(min(ys)))), min(height - 1, int(np.ceil(max(ys)))) + 1):
+            for col in range(max(0, int(np.floor(min(xs)))), min(width - 1, int(np.ceil(max(xs)))) + 1):
+                expected[row, col] = _overlaps_texel(p, col, row)
+        np.testing.assert_array_equal(mask, expected, err_msg=f"triangle {uv.tolist()}")
+    assert sum(lmrefine.coverage_mask(uv, np.array([[0, 1, 2]]), (height, width)).sum() for uv in cases) > 100

@@ -144,3 +144,70 @@ def test_gutter_texels_mark_the_texels_between_charts():
     # both sides of the seam still are gutter, the rest of each chart not.
     assert lmrefine.coverage_mask(uvs, tris, R).all()
     assert gutter[:, 15:17].all() and not gutter[:, :14].any() and not gutter[:, 18:].any()
+
+
+def _same_report(a, b):
+    assert a.keys() == b.keys()
+    for key in a:
+        if key == "failing_charts":
+            np.testing.assert_array_equal(a[key], b[key])
+        else:
+            assert a[key] == b[key], key
+
+
+@pytest.mark.parametrize("name", ["pack", "smart", "overlapping", "degenerate"])
+def test_layout_checker_gives_what_the_single_calls_give(name, rng):
+    # The refiner's LayoutChecker analyses the original once; every result
+    # must equal check_layout / coverage_mask / gutter_texels / find_charts.
+    if name == "pack":
+        uvs, tris = lightmap_pack(8, margin_texels=1.5, resolution=R, quads=2)
+    elif name == "smart":
+        uvs, tris = smart_uv(R, margin_texels=3, n=6)
+    elif name == "overlapping":
+        uvs, tris = merge(square(0.1, 0.1, 0.3, n=3), square(0.35, 0.3, 0.3, n=2), square(0.7, 0.1, 0.2))
+    else:
+        uvs, tris = merge(square(0.1, 0.1, 0.3, n=3), square(0.5, 0.5, 0.3, n=2))
+        uvs[tris[4, 2]] = uvs[tris[4, 1]]  # one triangle of zero area
+    checker = lmrefine.LayoutChecker(uvs, tris, R, 2)
+    np.testing.assert_array_equal(checker.charts, lmrefine.find_charts(uvs, tris))
+    np.testing.assert_array_equal(checker.coverage_mask(), lmrefine.coverage_mask(uvs, tris, R))
+    np.testing.assert_array_equal(checker.gutter_texels(), lmrefine._native.gutter_texels(uvs, tris, R))
+    for failing in (False, True):
+        _same_report(checker.check(failing_charts=failing),
+                     lmrefine.check_layout(uvs, tris, R, 2, failing_charts=failing))
+    # Warped versions: a smooth shift (gutters change), and one that flips
+    # and overlaps triangles.
+    shift = 0.02 * np.sin(uvs * 7.0).astype(np.float32)
+    swapped = uvs.copy()
+    swapped[tris[:3, 1]], swapped[tris[:3, 2]] = uvs[tris[:3, 2]], uvs[tris[:3, 1]]
+    for warped in (np.clip(uvs + shift, 0, 1), swapped):
+        for failing in (False, True):
+            for relative in (False, True):
+                _same_report(checker.check(warped, failing_charts=failing, relative_gutter=relative),
+                             lmrefine.check_layout(warped, tris, R, 2, reference_uvs=uvs, failing_charts=failing,
+                                                   relative_gutter=relative))
+    report = checker.check(swapped, failing_charts=True)
+    assert report["flipped"] >= 3 and 0 in report["failing_charts"]
+    if name == "overlapping":
+        assert checker.check()["overlapping"] > 0
+    if name == "degenerate":
+        assert checker.check()["degenerate"] == 1
+
+
+def test_layout_checker_bad_input():
+    uvs, tris = plane(4)
+    with pytest.raises(ValueError, match="padding"):
+        lmrefine.LayoutChecker(uvs, tris, R, -1)
+    with pytest.raises(ValueError, match="positive"):
+        lmrefine.LayoutChecker(uvs, tris, 0)
+    with pytest.raises(ValueError, match="refers to UV"):
+        lmrefine.LayoutChecker(uvs, tris + 1, R)
+    checker = lmrefine.LayoutChecker(uvs, tris, R)
+    with pytest.raises(ValueError, match="same layout"):
+        checker.check(uvs[:-3])
+    with pytest.raises(ValueError, match="relative_gutter"):
+        checker.check(relative_gutter=True)
+    bad = uvs.copy()
+    bad[5, 0] = np.nan
+    with pytest.raises(ValueError, match="NaN"):
+        checker.check(bad)

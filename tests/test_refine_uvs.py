@@ -237,3 +237,24 @@ def test_rectangular_lightmaps(shape):
     assert result.grid.shape == (shape[0] + 1, shape[1] + 1, 2)
     assert result.report["transition_widening"] > 2.0
     assert_valid(result, uvs, tris, shape, 2)
+
+
+def test_invalid_cells_are_the_inverted_and_concave_ones(rng):
+    from lmrefine import backoff
+    grid = lmrefine.identity_grid((6, 8))
+    assert not backoff.invalid_cells(grid).any()
+    bent = grid.copy()
+    bent[2, 3] = grid[3, 4]  # a node pushed onto its lower-right neighbour
+    bad = backoff.invalid_cells(bent)
+    # Cell (2, 3) collapses, (1, 3) and (2, 2) fold; (1, 2) only grows.
+    assert bad.shape == (6, 8) and sorted(zip(*np.nonzero(bad))) == [(1, 3), (2, 2), (2, 3)]
+    # Against the cross-product rule in float32, on grids noisy enough to fold.
+    for noise in (0.1, 0.4, 0.8):
+        noisy = (grid + rng.normal(0, noise / 8, grid.shape)).astype(np.float32)
+        q = [noisy[:-1, :-1], noisy[:-1, 1:], noisy[1:, 1:], noisy[1:, :-1]]
+        expected = np.zeros((6, 8), bool)
+        for k in range(4):
+            a, b = q[(k + 1) % 4] - q[k], q[(k + 3) % 4] - q[k]
+            expected |= (a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]) >= 0
+        np.testing.assert_array_equal(backoff.invalid_cells(noisy), expected)
+        assert 0 < expected.sum() or noise < 0.5

@@ -10,7 +10,9 @@ namespace lmrefine::bindings {
 namespace {
 
 py::array_t<bool> coverage(const py::handle& uvs, const py::handle& triangles, const py::handle& resolution) {
-    return py_util::layout_mask(uvs, triangles, resolution, coverage_mask);
+    return py_util::layout_mask(uvs, triangles, resolution, [](const UvLayout& layout, int width, int height) {
+        return coverage_mask(layout, width, height);
+    });
 }
 
 }  // namespace

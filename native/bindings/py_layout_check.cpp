@@ -1,5 +1,9 @@
 #include <pybind11/pybind11.h>
 
+#include <memory>
+#include <tuple>
+#include <vector>
+
 #include "lmrefine/error.h"
 #include "lmrefine/gutter.h"
 #include "lmrefine/layout_check.h"
@@ -9,6 +13,89 @@ namespace py = pybind11;
 
 namespace lmrefine::bindings {
 namespace {
+
+py::dict report_dict(LayoutReport& r, bool relative_gutter, bool failing_charts) {
+    py::dict out;
+    out["flipped"] = r.flipped;
+    out["degenerate"] = r.degenerate;
+    out["overlapping"] = r.overlapping;
+    out["out_of_bounds"] = r.out_of_bounds;
+    out["min_gutter_texels"] = r.min_gutter_texels;
+    out["charts"] = r.charts;
+    out["valid"] = r.valid;
+    if (relative_gutter) out["gutter_violations"] = r.gutter_violations;
+    if (failing_charts) {
+        const py::ssize_t n = py::ssize_t(r.failing_charts.size());
+        out["failing_charts"] = py_util::to_numpy(std::move(r.failing_charts), {n});
+    }
+    return out;
+}
+
+// The Python object owns copies of the original layout (small next to a
+// lightmap) so the checker's view of it stays valid.
+class PyLayoutChecker {
+public:
+    PyLayoutChecker(const py::handle& uvs_in, const py::handle& triangles_in, const py::handle& resolution,
+                    double padding) {
+        auto uvs = py_util::require_points(uvs_in, "uvs", 2);
+        auto triangles = py_util::require_indices(triangles_in, "triangles", 3, /*allow_empty=*/true);
+        std::tie(height_, width_) = py_util::parse_resolution(resolution);
+        uvs_.assign(uvs.data(), uvs.data() + uvs.size());
+        triangles_.assign(triangles.data(), triangles.data() + triangles.size());
+        const UvLayout layout{uvs_.data(), uvs.shape(0), triangles_.data(), triangles.shape(0)};
+        py::gil_scoped_release release;
+        checker_ = std::make_unique<LayoutChecker>(layout, width_, height_, padding);
+    }
+
+    py::dict check(const py::handle& uvs_in, bool failing_charts, bool relative_gutter) {
+        LayoutReport r;
+        if (uvs_in.is_none()) {
+            if (relative_gutter) {
+                throw py::value_error("relative_gutter compares a warped layout with the original: pass uvs");
+            }
+            py::gil_scoped_release release;
+            r = checker_->check_original(failing_charts);
+        } else {
+            auto uvs = py_util::require_points(uvs_in, "uvs", 2);
+            if (uvs.shape(0) * 2 != py::ssize_t(uvs_.size())) {
+                throw py::value_error("uvs has " + std::to_string(uvs.shape(0)) + " UVs but the original layout has " +
+                                      std::to_string(uvs_.size() / 2) + "; pass a warped version of the same layout");
+            }
+            py::gil_scoped_release release;
+            validate_layout({uvs.data(), uvs.shape(0), triangles_.data(), py::ssize_t(triangles_.size() / 3)});
+            r = checker_->check(uvs.data(), failing_charts, relative_gutter);
+        }
+        return report_dict(r, relative_gutter, failing_charts);
+    }
+
+    py::array_t<bool> mask(std::vector<uint8_t> (*compute)(const LayoutChecker&)) {
+        std::vector<uint8_t> mask;
+        {
+            py::gil_scoped_release release;
+            mask = compute(*checker_);
+        }
+        auto bytes = py_util::to_numpy(std::move(mask), {height_, width_});
+        return bytes.attr("view")(py::dtype::of<bool>()).cast<py::array_t<bool>>();
+    }
+
+    py::array_t<int32_t> charts() const {
+        std::vector<int32_t> ids = checker_->charts().triangle_chart;
+        const py::ssize_t n = py::ssize_t(ids.size());
+        return py_util::to_numpy(std::move(ids), {n});
+    }
+
+private:
+    std::vector<float> uvs_;
+    std::vector<int32_t> triangles_;
+    int width_ = 0, height_ = 0;
+    std::unique_ptr<LayoutChecker> checker_;
+};
+
+std::vector<uint8_t> checker_coverage(const LayoutChecker& checker) { return coverage_mask(checker.raster()); }
+
+std::vector<uint8_t> checker_gutter(const LayoutChecker& checker) {
+    return gutter_texels(checker.owners(), checker.raster().width(), checker.raster().height());
+}
 
 py::dict check(const py::handle& uvs_in, const py::handle& triangles_in, const py::handle& resolution,
                double padding, const py::handle& reference_in, bool failing_charts,
@@ -31,24 +118,14 @@ py::dict check(const py::handle& uvs_in, const py::handle& triangles_in, const p
         r = check_layout(layout, width, height, padding, reference_in.is_none() ? nullptr : reference.data(),
                          failing_charts, relative_gutter);
     }
-    py::dict out;
-    out["flipped"] = r.flipped;
-    out["degenerate"] = r.degenerate;
-    out["overlapping"] = r.overlapping;
-    out["out_of_bounds"] = r.out_of_bounds;
-    out["min_gutter_texels"] = r.min_gutter_texels;
-    out["charts"] = r.charts;
-    out["valid"] = r.valid;
-    if (relative_gutter) out["gutter_violations"] = r.gutter_violations;
-    if (failing_charts) {
-        const py::ssize_t n = py::ssize_t(r.failing_charts.size());
-        out["failing_charts"] = py_util::to_numpy(std::move(r.failing_charts), {n});
-    }
-    return out;
+    return report_dict(r, relative_gutter, failing_charts);
 }
 
 py::array_t<bool> gutter(const py::handle& uvs, const py::handle& triangles, const py::handle& resolution) {
-    return py_util::layout_mask(uvs, triangles, resolution, gutter_texels);
+    return py_util::layout_mask(uvs, triangles, resolution,
+                                [](const UvLayout& layout, int width, int height) {
+                                    return gutter_texels(layout, width, height);
+                                });
 }
 
 }  // namespace
@@ -96,6 +173,43 @@ Returns:
 Raises:
     ValueError: bad shapes, indices out of range, NaN UVs, resolution <= 0.
 )doc");
+
+    py::class_<PyLayoutChecker>(m, "LayoutChecker", R"doc(One original layout, analysed once for many checks.
+
+The refiner checks the original, rasterizes it for its coverage and gutter
+texels, and checks every warped version against it (back-off rounds). A
+LayoutChecker computes what depends only on the original (charts,
+orientations, rasterization, chart-pair distances) once; each result equals
+the corresponding check_layout / coverage_mask / gutter_texels call exactly.
+
+Args:
+    uvs (numpy.ndarray): (N, 2) per-corner UVs of the original (copied).
+    triangles (numpy.ndarray): (T, 3) integer indices into ``uvs`` (copied).
+    resolution (int | tuple[int, int]): lightmap size, square or (height, width).
+    padding (float): the smallest acceptable gutter between charts, in texels.
+
+Raises:
+    ValueError: bad shapes, indices out of range, NaN UVs, resolution <= 0,
+        padding < 0.
+)doc")
+        .def(py::init<const py::handle&, const py::handle&, const py::handle&, double>(), py::arg("uvs"),
+             py::arg("triangles"), py::arg("resolution"), py::arg("padding") = 2.0)
+        .def("check", &PyLayoutChecker::check, py::arg("uvs") = py::none(), py::kw_only(),
+             py::arg("failing_charts") = false, py::arg("relative_gutter") = false,
+             R"doc(check_layout of the original (uvs=None), or of a warped version of it.
+
+With ``uvs`` (N, 2) (the original's triangles), the same as
+``check_layout(uvs, triangles, resolution, padding, reference_uvs=original,
+failing_charts=..., relative_gutter=...)``; without, the same as
+``check_layout(original, triangles, resolution, padding,
+failing_charts=...)``.
+)doc")
+        .def("coverage_mask", [](PyLayoutChecker& self) { return self.mask(checker_coverage); },
+             "coverage_mask(original, triangles, resolution): (H, W) bool.")
+        .def("gutter_texels", [](PyLayoutChecker& self) { return self.mask(checker_gutter); },
+             "gutter_texels(original, triangles, resolution): (H, W) bool.")
+        .def_property_readonly("charts", &PyLayoutChecker::charts,
+                               "find_charts(original, triangles): (T,) int32 chart id per triangle.");
 }
 
 }  // namespace lmrefine::bindings

@@ -1,5 +1,8 @@
 #include <pybind11/pybind11.h>
 
+#include <algorithm>
+#include <cmath>
+
 #include "grid_array.h"
 #include "lmrefine/error.h"
 #include "lmrefine/texel_space.h"
@@ -20,22 +23,17 @@ py::array_t<float> grid_to_numpy(const NodeGrid& grid, int width, int height) {
     return to_numpy(std::move(values), {grid.rows + 1, grid.cols + 1, 2});
 }
 
-NodeGrid grid_from_numpy(const py::handle& object, const char* name) {
+UvGridArray grid_from_numpy(const py::handle& object, const char* name) {
     auto array = require_float32(object, name, {3});
     if (array.shape(2) != 2 || array.shape(0) < 2 || array.shape(1) < 2) {
         throw py::value_error(std::string(name) + " must have shape (H + 1, W + 1, 2), got " +
                               shape_string(array));
     }
-    const int height = int(array.shape(0)) - 1, width = int(array.shape(1)) - 1;
-    NodeGrid grid = identity_grid(width, height);
     const float* p = array.data();
-    for (size_t k = 0; k < grid.nodes.size(); ++k) {
-        if (!std::isfinite(p[2 * k]) || !std::isfinite(p[2 * k + 1])) {
-            throw py::value_error(std::string(name) + " holds NaN or Inf node positions");
-        }
-        grid.nodes[k] = uv_to_pixel({p[2 * k], p[2 * k + 1]}, width, height);
+    if (!std::all_of(p, p + array.size(), [](float x) { return std::isfinite(x); })) {
+        throw py::value_error(std::string(name) + " holds NaN or Inf node positions");
     }
-    return grid;
+    return {array, UvGridView{p, int(array.shape(0)) - 1, int(array.shape(1)) - 1}};
 }
 
 }  // namespace py_util
@@ -47,7 +45,7 @@ void bind_warp(py::module_& m) {
         "warp_uvs",
         [](const py::handle& uvs_in, const py::handle& grid_in) {
             auto uvs = py_util::require_points(uvs_in, "uvs", 2, /*allow_empty=*/true);
-            const NodeGrid grid = py_util::grid_from_numpy(grid_in, "grid");
+            const auto grid = py_util::grid_from_numpy(grid_in, "grid");
             const int64_t n = uvs.shape(0);
             for (int64_t k = 0; k < 2 * n; ++k) {
                 if (!std::isfinite(uvs.data()[k])) {
@@ -57,7 +55,7 @@ void bind_warp(py::module_& m) {
             std::vector<float> out(size_t(n) * 2);
             {
                 py::gil_scoped_release release;
-                warp_uvs(grid, grid.cols, grid.rows, uvs.data(), n, out.data());
+                warp_uvs(grid.view, uvs.data(), n, out.data());
             }
             return py_util::to_numpy(std::move(out), {py::ssize_t(n), 2});
         },
@@ -77,15 +75,42 @@ Returns:
 )doc");
 
     m.def(
+        "grid_invalid_cells",
+        [](const py::handle& grid_in) {
+            auto grid = py_util::require_float32(grid_in, "grid", {3});
+            if (grid.shape(2) != 2 || grid.shape(0) < 2 || grid.shape(1) < 2) {
+                throw py::value_error("grid must have shape (H + 1, W + 1, 2), got " + py_util::shape_string(grid));
+            }
+            const int rows = int(grid.shape(0)) - 1, cols = int(grid.shape(1)) - 1;
+            std::vector<uint8_t> bad;
+            {
+                py::gil_scoped_release release;
+                bad = invalid_cells(grid.data(), rows, cols);
+            }
+            auto bytes = py_util::to_numpy(std::move(bad), {rows, cols});
+            return bytes.attr("view")(py::dtype::of<bool>()).cast<py::array_t<bool>>();
+        },
+        py::arg("grid"),
+        R"doc(Cells of a deformed grid that are not convex, non-inverted quadrilaterals.
+
+Args:
+    grid (numpy.ndarray): float32 (H + 1, W + 1, 2) node positions in UV space.
+
+Returns:
+    numpy.ndarray: bool (H, W), True where a corner's cross product (float32,
+    UV space, v up: a valid cell turns clockwise) is >= 0.
+)doc");
+
+    m.def(
         "grid_cell_areas",
         [](const py::handle& grid_in) {
-            const NodeGrid grid = py_util::grid_from_numpy(grid_in, "grid");
+            const auto grid = py_util::grid_from_numpy(grid_in, "grid");
             std::vector<float> areas;
             {
                 py::gil_scoped_release release;
-                areas = cell_areas(grid);
+                areas = cell_areas(grid.view);
             }
-            return py_util::to_numpy(std::move(areas), {grid.rows, grid.cols});
+            return py_util::to_numpy(std::move(areas), {grid.view.rows, grid.view.cols});
         },
         py::arg("grid"),
         R"doc(Area of every cell of a deformed grid, in texels.

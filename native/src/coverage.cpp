@@ -7,6 +7,7 @@
 #include <glm/geometric.hpp>
 
 #include "lmrefine/error.h"
+#include "lmrefine/layout_raster.h"
 #include "lmrefine/texel_space.h"
 
 namespace lmrefine {
@@ -16,32 +17,101 @@ namespace {
 // edge that lies exactly on a texel border does not claim the next texel.
 constexpr double kTouch = 1e-7;
 
-// Separating-axis test of a triangle against the unit square at (x0, y0).
-bool overlaps_texel(const glm::dvec2 p[3], double x0, double y0) {
-    const glm::dvec2 corners[4] = {{x0, y0}, {x0 + 1, y0}, {x0, y0 + 1}, {x0 + 1, y0 + 1}};
+// The smallest index in [lo, hi) where `holds` is true, or hi; `holds` must
+// be false then true along the range (monotone). Starts from `guess` (any
+// value, NaN too: it only decides how many steps the walk takes).
+template <class Holds>
+int first_true(int lo, int hi, double guess, Holds&& holds) {
+    int k = guess > lo ? (guess < hi ? int(guess) : hi) : lo;
+    while (k > lo && holds(k - 1)) --k;
+    while (k < hi && !holds(k)) ++k;
+    return k;
+}
+
+}  // namespace
+
+TriangleCover::TriangleCover(const glm::dvec2 p[3], int width, int height) {
+    const double xmin = std::min({p[0].x, p[1].x, p[2].x}), xmax = std::max({p[0].x, p[1].x, p[2].x});
+    const double ymin = std::min({p[0].y, p[1].y, p[2].y}), ymax = std::max({p[0].y, p[1].y, p[2].y});
+    c0_ = std::max(0, int(std::floor(xmin)));
+    c1_ = std::min(width - 1, int(std::ceil(xmax)));
+    r0_ = std::max(0, int(std::floor(ymin)));
+    r1_ = std::min(height - 1, int(std::ceil(ymax)));
+    empty_ = c0_ > c1_ || r0_ > r1_;
     for (int e = 0; e < 3; ++e) {
         const glm::dvec2 a = p[e], b = p[(e + 1) % 3];
-        const glm::dvec2 axis(a.y - b.y, b.x - a.x);
-        const double scale = glm::length(axis);
-        if (scale == 0.0) return false;
-        double tmin = glm::dot(axis, p[0]), tmax = tmin;
+        axis_[e] = glm::dvec2(a.y - b.y, b.x - a.x);
+        const double scale = glm::length(axis_[e]);
+        if (scale == 0.0) empty_ = true;  // zero area: touches nothing
+        tmin_[e] = tmax_[e] = glm::dot(axis_[e], p[0]);
         for (int k = 1; k < 3; ++k) {
-            const double t = glm::dot(axis, p[k]);
-            tmin = std::min(tmin, t);
-            tmax = std::max(tmax, t);
+            const double t = glm::dot(axis_[e], p[k]);
+            tmin_[e] = std::min(tmin_[e], t);
+            tmax_[e] = std::max(tmax_[e], t);
         }
-        double smin = glm::dot(axis, corners[0]), smax = smin;
-        for (int k = 1; k < 4; ++k) {
-            const double s = glm::dot(axis, corners[k]);
-            smin = std::min(smin, s);
-            smax = std::max(smax, s);
-        }
-        if (tmax <= smin + kTouch * scale || smax <= tmin + kTouch * scale) return false;
+        touch_[e] = kTouch * scale;
+        inverse_ax_[e] = axis_[e].x != 0.0 ? 1.0 / axis_[e].x : 0.0;
+    }
+}
+
+TriangleCover::TriangleCover(const UvLayout& layout, int64_t t, int width, int height) {
+    glm::dvec2 p[3];
+    for (int k = 0; k < 3; ++k) {
+        const int32_t index = layout.triangles[3 * t + k];
+        p[k] = uv_to_pixel({layout.uvs[2 * index], layout.uvs[2 * index + 1]}, width, height);
+    }
+    *this = TriangleCover(p, width, height);
+}
+
+// Separating-axis test of the triangle against the texel's unit square, per
+// edge normal: the square's projection is [smin, smax]. Since a + b rounds
+// monotonically in a and b, the smallest of the four corners' dot products
+// (a.x * x + a.y * y) is the sum of the smallest x and y terms, bit for bit.
+bool TriangleCover::overlaps(int row, int col) const {
+    if (empty_ || row < r0_ || row > r1_ || col < c0_ || col > c1_) return false;
+    for (int e = 0; e < 3; ++e) {
+        const double x0 = axis_[e].x * col, x1 = axis_[e].x * (col + 1.0);
+        const double y0 = axis_[e].y * row, y1 = axis_[e].y * (row + 1.0);
+        const double smin = std::min(x0, x1) + std::min(y0, y1), smax = std::max(x0, x1) + std::max(y0, y1);
+        if (tmax_[e] <= smin + touch_[e] || smax <= tmin_[e] + touch_[e]) return false;
     }
     return true;
 }
 
-}  // namespace
+// Each of the six half-tests of `overlaps` is monotone along a row (smin and
+// smax move one way with the column), so each bounds the span from one side.
+// The bound is guessed from the real-valued crossing (rounded up to the
+// next column) and then walked to the exact column where the rounded
+// half-test flips: the span holds exactly the texels `overlaps` accepts.
+std::pair<int, int> TriangleCover::columns(int row) const {
+    int begin = c0_, end = c1_ + 1;
+    if (empty_) return {c0_, c0_};
+    for (int e = 0; e < 3 && begin < end; ++e) {
+        const double ax = axis_[e].x;
+        const double y0 = axis_[e].y * row, y1 = axis_[e].y * (row + 1.0);
+        const double ymin = std::min(y0, y1), ymax = std::max(y0, y1);
+        const double tmax = tmax_[e], tmin_touch = tmin_[e] + touch_[e], touch = touch_[e];
+        // below(col): the triangle reaches past the square's low end
+        // (tmax > smin + touch); above(col): past its high end (smax > tmin
+        // + touch). With ax > 0 the square's low end is at its left column
+        // edge (ax * col), else at its right one: the same rounded values
+        // as the min / max in `overlaps`.
+        if (ax > 0) {
+            auto above = [&](int col) { return ax * (col + 1.0) + ymax > tmin_touch; };
+            auto not_below = [&](int col) { return !(tmax > ax * col + ymin + touch); };
+            begin = first_true(begin, end, (tmin_touch - ymax) * inverse_ax_[e], above);
+            end = first_true(begin, end, (tmax - ymin - touch) * inverse_ax_[e] + 1.0, not_below);
+        } else if (ax < 0) {
+            auto below = [&](int col) { return tmax > ax * (col + 1.0) + ymin + touch; };
+            auto not_above = [&](int col) { return !(ax * col + ymax > tmin_touch); };
+            begin = first_true(begin, end, (tmax - ymin - touch) * inverse_ax_[e], below);
+            end = first_true(begin, end, (tmin_touch - ymax) * inverse_ax_[e] + 1.0, not_above);
+        } else if (!(tmax > ymin + touch) || !(ymax > tmin_touch)) {  // the same for every column
+            end = begin;
+        }
+    }
+    return begin >= end ? std::pair<int, int>(c0_, c0_) : std::pair<int, int>(begin, end);
+}
 
 void validate_layout(const UvLayout& layout) {
     LMREFINE_REQUIRE(layout.uv_count >= 0 && layout.triangle_count >= 0, "negative layout size");
@@ -62,34 +132,11 @@ void validate_layout(const UvLayout& layout) {
     }
 }
 
-void for_each_covered_texel(const UvLayout& layout, int width, int height,
-                            const std::function<void(int64_t, int, int)>& visit) {
-    for (int64_t t = 0; t < layout.triangle_count; ++t) {
-        glm::dvec2 p[3];
-        for (int k = 0; k < 3; ++k) {
-            const int32_t index = layout.triangles[3 * t + k];
-            p[k] = uv_to_pixel({layout.uvs[2 * index], layout.uvs[2 * index + 1]}, width, height);
-        }
-        const double xmin = std::min({p[0].x, p[1].x, p[2].x}), xmax = std::max({p[0].x, p[1].x, p[2].x});
-        const double ymin = std::min({p[0].y, p[1].y, p[2].y}), ymax = std::max({p[0].y, p[1].y, p[2].y});
-        const int c0 = std::max(0, int(std::floor(xmin))), c1 = std::min(width - 1, int(std::ceil(xmax)));
-        const int r0 = std::max(0, int(std::floor(ymin))), r1 = std::min(height - 1, int(std::ceil(ymax)));
-        for (int row = r0; row <= r1; ++row) {
-            for (int col = c0; col <= c1; ++col) {
-                if (overlaps_texel(p, col, row)) visit(t, row, col);
-            }
-        }
-    }
-}
-
 std::vector<uint8_t> coverage_mask(const UvLayout& layout, int width, int height) {
     LMREFINE_REQUIRE(width > 0 && height > 0, "resolution must be positive, got " + std::to_string(width) +
                                                   "x" + std::to_string(height));
     validate_layout(layout);
-    std::vector<uint8_t> mask(size_t(width) * height, 0);
-    for_each_covered_texel(layout, width, height,
-                           [&](int64_t, int row, int col) { mask[size_t(row) * width + col] = 1; });
-    return mask;
+    return coverage_mask(LayoutRaster(layout, width, height));
 }
 
 }  // namespace lmrefine

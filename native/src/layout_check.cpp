@@ -15,6 +15,7 @@
 
 #include "lmrefine/chart.h"
 #include "lmrefine/error.h"
+#include "lmrefine/parallel.h"
 #include "lmrefine/texel_space.h"
 
 namespace lmrefine {
@@ -199,20 +200,67 @@ double min_gutter(const std::vector<Edge>& edges, int width, int height, double 
 
 }  // namespace
 
-LayoutReport check_layout(const UvLayout& layout, int width, int height, double padding,
-                          const float* reference_uvs, bool list_failing_charts, bool relative_gutter) {
-    LMREFINE_REQUIRE(!relative_gutter || reference_uvs,
-                     "relative_gutter compares with the original layout: pass reference_uvs");
+// The original's smallest chart distance and every chart pair closer than
+// the padding, with its distance: one min_gutter pass serves the original's
+// own report and every relative check.
+struct LayoutChecker::Gutter {
+    double best = std::numeric_limits<double>::infinity();
+    PairDistances pairs;
+};
+
+LayoutChecker::LayoutChecker(const UvLayout& original, int width, int height, double padding)
+    : original_(original), width_(width), height_(height), padding_(padding) {
     LMREFINE_REQUIRE(width > 0 && height > 0, "resolution must be positive, got " + std::to_string(height) +
                                                   "x" + std::to_string(width));
     LMREFINE_REQUIRE(padding >= 0, "padding must be >= 0 texels");
-    validate_layout(layout);
-    if (reference_uvs) validate_layout({reference_uvs, layout.uv_count, layout.triangles, layout.triangle_count});
+    validate_layout(original);
+    charts_ = find_charts(original);
+    orientation_.resize(size_t(original.triangle_count));
+    for (int64_t t = 0; t < original.triangle_count; ++t) {
+        orientation_[size_t(t)] = int8_t(orientation(pixel_triangle(original, original.uvs, t, width, height)));
+    }
+}
 
+LayoutChecker::~LayoutChecker() = default;
+
+const LayoutRaster& LayoutChecker::raster() const {
+    std::call_once(raster_once_, [&] { raster_ = std::make_unique<LayoutRaster>(original_, width_, height_); });
+    return *raster_;
+}
+
+const std::vector<int32_t>& LayoutChecker::owners() const {
+    std::call_once(owners_once_, [&] { owners_ = texel_owners(raster(), charts_.triangle_chart); });
+    return owners_;
+}
+
+const LayoutChecker::Gutter& LayoutChecker::original_gutter() const {
+    std::call_once(gutter_once_, [&] {
+        auto gutter = std::make_unique<Gutter>();
+        if (charts_.count >= 2) {
+            gutter->best = min_gutter(boundary_edges(original_, charts_, width_, height_), width_, height_, padding_,
+                                      nullptr, &gutter->pairs);
+        }
+        gutter_ = std::move(gutter);
+    });
+    return *gutter_;
+}
+
+LayoutReport LayoutChecker::check_original(bool list_failing_charts) const {
+    return check_against(original_, raster(), false, list_failing_charts, false);
+}
+
+LayoutReport LayoutChecker::check(const float* uvs, bool list_failing_charts, bool relative_gutter) const {
+    const UvLayout layout{uvs, original_.uv_count, original_.triangles, original_.triangle_count};
+    return check_against(layout, LayoutRaster(layout, width_, height_), true, list_failing_charts, relative_gutter);
+}
+
+// check_layout's body. Without a reference `layout` is the original itself.
+LayoutReport LayoutChecker::check_against(const UvLayout& layout, const LayoutRaster& raster, bool with_reference,
+                                          bool list_failing_charts, bool relative_gutter) const {
+    const int width = width_, height = height_;
+    const double padding = padding_;
+    const Charts& charts = charts_;
     LayoutReport report;
-    const Charts charts = find_charts(reference_uvs ? UvLayout{reference_uvs, layout.uv_count, layout.triangles,
-                                                               layout.triangle_count}
-                                                    : layout);
     report.charts = charts.count;
 
     for (int64_t k = 0; k < layout.uv_count; ++k) {
@@ -222,15 +270,16 @@ LayoutReport check_layout(const UvLayout& layout, int width, int height, double 
 
     // Orientation and degeneracy.
     const size_t T = size_t(layout.triangle_count);
-    std::vector<int8_t> sign(T);
+    std::vector<int8_t> sign(T), skip(T);
     std::vector<uint8_t> failing(size_t(charts.count), 0);
     std::vector<int64_t> chart_balance(size_t(charts.count), 0);
     for (size_t t = 0; t < T; ++t) {
-        sign[t] = int8_t(orientation(pixel_triangle(layout, layout.uvs, int64_t(t), width, height)));
+        sign[t] = with_reference ? int8_t(orientation(pixel_triangle(layout, layout.uvs, int64_t(t), width, height)))
+                                 : orientation_[t];
+        skip[t] = sign[t] == 0;
         if (sign[t] == 0) {
             ++report.degenerate;
-            const bool was_degenerate =
-                reference_uvs && orientation(pixel_triangle(layout, reference_uvs, int64_t(t), width, height)) == 0;
+            const bool was_degenerate = with_reference && orientation_[t] == 0;
             if (!was_degenerate) failing[size_t(charts.triangle_chart[t])] = 1;
         }
         chart_balance[size_t(charts.triangle_chart[t])] += sign[t];
@@ -238,8 +287,8 @@ LayoutReport check_layout(const UvLayout& layout, int width, int height, double 
     for (size_t t = 0; t < T; ++t) {
         if (sign[t] == 0) continue;
         int expected;
-        if (reference_uvs) {
-            expected = orientation(pixel_triangle(layout, reference_uvs, int64_t(t), width, height));
+        if (with_reference) {
+            expected = orientation_[t];
             if (expected == 0) continue;  // a degenerate original has no orientation to keep
         } else {
             // Ties count the chart as counter-clockwise in UV (clockwise in pixel space, y down).
@@ -253,20 +302,32 @@ LayoutReport check_layout(const UvLayout& layout, int width, int height, double 
 
     // Overlap: first mark texels reached by more than one chart, then test
     // the triangle pairs of different charts inside those texels only.
-    constexpr int32_t kEmpty = -1, kShared = -2;
-    std::vector<int32_t> owner(size_t(width) * height, kEmpty);
-    for_each_covered_texel(layout, width, height, [&](int64_t t, int row, int col) {
-        if (sign[size_t(t)] == 0) return;
-        int32_t& o = owner[size_t(row) * width + col];
-        const int32_t chart = charts.triangle_chart[size_t(t)];
-        if (o == kEmpty) o = chart;
-        else if (o != chart) o = kShared;
+    // The original's owners (every triangle) serve when no triangle is skipped.
+    std::vector<int32_t> own_owner;
+    if (with_reference || report.degenerate) own_owner = texel_owners(raster, charts.triangle_chart, skip.data());
+    const std::vector<int32_t>& owner = with_reference || report.degenerate ? own_owner : owners();
+    // (texel, triangle) for every shared texel, gathered per row band in
+    // parallel; sorting makes the order independent of the bands.
+    std::vector<std::vector<std::pair<int32_t, int32_t>>> shared_in_band(static_cast<size_t>(raster.band_count()));
+    parallel_for(raster.band_count(), 1, [&](int64_t band_begin, int64_t band_end) {
+        for (int64_t band = band_begin; band < band_end; ++band) {
+            // Most bands have no texel of two charts (charts a gutter apart): skip them.
+            const int row0 = int(band) * LayoutRaster::kBandRows;
+            const auto first = owner.begin() + ptrdiff_t(row0) * width;
+            const auto last = owner.begin() + ptrdiff_t(std::min(height, row0 + LayoutRaster::kBandRows)) * width;
+            if (std::find(first, last, kShared) == last) continue;
+            auto& found = shared_in_band[size_t(band)];
+            raster.for_each_span_in_band(int(band), [&](int64_t t, int row, int begin, int end) {
+                if (skip[size_t(t)]) return;
+                for (int col = begin; col < end; ++col) {
+                    const size_t texel = size_t(row) * width + col;
+                    if (owner[texel] == kShared) found.emplace_back(int32_t(texel), int32_t(t));
+                }
+            });
+        }
     });
     std::vector<std::pair<int32_t, int32_t>> shared;  // (texel, triangle)
-    for_each_covered_texel(layout, width, height, [&](int64_t t, int row, int col) {
-        const size_t texel = size_t(row) * width + col;
-        if (sign[size_t(t)] != 0 && owner[texel] == kShared) shared.emplace_back(int32_t(texel), int32_t(t));
-    });
+    for (const auto& found : shared_in_band) shared.insert(shared.end(), found.begin(), found.end());
     std::sort(shared.begin(), shared.end());
     std::vector<uint8_t> overlapping(T, 0);
     for (size_t begin = 0; begin < shared.size();) {
@@ -293,6 +354,16 @@ LayoutReport check_layout(const UvLayout& layout, int width, int height, double 
 
     if (charts.count < 2) {
         report.min_gutter_texels = std::numeric_limits<double>::infinity();
+    } else if (!with_reference) {
+        // The pairs closer than the padding are exactly the ones min_gutter
+        // would mark as close.
+        const Gutter& gutter = original_gutter();
+        report.min_gutter_texels = gutter.best;
+        if (list_failing_charts) {
+            for (const auto& [key, distance] : gutter.pairs) {
+                failing[size_t(key >> 32)] = failing[size_t(key & 0xffffffffu)] = 1;
+            }
+        }
     } else if (!relative_gutter) {
         report.min_gutter_texels = min_gutter(boundary_edges(layout, charts, width, height), width, height, padding,
                                               list_failing_charts ? &failing : nullptr);
@@ -300,9 +371,8 @@ LayoutReport check_layout(const UvLayout& layout, int width, int height, double 
         // Every chart pair must stay at least min(padding, its original
         // distance) apart: a pair the original packed tighter than the
         // padding keeps its own gutter, without holding back all the others.
-        PairDistances before, after;
-        const UvLayout reference{reference_uvs, layout.uv_count, layout.triangles, layout.triangle_count};
-        min_gutter(boundary_edges(reference, charts, width, height), width, height, padding, nullptr, &before);
+        const PairDistances& before = original_gutter().pairs;
+        PairDistances after;
         report.min_gutter_texels =
             min_gutter(boundary_edges(layout, charts, width, height), width, height, padding, nullptr, &after);
         std::vector<std::pair<uint64_t, double>> close(after.begin(), after.end());
@@ -324,6 +394,20 @@ LayoutReport check_layout(const UvLayout& layout, int width, int height, double 
     report.valid = report.flipped == 0 && report.degenerate == 0 && report.overlapping == 0 &&
                    report.out_of_bounds == 0 && report.min_gutter_texels >= padding - 1e-6;
     return report;
+}
+
+LayoutReport check_layout(const UvLayout& layout, int width, int height, double padding,
+                          const float* reference_uvs, bool list_failing_charts, bool relative_gutter) {
+    LMREFINE_REQUIRE(!relative_gutter || reference_uvs,
+                     "relative_gutter compares with the original layout: pass reference_uvs");
+    LMREFINE_REQUIRE(width > 0 && height > 0, "resolution must be positive, got " + std::to_string(height) +
+                                                  "x" + std::to_string(width));
+    LMREFINE_REQUIRE(padding >= 0, "padding must be >= 0 texels");
+    validate_layout(layout);
+    if (!reference_uvs) return LayoutChecker(layout, width, height, padding).check_original(list_failing_charts);
+    const LayoutChecker checker({reference_uvs, layout.uv_count, layout.triangles, layout.triangle_count}, width,
+                                height, padding);
+    return checker.check(layout.uvs, list_failing_charts, relative_gutter);
 }
 
 }  // namespace lmrefine

@@ -23,6 +23,7 @@ except ImportError as error:  # pragma: no cover - depends on the build state
 
 from ._native import (  # noqa: F401  (re-exports)
     CancelledError,
+    LayoutChecker,
     Scene,
     check_layout,
     coverage_mask,
@@ -46,6 +47,7 @@ __version__ = _native.__version__
 __all__ = [
     "BakeResult",
     "CancelledError",
+    "LayoutChecker",
     "RefineResult",
     "Scene",
     "bake",

@@ -50,20 +50,16 @@ def allowed_gutter(padding, original):
 
 def invalid_cells(grid):
     """(H, W) bool: cells that are not convex, non-inverted quadrilaterals
-    (UV space, v up, so a valid cell turns clockwise)."""
-    q = [grid[:-1, :-1], grid[:-1, 1:], grid[1:, 1:], grid[1:, :-1]]
-    bad = np.zeros(grid.shape[:2] - np.array([1, 1]), bool)
-    for k in range(4):
-        a = q[(k + 1) % 4] - q[k]
-        b = q[(k + 3) % 4] - q[k]
-        bad |= (a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]) >= 0
-    return bad
+    (UV space, v up, so a valid cell turns clockwise; float32 cross products)."""
+    return _native.grid_invalid_cells(np.asarray(grid, np.float32))
 
 
-def chart_boxes(uvs, triangles, shape):
-    """Per chart, its node-index bounding box (i0, j0, i1, j1), widened by _MARGIN."""
+def chart_boxes(uvs, triangles, shape, charts=None):
+    """Per chart, its node-index bounding box (i0, j0, i1, j1), widened by
+    _MARGIN. charts: find_charts(uvs, triangles) if already known."""
     height, width = shape
-    charts = _native.find_charts(uvs, triangles)
+    if charts is None:
+        charts = _native.find_charts(uvs, triangles)
     count = int(charts.max()) + 1 if len(charts) else 0
     corner_chart = np.repeat(charts, 3)
     corners = uvs[triangles.ravel()].astype(np.float64)
@@ -108,26 +104,32 @@ def _ramp(kept):
     return kept
 
 
-def accept(full, identity, uvs, triangles, shape, padding, original):
-    """The most of `full` that gives a valid layout.
+def accept(full, identity, uvs, triangles, shape, padding, original, checker=None):
+    """The most of `full` that gives a valid layout. checker: the original's
+    LayoutChecker (uvs, triangles, shape, padding) if the caller has one.
 
     Returns (grid, uvs, check, kept, limited_by): the blended grid, the
     warped UVs, their check_layout report, the (H + 1, W + 1) fraction of
     the deformation kept at each node, and what forced any back-off.
     """
+    if checker is None:
+        checker = _native.LayoutChecker(uvs, triangles, shape, padding)
     kept = np.ones(full.shape[:2], np.float32)
+    displacement = full - identity
     threshold = max(allowed_gutter(padding, original), 0.0)
     boxes = None
     limited_by = []
     for _ in range(_ROUNDS):
-        grid = (identity + kept[..., None] * (full - identity)).astype(np.float32)
+        # identity + kept * (full - identity), without temporaries.
+        grid = kept[..., None] * displacement
+        grid += identity
+        grid = grid.astype(np.float32, copy=False)
         bad_cells = invalid_cells(grid)
         if not bad_cells.any():
             new_uvs = _native.warp_uvs(uvs, grid)
             # Per chart pair: no pair closer than min(padding, its original
             # distance), so one tight pair does not hold back all the others.
-            check = _native.check_layout(new_uvs, triangles, shape, padding, reference_uvs=uvs,
-                                         failing_charts=True, relative_gutter=True)
+            check = checker.check(new_uvs, failing_charts=True, relative_gutter=True)
             failed = failures(check, original, padding)
             if not failed:
                 check.pop("failing_charts")
@@ -137,7 +139,7 @@ def accept(full, identity, uvs, triangles, shape, padding, original):
                 return grid, new_uvs, check, kept, limited_by
             limited_by += [f for f in failed if f not in limited_by]
             if boxes is None:
-                boxes = chart_boxes(uvs, triangles, shape)
+                boxes = chart_boxes(uvs, triangles, shape, checker.charts)
             region = np.zeros(kept.shape, bool)
             for i0, j0, i1, j1 in boxes[check["failing_charts"]]:
                 region[i0:i1 + 1, j0:j1 + 1] = True

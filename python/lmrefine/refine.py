@@ -173,8 +173,9 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
         'original_gutter' (the original is tighter than padding); empty if
         nothing), notes (list of sentences, e.g. on the original's gutter),
         passes, edge_shrink (the value used: 1.0 on a tight pack),
-        border, seconds (timings: setup, gradient_map, automaton,
-        warp_and_check), original_check and check (check_layout reports).
+        border, seconds (timings: setup (the original's coverage, gutter
+        texels and check), gradient_map, automaton, warp_and_check),
+        original_check and check (check_layout reports).
 
     Raises:
         ValueError: bad shapes, indices out of range, NaN UVs, UVs outside
@@ -189,17 +190,22 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
         raise ValueError(f"border must be one of {BORDER_MODES}, got {border!r}")
     if not (isinstance(passes, (int, np.integer)) and passes >= 1):
         raise ValueError(f"passes must be an integer >= 1, got {passes!r}")
+    if not 0 < edge_shrink <= 1:
+        raise ValueError(f"edge_shrink must be in (0, 1] (1: chart edges keep their size), got {edge_shrink}")
+    # The original is analysed once (charts, rasterization, chart distances)
+    # for its coverage, gutter texels and check and every back-off round.
+    checker = _native.LayoutChecker(uvs, triangles, shape, padding)
     if mask is None:
-        mask = _native.coverage_mask(uvs, triangles, shape)
+        mask = checker.coverage_mask()
     else:
         mask = np.asarray(mask)
         if mask.shape != shape:
             raise ValueError(f"mask must have shape {shape} (the resolution), got {mask.shape}")
         mask = mask.astype(bool)
-
-    original = _native.check_layout(uvs, triangles, shape, padding)
-    if not 0 < edge_shrink <= 1:
-        raise ValueError(f"edge_shrink must be in (0, 1] (1: chart edges keep their size), got {edge_shrink}")
+    # Texels between charts only shift, chart edges facing the gutter shrink to
+    # edge_shrink at most (if the gutter is wide): chart pairs keep their distance.
+    rigid = checker.gutter_texels()
+    original = checker.check()
     edge_shrink_used = (float(edge_shrink) if original["min_gutter_texels"] >= padding + _EDGE_SHRINK_GUTTER_MARGIN
                         else 1.0)
     timings = {"setup": time.perf_counter() - start}
@@ -208,9 +214,6 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
     energy, scalar_energy = _energy(gradient, mask, float(strength), directional)
     timings["gradient_map"] = time.perf_counter() - clock
     clock = time.perf_counter()
-    # Texels between charts only shift, chart edges facing the gutter shrink to
-    # edge_shrink at most (if the gutter is wide): chart pairs keep their distance.
-    rigid = _native.gutter_texels(uvs, triangles, shape)
     run = _native.run_automaton(energy, mask, rigid=rigid, diffusion=diffusion, delta=delta, max_steps=max_steps,
                                 min_shrink=min_shrink, max_magnification=max_magnification,
                                 edge_shrink=edge_shrink_used, border=border,
@@ -233,7 +236,8 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
     if np.array_equal(full, identity):
         grid, new_uvs, check, kept = identity, uvs.copy(), original, np.ones(identity.shape[:2], np.float32)
     else:
-        grid, new_uvs, check, kept, failed = backoff.accept(full, identity, uvs, triangles, shape, padding, original)
+        grid, new_uvs, check, kept, failed = backoff.accept(full, identity, uvs, triangles, shape, padding, original,
+                                                          checker)
         limited_by += failed
 
     timings["warp_and_check"] = time.perf_counter() - clock

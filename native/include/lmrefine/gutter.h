@@ -18,4 +18,8 @@ namespace lmrefine {
 // find_charts.
 std::vector<uint8_t> gutter_texels(const UvLayout& layout, int width, int height);
 
+// The same from the layout's texel_owners (every triangle counted), for a
+// caller that already rasterized it.
+std::vector<uint8_t> gutter_texels(const std::vector<int32_t>& owners, int width, int height);
+
 }  // namespace lmrefine

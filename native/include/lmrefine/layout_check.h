@@ -4,9 +4,14 @@
 #pragma once
 
 #include <cstdint>
+#include <memory>
+#include <mutex>
+#include <unordered_map>
 #include <vector>
 
+#include "lmrefine/chart.h"
 #include "lmrefine/coverage.h"
+#include "lmrefine/layout_raster.h"
 
 namespace lmrefine {
 
@@ -41,5 +46,45 @@ struct LayoutReport {
 LayoutReport check_layout(const UvLayout& layout, int width, int height, double padding,
                           const float* reference_uvs = nullptr, bool list_failing_charts = false,
                           bool relative_gutter = false);
+
+// Checks of one original layout and of its warped versions (same triangles,
+// moved UVs), as the refiner's back-off rounds make them: what depends only
+// on the original (its charts, orientations, rasterization and chart-pair
+// distances) is computed once instead of per check. Results equal
+// check_layout's bit for bit. `original` is viewed, not copied: it must
+// outlive the checker. Caches fill on first use (once, thread-safe).
+class LayoutChecker {
+public:
+    LayoutChecker(const UvLayout& original, int width, int height, double padding);
+    ~LayoutChecker();
+
+    const Charts& charts() const { return charts_; }
+    // The original's rasterization (computed on first use).
+    const LayoutRaster& raster() const;
+    // texel_owners of the original, every triangle counted (computed on first use).
+    const std::vector<int32_t>& owners() const;
+
+    // check_layout(original, width, height, padding, nullptr, list_failing_charts).
+    LayoutReport check_original(bool list_failing_charts = false) const;
+    // check_layout({uvs, original's triangles}, width, height, padding,
+    // original.uvs, list_failing_charts, relative_gutter); uvs must be valid.
+    LayoutReport check(const float* uvs, bool list_failing_charts, bool relative_gutter) const;
+
+private:
+    struct Gutter;
+    const Gutter& original_gutter() const;
+    LayoutReport check_against(const UvLayout& layout, const LayoutRaster& raster, bool with_reference,
+                               bool list_failing_charts, bool relative_gutter) const;
+
+    UvLayout original_;
+    int width_, height_;
+    double padding_;
+    Charts charts_;
+    std::vector<int8_t> orientation_;  // of the original, per triangle
+    mutable std::once_flag raster_once_, owners_once_, gutter_once_;
+    mutable std::unique_ptr<LayoutRaster> raster_;
+    mutable std::vector<int32_t> owners_;
+    mutable std::unique_ptr<Gutter> gutter_;
+};
 
 }  // namespace lmrefine
