@@ -56,18 +56,26 @@ struct Shape {
     // cross product of the edges a, b at a corner (bounded through
     // |a| + |b| <= sqrt(2 (|a|^2 + |b|^2))); a quarter cell for a square.
     // Moves this size can still spoil a cell when all its corners move
-    // against it; step 4 puts those moves back, so validity never rests on
+    // against it; the guards put those moves back, so validity never rests on
     // the radius, which only keeps such reverts rare.
     double radius;
     // How well shaped, squared and signed (negative if inverted): the
     // smallest sin^2 of the corner angles, or 16 (shortest / longest edge)^2
-    // if smaller (a convex cell can still collapse an edge into a triangle).
+    // if smaller (a convex cell can still collapse an edge into a triangle);
+    // kQualityExactBelow for every cell at least that well shaped.
     double quality2;
 };
 
 // Two doubles divided at once (SSE2 divpd, in every x86-64): the divisions
 // were most of a step's time, and IEEE division rounds the same either way.
 typedef double Pair __attribute__((vector_size(16)));
+
+// A cell's quality is only ever compared with kMinQuality^2 and, below
+// that, with its previous quality, so any value at or above this bound
+// gives the same decisions: a well-shaped cell reports the bound itself and
+// skips the quality's divisions.
+constexpr double kQualityExactBelow = 0.25;
+static_assert(kQualityExactBelow > kMinQuality * kMinQuality, "the bound must lie above every decision");
 
 Shape shape(const glm::dvec2 q[4]) {
     glm::dvec2 e[4];
@@ -76,24 +84,24 @@ Shape shape(const glm::dvec2 q[4]) {
         e[k] = q[(k + 1) % 4] - q[k];
         l2[k] = glm::dot(e[k], e[k]);
     }
-    // At corner k, between its two edges: c^2 over the radius' and the
-    // sine's denominators.
-    Pair ratio[4];
+    // At corner k, between edge p before it and edge k: c^2 = (e_p x e_k)^2.
+    double c2[4];
     for (int k = 0; k < 4; ++k) {
-        const int p = (k + 3) % 4;
-        const double c = cross(e[p], e[k]);
+        const double c = cross(e[(k + 3) % 4], e[k]);
         if (!(c > 0)) return {quad_area(q), 0.0, -1.0};
-        const Pair numerator = {c * c, c * c};
-        const Pair denominator = {8 * (l2[p] + l2[k]), l2[p] * l2[k]};
-        ratio[k] = numerator / denominator;
+        c2[k] = c * c;
     }
-    double r2 = std::numeric_limits<double>::infinity(), sin2 = 1.0;
-    for (int k = 0; k < 4; ++k) {
-        r2 = std::min(r2, ratio[k][0]);
-        sin2 = std::min(sin2, ratio[k][1]);
-    }
+    const Pair radius01 = Pair{c2[0], c2[1]} / Pair{8 * (l2[3] + l2[0]), 8 * (l2[0] + l2[1])};
+    const Pair radius23 = Pair{c2[2], c2[3]} / Pair{8 * (l2[1] + l2[2]), 8 * (l2[2] + l2[3])};
+    const double r2 = std::min(std::min(radius01[0], radius01[1]), std::min(radius23[0], radius23[1]));
     const double shortest = std::min({l2[0], l2[1], l2[2], l2[3]});
     const double longest = std::max({l2[0], l2[1], l2[2], l2[3]});
+    bool well_shaped = 16 * shortest >= kQualityExactBelow * longest;
+    for (int k = 0; k < 4; ++k) well_shaped = well_shaped && c2[k] >= kQualityExactBelow * l2[(k + 3) % 4] * l2[k];
+    if (well_shaped) return {quad_area(q), std::sqrt(r2), kQualityExactBelow};
+    const Pair sine01 = Pair{c2[0], c2[1]} / Pair{l2[3] * l2[0], l2[0] * l2[1]};
+    const Pair sine23 = Pair{c2[2], c2[3]} / Pair{l2[1] * l2[2], l2[2] * l2[3]};
+    const double sin2 = std::min({1.0, sine01[0], sine01[1], sine23[0], sine23[1]});
     return {quad_area(q), std::sqrt(r2), std::min(sin2, 16 * shortest / longest)};
 }
 
