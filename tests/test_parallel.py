@@ -68,3 +68,4 @@ def test_a_forked_child_runs_parallel_loops(monkeypatch):
             os._exit(code)
     _, status = os.waitpid(pid, 0)
     assert os.WIFEXITED(status) and os.WEXITSTATUS(status) == 0, f"child status {status}"
+

@@ -51,7 +51,9 @@ void require_columns(const py::array& array, const char* name, int columns, bool
 
 FloatArray require_float32(const py::handle& object, const char* name, std::initializer_list<int> ndims) {
     py::array array = as_array(object, name);
-    if (!array.dtype().is(py::dtype::of<float>())) {
+    // Equal, not the same object: an unpickled array (multiprocessing) has
+    // its own float32 dtype object. Byte-swapped float32 is not equal.
+    if (!array.dtype().equal(py::dtype::of<float>())) {
         throw py::value_error(std::string(name) + " must be float32, got " + dtype_name(array) +
                               "; convert it with " + name + ".astype(numpy.float32)");
     }
@@ -79,7 +81,7 @@ IndexArray require_indices(const py::handle& object, const char* name, int colum
         throw py::value_error(std::string(name) + " must hold integers, got dtype " + dtype_name(array));
     }
     require_columns(array, name, columns, allow_empty);
-    if (array.dtype().is(py::dtype::of<int32_t>())) return IndexArray::ensure(array);
+    if (array.dtype().equal(py::dtype::of<int32_t>())) return IndexArray::ensure(array);
     // Range-check before narrowing so a huge index is reported, not wrapped.
     py::array_t<int64_t, py::array::c_style | py::array::forcecast> wide(array);
     const int64_t* p = wide.data();

@@ -30,7 +30,7 @@ py::array_t<float> compute(const py::handle& image_in, const py::handle& mask_in
     if (!mask_in.is_none()) {
         if (!py::isinstance<py::array>(mask_in)) throw py::value_error("mask must be a numpy bool array or None");
         auto raw = py::reinterpret_borrow<py::array>(mask_in);
-        if (!raw.dtype().is(py::dtype::of<bool>())) {
+        if (!raw.dtype().equal(py::dtype::of<bool>())) {  // equal: unpickled arrays have their own dtype
             throw py::value_error("mask must be bool (True = covered), got " + py_util::dtype_name(raw) +
                                   "; use lmrefine.coverage_mask(uvs, triangles, resolution) or mask.astype(bool)");
         }

@@ -61,18 +61,26 @@ struct Shape {
     // cross product of the edges a, b at a corner (bounded through
     // |a| + |b| <= sqrt(2 (|a|^2 + |b|^2))); a quarter cell for a square.
     // Moves this size can still spoil a cell when all its corners move
-    // against it; step 4 puts those moves back, so validity never rests on
+    // against it; the guards put those moves back, so validity never rests on
     // the radius, which only keeps such reverts rare.
     double radius;
     // How well shaped, squared and signed (negative if inverted): the
     // smallest sin^2 of the corner angles, or 16 (shortest / longest edge)^2
-    // if smaller (a convex cell can still collapse an edge into a triangle).
+    // if smaller (a convex cell can still collapse an edge into a triangle);
+    // kQualityExactBelow for every cell at least that well shaped.
     double quality2;
 };
 
 // Two doubles divided at once (SSE2 divpd, in every x86-64): the divisions
 // were most of a step's time, and IEEE division rounds the same either way.
 typedef double Pair __attribute__((vector_size(16)));
+
+// A cell's quality is only ever compared with kMinQuality^2 and, below
+// that, with its previous quality, so any value at or above this bound
+// gives the same decisions: a well-shaped cell reports the bound itself and
+// skips the quality's divisions.
+constexpr double kQualityExactBelow = 0.25;
+static_assert(kQualityExactBelow > kMinQuality * kMinQuality, "the bound must lie above every decision");
 
 Shape shape(const glm::dvec2 q[4]) {
     glm::dvec2 e[4];
@@ -81,24 +89,24 @@ Shape shape(const glm::dvec2 q[4]) {
         e[k] = q[(k + 1) % 4] - q[k];
         l2[k] = glm::dot(e[k], e[k]);
     }
-    // At corner k, between its two edges: c^2 over the radius' and the
-    // sine's denominators.
-    Pair ratio[4];
+    // At corner k, between edge p before it and edge k: c^2 = (e_p x e_k)^2.
+    double c2[4];
     for (int k = 0; k < 4; ++k) {
-        const int p = (k + 3) % 4;
-        const double c = cross(e[p], e[k]);
+        const double c = cross(e[(k + 3) % 4], e[k]);
         if (!(c > 0)) return {quad_area(q), 0.0, -1.0};
-        const Pair numerator = {c * c, c * c};
-        const Pair denominator = {8 * (l2[p] + l2[k]), l2[p] * l2[k]};
-        ratio[k] = numerator / denominator;
+        c2[k] = c * c;
     }
-    double r2 = std::numeric_limits<double>::infinity(), sin2 = 1.0;
-    for (int k = 0; k < 4; ++k) {
-        r2 = std::min(r2, ratio[k][0]);
-        sin2 = std::min(sin2, ratio[k][1]);
-    }
+    const Pair radius01 = Pair{c2[0], c2[1]} / Pair{8 * (l2[3] + l2[0]), 8 * (l2[0] + l2[1])};
+    const Pair radius23 = Pair{c2[2], c2[3]} / Pair{8 * (l2[1] + l2[2]), 8 * (l2[2] + l2[3])};
+    const double r2 = std::min(std::min(radius01[0], radius01[1]), std::min(radius23[0], radius23[1]));
     const double shortest = std::min({l2[0], l2[1], l2[2], l2[3]});
     const double longest = std::max({l2[0], l2[1], l2[2], l2[3]});
+    bool well_shaped = 16 * shortest >= kQualityExactBelow * longest;
+    for (int k = 0; k < 4; ++k) well_shaped = well_shaped && c2[k] >= kQualityExactBelow * l2[(k + 3) % 4] * l2[k];
+    if (well_shaped) return {quad_area(q), std::sqrt(r2), kQualityExactBelow};
+    const Pair sine01 = Pair{c2[0], c2[1]} / Pair{l2[3] * l2[0], l2[0] * l2[1]};
+    const Pair sine23 = Pair{c2[2], c2[3]} / Pair{l2[1] * l2[2], l2[2] * l2[3]};
+    const double sin2 = std::min({1.0, sine01[0], sine01[1], sine23[0], sine23[1]});
     return {quad_area(q), std::sqrt(r2), std::min(sin2, 16 * shortest / longest)};
 }
 
@@ -223,16 +231,28 @@ void row_densities(const Level& level, int i, double* diffusion, double* pressur
         const size_t c = level.cell(i, j);
         const double a = level.area[c];
         const double* e = &level.energy[c * channels];
-        const bool material = level.kind[c] == CellKind::Material;
-        for (int k = 0; k < channels; ++k) diffusion[j * channels + k] = material ? e[k] / a : 0.0;
+        // Numerators: each channel's energy, then each axis' pressure
+        // energy; divided by the area in pairs.
+        static_assert((channels + axes) % 2 == 0, "the divisions go in pairs");
+        double numerator[channels + axes];
+        for (int k = 0; k < channels; ++k) numerator[k] = e[k];
         for (int axis = 0; axis < axes; ++axis) {
             double sum = 0.0, reference = 0.0;
             for (int k = axis; k < channels; k += axes) {
                 sum += e[k];
                 reference += level.reference_density[k];
             }
-            pressure[j * axes + axis] = (sum + reference * level.uncovered_area[c]) / a;
+            numerator[channels + axis] = sum + reference * level.uncovered_area[c];
         }
+        double quotient[channels + axes];
+        for (int k = 0; k < channels + axes; k += 2) {
+            const Pair q = Pair{numerator[k], numerator[k + 1]} / Pair{a, a};
+            quotient[k] = q[0];
+            quotient[k + 1] = q[1];
+        }
+        const bool material = level.kind[c] == CellKind::Material;
+        for (int k = 0; k < channels; ++k) diffusion[j * channels + k] = material ? quotient[k] : 0.0;
+        for (int axis = 0; axis < axes; ++axis) pressure[j * axes + axis] = quotient[channels + axis];
     }
 }
 
@@ -266,18 +286,24 @@ StepStats step_of(Level& level, const AutomatonOptions& options) {
     // the less dense; the border and the gutter are adiabatic) and the push
     // that moves the edge towards the less dense cell.
     // Cells a and b with their densities (da, pa: diffusion, pressure).
-    auto edge = [&](size_t a, double da, double pa, size_t b, double db, double pb, int axis, double& push_out,
+    // Returns |pa - pb| between covered cells (0 elsewhere): the density
+    // difference, relative to the axis' reference density below.
+    auto edge = [&](size_t a, double da, double pa, size_t b, double db, double pb, double& push_out,
                     double& flux_out) {
         push_out = push(pa, pb);
         flux_out = 0.0;
-        double difference = 0.0;
-        if (level.kind[a] == CellKind::Material && level.kind[b] == CellKind::Material) {
-            flux_out = options.diffusion * std::min(level.area[a], level.area[b]) * (da - db);
-            double reference = 0.0;
-            for (int k = axis; k < channels; k += axes) reference += level.reference_density[k];
-            if (reference > 0) difference = std::abs(pa - pb) / reference;
-        }
-        return difference;
+        if (level.kind[a] != CellKind::Material || level.kind[b] != CellKind::Material) return 0.0;
+        flux_out = options.diffusion * std::min(level.area[a], level.area[b]) * (da - db);
+        return std::abs(pa - pb);
+    };
+    // Reference density per axis; dividing the largest difference of a row
+    // by it once gives the largest quotient (rounding is monotonic).
+    double reference[2] = {0.0, 0.0};
+    for (int axis = 0; axis < axes; ++axis) {
+        for (int k = axis; k < channels; k += axes) reference[axis] += level.reference_density[k];
+    }
+    auto relative = [&](double difference, int axis) {
+        return reference[axis] > 0 ? difference / reference[axis] : 0.0;
     };
     // Edge row r: the vertical edges between the cells of row r (r < rows)
     // and the horizontal edges along node row r (between cell rows r - 1 and
@@ -287,14 +313,14 @@ StepStats step_of(Level& level, const AutomatonOptions& options) {
                         double* push_h, double* flux_h) {
         const double* pressure_above = above + size_t(cols) * channels;
         const double* pressure_here = here + size_t(cols) * channels;
-        double largest = 0.0;
+        double largest_v = 0.0, largest_h = 0.0;
         push_v[0] = flux_v[0] = push_v[cols] = flux_v[cols] = 0.0;
         if (r < rows) {
             for (int j = 1; j < cols; ++j) {
-                largest = std::max(largest, edge(level.cell(r, j - 1), here[(j - 1) * channels + face.right],
-                                                 pressure_here[(j - 1) * axes + axes - 1], level.cell(r, j),
-                                                 here[j * channels + face.left], pressure_here[j * axes + axes - 1],
-                                                 axes - 1, push_v[j], flux_v[j]));
+                largest_v = std::max(largest_v, edge(level.cell(r, j - 1), here[(j - 1) * channels + face.right],
+                                                     pressure_here[(j - 1) * axes + axes - 1], level.cell(r, j),
+                                                     here[j * channels + face.left],
+                                                     pressure_here[j * axes + axes - 1], push_v[j], flux_v[j]));
             }
         } else {
             std::fill(push_v, push_v + cols + 1, 0.0);
@@ -302,16 +328,16 @@ StepStats step_of(Level& level, const AutomatonOptions& options) {
         }
         if (r > 0 && r < rows) {
             for (int j = 0; j < cols; ++j) {
-                largest = std::max(largest, edge(level.cell(r - 1, j), above[j * channels + face.down],
-                                                 pressure_above[j * axes], level.cell(r, j),
-                                                 here[j * channels + face.up], pressure_here[j * axes], 0,
-                                                 push_h[j], flux_h[j]));
+                largest_h = std::max(largest_h, edge(level.cell(r - 1, j), above[j * channels + face.down],
+                                                     pressure_above[j * axes], level.cell(r, j),
+                                                     here[j * channels + face.up], pressure_here[j * axes],
+                                                     push_h[j], flux_h[j]));
             }
         } else {
             std::fill(push_h, push_h + cols, 0.0);
             std::fill(flux_h, flux_h + cols, 0.0);
         }
-        return largest;
+        return std::max(relative(largest_v, axes - 1), relative(largest_h, 0));
     };
 
     // 2. New energies (each edge's flux leaves one cell and enters the other,
@@ -399,7 +425,8 @@ StepStats step_of(Level& level, const AutomatonOptions& options) {
                             }
                         }
                     }
-                    const double size = std::sqrt(area_sum / adjacent);
+                    // x / 4 == x * 0.25 exactly; a division costs as much as the root.
+                    const double size = std::sqrt(adjacent == 4 ? area_sum * 0.25 : area_sum / adjacent);
                     glm::dvec2 move = 0.5 * options.rate * size * glm::dvec2(fx, fy);
                     if (mode == NodeMode::SlideX) move.y = 0;
                     if (mode == NodeMode::SlideY) move.x = 0;
