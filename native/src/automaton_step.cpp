@@ -55,6 +55,37 @@ void corners(const Level& level, const std::vector<glm::dvec2>& nodes, int i, in
 
 double quad_area(const glm::dvec2 q[4]) { return 0.5 * (cross(q[2] - q[0], q[3] - q[1])); }
 
+// Appends the cells around node (ni, nj) that this round (a stamp in
+// level.suspect_round) has not queued yet: each cell once per round.
+void queue_cells_around(Level& level, int ni, int nj, uint32_t round, std::vector<int32_t>& queue) {
+    for (int ci = std::max(0, ni - 1); ci <= std::min(level.rows() - 1, ni); ++ci) {
+        for (int cj = std::max(0, nj - 1); cj <= std::min(level.cols() - 1, nj); ++cj) {
+            const size_t c = level.cell(ci, cj);
+            if (level.suspect_round[c] == round) continue;
+            level.suspect_round[c] = round;
+            queue.push_back(int32_t(c));
+        }
+    }
+}
+
+// The cells of `cells` (each listed once) for which fails(i, j) holds,
+// judged in parallel, in list order; `verdicts` is scratch.
+template <typename Fails>
+void judge_cells(const Level& level, const std::vector<int32_t>& cells, const Fails& fails,
+                 std::vector<uint8_t>& verdicts, std::vector<int32_t>& failing) {
+    const int cols = level.cols();
+    verdicts.assign(cells.size(), 0);
+    parallel_for(int64_t(cells.size()), kSuspectGrain, [&](int64_t begin, int64_t end) {
+        for (int64_t k = begin; k < end; ++k) {
+            verdicts[size_t(k)] = fails(cells[size_t(k)] / cols, cells[size_t(k)] % cols);
+        }
+    });
+    failing.clear();
+    for (size_t k = 0; k < cells.size(); ++k) {
+        if (verdicts[k]) failing.push_back(cells[k]);
+    }
+}
+
 struct Shape {
     double area;
     // How far a corner may move in one step: c / (2 (|a| + |b|)) with c the
@@ -563,28 +594,12 @@ StepStats step_of(Level& level, const AutomatonOptions& options) {
             for (int ni = i; ni <= i + 1; ++ni) {
                 for (int nj = j; nj <= j + 1; ++nj) {
                     level.next_nodes[level.node(ni, nj)] = nodes[level.node(ni, nj)];
-                    for (int ci = std::max(0, ni - 1); ci <= std::min(rows - 1, ni); ++ci) {
-                        for (int cj = std::max(0, nj - 1); cj <= std::min(cols - 1, nj); ++cj) {
-                            const size_t cell = level.cell(ci, cj);
-                            if (level.suspect_round[cell] == round) continue;
-                            level.suspect_round[cell] = round;
-                            suspects.push_back(int32_t(cell));
-                        }
-                    }
+                    queue_cells_around(level, ni, nj, round, suspects);
                 }
             }
         }
         // Judged in parallel: each suspect once, writing only its own state.
-        verdicts.assign(suspects.size(), 0);
-        parallel_for(int64_t(suspects.size()), kSuspectGrain, [&](int64_t begin, int64_t end) {
-            for (int64_t k = begin; k < end; ++k) {
-                verdicts[size_t(k)] = breaks_bound(suspects[size_t(k)] / cols, suspects[size_t(k)] % cols);
-            }
-        });
-        breaking.clear();
-        for (size_t k = 0; k < suspects.size(); ++k) {
-            if (verdicts[k]) breaking.push_back(suspects[k]);
-        }
+        judge_cells(level, suspects, breaks_bound, verdicts, breaking);
     }
 
     // The largest node move actually made, in cell sizes of this level.
@@ -710,26 +725,10 @@ int fit_to_bounds(Level& level) {
         const uint32_t stamp = ++level.revert_round;
         checked.clear();
         for (int32_t node : lowered) {
-            const int ni = int(size_t(node) / size_t(cols + 1)), nj = int(size_t(node) % size_t(cols + 1));
-            for (int ci = std::max(0, ni - 1); ci <= std::min(rows - 1, ni); ++ci) {
-                for (int cj = std::max(0, nj - 1); cj <= std::min(cols - 1, nj); ++cj) {
-                    const size_t c = level.cell(ci, cj);
-                    if (level.suspect_round[c] == stamp) continue;
-                    level.suspect_round[c] = stamp;
-                    checked.push_back(int32_t(c));
-                }
-            }
+            queue_cells_around(level, int(size_t(node) / size_t(cols + 1)), int(size_t(node) % size_t(cols + 1)),
+                               stamp, checked);
         }
-        verdicts.assign(checked.size(), 0);
-        parallel_for(int64_t(checked.size()), kSuspectGrain, [&](int64_t begin, int64_t end) {
-            for (int64_t k = begin; k < end; ++k) {
-                verdicts[size_t(k)] = out_of_bounds(checked[size_t(k)] / cols, checked[size_t(k)] % cols);
-            }
-        });
-        bad.clear();
-        for (size_t k = 0; k < checked.size(); ++k) {
-            if (verdicts[k]) bad.push_back(checked[k]);
-        }
+        judge_cells(level, checked, out_of_bounds, verdicts, bad);
         if (bad.empty()) return round + 1;
     }
 }
