@@ -10,6 +10,7 @@
 #include <glm/common.hpp>
 #include <glm/geometric.hpp>
 
+#include "automaton_cell.h"
 #include "automaton_level.h"
 #include "lmrefine/error.h"
 #include "lmrefine/parallel.h"
@@ -17,24 +18,9 @@
 namespace lmrefine::automaton_detail {
 namespace {
 
-constexpr int64_t kRowGrain = 8;
-constexpr int64_t kSuspectGrain = 256;  // cells judged again after a revert, per chunk
 // Guard reverts run over the whole grid while more than 1/this of the cells
 // break a bound, over lists of cells below.
 constexpr int64_t kDenseRevertFraction = 32;
-// fit_to_bounds: nodes this many around an out-of-bounds cell back off with
-// it; below kFitSnap of its move a node goes back to rest; after kFitRounds
-// rounds every node still lowered goes back to rest.
-constexpr int kFitMargin = 1;
-constexpr double kFitSnap = 0.05;
-constexpr int kFitRounds = 40;
-constexpr double kFitFactor = 0.8;
-// fit_to_bounds first smooths the nodes around out-of-bounds cells for this
-// many rounds (strength 24 on the sample scenes: 126 rounds of blending to
-// rest and an equal-error ratio of 1.28 on the courtyard before, 1.60 with
-// 10 rounds). 20: with the coarse margin 1.5 below, 10 rounds left
-// fence_and_tree cascading (94 rounds, ratio 1.13), 20 end in 16.
-constexpr int kFitSmoothRounds = 20;
 // Coarse levels keep cells above min_shrink x this: cells interpolated from
 // a coarse cell differ in size, and the finest level must start (nearly)
 // inside its bounds. 1.25 left fit_to_bounds cascading at strength >= 24;
@@ -42,111 +28,6 @@ constexpr int kFitSmoothRounds = 20;
 // ratio on the sample scenes against 1.5; 1.4-1.55 all fit in <= 16 rounds
 // at strength 20-28, 1.3 cascades (docs/refiner.md).
 constexpr double kCoarseShrinkMargin = 1.5;
-
-double cross(const glm::dvec2& a, const glm::dvec2& b) { return a.x * b.y - a.y * b.x; }
-
-// Corners of cell (i, j) in order around it.
-void corners(const Level& level, const std::vector<glm::dvec2>& nodes, int i, int j, glm::dvec2 q[4]) {
-    q[0] = nodes[level.node(i, j)];
-    q[1] = nodes[level.node(i, j + 1)];
-    q[2] = nodes[level.node(i + 1, j + 1)];
-    q[3] = nodes[level.node(i + 1, j)];
-}
-
-double quad_area(const glm::dvec2 q[4]) { return 0.5 * (cross(q[2] - q[0], q[3] - q[1])); }
-
-// Appends the cells around node (ni, nj) that this round (a stamp in
-// level.suspect_round) has not queued yet: each cell once per round.
-void queue_cells_around(Level& level, int ni, int nj, uint32_t round, std::vector<int32_t>& queue) {
-    for (int ci = std::max(0, ni - 1); ci <= std::min(level.rows() - 1, ni); ++ci) {
-        for (int cj = std::max(0, nj - 1); cj <= std::min(level.cols() - 1, nj); ++cj) {
-            const size_t c = level.cell(ci, cj);
-            if (level.suspect_round[c] == round) continue;
-            level.suspect_round[c] = round;
-            queue.push_back(int32_t(c));
-        }
-    }
-}
-
-// The cells of `cells` (each listed once) for which fails(i, j) holds,
-// judged in parallel, in list order; `verdicts` is scratch.
-template <typename Fails>
-void judge_cells(const Level& level, const std::vector<int32_t>& cells, const Fails& fails,
-                 std::vector<uint8_t>& verdicts, std::vector<int32_t>& failing) {
-    const int cols = level.cols();
-    verdicts.assign(cells.size(), 0);
-    parallel_for(int64_t(cells.size()), kSuspectGrain, [&](int64_t begin, int64_t end) {
-        for (int64_t k = begin; k < end; ++k) {
-            verdicts[size_t(k)] = fails(cells[size_t(k)] / cols, cells[size_t(k)] % cols);
-        }
-    });
-    failing.clear();
-    for (size_t k = 0; k < cells.size(); ++k) {
-        if (verdicts[k]) failing.push_back(cells[k]);
-    }
-}
-
-struct Shape {
-    double area;
-    // How far a corner may move in one step: c / (2 (|a| + |b|)) with c the
-    // cross product of the edges a, b at a corner (bounded through
-    // |a| + |b| <= sqrt(2 (|a|^2 + |b|^2))); a quarter cell for a square.
-    // Moves this size can still spoil a cell when all its corners move
-    // against it; the guards put those moves back, so validity never rests on
-    // the radius, which only keeps such reverts rare.
-    double radius;
-    // How well shaped, squared and signed (negative if inverted): the
-    // smallest sin^2 of the corner angles, or 16 (shortest / longest edge)^2
-    // if smaller (a convex cell can still collapse an edge into a triangle);
-    // kQualityExactBelow for every cell at least that well shaped.
-    double quality2;
-};
-
-// Two doubles divided at once (SSE2 divpd, in every x86-64): the divisions
-// were most of a step's time, and IEEE division rounds the same either way.
-typedef double Pair __attribute__((vector_size(16)));
-
-// A cell's quality is only ever compared with kMinQuality^2 and, below
-// that, with its previous quality, so any value at or above this bound
-// gives the same decisions: a well-shaped cell reports the bound itself and
-// skips the quality's divisions.
-constexpr double kQualityExactBelow = 0.25;
-static_assert(kQualityExactBelow > kMinQuality * kMinQuality, "the bound must lie above every decision");
-
-Shape shape(const glm::dvec2 q[4]) {
-    glm::dvec2 e[4];
-    double l2[4];
-    for (int k = 0; k < 4; ++k) {
-        e[k] = q[(k + 1) % 4] - q[k];
-        l2[k] = glm::dot(e[k], e[k]);
-    }
-    // At corner k, between edge p before it and edge k: c^2 = (e_p x e_k)^2.
-    double c2[4];
-    for (int k = 0; k < 4; ++k) {
-        const double c = cross(e[(k + 3) % 4], e[k]);
-        if (!(c > 0)) return {quad_area(q), 0.0, -1.0};
-        c2[k] = c * c;
-    }
-    const Pair radius01 = Pair{c2[0], c2[1]} / Pair{8 * (l2[3] + l2[0]), 8 * (l2[0] + l2[1])};
-    const Pair radius23 = Pair{c2[2], c2[3]} / Pair{8 * (l2[1] + l2[2]), 8 * (l2[2] + l2[3])};
-    const double r2 = std::min(std::min(radius01[0], radius01[1]), std::min(radius23[0], radius23[1]));
-    const double shortest = std::min({l2[0], l2[1], l2[2], l2[3]});
-    const double longest = std::max({l2[0], l2[1], l2[2], l2[3]});
-    bool well_shaped = 16 * shortest >= kQualityExactBelow * longest;
-    for (int k = 0; k < 4; ++k) well_shaped = well_shaped && c2[k] >= kQualityExactBelow * l2[(k + 3) % 4] * l2[k];
-    if (well_shaped) return {quad_area(q), std::sqrt(r2), kQualityExactBelow};
-    const Pair sine01 = Pair{c2[0], c2[1]} / Pair{l2[3] * l2[0], l2[0] * l2[1]};
-    const Pair sine23 = Pair{c2[2], c2[3]} / Pair{l2[1] * l2[2], l2[2] * l2[3]};
-    const double sin2 = std::min({1.0, sine01[0], sine01[1], sine23[0], sine23[1]});
-    return {quad_area(q), std::sqrt(r2), std::min(sin2, 16 * shortest / longest)};
-}
-
-// Distance across the cell between its left and right edges, and between
-// its top and bottom edges (exact for parallelograms, a lower bound otherwise).
-glm::dvec2 thickness(const glm::dvec2 q[4], double area) {
-    return {area / std::max(glm::length(q[3] - q[0]), glm::length(q[2] - q[1])),
-            area / std::max(glm::length(q[1] - q[0]), glm::length(q[2] - q[3]))};
-}
 
 // The channel of a cell that faces each side (directional variant); with one
 // channel every side uses channel 0.
@@ -629,108 +510,6 @@ StepStats step_of(Level& level, const AutomatonOptions& options) {
 
 StepStats step(Level& level, const AutomatonOptions& options) {
     return level.channels == 4 ? step_of<4>(level, options) : step_of<1>(level, options);
-}
-
-int fit_to_bounds(Level& level) {
-    const int rows = level.rows(), cols = level.cols();
-    const NodeGrid& grid = level.grid;
-    auto out_of_bounds = [&](int i, int j) {
-        const size_t c = level.cell(i, j);
-        glm::dvec2 q[4];
-        corners(level, grid.nodes, i, j, q);
-        const Shape now = shape(q);
-        if (now.quality2 < 0) return true;  // not convex
-        if (now.area < level.min_area[c] || now.area > level.max_area[c]) return true;
-        if (level.rigid_area[c] < level.original_area[c]) return false;
-        const glm::dvec2 thin = thickness(q, now.area);
-        return thin.x < grid.xs[j + 1] - grid.xs[j] || thin.y < grid.ys[i + 1] - grid.ys[i];
-    };
-    // Round 0 checks every cell; later rounds only the cells around the
-    // nodes moved in the round before (a bad cell's own corners are among
-    // them, so every bad cell is checked again). Rounds work on lists: the
-    // bad region is small next to the grid, and there can be dozens.
-    std::vector<int32_t> checked, bad;
-    std::vector<uint8_t> verdicts(size_t(rows), 0);
-    std::vector<std::vector<int32_t>> row_bad(static_cast<size_t>(rows));
-    parallel_for(rows, kRowGrain, [&](int64_t begin, int64_t end) {
-        for (int i = int(begin); i < int(end); ++i) {
-            for (int j = 0; j < cols; ++j) {
-                if (out_of_bounds(i, j)) row_bad[size_t(i)].push_back(int32_t(level.cell(i, j)));
-            }
-        }
-    });
-    for (const auto& r : row_bad) bad.insert(bad.end(), r.begin(), r.end());
-    if (bad.empty()) return 0;
-
-    std::vector<glm::dvec2> carried;  // blended towards rest from round kFitSmoothRounds on
-    std::vector<double> kept(grid.nodes.size(), 1.0);
-    std::vector<uint32_t> lowered_round(grid.nodes.size(), 0);
-    std::vector<int32_t> lowered;
-    std::vector<glm::dvec2> smoothed;
-    for (int round = 0;; ++round) {
-        // Halve the move of every node within kFitMargin nodes of a bad
-        // cell (once per round), to 0 below kFitSnap: a cell whose nodes
-        // are all back at rest is the identity, inside every bound.
-        lowered.clear();
-        for (int32_t c : bad) {
-            const int i = c / cols, j = c % cols;
-            for (int ni = std::max(0, i - kFitMargin); ni <= std::min(rows, i + 1 + kFitMargin); ++ni) {
-                for (int nj = std::max(0, j - kFitMargin); nj <= std::min(cols, j + 1 + kFitMargin); ++nj) {
-                    const size_t n = level.node(ni, nj);
-                    if (lowered_round[n] == uint32_t(round + 1)) continue;
-                    lowered_round[n] = uint32_t(round + 1);
-                    lowered.push_back(int32_t(n));
-                }
-            }
-        }
-        if (round < kFitSmoothRounds) {
-            // First even out the nodes around the bad cells (a Laplacian
-            // step, synchronous): cells interpolated from one coarse cell
-            // differ in size, and smoothing evens them out without giving
-            // up the deformation; blending towards rest (below) cascades
-            // through a strongly compressed region and undoes it.
-            const std::vector<glm::dvec2>& before = level.grid.nodes;
-            smoothed.resize(lowered.size());
-            for (size_t k = 0; k < lowered.size(); ++k) {
-                const size_t n = size_t(lowered[k]);
-                const int i = int(n / size_t(cols + 1)), j = int(n % size_t(cols + 1));
-                const NodeMode mode = level.node_mode[n];
-                smoothed[k] = before[n];
-                if (mode == NodeMode::Fixed) continue;
-                glm::dvec2 sum(0.0);
-                int count = 0;
-                if (i > 0) sum += before[level.node(i - 1, j)], ++count;
-                if (i < rows) sum += before[level.node(i + 1, j)], ++count;
-                if (j > 0) sum += before[level.node(i, j - 1)], ++count;
-                if (j < cols) sum += before[level.node(i, j + 1)], ++count;
-                glm::dvec2 move = 0.5 * (sum / double(count) - before[n]);
-                if (mode == NodeMode::SlideX) move.y = 0;
-                if (mode == NodeMode::SlideY) move.x = 0;
-                smoothed[k] = before[n] + move;
-            }
-            for (size_t k = 0; k < lowered.size(); ++k) level.grid.nodes[size_t(lowered[k])] = smoothed[k];
-        } else {
-            if (round == kFitSmoothRounds) carried = level.grid.nodes;
-            const bool last = round >= kFitRounds + kFitSmoothRounds;
-            for (int32_t node : lowered) {
-                const size_t n = size_t(node);
-                const int i = int(n / size_t(cols + 1)), j = int(n % size_t(cols + 1));
-                kept[n] = last || kept[n] < kFitSnap ? 0.0 : kFitFactor * kept[n];
-                const glm::dvec2 rest(grid.xs[j], grid.ys[i]);
-                level.grid.nodes[n] = rest + kept[n] * (carried[n] - rest);
-            }
-        }
-
-        // Check the cells around the moved nodes again.
-        const uint32_t stamp = ++level.revert_round;
-        checked.clear();
-        for (int32_t node : lowered) {
-            queue_cells_around(level, int(size_t(node) / size_t(cols + 1)), int(size_t(node) % size_t(cols + 1)),
-                               stamp, checked);
-        }
-        judge_cells(level, checked, out_of_bounds, verdicts, bad);
-        if (bad.empty()) return round + 1;
-    }
 }
 
 void check_invariants(const Level& level, int step_index) {
