@@ -136,9 +136,11 @@ void parallel_for(int64_t count, int64_t grain,
     std::unique_lock<std::mutex> busy;
     if (threads > 1 && !t_inside_loop) busy = std::unique_lock<std::mutex>(pool().busy(), std::try_to_lock);
     if (busy.owns_lock()) {
-        t_inside_loop = true;
+        struct Inside {  // reset even if starting a worker throws
+            Inside() { t_inside_loop = true; }
+            ~Inside() { t_inside_loop = false; }
+        } inside;
         pool().run(threads, worker);
-        t_inside_loop = false;
     } else {
         worker();
     }
