@@ -201,3 +201,15 @@ def test_result_does_not_depend_on_the_thread_count(rng, monkeypatch):
     for other in runs[1:]:
         np.testing.assert_array_equal(runs[0]["grid"], other["grid"])
         np.testing.assert_array_equal(runs[0]["energy"], other["energy"])
+
+
+def test_levels_report_the_fit_to_bounds_rounds():
+    # Only the finest level is fitted; a flat map starts inside every bound.
+    flat = lmrefine.run_automaton(np.ones((64, 64), np.float32))["levels"]
+    assert [level["fit_rounds"] for level in flat] == [0] * len(flat)
+    rng = np.random.default_rng(3)
+    energy = ((rng.random((96, 96)) ** 6) * 0.96 + 0.04).astype(np.float32)
+    levels = lmrefine.run_automaton(energy)["levels"]
+    assert all(level["fit_rounds"] == 0 for level in levels[:-1])
+    assert levels[-1]["block"] == 1 and levels[-1]["fit_rounds"] >= 1
+    assert all(level["seconds"] >= 0 for level in levels)

@@ -67,6 +67,7 @@ py::dict run(const py::handle& energy_in, const py::handle& mask_in, const py::h
         level["converged"] = s.converged;
         level["settled"] = s.settled;
         level["seconds"] = s.seconds;
+        level["fit_rounds"] = s.fit_rounds;
         levels.append(level);
     }
     py::dict out;
@@ -125,7 +126,7 @@ Returns:
     dict: grid (H + 1, W + 1, 2) float32 node positions in UV space,
     cell_area (H, W) float32 in texels, energy (final energies, the input's
     shape), steps (int), converged (bool), levels (list of per-level dicts:
-    block, rows, cols, steps, max_difference, converged, settled, seconds; coarsest first).
+    block, rows, cols, steps, max_difference, converged, settled, seconds, fit_rounds; coarsest first).
 )doc");
 }
 

@@ -186,7 +186,7 @@ void run_level(Level& level, const AutomatonOptions& options, bool ring, LevelSt
                Progress* progress) {
     automaton_detail::prepare_level(level, options, ring);
     // The finest level's grid: every bound holds from its start.
-    if (level.grid.xs[1] - level.grid.xs[0] == 1) automaton_detail::fit_to_bounds(level);
+    if (level.grid.xs[1] - level.grid.xs[0] == 1) stats.fit_rounds = automaton_detail::fit_to_bounds(level);
     automaton_detail::measure_cells(level);
     if (options.check_invariants) automaton_detail::check_invariants(level, total_steps);
     stats.steps = 0;

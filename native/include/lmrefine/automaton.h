@@ -74,6 +74,10 @@ struct LevelStats {
     bool converged = false;
     bool settled = false;       // stopped because no node moved any more (guards hold the rest)
     double seconds = 0;         // wall time of the level, setup included
+    // The finest level: rounds fit_to_bounds took to bring the cells
+    // interpolated from the level above inside their bounds (0: none
+    // outside; dozens: the deformation was partly undone, see docs/refiner.md).
+    int fit_rounds = 0;
 };
 
 struct AutomatonResult {
