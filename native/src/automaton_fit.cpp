@@ -44,7 +44,7 @@ int fit_to_bounds(Level& level) {
     // them, so every bad cell is checked again). Rounds work on lists: the
     // bad region is small next to the grid, and there can be dozens.
     std::vector<int32_t> checked, bad;
-    std::vector<uint8_t> verdicts(size_t(rows), 0);
+    std::vector<uint8_t> verdicts;
     std::vector<std::vector<int32_t>> row_bad(static_cast<size_t>(rows));
     parallel_for(rows, kRowGrain, [&](int64_t begin, int64_t end) {
         for (int i = int(begin); i < int(end); ++i) {

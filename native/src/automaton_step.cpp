@@ -392,22 +392,31 @@ StepStats step_of(Level& level, const AutomatonOptions& options) {
         const glm::dvec2 was = thickness(old, before);
         return (thin.x < w0 && thin.x < was.x) || (thin.y < h0 && thin.y < was.y);
     };
-    // Every cell judged in parallel; its verdict goes to breaking_cell.
+    // Judges the cells of the whole grid in parallel (all of them, or only
+    // those with a corner put back in this round): verdicts in breaking_cell,
+    // counts per row in row_count.
     std::vector<uint8_t>& breaking_cell = level.breaking_cell;
     std::vector<int64_t> row_count(size_t(rows), 0);
-    parallel_for(rows, kRowGrain, [&](int64_t begin, int64_t end) {
-        for (int i = int(begin); i < int(end); ++i) {
-            int64_t count = 0;
-            for (int j = 0; j < cols; ++j) {
-                const bool breaks = breaks_bound(i, j);
-                breaking_cell[level.cell(i, j)] = breaks;
-                count += breaks;
+    auto judge_grid = [&](bool only_reverted) {
+        parallel_for(rows, kRowGrain, [&](int64_t begin, int64_t end) {
+            for (int i = int(begin); i < int(end); ++i) {
+                int64_t count = 0;
+                for (int j = 0; j < cols; ++j) {
+                    const bool suspect = !only_reverted || level.reverted_node[level.node(i, j)] ||
+                                         level.reverted_node[level.node(i, j + 1)] ||
+                                         level.reverted_node[level.node(i + 1, j)] ||
+                                         level.reverted_node[level.node(i + 1, j + 1)];
+                    const bool breaks = suspect && breaks_bound(i, j);
+                    breaking_cell[level.cell(i, j)] = breaks;
+                    count += breaks;
+                }
+                row_count[size_t(i)] = count;
             }
-            row_count[size_t(i)] = count;
-        }
-    });
+        });
+    };
+    judge_grid(false);
     std::vector<uint8_t> reverted_rows(size_t(rows) + 1, 0);  // node rows with a node put back
-    // Dense rounds, while many cells break (a tenth of the finest level's
+    // Dense rounds, while many cells break (a seventh of the finest level's
     // cells on a Lightmap Pack layout): two passes over the whole grid, in
     // parallel. Nodes of breaking cells go back; the cells around them are
     // judged again. The same sets as the sparse rounds below.
@@ -433,21 +442,7 @@ StepStats step_of(Level& level, const AutomatonOptions& options) {
                 }
             }
         });
-        parallel_for(rows, kRowGrain, [&](int64_t begin, int64_t end) {
-            for (int i = int(begin); i < int(end); ++i) {
-                int64_t count = 0;
-                for (int j = 0; j < cols; ++j) {
-                    const bool suspect = level.reverted_node[level.node(i, j)] ||
-                                         level.reverted_node[level.node(i, j + 1)] ||
-                                         level.reverted_node[level.node(i + 1, j)] ||
-                                         level.reverted_node[level.node(i + 1, j + 1)];
-                    const bool breaks = suspect && breaks_bound(i, j);
-                    breaking_cell[level.cell(i, j)] = breaks;
-                    count += breaks;
-                }
-                row_count[size_t(i)] = count;
-            }
-        });
+        judge_grid(true);
     }
     std::vector<std::vector<int32_t>> row_breaking(static_cast<size_t>(rows));
     parallel_for(rows, kRowGrain, [&](int64_t begin, int64_t end) {
