@@ -1,4 +1,4 @@
-"""The native worker pool (native/src/parallel.cpp): loops from several
+"""The native worker pool (native/src/core/parallel.cpp): loops from several
 Python threads at once, after a fork, and with changing thread counts give
 the results of a lone serial run."""
 

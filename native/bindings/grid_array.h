@@ -6,7 +6,7 @@
 
 #include <pybind11/numpy.h>
 
-#include "lmrefine/warp.h"
+#include "lmrefine/automaton/warp.h"
 
 namespace lmrefine::py_util {
 

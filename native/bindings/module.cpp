@@ -2,7 +2,7 @@
 // re-exports it. One bind_* function per concept, each in py_<concept>.cpp.
 #include <pybind11/pybind11.h>
 
-#include "lmrefine/error.h"
+#include "lmrefine/core/error.h"
 
 namespace py = pybind11;
 

@@ -11,7 +11,7 @@
 #include <utility>
 #include <vector>
 
-#include "lmrefine/coverage.h"
+#include "lmrefine/layout/coverage.h"
 
 namespace lmrefine::py_util {
 

@@ -8,8 +8,8 @@
 #include <optional>
 #include <utility>
 
-#include "lmrefine/error.h"
-#include "lmrefine/progress.h"
+#include "lmrefine/core/error.h"
+#include "lmrefine/core/progress.h"
 
 namespace lmrefine::py_util {
 

@@ -3,8 +3,8 @@
 #include <string>
 
 #include "grid_array.h"
-#include "lmrefine/automaton.h"
-#include "lmrefine/error.h"
+#include "lmrefine/automaton/automaton.h"
+#include "lmrefine/core/error.h"
 #include "numpy_util.h"
 #include "progress_binding.h"
 

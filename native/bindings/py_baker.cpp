@@ -6,8 +6,8 @@
 #include <string>
 #include <vector>
 
-#include "lmrefine/baker.h"
-#include "lmrefine/error.h"
+#include "lmrefine/bake/baker.h"
+#include "lmrefine/core/error.h"
 #include "numpy_util.h"
 #include "progress_binding.h"
 

@@ -1,6 +1,6 @@
 #include <pybind11/pybind11.h>
 
-#include "lmrefine/chart.h"
+#include "lmrefine/layout/chart.h"
 #include "numpy_util.h"
 
 namespace py = pybind11;

@@ -1,7 +1,7 @@
 #include <pybind11/pybind11.h>
 
-#include "lmrefine/coverage.h"
-#include "lmrefine/error.h"
+#include "lmrefine/layout/coverage.h"
+#include "lmrefine/core/error.h"
 #include "numpy_util.h"
 
 namespace py = pybind11;

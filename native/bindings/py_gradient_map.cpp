@@ -3,9 +3,9 @@
 #include <optional>
 #include <string>
 
-#include "lmrefine/error.h"
-#include "lmrefine/gradient_map.h"
-#include "lmrefine/wavelet.h"
+#include "lmrefine/core/error.h"
+#include "lmrefine/gradient/gradient_map.h"
+#include "lmrefine/gradient/wavelet.h"
 #include "numpy_util.h"
 #include "progress_binding.h"
 

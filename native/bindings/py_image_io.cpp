@@ -4,8 +4,8 @@
 #include <optional>
 #include <string>
 
-#include "lmrefine/error.h"
-#include "lmrefine/image_io.h"
+#include "lmrefine/core/error.h"
+#include "lmrefine/core/image_io.h"
 #include "numpy_util.h"
 
 namespace py = pybind11;

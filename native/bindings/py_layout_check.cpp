@@ -4,9 +4,9 @@
 #include <tuple>
 #include <vector>
 
-#include "lmrefine/error.h"
-#include "lmrefine/gutter.h"
-#include "lmrefine/layout_check.h"
+#include "lmrefine/core/error.h"
+#include "lmrefine/layout/gutter.h"
+#include "lmrefine/layout/layout_check.h"
 #include "numpy_util.h"
 
 namespace py = pybind11;

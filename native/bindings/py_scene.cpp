@@ -4,8 +4,8 @@
 #include <memory>
 #include <string>
 
-#include "lmrefine/error.h"
-#include "lmrefine/scene.h"
+#include "lmrefine/core/error.h"
+#include "lmrefine/bake/scene.h"
 #include "numpy_util.h"
 
 namespace py = pybind11;

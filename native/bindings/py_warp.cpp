@@ -4,8 +4,8 @@
 #include <cmath>
 
 #include "grid_array.h"
-#include "lmrefine/error.h"
-#include "lmrefine/texel_space.h"
+#include "lmrefine/core/error.h"
+#include "lmrefine/core/texel_space.h"
 #include "numpy_util.h"
 
 namespace py = pybind11;

@@ -4,8 +4,8 @@
 #include <string>
 #include <vector>
 
-#include "lmrefine/error.h"
-#include "lmrefine/wavelet.h"
+#include "lmrefine/core/error.h"
+#include "lmrefine/gradient/wavelet.h"
 #include "numpy_util.h"
 #include "progress_binding.h"
 

@@ -7,10 +7,10 @@ lifting step, chosen by a Euclidean algorithm on the first row (in 40-digit
 arithmetic, quotients picked for small coefficients). D20: that route needs
 coefficients up to 68 for db10, too many for float32, so db10 uses the
 paraunitary lattice instead (derive_lattice). The result is printed as C++
-initialisers for native/src/wavelet_filters.cpp and checked here in float64
+initialisers for native/src/gradient/wavelet_filters.cpp and checked here in float64
 against the filter taps.
 
-Conventions (those of native/src/wavelet_lifting.cpp): a Laurent polynomial
+Conventions (those of native/src/gradient/wavelet_lifting.cpp): a Laurent polynomial
 {offset: c} applied to a sequence y gives sum_k c_k y[n + k]. The signal x is
 split into even xe[n] = x[2n] and odd xo[n] = x[2n + 1]; an "update" step does
 s[n] += sum_k c_k d[n + k], a "predict" step d[n] += sum_k c_k s[n + k];

@@ -1,0 +1,127 @@
+// A cell of the automaton's grid as its rule and guards see it: corners,
+// area, shape (move radius, quality), thickness, and the lists the guards
+// re-judge cells from (internal to automaton*.cpp).
+#pragma once
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <vector>
+
+#include <glm/geometric.hpp>
+
+#include "automaton_level.h"
+#include "lmrefine/core/parallel.h"
+
+namespace lmrefine::automaton_detail {
+
+constexpr int64_t kRowGrain = 8;
+constexpr int64_t kSuspectGrain = 256;  // cells judged again after a revert, per chunk
+
+inline double cross(const glm::dvec2& a, const glm::dvec2& b) { return a.x * b.y - a.y * b.x; }
+
+// Corners of cell (i, j) in order around it.
+inline void corners(const Level& level, const std::vector<glm::dvec2>& nodes, int i, int j, glm::dvec2 q[4]) {
+    q[0] = nodes[level.node(i, j)];
+    q[1] = nodes[level.node(i, j + 1)];
+    q[2] = nodes[level.node(i + 1, j + 1)];
+    q[3] = nodes[level.node(i + 1, j)];
+}
+
+inline double quad_area(const glm::dvec2 q[4]) { return 0.5 * (cross(q[2] - q[0], q[3] - q[1])); }
+
+// Appends the cells around node (ni, nj) that this round (a stamp in
+// level.suspect_round) has not queued yet: each cell once per round.
+inline void queue_cells_around(Level& level, int ni, int nj, uint32_t round, std::vector<int32_t>& queue) {
+    for (int ci = std::max(0, ni - 1); ci <= std::min(level.rows() - 1, ni); ++ci) {
+        for (int cj = std::max(0, nj - 1); cj <= std::min(level.cols() - 1, nj); ++cj) {
+            const size_t c = level.cell(ci, cj);
+            if (level.suspect_round[c] == round) continue;
+            level.suspect_round[c] = round;
+            queue.push_back(int32_t(c));
+        }
+    }
+}
+
+// The cells of `cells` (each listed once) for which fails(i, j) holds,
+// judged in parallel, in list order; `verdicts` is scratch.
+template <typename Fails>
+void judge_cells(const Level& level, const std::vector<int32_t>& cells, const Fails& fails,
+                 std::vector<uint8_t>& verdicts, std::vector<int32_t>& failing) {
+    const int cols = level.cols();
+    verdicts.assign(cells.size(), 0);
+    parallel_for(int64_t(cells.size()), kSuspectGrain, [&](int64_t begin, int64_t end) {
+        for (int64_t k = begin; k < end; ++k) {
+            verdicts[size_t(k)] = fails(cells[size_t(k)] / cols, cells[size_t(k)] % cols);
+        }
+    });
+    failing.clear();
+    for (size_t k = 0; k < cells.size(); ++k) {
+        if (verdicts[k]) failing.push_back(cells[k]);
+    }
+}
+
+struct Shape {
+    double area;
+    // How far a corner may move in one step: c / (2 (|a| + |b|)) with c the
+    // cross product of the edges a, b at a corner (bounded through
+    // |a| + |b| <= sqrt(2 (|a|^2 + |b|^2))); a quarter cell for a square.
+    // Moves this size can still spoil a cell when all its corners move
+    // against it; the guards put those moves back, so validity never rests on
+    // the radius, which only keeps such reverts rare.
+    double radius;
+    // How well shaped, squared and signed (negative if inverted): the
+    // smallest sin^2 of the corner angles, or 16 (shortest / longest edge)^2
+    // if smaller (a convex cell can still collapse an edge into a triangle);
+    // kQualityExactBelow for every cell at least that well shaped.
+    double quality2;
+};
+
+// Two doubles divided at once (SSE2 divpd, in every x86-64): the divisions
+// were most of a step's time, and IEEE division rounds the same either way.
+typedef double Pair __attribute__((vector_size(16)));
+
+// A cell's quality is only ever compared with kMinQuality^2 and, below
+// that, with its previous quality, so any value at or above this bound
+// gives the same decisions: a well-shaped cell reports the bound itself and
+// skips the quality's divisions.
+constexpr double kQualityExactBelow = 0.25;
+static_assert(kQualityExactBelow > kMinQuality * kMinQuality, "the bound must lie above every decision");
+
+inline Shape shape(const glm::dvec2 q[4]) {
+    glm::dvec2 e[4];
+    double l2[4];
+    for (int k = 0; k < 4; ++k) {
+        e[k] = q[(k + 1) % 4] - q[k];
+        l2[k] = glm::dot(e[k], e[k]);
+    }
+    // At corner k, between edge p before it and edge k: c^2 = (e_p x e_k)^2.
+    double c2[4];
+    for (int k = 0; k < 4; ++k) {
+        const double c = cross(e[(k + 3) % 4], e[k]);
+        if (!(c > 0)) return {quad_area(q), 0.0, -1.0};
+        c2[k] = c * c;
+    }
+    const Pair radius01 = Pair{c2[0], c2[1]} / Pair{8 * (l2[3] + l2[0]), 8 * (l2[0] + l2[1])};
+    const Pair radius23 = Pair{c2[2], c2[3]} / Pair{8 * (l2[1] + l2[2]), 8 * (l2[2] + l2[3])};
+    const double r2 = std::min(std::min(radius01[0], radius01[1]), std::min(radius23[0], radius23[1]));
+    const double shortest = std::min({l2[0], l2[1], l2[2], l2[3]});
+    const double longest = std::max({l2[0], l2[1], l2[2], l2[3]});
+    bool well_shaped = 16 * shortest >= kQualityExactBelow * longest;
+    for (int k = 0; k < 4; ++k) well_shaped = well_shaped && c2[k] >= kQualityExactBelow * l2[(k + 3) % 4] * l2[k];
+    if (well_shaped) return {quad_area(q), std::sqrt(r2), kQualityExactBelow};
+    const Pair sine01 = Pair{c2[0], c2[1]} / Pair{l2[3] * l2[0], l2[0] * l2[1]};
+    const Pair sine23 = Pair{c2[2], c2[3]} / Pair{l2[1] * l2[2], l2[2] * l2[3]};
+    const double sin2 = std::min({1.0, sine01[0], sine01[1], sine23[0], sine23[1]});
+    return {quad_area(q), std::sqrt(r2), std::min(sin2, 16 * shortest / longest)};
+}
+
+// Distance across the cell between its left and right edges, and between
+// its top and bottom edges (exact for parallelograms, a lower bound otherwise).
+inline glm::dvec2 thickness(const glm::dvec2 q[4], double area) {
+    return {area / std::max(glm::length(q[3] - q[0]), glm::length(q[2] - q[1])),
+            area / std::max(glm::length(q[1] - q[0]), glm::length(q[2] - q[3]))};
+}
+
+}  // namespace lmrefine::automaton_detail

@@ -1,0 +1,88 @@
+// One level of the automaton's pyramid: its cells, their energies and the
+// double-buffered node positions, and the synchronous step (internal to
+// automaton*.cpp).
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "lmrefine/automaton/automaton.h"
+#include "lmrefine/automaton/warp.h"
+
+namespace lmrefine::automaton_detail {
+
+enum class CellKind : uint8_t {
+    Material,  // holds covered texels: energy, diffusion, free to shrink or grow
+    Gutter,    // only uncovered texels: no energy; keeps at least its original area
+    Ring,      // the extra ring (BorderMode::ExtraRing): neutral, removed after the level
+};
+
+// Cells stay well shaped, not just convex: no corner sharper than about 11.5
+// degrees (|sin| >= 0.2), no edge shorter than 1/20 of the longest.
+constexpr double kMinQuality = 0.2;
+
+enum class NodeMode : uint8_t { Free, SlideX, SlideY, Fixed };
+
+struct Level {
+    NodeGrid grid;                       // current node positions (and original xs, ys)
+    std::vector<glm::dvec2> next_nodes;  // the second buffer
+    int channels = 1;
+    std::vector<double> energy, next_energy;  // cells * channels
+    std::vector<CellKind> kind;
+    std::vector<double> original_area, min_area, max_area;
+    std::vector<double> uncovered_area;  // texel area of uncovered texels inside (pressure only)
+    std::vector<double> rigid_area;      // texel area of rigid texels inside: uncovered or on a chart's edge
+    std::vector<NodeMode> node_mode;
+    std::array<double, 4> reference_density{};  // covered energy / covered area, per channel
+    double initial_total = 0;                   // sum of all energies, for the conservation check
+
+    // Cell shapes derived from the nodes (measure_cells), kept
+    // double-buffered like them: a step measures the cells it moved while
+    // checking their bounds, so the next step need not measure them again.
+    std::vector<double> area, safe_radius, quality;
+    std::vector<double> next_area, next_safe_radius, next_quality;
+    // Scratch, rebuilt every step.
+    std::vector<double> row_difference;  // per row of edges, the largest density difference
+    std::vector<double> row_moved;       // per row of nodes, the largest squared node move
+    std::vector<uint32_t> suspect_round;  // per cell, the last revert round that queued it
+    std::vector<uint8_t> breaking_cell;   // per cell: breaks a bound (dense revert rounds)
+    std::vector<uint8_t> reverted_node;   // per node: put back in this dense round
+    uint32_t revert_round = 0;
+
+    int rows() const { return grid.rows; }
+    int cols() const { return grid.cols; }
+    size_t cell(int i, int j) const { return size_t(i) * grid.cols + j; }
+    size_t node(int i, int j) const { return size_t(i) * (grid.cols + 1) + j; }
+};
+
+// Fills kind, areas, bounds, node modes and the reference density from the
+// energies and uncovered areas already in `level` (grid and energy set).
+void prepare_level(Level& level, const AutomatonOptions& options, bool ring);
+
+// The finest level starts from a grid interpolated from the level above,
+// where cells of one coarse cell differ in size: some may start outside
+// their bounds (area, a rigid cell's width and height). Smooths the nodes
+// around every such cell for a few rounds, then blends them back towards
+// rest until every cell is inside, so
+// the steps' guards keep every bound from the start. Returns the rounds.
+int fit_to_bounds(Level& level);
+
+// Measures every cell (area, move radius, quality) from the current nodes;
+// run before the first step of a level, after any change to the nodes that
+// step() did not make.
+void measure_cells(Level& level);
+
+struct StepStats {
+    double difference;  // largest neighbour density difference / reference density, before the step
+    double moved;       // largest node move made, in cells of this level
+};
+
+// One synchronous step (needs measure_cells' state, and keeps it current).
+StepStats step(Level& level, const AutomatonOptions& options);
+
+// Throws lmrefine::Error naming the first broken invariant (tests, debugging).
+void check_invariants(const Level& level, int step_index);
+
+}  // namespace lmrefine::automaton_detail

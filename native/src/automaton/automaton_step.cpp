@@ -1,0 +1,539 @@
+// The automaton's rule (method §4) and its guards. Every quantity of step n+1
+// is computed from the state of step n only, cell by cell and edge by edge,
+// so rows can be split among threads in any way with the same result.
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <numeric>
+#include <string>
+
+#include <glm/common.hpp>
+#include <glm/geometric.hpp>
+
+#include "automaton_cell.h"
+#include "automaton_level.h"
+#include "lmrefine/core/error.h"
+#include "lmrefine/core/parallel.h"
+
+namespace lmrefine::automaton_detail {
+namespace {
+
+// Guard reverts run over the whole grid while more than 1/this of the cells
+// break a bound, over lists of cells below.
+constexpr int64_t kDenseRevertFraction = 32;
+// Coarse levels keep cells above min_shrink x this: cells interpolated from
+// a coarse cell differ in size, and the finest level must start (nearly)
+// inside its bounds. 1.25 left fit_to_bounds cascading at strength >= 24;
+// 1.6 (with 10 smoothing rounds) cost 0.04 / 0.04 / 0.01 of equal-error
+// ratio on the sample scenes against 1.5; 1.4-1.55 all fit in <= 16 rounds
+// at strength 20-28, 1.3 cascades (docs/refiner.md).
+constexpr double kCoarseShrinkMargin = 1.5;
+
+// The channel of a cell that faces each side (directional variant); with one
+// channel every side uses channel 0.
+struct Facing {
+    int down, right, up, left;
+};
+constexpr Facing facing(int channels) { return channels == 4 ? Facing{0, 1, 2, 3} : Facing{0, 0, 0, 0}; }
+
+// Relative pressure difference in [-1, 1]; > 0 moves the edge towards b.
+double push(double a, double b) { return a + b > 0 ? (a - b) / (a + b) : 0.0; }
+
+}  // namespace
+
+void prepare_level(Level& level, const AutomatonOptions& options, bool ring) {
+    const int rows = level.rows(), cols = level.cols(), channels = level.channels;
+    const size_t cells = size_t(rows) * cols;
+    level.kind.assign(cells, CellKind::Material);
+    level.original_area.resize(cells);
+    level.min_area.resize(cells);
+    level.max_area.resize(cells);
+    std::array<double, 4> energy{}, covered_area{};
+    // Coarse levels keep a margin inside the bounds: cells interpolated from
+    // a coarse cell differ in size, and the finest level must start inside.
+    const bool coarse = level.grid.xs[1] - level.grid.xs[0] > 1;
+    const double lowest = coarse ? std::min(1.0, options.min_area * kCoarseShrinkMargin) : options.min_area;
+    const double highest = coarse ? std::max(1.0, options.max_area * 0.8) : options.max_area;
+    for (int i = 0; i < rows; ++i) {
+        for (int j = 0; j < cols; ++j) {
+            const size_t c = level.cell(i, j);
+            const double a0 = (level.grid.xs[j + 1] - level.grid.xs[j]) * (level.grid.ys[i + 1] - level.grid.ys[i]);
+            level.original_area[c] = a0;
+            const bool in_ring = ring && (i == 0 || j == 0 || i == rows - 1 || j == cols - 1);
+            if (in_ring) {
+                level.kind[c] = CellKind::Ring;
+                level.uncovered_area[c] = a0;
+                level.rigid_area[c] = 0;
+                level.min_area[c] = options.min_area * a0;
+                level.max_area[c] = std::numeric_limits<double>::infinity();
+            } else if (level.uncovered_area[c] >= a0) {
+                level.kind[c] = CellKind::Gutter;
+                level.min_area[c] = a0;  // gutter texels shift but are never compressed
+                level.max_area[c] = std::numeric_limits<double>::infinity();
+            } else {
+                // A coarse cell holding any rigid texel is rigid as a whole:
+                // its texels get their share of its area when it is
+                // interpolated, so a partly rigid block may not shrink.
+                if (coarse && level.rigid_area[c] > 0) level.rigid_area[c] = a0;
+                level.min_area[c] = std::max(lowest * a0, level.rigid_area[c]);
+                level.max_area[c] = highest * a0;
+                for (int k = 0; k < channels; ++k) {
+                    energy[k] += level.energy[c * channels + k];
+                    covered_area[k] += a0 - level.uncovered_area[c];
+                }
+            }
+        }
+    }
+    level.initial_total = 0;
+    for (double e : level.energy) level.initial_total += e;
+    for (int k = 0; k < channels; ++k) {
+        level.reference_density[k] = covered_area[k] > 0 ? energy[k] / covered_area[k] : 0.0;
+    }
+
+    level.node_mode.assign(size_t(rows + 1) * (cols + 1), NodeMode::Free);
+    for (int i = 0; i <= rows; ++i) {
+        for (int j = 0; j <= cols; ++j) {
+            const bool top_bottom = i == 0 || i == rows, left_right = j == 0 || j == cols;
+            NodeMode mode = NodeMode::Free;
+            if (top_bottom && left_right) {
+                mode = NodeMode::Fixed;
+            } else if (top_bottom || left_right) {
+                if (ring || options.border == BorderMode::BorderRule) {
+                    mode = NodeMode::Fixed;
+                } else {
+                    mode = top_bottom ? NodeMode::SlideX : NodeMode::SlideY;
+                }
+            }
+            level.node_mode[level.node(i, j)] = mode;
+        }
+    }
+
+    level.next_nodes = level.grid.nodes;
+    level.next_energy = level.energy;
+    for (auto* v : {&level.area, &level.safe_radius, &level.quality, &level.next_area, &level.next_safe_radius,
+                    &level.next_quality}) {
+        v->resize(cells);
+    }
+    level.row_difference.assign(size_t(rows + 1), 0.0);
+    level.row_moved.assign(size_t(rows + 1), 0.0);
+    level.suspect_round.assign(cells, 0);
+    level.revert_round = 0;
+    level.breaking_cell.assign(cells, 0);
+    level.reverted_node.assign(size_t(rows + 1) * (cols + 1), 0);
+}
+
+namespace {
+
+// A cell's shape state, written to the given arrays.
+void write_shape(size_t c, const Shape& now, double* area, double* radius, double* quality) {
+    area[c] = now.area;
+    radius[c] = now.radius;
+    quality[c] = now.quality2;
+}
+
+// Densities of the cells of row i from their energies and areas: energy /
+// area for diffusion (0 outside material cells); pressure per axis: a
+// cell's springs along an axis push both its edges across that axis (four
+// channels: y from r + b, x from g + a), uncovered texels weighing as the
+// mean density.
+template <int channels>
+void row_densities(const Level& level, int i, double* diffusion, double* pressure) {
+    constexpr int axes = channels == 4 ? 2 : 1;
+    for (int j = 0; j < level.cols(); ++j) {
+        const size_t c = level.cell(i, j);
+        const double a = level.area[c];
+        const double* e = &level.energy[c * channels];
+        // Numerators: each channel's energy, then each axis' pressure
+        // energy; divided by the area in pairs.
+        static_assert((channels + axes) % 2 == 0, "the divisions go in pairs");
+        double numerator[channels + axes];
+        for (int k = 0; k < channels; ++k) numerator[k] = e[k];
+        for (int axis = 0; axis < axes; ++axis) {
+            double sum = 0.0, reference = 0.0;
+            for (int k = axis; k < channels; k += axes) {
+                sum += e[k];
+                reference += level.reference_density[k];
+            }
+            numerator[channels + axis] = sum + reference * level.uncovered_area[c];
+        }
+        double quotient[channels + axes];
+        for (int k = 0; k < channels + axes; k += 2) {
+            const Pair q = Pair{numerator[k], numerator[k + 1]} / Pair{a, a};
+            quotient[k] = q[0];
+            quotient[k + 1] = q[1];
+        }
+        const bool material = level.kind[c] == CellKind::Material;
+        for (int k = 0; k < channels; ++k) diffusion[j * channels + k] = material ? quotient[k] : 0.0;
+        for (int axis = 0; axis < axes; ++axis) pressure[j * axes + axis] = quotient[channels + axis];
+    }
+}
+
+}  // namespace
+
+void measure_cells(Level& level) {
+    parallel_for(level.rows(), kRowGrain, [&](int64_t begin, int64_t end) {
+        for (int i = int(begin); i < int(end); ++i) {
+            for (int j = 0; j < level.cols(); ++j) {
+                glm::dvec2 q[4];
+                corners(level, level.grid.nodes, i, j, q);
+                write_shape(level.cell(i, j), shape(q), level.area.data(), level.safe_radius.data(),
+                            level.quality.data());
+            }
+        }
+    });
+}
+
+namespace {
+
+// The step for one or four channels (constants let the compiler unroll the
+// per-channel loops of the inner kernels).
+template <int channels>
+StepStats step_of(Level& level, const AutomatonOptions& options) {
+    const int rows = level.rows(), cols = level.cols();
+    constexpr Facing face = facing(channels);
+    constexpr int axes = channels == 4 ? 2 : 1;  // pressure: y (and x) axis
+    const std::vector<glm::dvec2>& nodes = level.grid.nodes;
+
+    // 1. Edges: energy flux (only between covered cells, from the denser to
+    // the less dense; the border and the gutter are adiabatic) and the push
+    // that moves the edge towards the less dense cell.
+    // Cells a and b with their densities (da, pa: diffusion, pressure).
+    // Returns |pa - pb| between covered cells (0 elsewhere): the density
+    // difference, relative to the axis' reference density below.
+    auto edge = [&](size_t a, double da, double pa, size_t b, double db, double pb, double& push_out,
+                    double& flux_out) {
+        push_out = push(pa, pb);
+        flux_out = 0.0;
+        if (level.kind[a] != CellKind::Material || level.kind[b] != CellKind::Material) return 0.0;
+        flux_out = options.diffusion * std::min(level.area[a], level.area[b]) * (da - db);
+        return std::abs(pa - pb);
+    };
+    // Reference density per axis; dividing the largest difference of a row
+    // by it once gives the largest quotient (rounding is monotonic).
+    double reference[2] = {0.0, 0.0};
+    for (int axis = 0; axis < axes; ++axis) {
+        for (int k = axis; k < channels; k += axes) reference[axis] += level.reference_density[k];
+    }
+    auto relative = [&](double difference, int axis) {
+        return reference[axis] > 0 ? difference / reference[axis] : 0.0;
+    };
+    // Edge row r: the vertical edges between the cells of row r (r < rows)
+    // and the horizontal edges along node row r (between cell rows r - 1 and
+    // r); border edges stay 0. `above` and `here`: the densities of cell
+    // rows r - 1 and r (diffusion, then pressure), where they exist.
+    auto edge_row = [&](int r, const double* above, const double* here, double* push_v, double* flux_v,
+                        double* push_h, double* flux_h) {
+        const double* pressure_above = above + size_t(cols) * channels;
+        const double* pressure_here = here + size_t(cols) * channels;
+        double largest_v = 0.0, largest_h = 0.0;
+        push_v[0] = flux_v[0] = push_v[cols] = flux_v[cols] = 0.0;
+        if (r < rows) {
+            for (int j = 1; j < cols; ++j) {
+                largest_v = std::max(largest_v, edge(level.cell(r, j - 1), here[(j - 1) * channels + face.right],
+                                                     pressure_here[(j - 1) * axes + axes - 1], level.cell(r, j),
+                                                     here[j * channels + face.left],
+                                                     pressure_here[j * axes + axes - 1], push_v[j], flux_v[j]));
+            }
+        } else {
+            std::fill(push_v, push_v + cols + 1, 0.0);
+            std::fill(flux_v, flux_v + cols + 1, 0.0);
+        }
+        if (r > 0 && r < rows) {
+            for (int j = 0; j < cols; ++j) {
+                largest_h = std::max(largest_h, edge(level.cell(r - 1, j), above[j * channels + face.down],
+                                                     pressure_above[j * axes], level.cell(r, j),
+                                                     here[j * channels + face.up], pressure_here[j * axes],
+                                                     push_h[j], flux_h[j]));
+            }
+        } else {
+            std::fill(push_h, push_h + cols, 0.0);
+            std::fill(flux_h, flux_h + cols, 0.0);
+        }
+        return std::max(relative(largest_v, axes - 1), relative(largest_h, 0));
+    };
+
+    // 2. New energies (each edge's flux leaves one cell and enters the other,
+    // so the total is conserved) and proposed node positions.
+    parallel_for(rows + 1, kRowGrain, [&](int64_t begin, int64_t end) {
+        // The energies and nodes of node rows [begin, end) need edge rows
+        // [begin - 1, end], and those the densities of cell rows
+        // [begin - 2, end]: each chunk computes its own (the halo rows
+        // twice) into scratch that stays in cache, and only its own rows'
+        // differences.
+        const int first = std::max(0, int(begin) - 1), last = std::min(rows, int(end));
+        const int first_cells = std::max(0, first - 1), last_cells = std::min(rows - 1, last);
+        const size_t stride = size_t(cols) + 1, edge_rows = size_t(last - first + 1);
+        const size_t density_stride = size_t(cols) * (channels + axes);
+        thread_local std::vector<double> scratch;
+        scratch.resize(4 * stride * edge_rows + density_stride * size_t(last_cells - first_cells + 1));
+        double* const pv = scratch.data();
+        double* const fv = pv + stride * edge_rows;
+        double* const ph = fv + stride * edge_rows;
+        double* const fh = ph + stride * edge_rows;
+        double* const densities = fh + stride * edge_rows;
+        auto density_row = [&](int i) {  // rows outside the grid are never read: any row will do
+            return densities + density_stride * size_t(std::clamp(i, first_cells, last_cells) - first_cells);
+        };
+        for (int i = first_cells; i <= last_cells; ++i) {
+            row_densities<channels>(level, i, density_row(i), density_row(i) + size_t(cols) * channels);
+        }
+        for (int r = first; r <= last; ++r) {
+            const size_t o = stride * size_t(r - first);
+            const double largest = edge_row(r, density_row(r - 1), density_row(r), pv + o, fv + o, ph + o, fh + o);
+            if (r >= begin && r < end) level.row_difference[size_t(r)] = largest;
+        }
+        // Edge values by edge row and column, as in the whole-grid arrays.
+        auto push_v = [&](int r, int j) { return pv[stride * size_t(r - first) + j]; };
+        auto flux_v = [&](int r, int j) { return fv[stride * size_t(r - first) + j]; };
+        auto push_h = [&](int r, int j) { return ph[stride * size_t(r - first) + j]; };
+        auto flux_h = [&](int r, int j) { return fh[stride * size_t(r - first) + j]; };
+        for (int i = int(begin); i < int(end); ++i) {
+            double largest_move = 0.0;
+            if (i < rows) {
+                for (int j = 0; j < cols; ++j) {
+                    const size_t c = level.cell(i, j);
+                    double* e = &level.next_energy[c * channels];
+                    for (int k = 0; k < channels; ++k) e[k] = level.energy[c * channels + k];
+                    e[face.left] += flux_v(i, j);
+                    e[face.right] -= flux_v(i, j + 1);
+                    e[face.up] += flux_h(i, j);
+                    e[face.down] -= flux_h(i + 1, j);
+                    // Rounding can leave -1e-17 where a cell gave all it had.
+                    for (int k = 0; k < channels; ++k) e[k] = std::max(e[k], 0.0);
+                }
+            }
+            for (int j = 0; j <= cols; ++j) {
+                const size_t n = level.node(i, j);
+                glm::dvec2 p = nodes[n];
+                const NodeMode mode = level.node_mode[n];
+                if (mode != NodeMode::Fixed) {
+                    // The vertical edges above and below the node move it in x,
+                    // the horizontal edges left and right of it in y; a missing
+                    // edge (at the border) contributes nothing.
+                    double fx = 0, fy = 0, area_sum = 0, radius = std::numeric_limits<double>::infinity();
+                    int adjacent = 0;
+                    if (i > 0 && i < rows && j > 0 && j < cols) {
+                        // Inside (nearly every node): all four edges and cells, in
+                        // the order of the general case below (same rounding).
+                        const size_t up = size_t(i - 1) * cols + j, down = up + cols;
+                        fx = push_v(i - 1, j) + push_v(i, j);
+                        fy = push_h(i, j - 1) + push_h(i, j);
+                        area_sum = level.area[up - 1] + level.area[up] + level.area[down - 1] + level.area[down];
+                        radius = std::min(std::min(level.safe_radius[up - 1], level.safe_radius[up]),
+                                          std::min(level.safe_radius[down - 1], level.safe_radius[down]));
+                        adjacent = 4;
+                    } else {
+                        if (i > 0) fx += push_v(i - 1, j);
+                        if (i < rows) fx += push_v(i, j);
+                        if (j > 0) fy += push_h(i, j - 1);
+                        if (j < cols) fy += push_h(i, j);
+                        for (int di = -1; di <= 0; ++di) {
+                            for (int dj = -1; dj <= 0; ++dj) {
+                                const int ci = i + di, cj = j + dj;
+                                if (ci < 0 || cj < 0 || ci >= rows || cj >= cols) continue;
+                                area_sum += level.area[level.cell(ci, cj)];
+                                radius = std::min(radius, level.safe_radius[level.cell(ci, cj)]);
+                                ++adjacent;
+                            }
+                        }
+                    }
+                    // x / 4 == x * 0.25 exactly; a division costs as much as the root.
+                    const double size = std::sqrt(adjacent == 4 ? area_sum * 0.25 : area_sum / adjacent);
+                    glm::dvec2 move = 0.5 * options.rate * size * glm::dvec2(fx, fy);
+                    if (mode == NodeMode::SlideX) move.y = 0;
+                    if (mode == NodeMode::SlideY) move.x = 0;
+                    // Squared first: the root is only needed to shorten a move.
+                    const double length2 = glm::dot(move, move);
+                    if (length2 > radius * radius) move *= radius / std::sqrt(length2);
+                    p += move;
+                    p.x = std::clamp(p.x, level.grid.xs.front(), level.grid.xs.back());
+                    p.y = std::clamp(p.y, level.grid.ys.front(), level.grid.ys.back());
+                    const glm::dvec2 d = p - nodes[n];
+                    largest_move = std::max(largest_move, glm::dot(d, d));
+                }
+                level.next_nodes[n] = p;
+            }
+            level.row_moved[size_t(i)] = largest_move;
+        }
+    });
+    const double difference = *std::max_element(level.row_difference.begin(), level.row_difference.end());
+
+    // 3. Shape bounds: a cell may not leave [min_area, max_area], get a corner
+    // sharper or an edge shorter than kMinQuality allows (which includes
+    // turning concave or inside out), or (a cell of rigid texels only) get
+    // thinner than its original width or height; nor move further out of a
+    // bound it already breaks (cells interpolated from a coarser level may).
+    // Cells that would are frozen by putting their corners back. A cell all
+    // of whose corners are back is in its previous, valid state, so
+    // repeating until nothing breaks a bound ends in a valid state. The first round
+    // checks every cell in parallel; later rounds only the cells around the
+    // corners just put back (rounds are whole sets, so the order within a
+    // round does not matter).
+    // Every cell is measured here for its new corners and energies (the next
+    // step's state): a cell whose corners did not move keeps its shape.
+    auto breaks_bound = [&](int i, int j) {
+        const size_t c = level.cell(i, j);
+        glm::dvec2 q[4];
+        corners(level, level.next_nodes, i, j, q);
+        glm::dvec2 old[4];
+        corners(level, nodes, i, j, old);
+        const bool unchanged = q[0] == old[0] && q[1] == old[1] && q[2] == old[2] && q[3] == old[3];
+        const Shape now = unchanged ? Shape{level.area[c], level.safe_radius[c], level.quality[c]} : shape(q);
+        write_shape(c, now, level.next_area.data(), level.next_safe_radius.data(), level.next_quality.data());
+        if (unchanged) return false;
+        const double a = now.area, before = level.area[c];
+        if ((a < level.min_area[c] && a < before) || (a > level.max_area[c] && a > before)) return true;
+        if (now.quality2 < kMinQuality * kMinQuality && now.quality2 < level.quality[c]) return true;
+        if (level.rigid_area[c] < level.original_area[c]) return false;
+        const glm::dvec2 thin = thickness(q, a);
+        const double w0 = level.grid.xs[j + 1] - level.grid.xs[j];
+        const double h0 = level.grid.ys[i + 1] - level.grid.ys[i];
+        if (!(thin.x < w0) && !(thin.y < h0)) return false;  // as thick as at rest: the usual case
+        const glm::dvec2 was = thickness(old, before);
+        return (thin.x < w0 && thin.x < was.x) || (thin.y < h0 && thin.y < was.y);
+    };
+    // Judges the cells of the whole grid in parallel (all of them, or only
+    // those with a corner put back in this round): verdicts in breaking_cell,
+    // counts per row in row_count.
+    std::vector<uint8_t>& breaking_cell = level.breaking_cell;
+    std::vector<int64_t> row_count(size_t(rows), 0);
+    auto judge_grid = [&](bool only_reverted) {
+        parallel_for(rows, kRowGrain, [&](int64_t begin, int64_t end) {
+            for (int i = int(begin); i < int(end); ++i) {
+                int64_t count = 0;
+                for (int j = 0; j < cols; ++j) {
+                    const bool suspect = !only_reverted || level.reverted_node[level.node(i, j)] ||
+                                         level.reverted_node[level.node(i, j + 1)] ||
+                                         level.reverted_node[level.node(i + 1, j)] ||
+                                         level.reverted_node[level.node(i + 1, j + 1)];
+                    const bool breaks = suspect && breaks_bound(i, j);
+                    breaking_cell[level.cell(i, j)] = breaks;
+                    count += breaks;
+                }
+                row_count[size_t(i)] = count;
+            }
+        });
+    };
+    judge_grid(false);
+    std::vector<uint8_t> reverted_rows(size_t(rows) + 1, 0);  // node rows with a node put back
+    // Dense rounds, while many cells break (a seventh of the finest level's
+    // cells on a Lightmap Pack layout): two passes over the whole grid, in
+    // parallel. Nodes of breaking cells go back; the cells around them are
+    // judged again. The same sets as the sparse rounds below.
+    auto total = [&] { return std::accumulate(row_count.begin(), row_count.end(), int64_t(0)); };
+    while (total() > int64_t(rows) * cols / kDenseRevertFraction) {
+        parallel_for(rows + 1, kRowGrain, [&](int64_t begin, int64_t end) {
+            for (int i = int(begin); i < int(end); ++i) {
+                // The cell rows above and below node row i, where they exist.
+                const uint8_t* above = i > 0 ? &breaking_cell[level.cell(i - 1, 0)] : nullptr;
+                const uint8_t* below = i < rows ? &breaking_cell[level.cell(i, 0)] : nullptr;
+                for (int j = 0; j <= cols; ++j) {
+                    uint8_t revert = 0;
+                    for (const uint8_t* row : {above, below}) {
+                        if (!row) continue;
+                        if (j > 0) revert |= row[j - 1];
+                        if (j < cols) revert |= row[j];
+                    }
+                    const size_t n = level.node(i, j);
+                    level.reverted_node[n] = revert;
+                    if (!revert) continue;
+                    level.next_nodes[n] = nodes[n];
+                    reverted_rows[size_t(i)] = 1;
+                }
+            }
+        });
+        judge_grid(true);
+    }
+    std::vector<std::vector<int32_t>> row_breaking(static_cast<size_t>(rows));
+    parallel_for(rows, kRowGrain, [&](int64_t begin, int64_t end) {
+        for (int i = int(begin); i < int(end); ++i) {
+            row_breaking[size_t(i)].clear();
+            if (!row_count[size_t(i)]) continue;
+            for (int j = 0; j < cols; ++j) {
+                if (breaking_cell[level.cell(i, j)]) row_breaking[size_t(i)].push_back(int32_t(level.cell(i, j)));
+            }
+        }
+    });
+    std::vector<int32_t> breaking;
+    for (const auto& r : row_breaking) breaking.insert(breaking.end(), r.begin(), r.end());
+    // Sparse rounds: lists of the breaking cells and their neighbours.
+    std::vector<int32_t> suspects;
+    std::vector<uint8_t> verdicts;
+    while (!breaking.empty()) {
+        // Each cell once per round (a stamp, not a sort: within a round the
+        // order does not matter, every cell is judged on the same nodes).
+        const uint32_t round = ++level.revert_round;
+        suspects.clear();
+        for (int32_t c : breaking) {
+            const int i = c / cols, j = c % cols;
+            reverted_rows[size_t(i)] = reverted_rows[size_t(i) + 1] = 1;
+            for (int ni = i; ni <= i + 1; ++ni) {
+                for (int nj = j; nj <= j + 1; ++nj) {
+                    level.next_nodes[level.node(ni, nj)] = nodes[level.node(ni, nj)];
+                    queue_cells_around(level, ni, nj, round, suspects);
+                }
+            }
+        }
+        // Judged in parallel: each suspect once, writing only its own state.
+        judge_cells(level, suspects, breaks_bound, verdicts, breaking);
+    }
+
+    // The largest node move actually made, in cell sizes of this level.
+    parallel_for(rows + 1, kRowGrain, [&](int64_t begin, int64_t end) {
+        for (int i = int(begin); i < int(end); ++i) {
+            if (!reverted_rows[size_t(i)]) continue;
+            double largest = 0.0;
+            for (int j = 0; j <= cols; ++j) {
+                const glm::dvec2 d = level.next_nodes[level.node(i, j)] - nodes[level.node(i, j)];
+                largest = std::max(largest, glm::dot(d, d));
+            }
+            level.row_moved[size_t(i)] = largest;
+        }
+    });
+    const double block = level.grid.xs[1] - level.grid.xs[0];
+    const double moved = std::sqrt(*std::max_element(level.row_moved.begin(), level.row_moved.end()));
+
+    level.grid.nodes.swap(level.next_nodes);
+    level.energy.swap(level.next_energy);
+    level.area.swap(level.next_area);
+    level.safe_radius.swap(level.next_safe_radius);
+    level.quality.swap(level.next_quality);
+    return {difference, moved / block};
+}
+
+}  // namespace
+
+StepStats step(Level& level, const AutomatonOptions& options) {
+    return level.channels == 4 ? step_of<4>(level, options) : step_of<1>(level, options);
+}
+
+void check_invariants(const Level& level, int step_index) {
+    auto fail = [&](const std::string& what) {
+        LMREFINE_THROW(Error, "automaton invariant broken after step " + std::to_string(step_index) + " (" +
+                                  std::to_string(level.rows()) + "x" + std::to_string(level.cols()) +
+                                  " cells): " + what);
+    };
+    const NodeGrid& grid = level.grid;
+    for (int i = 0; i < level.rows(); ++i) {
+        for (int j = 0; j < level.cols(); ++j) {
+            if (!(min_corner_cross(grid, i, j) > 0)) {
+                fail("cell (" + std::to_string(i) + ", " + std::to_string(j) + ") is inverted or degenerate");
+            }
+        }
+    }
+    for (const glm::dvec2& p : grid.nodes) {
+        if (!(p.x >= grid.xs.front() && p.x <= grid.xs.back() && p.y >= grid.ys.front() && p.y <= grid.ys.back())) {
+            fail("a node left the grid's rectangle");
+        }
+    }
+    double total = 0;
+    for (double e : level.energy) {
+        if (!(e >= 0)) fail("negative energy " + std::to_string(e));
+        total += e;
+    }
+    if (std::abs(total - level.initial_total) > 1e-9 * std::max(1.0, level.initial_total)) {
+        fail("total energy changed from " + std::to_string(level.initial_total) + " to " + std::to_string(total));
+    }
+}
+
+}  // namespace lmrefine::automaton_detail
