@@ -1,7 +1,9 @@
 // Charts: the connected pieces of a UV layout. Layouts arrive as per-corner
 // UVs, so a vertex shared inside a chart appears once per corner with the
 // same UV value; triangles are joined where corners share a UV index or hold
-// bit-identical UVs.
+// UVs closer than a tolerance (bit-identical with tolerance 0). Blender's
+// layouts are not bit-exact, so callers that want its islands weld within a
+// small tolerance.
 #pragma once
 
 #include <cstdint>
@@ -16,7 +18,14 @@ struct Charts {
     int32_t count = 0;
 };
 
-// The layout must be valid (validate_layout).
-Charts find_charts(const UvLayout& layout);
+// The layout must be valid (validate_layout); tolerance >= 0 is a UV-space
+// distance: corners closer than it (or bit-identical) are joined.
+Charts find_charts(const UvLayout& layout, double tolerance = 0.0);
+
+// Welded corners: per UV index, the smallest UV index of the triangles'
+// corners it is joined to by the tolerance (corners closer than it, chained),
+// itself when none; UV indices no triangle uses map to themselves. With
+// tolerance 0, bit-identical UVs are joined.
+std::vector<int64_t> weld_corners(const UvLayout& layout, double tolerance);
 
 }  // namespace lmrefine

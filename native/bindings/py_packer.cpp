@@ -1,0 +1,178 @@
+#include <pybind11/pybind11.h>
+
+#include <chrono>
+#include <string>
+
+#include "lmrefine/core/error.h"
+#include "lmrefine/layout/chart.h"
+#include "lmrefine/pack/packer.h"
+#include "numpy_util.h"
+#include "progress_binding.h"
+
+namespace py = pybind11;
+
+namespace lmrefine::bindings {
+namespace {
+
+struct PyPackResult {
+    py::array_t<float> uvs;
+    py::dict report;
+};
+
+double utilisation(const UvLayout& layout, int width, int height) {
+    const std::vector<uint8_t> mask = coverage_mask(layout, width, height);
+    int64_t covered = 0;
+    for (uint8_t m : mask) covered += m;
+    return double(covered) / (double(width) * height);
+}
+
+PyPackResult pack(const py::handle& uvs_in, const py::handle& triangles_in, const py::handle& resolution,
+                  double padding, const py::handle& charts_in, const py::handle& scales_in, bool rotate,
+                  py::object progress_callback, double tolerance) {
+    const auto start = std::chrono::steady_clock::now();
+    auto uvs = py_util::require_points(uvs_in, "uvs", 2, /*allow_empty=*/true);
+    auto triangles = py_util::require_indices(triangles_in, "triangles", 3, /*allow_empty=*/true);
+    PackOptions options;
+    std::tie(options.height, options.width) = py_util::parse_resolution(resolution);
+    options.padding = padding;
+    options.rotate = rotate;
+    options.weld_tolerance = tolerance;
+    if (!(padding >= 0.0) || !std::isfinite(padding)) {
+        throw py::value_error("padding must be a finite number of texels >= 0 (got " + std::to_string(padding) + ")");
+    }
+    if (!(tolerance >= 0.0) || !std::isfinite(tolerance)) {
+        throw py::value_error("tolerance must be a finite UV distance >= 0 (got " + std::to_string(tolerance) + ")");
+    }
+    const UvLayout layout{uvs.data(), uvs.shape(0), triangles.data(), triangles.shape(0)};
+    validate_layout(layout);
+
+    std::vector<int32_t> chart_ids;
+    int32_t chart_count = 0;
+    if (charts_in.is_none()) {
+        Charts charts = find_charts(layout, tolerance);
+        chart_ids = std::move(charts.triangle_chart);
+        chart_count = charts.count;
+    } else {
+        py::array array = py::array::ensure(charts_in);
+        if (!array || (array.dtype().kind() != 'i' && array.dtype().kind() != 'u')) {
+            throw py::value_error("charts must be an integer array of chart ids, one per triangle");
+        }
+        if (array.ndim() != 1 || array.shape(0) != layout.triangle_count) {
+            throw py::value_error("charts must have shape (" + std::to_string(layout.triangle_count) + ",): one chart id per triangle, got " +
+                                  py_util::shape_string(array));
+        }
+        py::array_t<int64_t, py::array::c_style | py::array::forcecast> wide(array);
+        chart_ids.resize(size_t(layout.triangle_count));
+        for (py::ssize_t t = 0; t < wide.size(); ++t) {
+            const int64_t c = wide.data()[t];
+            if (c < 0 || c >= (int64_t(1) << 30)) {
+                throw py::value_error("charts[" + std::to_string(t) + "] is " + std::to_string(c) +
+                                      "; chart ids must be >= 0 (and below 2^30)");
+            }
+            chart_ids[size_t(t)] = int32_t(c);
+            chart_count = std::max(chart_count, int32_t(c) + 1);
+        }
+    }
+    std::vector<double> scales(size_t(chart_count), 1.0);
+    if (!scales_in.is_none()) {
+        py::array array = py::array::ensure(scales_in);
+        if (!array || (array.dtype().kind() != 'f' && array.dtype().kind() != 'i' && array.dtype().kind() != 'u')) {
+            throw py::value_error("scales must be a real array, one scale per chart");
+        }
+        if (array.ndim() != 1 || array.shape(0) != chart_count) {
+            throw py::value_error("scales must have shape (" + std::to_string(chart_count) + ",): one scale per chart, got " +
+                                  py_util::shape_string(array));
+        }
+        py::array_t<double, py::array::c_style | py::array::forcecast> values(array);
+        for (int32_t c = 0; c < chart_count; ++c) {
+            const double s = values.data()[c];
+            if (!(s > 0.0) || !std::isfinite(s)) {
+                throw py::value_error("scales must be finite and > 0: scales[" + std::to_string(c) + "] is " + std::to_string(s));
+            }
+            scales[size_t(c)] = s;
+        }
+    }
+
+    py_util::PythonProgress progress(std::move(progress_callback));
+    double utilisation_in = 0, utilisation_out = 0;
+    PackResult result = progress.run([&](Progress& p) {
+        PackResult r = pack_charts(layout, chart_ids, chart_count, scales, options, &p);
+        const UvLayout out{r.uvs.data(), layout.uv_count, layout.triangles, layout.triangle_count};
+        utilisation_out = utilisation(out, options.width, options.height);
+        utilisation_in = utilisation(layout, options.width, options.height);
+        return r;
+    });
+
+    PyPackResult out;
+    py::dict& report = out.report;
+    report["global_scale"] = result.global_scale;
+    report["scale_bound"] = result.scale_bound;
+    report["utilisation"] = utilisation_out;
+    report["utilisation_input"] = utilisation_in;
+    report["charts"] = chart_count;
+    report["trials"] = result.trials;
+    report["footprint_texels"] = result.footprint_texels;
+    report["padding"] = padding;
+    report["resolution"] = py::make_tuple(options.height, options.width);
+    report["rotations"] = py_util::to_numpy(std::move(result.rotations), {py::ssize_t(chart_count)});
+    out.uvs = py_util::to_numpy(std::move(result.uvs), {py::ssize_t(layout.uv_count), 2});
+    report["seconds"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    return out;
+}
+
+}  // namespace
+
+void bind_packer(py::module_& m) {
+    py::class_<PyPackResult>(m, "PackResult", "The packed layout: ``uvs`` (N, 2) float32 and ``report`` (dict).")
+        .def_readonly("uvs", &PyPackResult::uvs)
+        .def_readonly("report", &PyPackResult::report)
+        .def("__repr__", [](const PyPackResult& r) {
+            return "PackResult(charts=" + py::str(r.report["charts"]).cast<std::string>() +
+                   ", global_scale=" + py::str(r.report["global_scale"]).cast<std::string>() +
+                   ", utilisation=" + py::str(r.report["utilisation"]).cast<std::string>() + ")";
+        });
+    m.def("pack_charts", &pack, py::arg("uvs"), py::arg("triangles"), py::arg("resolution"), py::arg("padding") = 2.0,
+          py::kw_only(), py::arg("charts") = py::none(), py::arg("scales") = py::none(), py::arg("rotate") = true,
+          py::arg("progress") = py::none(), py::arg("tolerance") = 1e-5,
+          R"doc(Pack a layout's charts into one atlas, as large as it allows.
+
+Each chart moves as a whole: a uniform scale (``global_scale * scales[c]``),
+a rotation by a multiple of 90 degrees and a translation, so its triangles
+keep their shapes. Charts are fitted by their conservative texel footprint
+at the target resolution (what ``coverage_mask`` rasterizes), dilated by the
+padding, with a first-fit raster placement (largest chart first, rows top to
+bottom); a search finds the largest global scale at which every chart is
+placed. Details: docs/packer.md.
+
+Args:
+    uvs (numpy.ndarray): (N, 2) per-corner UVs (any position).
+    triangles (numpy.ndarray): (T, 3) integer indices into ``uvs``.
+    resolution (int | tuple[int, int]): target lightmap, square or (height, width).
+    padding (float): smallest gutter between charts in texels, as
+        ``check_layout`` measures it.
+    charts (numpy.ndarray | None): (T,) integer chart id per triangle;
+        default ``find_charts(uvs, triangles, tolerance=tolerance)``.
+    scales (numpy.ndarray | None): (C,) relative linear scale per chart,
+        > 0 (C = largest chart id + 1); default all 1 (a uniform repack).
+    rotate (bool): allow quarter turns.
+    progress (callable | None): ``progress(fraction, stage)``; return False to cancel.
+    tolerance (float): UV distance within which a chart's corners are
+        welded (snapped together in the output) and, without ``charts``,
+        triangles are joined into charts.
+
+Returns:
+    PackResult: ``uvs`` (N, 2) float32 (UVs no triangle uses are copied)
+    and ``report``: global_scale, scale_bound (the area bound), utilisation
+    (fraction of texels covered in the output, by coverage_mask),
+    utilisation_input (the same for the input, clipped to [0, 1]),
+    rotations (C,) quarter turns, charts, trials, footprint_texels,
+    padding, resolution, seconds.
+
+Raises:
+    ValueError: bad shapes or values (naming the argument), a UV index used
+        by two charts, or charts that cannot fit even at a tiny scale.
+    lmrefine.CancelledError: the progress callback returned False.
+)doc");
+}
+
+}  // namespace lmrefine::bindings

@@ -1,0 +1,41 @@
+// The atlas packer: moves whole charts (uniform scale, a rotation by a
+// multiple of 90 degrees, a translation) into [0, 1]^2 at a lightmap
+// resolution, with at least `padding` texels between charts as check_layout
+// measures it, as large as the atlas allows. Charts are fitted by their
+// conservative texel footprint (what coverage_mask rasterizes), not by their
+// bounding boxes. Details and measurements: docs/packer.md.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "lmrefine/layout/coverage.h"
+
+namespace lmrefine {
+
+class Progress;
+
+struct PackOptions {
+    int width = 0, height = 0;  // the target lightmap
+    double padding = 2.0;       // texels between charts, >= 0
+    bool rotate = true;         // allow 90-degree turns
+    double weld_tolerance = 0;  // corners of one chart closer than this (UV) are snapped together
+};
+
+struct PackResult {
+    std::vector<float> uvs;          // (uv_count, 2), the input's where no triangle uses a UV
+    double global_scale = 0;         // each chart's linear scale is global_scale * scales[c]
+    double scale_bound = 0;          // the area bound on global_scale (total chart area = atlas)
+    std::vector<int32_t> rotations;  // per chart, quarter turns counter-clockwise (0 or 1)
+    int trials = 0;                  // placements tried by the scale search
+    int64_t footprint_texels = 0;    // texels of the placed footprints (undilated)
+};
+
+// triangle_chart: chart id per triangle in [0, chart_count); a UV index used
+// by two charts, bad scales or a bad resolution throw InvalidArgument. The
+// layout must be valid (validate_layout). Deterministic: the result does not
+// depend on the thread count.
+PackResult pack_charts(const UvLayout& layout, const std::vector<int32_t>& triangle_chart, int32_t chart_count,
+                       const std::vector<double>& scales, const PackOptions& options, Progress* progress = nullptr);
+
+}  // namespace lmrefine

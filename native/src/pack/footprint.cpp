@@ -1,0 +1,128 @@
+#include "footprint.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include <glm/common.hpp>
+
+namespace lmrefine::pack {
+namespace {
+
+// Two footprints' texels are closed unit squares; charts lie inside them, so
+// squares at least `padding` + kMargin apart keep the charts that far apart
+// even after the output UVs are rounded to float32 (~1e-4 texel at 2048^2).
+constexpr double kMargin = 1e-3;
+
+SpanRows to_spans(const std::vector<uint8_t>& bits, int width, int height) {
+    SpanRows rows;
+    rows.width = width;
+    rows.height = height;
+    rows.offsets.reserve(size_t(height) + 1);
+    for (int r = 0; r < height; ++r) {
+        rows.offsets.push_back(int32_t(rows.spans.size()));
+        const uint8_t* row = bits.data() + size_t(r) * size_t(width);
+        for (int c = 0; c < width;) {
+            if (!row[c]) {
+                ++c;
+                continue;
+            }
+            const int begin = c;
+            while (c < width && row[c]) ++c;
+            rows.spans.push_back({begin, c});
+        }
+    }
+    rows.offsets.push_back(int32_t(rows.spans.size()));
+    return rows;
+}
+
+}  // namespace
+
+std::vector<glm::dvec2> local_pixels(const ChartPiece& piece, const std::vector<glm::dvec2>& uvs, double scale,
+                                     int quarter_turns, int width, int height) {
+    std::vector<glm::dvec2> local(piece.corners.size());
+    glm::dvec2 low(INFINITY);
+    for (size_t k = 0; k < piece.corners.size(); ++k) {
+        glm::dvec2 uv = uvs[size_t(piece.corners[k])] * scale;
+        if (quarter_turns & 1) uv = glm::dvec2(-uv.y, uv.x);
+        local[k] = glm::dvec2(uv.x * width, -uv.y * height);
+        low = glm::min(low, local[k]);
+    }
+    for (auto& p : local) p -= low;
+    return local;
+}
+
+Footprint make_footprint(const ChartPiece& piece, const UvLayout& layout, const std::vector<glm::dvec2>& local,
+                         double padding) {
+    glm::dvec2 high(0.0);
+    for (const auto& p : local) high = glm::max(high, p);
+    const int width = std::max(1, int(std::ceil(high.x))), height = std::max(1, int(std::ceil(high.y)));
+    std::vector<uint8_t> bits(size_t(width) * size_t(height), 0);
+    auto set_point = [&](const glm::dvec2& p) {
+        const int c = std::clamp(int(std::floor(p.x)), 0, width - 1), r = std::clamp(int(std::floor(p.y)), 0, height - 1);
+        bits[size_t(r) * size_t(width) + size_t(c)] = 1;
+    };
+    auto local_of = [&](int32_t uv_index) {
+        const auto it = std::lower_bound(piece.corners.begin(), piece.corners.end(), int64_t(uv_index));
+        return local[size_t(it - piece.corners.begin())];
+    };
+    for (int64_t t : piece.triangles) {
+        glm::dvec2 p[3];
+        for (int k = 0; k < 3; ++k) p[k] = local_of(layout.triangles[3 * t + k]);
+        const TriangleCover cover(p, width, height);
+        for (int r = cover.row_begin(); r < cover.row_end(); ++r) {
+            const auto [begin, end] = cover.columns(r);
+            std::fill(bits.begin() + r * width + begin, bits.begin() + r * width + end, uint8_t(1));
+        }
+        // Slivers (and zero-area triangles, which cover nothing) still occupy
+        // the texels their corners and edges pass through.
+        const double twice_area = std::abs((p[1].x - p[0].x) * (p[2].y - p[0].y) - (p[1].y - p[0].y) * (p[2].x - p[0].x));
+        if (twice_area < 1.0) {
+            for (int e = 0; e < 3; ++e) {
+                const glm::dvec2 a = p[e], b = p[(e + 1) % 3];
+                const int steps = 1 + int(std::ceil(4.0 * std::max(std::abs(b.x - a.x), std::abs(b.y - a.y))));
+                for (int s = 0; s <= steps; ++s) set_point(a + (b - a) * (double(s) / steps));
+            }
+        }
+    }
+    for (const auto& p : local) set_point(p);
+
+    Footprint fp;
+    fp.covered = to_spans(bits, width, height);
+    fp.row_first.assign(size_t(height), width);
+    for (int r = 0; r < height; ++r) {
+        if (fp.covered.offsets[r] < fp.covered.offsets[r + 1]) fp.row_first[r] = fp.covered.spans[fp.covered.offsets[r]].first;
+        for (int k = fp.covered.offsets[r]; k < fp.covered.offsets[r + 1]; ++k) {
+            fp.texels += fp.covered.spans[k].second - fp.covered.spans[k].first;
+        }
+    }
+
+    // Texel squares (di, dj) apart are max(0, |di| - 1), max(0, |dj| - 1)
+    // texels apart; the dilation holds every offset closer than the padding.
+    const double limit = padding + kMargin;
+    fp.reach = int(std::ceil(limit));
+    std::vector<int> half(size_t(2 * fp.reach + 1), -1);  // per row offset, the horizontal reach
+    for (int di = -fp.reach; di <= fp.reach; ++di) {
+        const double gy = std::max(0, std::abs(di) - 1);
+        for (int dj = 0; dj <= fp.reach; ++dj) {
+            const double gx = std::max(0, dj - 1);
+            if (gx * gx + gy * gy < limit * limit) half[size_t(di + fp.reach)] = dj;
+        }
+    }
+    const int dw = width + 2 * fp.reach, dh = height + 2 * fp.reach;
+    std::vector<uint8_t> dilated(size_t(dw) * size_t(dh), 0);
+    for (int r = 0; r < height; ++r) {
+        for (int k = fp.covered.offsets[r]; k < fp.covered.offsets[r + 1]; ++k) {
+            const auto [begin, end] = fp.covered.spans[k];
+            for (int di = -fp.reach; di <= fp.reach; ++di) {
+                const int h = half[size_t(di + fp.reach)];
+                if (h < 0) continue;
+                uint8_t* row = dilated.data() + size_t(r + di + fp.reach) * size_t(dw);
+                std::fill(row + begin + fp.reach - h, row + end + fp.reach + h, uint8_t(1));
+            }
+        }
+    }
+    fp.dilated = to_spans(dilated, dw, dh);
+    return fp;
+}
+
+}  // namespace lmrefine::pack

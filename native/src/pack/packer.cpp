@@ -1,0 +1,255 @@
+// The scale search: the largest global scale at which the greedy first-fit
+// placement (occupancy.cpp) places every chart. Each trial rasterizes every
+// chart's footprint at the trial's scale (footprint.cpp) and places the
+// charts largest first.
+#include "lmrefine/pack/packer.h"
+
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+
+#include <glm/common.hpp>
+#include <string>
+
+#include "footprint.h"
+#include "lmrefine/core/error.h"
+#include "lmrefine/core/parallel.h"
+#include "lmrefine/core/progress.h"
+#include "lmrefine/layout/chart.h"
+#include "occupancy.h"
+
+namespace lmrefine {
+namespace {
+
+using pack::ChartPiece;
+using pack::Footprint;
+
+struct Placement {
+    int x = 0, y = 0, turns = 0;
+};
+
+struct Trial {
+    bool fits = false;
+    std::vector<Placement> placements;  // per chart
+    int64_t texels = 0;
+};
+
+struct Problem {
+    const UvLayout& layout;
+    const std::vector<ChartPiece>& pieces;
+    const std::vector<glm::dvec2>& uvs;  // welded, double
+    const std::vector<double>& scales;
+    const PackOptions& options;
+};
+
+// Places every chart at one global scale, or stops at the first that does not fit.
+Trial run_trial(const Problem& problem, double global_scale, Progress* progress) {
+    const size_t count = problem.pieces.size();
+    const int turn_options = problem.options.rotate ? 2 : 1;
+    std::vector<Footprint> footprints(count * size_t(turn_options));
+    parallel_for(int64_t(footprints.size()), 16, [&](int64_t begin, int64_t end) {
+        for (int64_t k = begin; k < end; ++k) {
+            const size_t c = size_t(k) / size_t(turn_options);
+            const int turns = int(k % turn_options);
+            const auto local = pack::local_pixels(problem.pieces[c], problem.uvs, global_scale * problem.scales[c], turns,
+                                                  problem.options.width, problem.options.height);
+            footprints[size_t(k)] = pack::make_footprint(problem.pieces[c], problem.layout, local, problem.options.padding);
+        }
+    });
+    // Largest first (footprint texels, then bounding box), ties by chart id.
+    std::vector<int32_t> order(count);
+    std::iota(order.begin(), order.end(), 0);
+    auto size_of = [&](int32_t c) {
+        const Footprint& f = footprints[size_t(c) * size_t(turn_options)];
+        return std::make_pair(f.texels, int64_t(f.covered.width) * f.covered.height);
+    };
+    std::stable_sort(order.begin(), order.end(), [&](int32_t a, int32_t b) { return size_of(a) > size_of(b); });
+
+    Trial trial;
+    trial.placements.resize(count);
+    pack::Occupancy occupancy(problem.options.width, problem.options.height);
+    for (size_t n = 0; n < count; ++n) {
+        if ((n & 63) == 0 && progress && progress->cancelled()) return trial;
+        const int32_t c = order[n];
+        bool found = false;
+        Placement best;
+        for (int turns = 0; turns < turn_options; ++turns) {
+            int x, y;
+            if (!occupancy.first_fit(footprints[size_t(c) * size_t(turn_options) + size_t(turns)], x, y)) continue;
+            if (!found || std::make_pair(y, x) < std::make_pair(best.y, best.x)) best = {x, y, turns};
+            found = true;
+        }
+        if (!found) return trial;
+        const Footprint& f = footprints[size_t(c) * size_t(turn_options) + size_t(best.turns)];
+        occupancy.place(f, best.x, best.y);
+        trial.texels += f.texels;
+        trial.placements[size_t(c)] = best;
+    }
+    trial.fits = true;
+    return trial;
+}
+
+}  // namespace
+
+PackResult pack_charts(const UvLayout& layout, const std::vector<int32_t>& triangle_chart, int32_t chart_count,
+                       const std::vector<double>& scales, const PackOptions& options, Progress* progress) {
+    if (options.width <= 0 || options.height <= 0) {
+        LMREFINE_THROW(InvalidArgument, "resolution must be positive (got " + std::to_string(options.height) + " x " +
+                                            std::to_string(options.width) + ")");
+    }
+    if (!(options.padding >= 0.0) || options.padding > 1e4) {
+        LMREFINE_THROW(InvalidArgument, "padding must be >= 0 texels and finite (got " + std::to_string(options.padding) + ")");
+    }
+    if (int64_t(triangle_chart.size()) != layout.triangle_count) {
+        LMREFINE_THROW(InvalidArgument, "charts must have one entry per triangle: got " + std::to_string(triangle_chart.size()) +
+                                            " for " + std::to_string(layout.triangle_count) + " triangles");
+    }
+    if (int64_t(scales.size()) != chart_count) {
+        LMREFINE_THROW(InvalidArgument, "scales must have one entry per chart: got " + std::to_string(scales.size()) +
+                                            " for " + std::to_string(chart_count) + " charts");
+    }
+    for (int32_t c = 0; c < chart_count; ++c) {
+        if (!(scales[size_t(c)] > 0.0) || !std::isfinite(scales[size_t(c)])) {
+            LMREFINE_THROW(InvalidArgument, "scales must be finite and > 0: scales[" + std::to_string(c) + "] is " +
+                                                std::to_string(scales[size_t(c)]));
+        }
+    }
+
+    // Charts' triangles and UV indices; a UV index may belong to one chart only.
+    std::vector<int32_t> chart_of_uv(size_t(layout.uv_count), -1);
+    std::vector<ChartPiece> pieces(static_cast<size_t>(chart_count));
+    for (int64_t t = 0; t < layout.triangle_count; ++t) {
+        const int32_t c = triangle_chart[size_t(t)];
+        if (c < 0 || c >= chart_count) {
+            LMREFINE_THROW(InvalidArgument, "charts[" + std::to_string(t) + "] is " + std::to_string(c) +
+                                                "; chart ids must be in [0, " + std::to_string(chart_count) + ")");
+        }
+        pieces[size_t(c)].triangles.push_back(t);
+        for (int k = 0; k < 3; ++k) {
+            const int32_t i = layout.triangles[3 * t + k];
+            int32_t& owner = chart_of_uv[size_t(i)];
+            if (owner >= 0 && owner != c) {
+                LMREFINE_THROW(InvalidArgument, "charts: UV index " + std::to_string(i) + " is used by triangles of charts " +
+                                                    std::to_string(owner) + " and " + std::to_string(c) +
+                                                    "; a chart moves as a whole, so give every chart its own UV indices");
+            }
+            if (owner < 0) pieces[size_t(c)].corners.push_back(i);
+            owner = c;
+        }
+    }
+    for (auto& piece : pieces) std::sort(piece.corners.begin(), piece.corners.end());
+
+    // Corners of one chart welded by the tolerance move as one corner, so the
+    // output's charts are the ones packed, even for find_charts without a tolerance.
+    std::vector<glm::dvec2> uvs(size_t(layout.uv_count));
+    const std::vector<int64_t> weld = weld_corners(layout, options.weld_tolerance);
+    for (int64_t i = 0; i < layout.uv_count; ++i) {
+        int64_t source = weld[size_t(i)];
+        if (chart_of_uv[size_t(source)] != chart_of_uv[size_t(i)]) source = i;
+        uvs[size_t(i)] = glm::dvec2(layout.uvs[2 * source], layout.uvs[2 * source + 1]);
+    }
+
+    // The area bound: the charts' total texel area at the global scale cannot exceed the atlas.
+    double area = 0.0, box_area = 0.0;
+    for (int32_t c = 0; c < chart_count; ++c) {
+        const ChartPiece& piece = pieces[size_t(c)];
+        double chart_area = 0.0;
+        for (int64_t t : piece.triangles) {
+            const int32_t* tri = layout.triangles + 3 * t;
+            const glm::dvec2 a = uvs[size_t(tri[0])], b = uvs[size_t(tri[1])], d = uvs[size_t(tri[2])];
+            chart_area += 0.5 * std::abs((b.x - a.x) * (d.y - a.y) - (b.y - a.y) * (d.x - a.x));
+        }
+        glm::dvec2 low(INFINITY), high(-INFINITY);
+        for (int64_t i : piece.corners) {
+            low = glm::min(low, uvs[size_t(i)]);
+            high = glm::max(high, uvs[size_t(i)]);
+        }
+        const double s2 = scales[size_t(c)] * scales[size_t(c)] * options.width * options.height;
+        area += chart_area * s2;
+        if (!piece.corners.empty()) box_area += (high.x - low.x) * (high.y - low.y) * s2;
+    }
+    const double atlas = double(options.width) * options.height;
+    double bound = area > 0 ? std::sqrt(atlas / area) : box_area > 0 ? std::sqrt(atlas / box_area) : 1.0;
+    if (!std::isfinite(bound) || bound > 1e12) bound = 1e12;
+
+    Problem problem{layout, pieces, uvs, scales, options};
+    PackResult result;
+    result.scale_bound = bound;
+    if (progress) progress->begin("pack", 40);
+
+    // Bracket [low, high): `low` fits, `high` does not (the bound never
+    // fits better than exactly). Two trials per round (one per core) cut the
+    // bracket in three; the sequence of scales tried does not depend on the
+    // thread count, so neither does the result.
+    Trial best;
+    double low = 0.0, high = bound * 1.0000001;
+    double guess = bound * 0.9;
+    while (!best.fits) {
+        Trial t = run_trial(problem, guess, progress);
+        ++result.trials;
+        if (progress) {
+            progress->check();
+            progress->advance();
+        }
+        if (t.fits) {
+            best = std::move(t);
+            low = guess;
+        } else {
+            high = guess;
+            guess *= 0.7;
+            if (guess < bound * 1e-9) {
+                LMREFINE_THROW(InvalidArgument,
+                               std::to_string(chart_count) + " charts do not fit a " + std::to_string(options.height) +
+                                   " x " + std::to_string(options.width) + " atlas with padding " +
+                                   std::to_string(options.padding) +
+                                   " texels even at a tiny scale; use a higher resolution or a smaller padding");
+            }
+        }
+    }
+    while (high / low > 1.004) {
+        const double ratio = high / low;
+        const double s1 = low * std::pow(ratio, 1.0 / 3.0), s2 = low * std::pow(ratio, 2.0 / 3.0);
+        Trial trials[2];
+        const double tried[2] = {s1, s2};
+        parallel_for(2, 1, [&](int64_t begin, int64_t end) {
+            for (int64_t k = begin; k < end; ++k) trials[k] = run_trial(problem, tried[k], progress);
+        });
+        result.trials += 2;
+        if (progress) {
+            progress->check();
+            progress->advance(2);
+        }
+        if (trials[1].fits) {
+            low = s2;
+            best = std::move(trials[1]);
+        } else if (trials[0].fits) {
+            low = s1;
+            high = s2;
+            best = std::move(trials[0]);
+        } else {
+            high = s1;
+        }
+    }
+    result.global_scale = low;
+    result.footprint_texels = best.texels;
+
+    // The output: each chart's local pixels at its placement, back to UV.
+    result.uvs.assign(layout.uvs, layout.uvs + 2 * layout.uv_count);
+    result.rotations.assign(size_t(chart_count), 0);
+    for (int32_t c = 0; c < chart_count; ++c) {
+        const ChartPiece& piece = pieces[size_t(c)];
+        const Placement& at = best.placements[size_t(c)];
+        result.rotations[size_t(c)] = at.turns;
+        const auto local = pack::local_pixels(piece, uvs, low * scales[size_t(c)], at.turns, options.width, options.height);
+        for (size_t k = 0; k < piece.corners.size(); ++k) {
+            const glm::dvec2 p = local[k] + glm::dvec2(at.x, at.y);
+            const size_t i = size_t(piece.corners[k]);
+            result.uvs[2 * i] = float(std::clamp(p.x / options.width, 0.0, 1.0));
+            result.uvs[2 * i + 1] = float(std::clamp(1.0 - p.y / options.height, 0.0, 1.0));
+        }
+    }
+    if (progress) progress->finish();
+    return result;
+}
+
+}  // namespace lmrefine
