@@ -1,4 +1,4 @@
-"""The cellular automaton (method §4): the thesis' example, symmetry, and the
+"""The cellular automaton (docs/method.md §4): the thesis' example, symmetry, and the
 invariants after every step on random inputs."""
 
 import numpy as np

@@ -1,5 +1,5 @@
 """refine_uvs: the whole refinement, from a gradient map to a valid refined
-layout (method §4, §5, §7)."""
+layout (docs/method.md §4, §5, §7)."""
 
 import numpy as np
 import pytest
@@ -109,7 +109,7 @@ def test_smart_uv_layout_stays_valid_and_is_refined():
 
 def test_a_layout_packed_tighter_than_the_padding_is_still_refined():
     # Packed with a 1.2-texel margin but refined at the default padding 2:
-    # every chart pair keeps at least its original distance (method §7),
+    # every chart pair keeps at least its original distance (docs/method.md §7),
     # and the shadow edge still gets more texels.
     resolution = 128
     uvs, tris = lightmap_pack(charts_across=4, margin_texels=1.2, resolution=resolution, quads=6)

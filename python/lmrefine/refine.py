@@ -1,4 +1,4 @@
-"""refine_uvs: the whole refinement of a lightmap UV layout (method §4, §5, §7).
+"""refine_uvs: the whole refinement of a lightmap UV layout (docs/method.md §4, §5, §7).
 
 gradient map -> energy -> cellular automaton (native, coarse-to-fine) ->
 warp of every UV through the deformed grid -> validity check, backing off
@@ -138,7 +138,7 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
         resolution: the lightmap's int or (height, width).
         padding: the gutter between charts, in texels, the result must
             keep; a chart pair the original packed closer keeps its
-            original distance instead (method §7).
+            original distance instead (docs/method.md §7).
         mask: (H, W) bool chart coverage; default coverage_mask(uvs, ...).
         gradient: a (H, W, 4) float32 gradient map to use instead of
             computing one from the lightmap.
@@ -227,7 +227,7 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
     if not run["converged"]:
         limited_by.append("step_cap")
     if original["min_gutter_texels"] < padding:
-        # method §7: keep the gutter the original had; pairs packed tighter
+        # docs/method.md §7: keep the gutter the original had; pairs packed tighter
         # than the padding keep their own distance (backoff.accept).
         limited_by.append("original_gutter")
         notes.append(f"original gutter {original['min_gutter_texels']:.2f} texels < padding {padding:g}: "
