@@ -71,7 +71,6 @@ def test_unknown_sample_names_the_known_ones():
         sample_scenes.load_sample("no_such_scene")
 
 
-@pytest.mark.skipif(not hasattr(lmrefine, "Scene"), reason="needs the baker (lmrefine.Scene)")
 def test_to_scene_builds_a_bakeable_scene():
     scene = sample_scenes.load_sample("fence_and_tree")
     uvs, _ = scene.layout("smart")
@@ -108,7 +107,6 @@ def test_blend_files_hold_the_exported_scenes(tmp_path):
         assert (ROOT / "blend_samples" / f"{name}.blend").stat().st_size < 400_000
 
 
-@pytest.mark.skipif(not hasattr(lmrefine, "Scene"), reason="needs the baker (lmrefine.Scene)")
 def test_scene_files_place_lights_by_matrix_and_older_files_still_load(tmp_path):
     """A light's matrix (make_samples.py writes matrix_world) places it with
     its spin and scale; a file without one (older) keeps Blender's default

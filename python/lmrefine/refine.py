@@ -22,9 +22,8 @@ _SCALE_MIN_FRACTION_OF_MAX = 0.25
 # Chart edges facing the gutter shrink (edge_shrink) only when every chart
 # pair is at least this many texels farther apart than the padding: their
 # cells may move a chart's boundary a fraction of a texel closer, and the
-# guards and the rigid gutter cells between keep the rest. On a pack tighter
-# than that (a 1.2-texel margin in the tests) a pair got 0.001 texel closer
-# and the back-off undid most of the refinement.
+# guards and the rigid gutter cells between keep the rest (why this margin:
+# docs/refiner.md, "Options and defaults").
 _EDGE_SHRINK_GUTTER_MARGIN = 0.5
 
 
