@@ -75,7 +75,11 @@ def test_to_scene_builds_a_bakeable_scene():
     scene = sample_scenes.load_sample("fence_and_tree")
     uvs, _ = scene.layout("smart")
     built = scene.to_scene(uvs)
-    assert built is not None
+    # The receivers, the occluders (fence and tree) as a second mesh, every light.
+    assert built.mesh_count == 2 and built.light_count == len(scene.lights) == 1
+    atrium = sample_scenes.load_sample("atrium")
+    built = atrium.to_scene(atrium.layout("smart")[0])
+    assert built.mesh_count == 2 and built.light_count == 3
     with pytest.raises(ValueError, match="per corner"):
         scene.to_scene(uvs[:10])
 
