@@ -54,7 +54,8 @@ def test_zero_area_counts_faces_and_uv_triangles_below_a_millionth_of_a_texel():
 
 def test_describe_problems_in_words():
     check = {"flipped": 2, "degenerate": 0, "overlapping": 1, "out_of_bounds": 0, "min_gutter_texels": 1.5}
-    assert layout_input.describe_problems(check, 2) == "2 flipped, 1 overlapping, charts 1.50 texels apart, padding is 2"
+    assert layout_input.describe_problems(check, 2) == ("2 flipped, 1 overlapping, "
+                                                        "charts 1.50 texels apart, padding is 2")
     assert layout_input.describe_problems(dict(check, flipped=0, overlapping=0), 1) == ""
 
 
