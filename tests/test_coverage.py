@@ -54,6 +54,23 @@ def test_find_charts_joins_per_corner_copies_and_separates_islands():
     assert charts.tolist() == [0, 0, 1, 1]
 
 
+
+def test_find_charts_joins_corners_within_the_tolerance_only():
+    # Two per-corner quads whose shared edge is off by 3e-6 (Blender's
+    # layouts are not bit-exact), and a third quad 1e-3 away.
+    a_uvs, _ = quad(0.1, 0.1, 0.4, 0.4)
+    b_uvs, _ = quad(0.4, 0.1, 0.7, 0.4)
+    c_uvs, _ = quad(0.701, 0.1, 0.9, 0.4)
+    b_uvs = b_uvs + np.float32(3e-6)
+    uvs = np.concatenate([q[[0, 1, 2, 0, 2, 3]] for q in (a_uvs, b_uvs, c_uvs)])
+    tris = np.arange(len(uvs), dtype=np.int32).reshape(-1, 3)
+    assert lmrefine.find_charts(uvs, tris).tolist() == [0, 0, 1, 1, 2, 2]
+    assert lmrefine.find_charts(uvs, tris, tolerance=1e-5).tolist() == [0, 0, 0, 0, 1, 1]
+    assert lmrefine.find_charts(uvs, tris, tolerance=2e-3).tolist() == [0, 0, 0, 0, 0, 0]
+    with pytest.raises(ValueError, match="tolerance"):
+        lmrefine.find_charts(uvs, tris, tolerance=-1.0)
+
+
 def _overlaps_texel(p, col, row, touch=1e-7):
     """The conservative rasterization's rule, texel by texel: the separating
     axes of a triangle (pixel space) and the unit square at (col, row)."""

@@ -14,11 +14,6 @@ namespace py = pybind11;
 namespace lmrefine::bindings {
 namespace {
 
-struct PyPackResult {
-    py::array_t<float> uvs;
-    py::dict report;
-};
-
 double utilisation(const UvLayout& layout, int width, int height) {
     const std::vector<uint8_t> mask = coverage_mask(layout, width, height);
     int64_t covered = 0;
@@ -26,7 +21,7 @@ double utilisation(const UvLayout& layout, int width, int height) {
     return double(covered) / (double(width) * height);
 }
 
-PyPackResult pack(const py::handle& uvs_in, const py::handle& triangles_in, const py::handle& resolution,
+py::tuple pack(const py::handle& uvs_in, const py::handle& triangles_in, const py::handle& resolution,
                   double padding, const py::handle& charts_in, const py::handle& scales_in, bool rotate,
                   py::object progress_callback, double tolerance) {
     const auto start = std::chrono::steady_clock::now();
@@ -103,76 +98,35 @@ PyPackResult pack(const py::handle& uvs_in, const py::handle& triangles_in, cons
         return r;
     });
 
-    PyPackResult out;
-    py::dict& report = out.report;
-    report["global_scale"] = result.global_scale;
-    report["scale_bound"] = result.scale_bound;
+    py::dict report;
     report["utilisation"] = utilisation_out;
     report["utilisation_input"] = utilisation_in;
+    report["global_scale"] = result.global_scale;
+    report["scale_bound"] = result.scale_bound;
+    std::vector<double> chart_scales(scales);
+    for (double& s : chart_scales) s *= result.global_scale;
+    report["chart_scales"] = py_util::to_numpy(std::move(chart_scales), {py::ssize_t(chart_count)});
+    report["rotations"] = py_util::to_numpy(std::move(result.rotations), {py::ssize_t(chart_count)});
+    report["offsets"] = py_util::to_numpy(std::move(result.offsets), {py::ssize_t(chart_count), 2});
+    report["chart_ids"] = py_util::to_numpy(std::move(chart_ids), {py::ssize_t(layout.triangle_count)});
     report["charts"] = chart_count;
     report["trials"] = result.trials;
     report["footprint_texels"] = result.footprint_texels;
     report["padding"] = padding;
     report["resolution"] = py::make_tuple(options.height, options.width);
-    report["rotations"] = py_util::to_numpy(std::move(result.rotations), {py::ssize_t(chart_count)});
-    out.uvs = py_util::to_numpy(std::move(result.uvs), {py::ssize_t(layout.uv_count), 2});
+    py::array_t<float> uvs_out = py_util::to_numpy(std::move(result.uvs), {py::ssize_t(layout.uv_count), 2});
     report["seconds"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    return out;
+    return py::make_tuple(uvs_out, report);
 }
 
 }  // namespace
 
 void bind_packer(py::module_& m) {
-    py::class_<PyPackResult>(m, "PackResult", "The packed layout: ``uvs`` (N, 2) float32 and ``report`` (dict).")
-        .def_readonly("uvs", &PyPackResult::uvs)
-        .def_readonly("report", &PyPackResult::report)
-        .def("__repr__", [](const PyPackResult& r) {
-            return "PackResult(charts=" + py::str(r.report["charts"]).cast<std::string>() +
-                   ", global_scale=" + py::str(r.report["global_scale"]).cast<std::string>() +
-                   ", utilisation=" + py::str(r.report["utilisation"]).cast<std::string>() + ")";
-        });
     m.def("pack_charts", &pack, py::arg("uvs"), py::arg("triangles"), py::arg("resolution"), py::arg("padding") = 2.0,
           py::kw_only(), py::arg("charts") = py::none(), py::arg("scales") = py::none(), py::arg("rotate") = true,
           py::arg("progress") = py::none(), py::arg("tolerance") = 1e-5,
-          R"doc(Pack a layout's charts into one atlas, as large as it allows.
-
-Each chart moves as a whole: a uniform scale (``global_scale * scales[c]``),
-a rotation by a multiple of 90 degrees and a translation, so its triangles
-keep their shapes. Charts are fitted by their conservative texel footprint
-at the target resolution (what ``coverage_mask`` rasterizes), dilated by the
-padding, with a first-fit raster placement (largest chart first, rows top to
-bottom); a search finds the largest global scale at which every chart is
-placed. Details: docs/packer.md.
-
-Args:
-    uvs (numpy.ndarray): (N, 2) per-corner UVs (any position).
-    triangles (numpy.ndarray): (T, 3) integer indices into ``uvs``.
-    resolution (int | tuple[int, int]): target lightmap, square or (height, width).
-    padding (float): smallest gutter between charts in texels, as
-        ``check_layout`` measures it.
-    charts (numpy.ndarray | None): (T,) integer chart id per triangle;
-        default ``find_charts(uvs, triangles, tolerance=tolerance)``.
-    scales (numpy.ndarray | None): (C,) relative linear scale per chart,
-        > 0 (C = largest chart id + 1); default all 1 (a uniform repack).
-    rotate (bool): allow quarter turns.
-    progress (callable | None): ``progress(fraction, stage)``; return False to cancel.
-    tolerance (float): UV distance within which a chart's corners are
-        welded (snapped together in the output) and, without ``charts``,
-        triangles are joined into charts.
-
-Returns:
-    PackResult: ``uvs`` (N, 2) float32 (UVs no triangle uses are copied)
-    and ``report``: global_scale, scale_bound (the area bound), utilisation
-    (fraction of texels covered in the output, by coverage_mask),
-    utilisation_input (the same for the input, clipped to [0, 1]),
-    rotations (C,) quarter turns, charts, trials, footprint_texels,
-    padding, resolution, seconds.
-
-Raises:
-    ValueError: bad shapes or values (naming the argument), a UV index used
-        by two charts, or charts that cannot fit even at a tiny scale.
-    lmrefine.CancelledError: the progress callback returned False.
-)doc");
+          R"doc(The atlas packer's native entry; use lmrefine.pack_charts (python/lmrefine/packer.py,
+documented there and in docs/packer.md). Returns (uvs, report).)doc");
 }
 
 }  // namespace lmrefine::bindings

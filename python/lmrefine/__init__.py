@@ -24,7 +24,6 @@ except ImportError as error:  # pragma: no cover - depends on the build state
 from ._native import (  # noqa: F401  (re-exports)
     CancelledError,
     LayoutChecker,
-    PackResult,
     Scene,
     check_layout,
     coverage_mask,
@@ -35,18 +34,19 @@ from ._native import (  # noqa: F401  (re-exports)
     grid_cell_areas,
     idwt,
     idwt2,
-    pack_charts,
     read_image,
     run_automaton,
     warp_uvs,
     write_image,
 )
 from .baker import BakeResult, bake, evaluate  # noqa: F401  (re-exports)
+from .packer import CHART_TOLERANCE, PackResult, pack_charts  # noqa: F401
 from .refine import RefineResult, identity_grid, refine_uvs  # noqa: F401
 
 __version__ = _native.__version__
 
 __all__ = [
+    "CHART_TOLERANCE",
     "BakeResult",
     "CancelledError",
     "LayoutChecker",

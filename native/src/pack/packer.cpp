@@ -236,11 +236,22 @@ PackResult pack_charts(const UvLayout& layout, const std::vector<int32_t>& trian
     // The output: each chart's local pixels at its placement, back to UV.
     result.uvs.assign(layout.uvs, layout.uvs + 2 * layout.uv_count);
     result.rotations.assign(size_t(chart_count), 0);
+    result.offsets.assign(2 * size_t(chart_count), 0.0);
     for (int32_t c = 0; c < chart_count; ++c) {
         const ChartPiece& piece = pieces[size_t(c)];
         const Placement& at = best.placements[size_t(c)];
         result.rotations[size_t(c)] = at.turns;
         const auto local = pack::local_pixels(piece, uvs, low * scales[size_t(c)], at.turns, options.width, options.height);
+        if (!piece.corners.empty()) {
+            // local = (u' W, -v' H) - shift for the rotated, scaled uv'; the
+            // first corner gives the shift, hence the offset.
+            const size_t i = size_t(piece.corners[0]);
+            glm::dvec2 uv = uvs[i] * (low * scales[size_t(c)]);
+            if (at.turns & 1) uv = glm::dvec2(-uv.y, uv.x);
+            const glm::dvec2 p = local[0] + glm::dvec2(at.x, at.y);
+            result.offsets[2 * size_t(c)] = p.x / options.width - uv.x;
+            result.offsets[2 * size_t(c) + 1] = 1.0 - p.y / options.height - uv.y;
+        }
         for (size_t k = 0; k < piece.corners.size(); ++k) {
             const glm::dvec2 p = local[k] + glm::dvec2(at.x, at.y);
             const size_t i = size_t(piece.corners[k]);

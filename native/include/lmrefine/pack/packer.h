@@ -27,6 +27,8 @@ struct PackResult {
     double global_scale = 0;         // each chart's linear scale is global_scale * scales[c]
     double scale_bound = 0;          // the area bound on global_scale (total chart area = atlas)
     std::vector<int32_t> rotations;  // per chart, quarter turns counter-clockwise (0 or 1)
+    // Per chart (u, v): a (welded) corner moves to scale_c * R(rotations[c]) * uv + offset.
+    std::vector<double> offsets;
     int trials = 0;                  // placements tried by the scale search
     int64_t footprint_texels = 0;    // texels of the placed footprints (undilated)
 };

@@ -1,0 +1,97 @@
+"""pack_charts: the atlas packer (docs/packer.md).
+
+Moves whole charts into one lightmap atlas, each by its own uniform scale, a
+quarter turn or none, and a translation, so every chart is as large as the
+atlas allows and at least `padding` texels from every other chart. The
+native kernel (native/src/pack/) fits charts by their rasterized texel
+footprints, not their bounding boxes.
+"""
+
+from typing import NamedTuple
+
+import numpy as np
+
+from . import _native
+
+# UV distance within which corners are one corner: find_charts joins the
+# triangles (Blender's layouts are not bit-exact) and the packer snaps them
+# together in its output. 1e-5 is 0.01 texel at 1024^2, well below any gutter.
+CHART_TOLERANCE = 1e-5
+
+
+class PackResult(NamedTuple):
+    """What pack_charts returns; unpacks as ``uvs, report = pack_charts(...)``.
+
+    uvs: (N, 2) float32, the packed per-corner UVs (a new array).
+    report: dict, see pack_charts.
+    """
+
+    uvs: np.ndarray
+    report: dict
+
+
+def pack_charts(uvs, triangles, charts, scales, resolution, padding=2.0, rotations=True, progress=None, *,
+                tolerance=CHART_TOLERANCE):
+    """Pack a layout's charts into one atlas, [0, 1]^2, as large as it allows.
+
+    Every chart moves as a whole: chart c is scaled by
+    ``global_scale * scales[c]``, turned by a multiple of 90 degrees (if
+    ``rotations``) and translated, so its triangles keep their shapes and
+    orientation. The packer searches the largest ``global_scale`` at which
+    every chart fits; charts are fitted by their conservative texel footprint
+    at ``resolution`` (the texels ``coverage_mask`` would mark), dilated by
+    ``padding``, so concave charts nest and small charts fill holes.
+    Deterministic: the same input gives the same output on any machine and
+    thread count. Give all objects that share an atlas in one call.
+
+    Args:
+        uvs: (N, 2) per-corner UVs, anywhere (not only in [0, 1]).
+        triangles: (T, 3) integer indices into ``uvs``.
+        charts: (T,) integer chart id per triangle (ids 0..C-1; an id no
+            triangle has is an empty chart), or None for
+            ``find_charts(uvs, triangles, tolerance=tolerance)``. A chart moves
+            as one piece, so a UV index may not be used by two charts.
+        scales: (C,) relative linear scale per chart, finite and > 0, or None
+            for all 1 (a uniform repack: every chart keeps its relative size).
+        resolution: int or (height, width), the target lightmap.
+        padding: smallest distance between two charts in texels, as
+            ``check_layout`` measures it (exact distance between chart
+            boundaries); the output always passes
+            ``check_layout(uvs, triangles, resolution, padding)``.
+        rotations: allow quarter turns.
+        progress: callable ``progress(fraction, stage)``; returning False
+            cancels (lmrefine.CancelledError). The native work runs with the
+            GIL released.
+        tolerance: UV distance within which a chart's corners are one
+            corner: they are snapped together in the output (and, with
+            ``charts=None``, join charts).
+
+    Returns:
+        PackResult ``(uvs, report)``. ``uvs`` (N, 2) float32: the packed
+        layout (UVs no triangle uses are copied). ``report`` (measured on
+        the output layout):
+
+        * utilisation: fraction of the atlas's texels covered by charts in
+          the output (``coverage_mask``); utilisation_input: the same for
+          the input (its texels inside [0, 1]^2).
+        * global_scale: the scale found; scale_bound: its upper bound from
+          area alone (total chart area = atlas area).
+        * chart_scales (C,) float64: each chart's linear scale from input to
+          output, ``global_scale * scales``.
+        * rotations (C,) int32: quarter turns counter-clockwise, 0 or 1.
+        * offsets (C, 2) float64: a chart's corner moves to
+          ``chart_scales[c] * R(rotations[c]) @ uv + offsets[c]`` (R a
+          counter-clockwise quarter turn; uv after the tolerance snap).
+        * chart_ids (T,) int32: the charts packed (``charts`` or found).
+        * charts, trials (placements the scale search tried),
+          footprint_texels, padding, resolution (height, width), seconds.
+
+    Raises:
+        ValueError: bad shapes or values (naming the argument), a UV index
+            used by two charts, or charts that do not fit even at a tiny
+            scale (a resolution too small for the padding and chart count).
+        lmrefine.CancelledError: the progress callback returned False.
+    """
+    new_uvs, report = _native.pack_charts(uvs, triangles, resolution, float(padding), charts=charts, scales=scales,
+                                          rotate=bool(rotations), progress=progress, tolerance=float(tolerance))
+    return PackResult(new_uvs, report)

@@ -1,0 +1,201 @@
+"""The atlas packer (docs/packer.md): every output passes check_layout with
+the padding, on layouts of every kind; the report describes the output."""
+
+import numpy as np
+import pytest
+
+import lmrefine
+from layouts import grid_chart, lightmap_pack, merge, smart_uv
+
+
+def rotation(turns):
+    return np.array([[1.0, 0.0], [0.0, 1.0]]) if turns % 2 == 0 else np.array([[0.0, -1.0], [1.0, 0.0]])
+
+
+def random_charts(rng, count, size_range, quads=(1, 3)):
+    """`count` rectangular grid charts and random triangles scattered
+    anywhere in [0, 1]^2, overlapping (the packer does not care where they
+    start)."""
+    layouts = []
+    for _ in range(count):
+        w, h = rng.uniform(*size_range, 2)
+        n = int(rng.integers(*quads, endpoint=True))
+        lo = rng.uniform(0, 1, 2)
+        layouts.append(grid_chart(n, lo, lo + (w, h)))
+    return merge(*layouts)
+
+
+def l_shape(lo, size):
+    """A concave chart: three quads in an L."""
+    parts = [grid_chart(1, lo, (lo[0] + size, lo[1] + size)),
+             grid_chart(1, (lo[0] + size, lo[1]), (lo[0] + 2 * size, lo[1] + size)),
+             grid_chart(1, (lo[0], lo[1] + size), (lo[0] + size, lo[1] + 2 * size))]
+    uvs, tris = merge(*parts)
+    return uvs, tris
+
+
+def kinds():
+    rng = np.random.default_rng(7)
+    slivers = merge(*(grid_chart(1, (0.1 * k, 0.2), (0.1 * k + 0.05, 0.2 + 1e-4)) for k in range(8)),
+                    random_charts(rng, 10, (0.02, 0.1)))
+    return {
+        "smart_uv": smart_uv(),
+        "lightmap_pack": lightmap_pack(charts_across=12, seed=3),
+        "many_tiny": random_charts(np.random.default_rng(1), 600, (0.001, 0.01)),
+        "one_huge": grid_chart(20, (-2.0, -1.0), (3.0, 0.5)),
+        "mixed_sizes": merge(grid_chart(8, (0, 0), (0.9, 0.7)), random_charts(rng, 60, (0.005, 0.2))),
+        "concave": merge(*(l_shape(rng.uniform(0, 1, 2), rng.uniform(0.02, 0.1)) for _ in range(40))),
+        "slivers": slivers,
+    }
+
+
+@pytest.mark.parametrize("kind", sorted(kinds()))
+@pytest.mark.parametrize("resolution,padding", [(128, 2.0), (256, 1.0), ((96, 160), 3.5)])
+def test_every_output_passes_check_layout_with_the_padding(kind, resolution, padding):
+    uvs, tris = kinds()[kind]
+    before = uvs.copy()
+    out, report = lmrefine.pack_charts(uvs, tris, None, None, resolution, padding)
+    np.testing.assert_array_equal(uvs, before)  # input untouched
+    check = lmrefine.check_layout(out, tris, resolution, padding)
+    assert check["valid"], (kind, check)
+    assert check["min_gutter_texels"] >= padding
+    assert check["charts"] == report["charts"]
+    height, width = (resolution, resolution) if isinstance(resolution, int) else resolution
+    mask = lmrefine.coverage_mask(out, tris, (height, width))
+    assert report["utilisation"] == pytest.approx(mask.mean())
+    assert 0 < report["global_scale"] <= report["scale_bound"] * (1 + 1e-6)
+
+
+def test_report_transforms_reproduce_the_output():
+    uvs, tris = kinds()["mixed_sizes"]
+    scales = np.linspace(0.5, 2.0, lmrefine.find_charts(uvs, tris).max() + 1)
+    out, report = lmrefine.pack_charts(uvs, tris, None, scales, 256, 2.0)
+    np.testing.assert_allclose(report["chart_scales"], report["global_scale"] * scales)
+    chart_of_uv = np.empty(len(uvs), np.int64)
+    chart_of_uv[tris.ravel()] = np.repeat(report["chart_ids"], 3)
+    for c in range(report["charts"]):
+        corners = np.unique(tris[report["chart_ids"] == c])
+        expected = (report["chart_scales"][c] * (rotation(report["rotations"][c]) @ uvs[corners].T.astype(np.float64)).T
+                    + report["offsets"][c])
+        np.testing.assert_allclose(out[corners], expected, atol=1e-6)
+    assert set(np.unique(report["rotations"])) <= {0, 1}
+
+
+def test_relative_scales_are_kept_and_quarter_turns_can_be_refused():
+    a = grid_chart(2, (0.0, 0.0), (0.3, 0.1))
+    b = grid_chart(2, (0.5, 0.5), (0.8, 0.6))
+    uvs, tris = merge(a, b)
+    out, report = lmrefine.pack_charts(uvs, tris, None, np.array([1.0, 0.5]), 256, 2.0, rotations=False)
+    assert report["rotations"].tolist() == [0, 0]
+    extent = [np.ptp(out[np.unique(tris[report["chart_ids"] == c])], axis=0) for c in (0, 1)]
+    np.testing.assert_allclose(extent[1], extent[0] * 0.5, rtol=1e-5)
+
+
+def test_a_tall_chart_is_turned_when_that_fits_more():
+    # Two charts 0.8 x 0.1 side by side fit flat; a third upright beside them
+    # only packs large if turned.
+    uvs, tris = merge(grid_chart(1, (0, 0), (1.0, 0.1)), grid_chart(1, (0, 0.2), (0.1, 1.2)))
+    _, turned = lmrefine.pack_charts(uvs, tris, None, None, 128, 2.0)
+    _, upright = lmrefine.pack_charts(uvs, tris, None, None, 128, 2.0, rotations=False)
+    assert turned["global_scale"] >= upright["global_scale"]
+
+
+def test_footprints_not_boxes_nest_concave_charts():
+    # Small squares go into a large L's notch, inside its bounding box.
+    uvs, tris = merge(l_shape((0.0, 0.0), 0.5), *(grid_chart(1, (0.1 * k, 2.0), (0.1 * k + 0.07, 2.07))
+                                                   for k in range(6)))
+    out, report = lmrefine.pack_charts(uvs, tris, None, None, 256, 1.0)
+    assert lmrefine.check_layout(out, tris, 256, 1.0)["valid"]
+    boxes = []
+    for c in range(report["charts"]):
+        corners = out[np.unique(tris[report["chart_ids"] == c])]
+        boxes.append((corners.min(0), corners.max(0)))
+    overlapping = sum(np.all(np.minimum(a[1], b[1]) - np.maximum(a[0], b[0]) > 0)
+                      for k, a in enumerate(boxes) for b in boxes[k + 1:])
+    assert overlapping > 0  # the charts share bounding-box area: they were not packed as boxes
+
+
+def test_deterministic_and_independent_of_where_charts_start():
+    uvs, tris = kinds()["lightmap_pack"]
+    first = lmrefine.pack_charts(uvs, tris, None, None, 256, 2.0)
+    second = lmrefine.pack_charts(uvs, tris, None, None, 256, 2.0)
+    np.testing.assert_array_equal(first.uvs, second.uvs)
+    moved = uvs + np.float32(3.0)  # whole layout shifted: same shapes, same packing
+    third = lmrefine.pack_charts(moved, tris, None, None, 256, 2.0)
+    assert third.report["global_scale"] == pytest.approx(first.report["global_scale"], rel=1e-6)
+
+
+def test_uniform_repack_of_smart_uv_layout_uses_more_of_the_atlas():
+    uvs, tris = smart_uv(256, margin_texels=8)
+    out, report = lmrefine.pack_charts(uvs, tris, None, None, 256, 2.0)
+    assert report["utilisation"] > report["utilisation_input"]
+    assert report["utilisation"] > 0.9
+
+
+def test_unused_uvs_are_copied_and_charts_may_be_given():
+    uvs, tris = merge(grid_chart(1, (0, 0), (0.5, 0.5)), grid_chart(1, (0.6, 0.6), (0.9, 0.9)))
+    uvs = np.concatenate([uvs, np.array([[7.0, -3.0]], np.float32)])
+    one_chart = np.zeros(len(tris), np.int32)  # both squares as one chart: they keep their relative place
+    out, report = lmrefine.pack_charts(uvs, tris, one_chart, None, 64, 2.0)
+    assert out[-1].tolist() == [7.0, -3.0]
+    assert report["charts"] == 1
+    d_in = uvs[tris[2, 0]] - uvs[tris[0, 0]]
+    d_out = out[tris[2, 0]] - out[tris[0, 0]]
+    assert np.linalg.norm(d_out) == pytest.approx(report["global_scale"] * np.linalg.norm(d_in), rel=1e-5)
+
+
+def test_corners_within_the_tolerance_are_snapped_into_one_chart():
+    uvs, tris = grid_chart(4, (0.1, 0.1), (0.6, 0.6))
+    noisy = uvs + np.random.default_rng(0).uniform(-2e-7, 2e-7, uvs.shape).astype(np.float32)
+    assert lmrefine.find_charts(noisy, tris).max() > 0  # bit-exact joining falls apart
+    assert lmrefine.find_charts(noisy, tris, tolerance=lmrefine.CHART_TOLERANCE).max() == 0
+    out, report = lmrefine.pack_charts(noisy, tris, None, None, 128, 2.0)
+    assert report["charts"] == 1
+    assert lmrefine.find_charts(out, tris).max() == 0  # snapped: bit-exact in the output
+    assert lmrefine.check_layout(out, tris, 128, 2.0)["valid"]
+
+
+@pytest.mark.parametrize("change,message", [
+    (dict(resolution=0), "resolution"),
+    (dict(padding=-1.0), "padding"),
+    (dict(padding=float("nan")), "padding"),
+    (dict(scales=np.array([1.0, 0.0])), "scales"),
+    (dict(scales=np.array([1.0])), "scales"),
+    (dict(charts=np.array([0, 0, 1, 1])), "charts"),
+    (dict(charts=np.array([0, -1, 1])), "charts"),
+    (dict(tolerance=-1.0), "tolerance"),
+    (dict(resolution=4, padding=50.0), "fit"),
+])
+def test_bad_input_raises_a_clear_value_error(change, message):
+    uvs, tris = merge(grid_chart(1, (0, 0), (0.5, 0.5)), grid_chart(1, (0.6, 0.6), (0.9, 0.9)))
+    tris = tris[[0, 1, 2]]
+    args = dict(charts=np.array([0, 0, 1]), scales=None, resolution=64, padding=2.0, tolerance=1e-5)
+    args.update(change)
+    with pytest.raises(ValueError, match=message):
+        lmrefine.pack_charts(uvs, tris, args["charts"], args["scales"], args["resolution"], args["padding"],
+                             tolerance=args["tolerance"])
+
+
+def test_a_uv_index_shared_by_two_charts_is_refused():
+    uvs, tris = grid_chart(1, (0, 0), (0.5, 0.5))
+    with pytest.raises(ValueError, match="UV index"):
+        lmrefine.pack_charts(uvs, np.array([[0, 1, 2], [0, 2, 5]]), np.array([0, 1]), None, 64, 2.0)
+
+
+def test_nan_uvs_and_empty_layouts():
+    uvs, tris = grid_chart(1, (0, 0), (0.5, 0.5))
+    bad = uvs.copy()
+    bad[1, 0] = np.nan
+    with pytest.raises(ValueError):
+        lmrefine.pack_charts(bad, tris, None, None, 64, 2.0)
+    out, report = lmrefine.pack_charts(np.zeros((0, 2), np.float32), np.zeros((0, 3), np.int32), None, None, 64, 2.0)
+    assert out.shape == (0, 2) and report["charts"] == 0
+
+
+def test_progress_reports_and_cancels():
+    uvs, tris = kinds()["lightmap_pack"]
+    seen = []
+    lmrefine.pack_charts(uvs, tris, None, None, 128, 2.0, progress=lambda f, stage: seen.append((f, stage)))
+    assert seen and seen[-1][0] == pytest.approx(1.0)
+    with pytest.raises(lmrefine.CancelledError):
+        lmrefine.pack_charts(uvs, tris, None, None, 128, 2.0, progress=lambda f, stage: False)
