@@ -8,11 +8,6 @@
 namespace lmrefine::pack {
 namespace {
 
-// Two footprints' texels are closed unit squares; charts lie inside them, so
-// squares at least `padding` + kMargin apart keep the charts that far apart
-// even after the output UVs are rounded to float32 (~1e-4 texel at 2048^2).
-constexpr double kMargin = 1e-3;
-
 SpanRows to_spans(const std::vector<uint8_t>& bits, int width, int height) {
     SpanRows rows;
     rows.width = width;
@@ -47,7 +42,7 @@ std::vector<glm::dvec2> local_pixels(const ChartPiece& piece, const std::vector<
         local[k] = glm::dvec2(uv.x * width, -uv.y * height);
         low = glm::min(low, local[k]);
     }
-    for (auto& p : local) p -= low;
+    for (auto& p : local) p += glm::dvec2(kInset) - low;
     return local;
 }
 
@@ -55,23 +50,33 @@ Footprint make_footprint(const ChartPiece& piece, const UvLayout& layout, const 
                          double padding) {
     glm::dvec2 high(0.0);
     for (const auto& p : local) high = glm::max(high, p);
-    const int width = std::max(1, int(std::ceil(high.x))), height = std::max(1, int(std::ceil(high.y)));
+    const int width = std::max(1, int(std::ceil(high.x + kInset))), height = std::max(1, int(std::ceil(high.y + kInset)));
     std::vector<uint8_t> bits(size_t(width) * size_t(height), 0);
+    // A point grown by kInset: the up to four texels its square meets.
     auto set_point = [&](const glm::dvec2& p) {
-        const int c = std::clamp(int(std::floor(p.x)), 0, width - 1), r = std::clamp(int(std::floor(p.y)), 0, height - 1);
-        bits[size_t(r) * size_t(width) + size_t(c)] = 1;
+        const int c0 = std::max(0, int(std::floor(p.x - kInset))), c1 = std::min(width - 1, int(std::floor(p.x + kInset)));
+        const int r0 = std::max(0, int(std::floor(p.y - kInset))), r1 = std::min(height - 1, int(std::floor(p.y + kInset)));
+        for (int r = r0; r <= r1; ++r)
+            for (int c = c0; c <= c1; ++c) bits[size_t(r) * size_t(width) + size_t(c)] = 1;
     };
     auto local_of = [&](int32_t uv_index) {
         const auto it = std::lower_bound(piece.corners.begin(), piece.corners.end(), int64_t(uv_index));
         return local[size_t(it - piece.corners.begin())];
     };
+    // The triangle grown by a square of half-side kInset meets a texel iff
+    // one of its four diagonal shifts by kInset does (the shifted unit
+    // squares tile the grown one).
+    static const glm::dvec2 kShifts[4] = {{-kInset, -kInset}, {kInset, -kInset}, {-kInset, kInset}, {kInset, kInset}};
     for (int64_t t : piece.triangles) {
         glm::dvec2 p[3];
         for (int k = 0; k < 3; ++k) p[k] = local_of(layout.triangles[3 * t + k]);
-        const TriangleCover cover(p, width, height);
-        for (int r = cover.row_begin(); r < cover.row_end(); ++r) {
-            const auto [begin, end] = cover.columns(r);
-            std::fill(bits.begin() + r * width + begin, bits.begin() + r * width + end, uint8_t(1));
+        for (const glm::dvec2& shift : kShifts) {
+            const glm::dvec2 q[3] = {p[0] + shift, p[1] + shift, p[2] + shift};
+            const TriangleCover cover(q, width, height);
+            for (int r = cover.row_begin(); r < cover.row_end(); ++r) {
+                const auto [begin, end] = cover.columns(r);
+                std::fill(bits.begin() + r * width + begin, bits.begin() + r * width + end, uint8_t(1));
+            }
         }
         // Slivers (and zero-area triangles, which cover nothing) still occupy
         // the texels their corners and edges pass through.
@@ -85,27 +90,31 @@ Footprint make_footprint(const ChartPiece& piece, const UvLayout& layout, const 
         }
     }
     for (const auto& p : local) set_point(p);
+    return footprint_of_bits(bits, width, height, padding);
+}
 
+Footprint footprint_of_bits(const std::vector<uint8_t>& bits, int width, int height, double padding) {
     Footprint fp;
     fp.covered = to_spans(bits, width, height);
-    fp.row_first.assign(size_t(height), width);
+    fp.longest.assign(size_t(height), 0);
     for (int r = 0; r < height; ++r) {
-        if (fp.covered.offsets[r] < fp.covered.offsets[r + 1]) fp.row_first[r] = fp.covered.spans[fp.covered.offsets[r]].first;
         for (int k = fp.covered.offsets[r]; k < fp.covered.offsets[r + 1]; ++k) {
-            fp.texels += fp.covered.spans[k].second - fp.covered.spans[k].first;
+            const int length = fp.covered.spans[k].second - fp.covered.spans[k].first;
+            fp.texels += length;
+            fp.longest[size_t(r)] = std::max(fp.longest[size_t(r)], length);
         }
+        if (fp.longest[size_t(r)] > fp.longest[size_t(fp.tightest)]) fp.tightest = r;
     }
 
-    // Texel squares (di, dj) apart are max(0, |di| - 1), max(0, |dj| - 1)
+    // Texel squares (di, dj) apart are hypot(max(0, |di| - 1), max(0, |dj| - 1))
     // texels apart; the dilation holds every offset closer than the padding.
-    const double limit = padding + kMargin;
-    fp.reach = int(std::ceil(limit));
+    fp.reach = int(std::ceil(padding));
     std::vector<int> half(size_t(2 * fp.reach + 1), -1);  // per row offset, the horizontal reach
     for (int di = -fp.reach; di <= fp.reach; ++di) {
         const double gy = std::max(0, std::abs(di) - 1);
         for (int dj = 0; dj <= fp.reach; ++dj) {
             const double gx = std::max(0, dj - 1);
-            if (gx * gx + gy * gy < limit * limit) half[size_t(di + fp.reach)] = dj;
+            if (gx * gx + gy * gy < padding * padding || (di == 0 && dj == 0)) half[size_t(di + fp.reach)] = dj;
         }
     }
     const int dw = width + 2 * fp.reach, dh = height + 2 * fp.reach;

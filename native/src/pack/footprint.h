@@ -1,6 +1,7 @@
 // A chart's texel footprint at one scale and rotation: the texels its
-// triangles cover (conservative, as coverage_mask), with its bounding box's
-// corner on a texel corner, and that footprint dilated by the padding.
+// triangles (grown by kInset) cover, with the chart kInset inside its
+// bounding box's corner on a texel corner; and the footprint dilated by the
+// padding: where another chart's footprint may not go.
 #pragma once
 
 #include <cstdint>
@@ -13,6 +14,12 @@
 
 namespace lmrefine::pack {
 
+// The chart is grown by this (texels) before it is rasterized, so footprints
+// `padding` apart keep the charts padding + 2 kInset apart: the output's
+// rounding to float32 (5e-4 texel at 16384^2) cannot bring them closer than
+// the padding.
+constexpr double kInset = 2e-3;
+
 using Span = std::pair<int32_t, int32_t>;  // columns [first, second)
 
 // Row spans of a small bitmap: row r's spans are spans[offsets[r] .. offsets[r + 1]).
@@ -23,11 +30,12 @@ struct SpanRows {
 };
 
 struct Footprint {
-    SpanRows covered;       // the chart's texels, origin at the footprint's corner
-    SpanRows dilated;       // texels another chart may not cover, origin at (-reach, -reach)
-    int reach = 0;          // how far the dilation reaches past the footprint
-    int64_t texels = 0;     // covered texels
-    std::vector<int32_t> row_first;  // per covered row, its first covered column (width if none)
+    SpanRows covered;    // the chart's texels, origin at the footprint's corner
+    SpanRows dilated;    // texels another chart may not cover, origin at (-reach, -reach)
+    int reach = 0;       // how far the dilation reaches past the footprint
+    int64_t texels = 0;  // covered texels
+    std::vector<int32_t> longest;  // per covered row, its longest span
+    int tightest = 0;              // the covered row with the longest span
 };
 
 // One chart as the packer sees it: its triangles and used UV indices.
@@ -37,13 +45,16 @@ struct ChartPiece {
 };
 
 // The chart's corners in footprint pixel coordinates (x right, y down, the
-// bounding box's corner at 0) for a linear scale and quarter turns, indexed
-// like piece.corners. `uvs` are the (welded) input UVs in double.
+// bounding box's corner at (kInset, kInset)) for a linear scale and quarter
+// turns, indexed like piece.corners. `uvs` are the (welded) input UVs.
 std::vector<glm::dvec2> local_pixels(const ChartPiece& piece, const std::vector<glm::dvec2>& uvs, double scale,
                                      int quarter_turns, int width, int height);
 
 // The footprint of the chart at those local pixels; `padding` in texels.
 Footprint make_footprint(const ChartPiece& piece, const UvLayout& layout, const std::vector<glm::dvec2>& local,
                          double padding);
+
+// The footprint of a bitmap ((height * width) bytes, nonzero = covered).
+Footprint footprint_of_bits(const std::vector<uint8_t>& bits, int width, int height, double padding);
 
 }  // namespace lmrefine::pack

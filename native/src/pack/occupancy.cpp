@@ -5,80 +5,105 @@
 namespace lmrefine::pack {
 namespace {
 
-int highest_bit(uint64_t word) {
-    int bit = 63;
-    while (!(word >> bit)) --bit;  // portable; a word rarely needs many steps after the mask
+int lowest_bit(uint64_t word) {
+    int bit = 0;
+    while (!(word >> bit & 1)) ++bit;  // portable (no builtins); words are short to walk
     return bit;
+}
+
+// Keeps the parts of `candidates` (sorted, disjoint column ranges of the
+// footprint's corner) where span [lo, hi) lies in one of `runs`.
+void keep_inside(const std::vector<Span>& candidates, const std::vector<Span>& runs, int lo, int hi,
+                 std::vector<Span>& out) {
+    out.clear();
+    size_t k = 0;
+    for (const Span& run : runs) {
+        if (run.second - run.first < hi - lo) continue;
+        // Corners x with [x + lo, x + hi) inside the run.
+        const int first = run.first - lo, last = run.second - hi + 1;
+        while (k < candidates.size() && candidates[k].second <= first) ++k;
+        for (size_t m = k; m < candidates.size() && candidates[m].first < last; ++m) {
+            const int a = std::max(first, candidates[m].first), b = std::min(last, candidates[m].second);
+            if (a < b) out.push_back({a, b});
+        }
+    }
 }
 
 }  // namespace
 
 Occupancy::Occupancy(int width, int height)
-    : width_(width), height_(height), words_((width + 63) / 64),
-      bits_(size_t(words_) * size_t(height), 0), first_free_(size_t(height), 0) {}
+    : width_(width), height_(height), words_((width + 63) / 64), bits_(size_t(words_) * size_t(height), 0),
+      runs_(size_t(height), std::vector<Span>{{0, width}}), longest_(size_t(height), width) {}
 
-int Occupancy::last_occupied(int row, int begin, int end) const {
-    if (begin >= end) return -1;
+void Occupancy::update_runs(int row) {
     const uint64_t* words = bits_.data() + size_t(row) * size_t(words_);
-    const int last = end - 1;
-    for (int w = last >> 6; w >= (begin >> 6); --w) {
-        uint64_t word = words[w];
-        if (!word) continue;
-        if (w == (last >> 6) && (last & 63) != 63) word &= (uint64_t(1) << ((last & 63) + 1)) - 1;
-        if (w == (begin >> 6)) word &= ~uint64_t(0) << (begin & 63);
-        if (word) return w * 64 + highest_bit(word);
+    std::vector<Span>& runs = runs_[size_t(row)];
+    runs.clear();
+    int longest = 0;
+    int c = 0;
+    while (c < width_) {
+        // Skip blocked texels, then take the free run.
+        while (c < width_) {
+            const uint64_t blocked = words[c >> 6] >> (c & 63);
+            if (!(blocked & 1)) break;
+            const uint64_t free = ~blocked;
+            c = free ? c + lowest_bit(free) : (c | 63) + 1;
+        }
+        if (c >= width_) break;
+        const int begin = c;
+        while (c < width_) {
+            const uint64_t blocked = words[c >> 6] >> (c & 63);
+            if (blocked & 1) break;
+            c = blocked ? c + lowest_bit(blocked) : (c | 63) + 1;
+        }
+        c = std::min(c, width_);
+        runs.push_back({begin, c});
+        longest = std::max(longest, c - begin);
     }
-    return -1;
+    longest_[size_t(row)] = longest;
 }
 
 bool Occupancy::first_fit(const Footprint& fp, int& out_x, int& out_y) const {
     const int fw = fp.covered.width, fh = fp.covered.height;
     if (fw > width_ || fh > height_) return false;
     for (int y = 0; y + fh <= height_; ++y) {
-        // Columns left of a row's first free texel are occupied, so the
-        // footprint's first texel in that row must start at or after it.
-        int x = 0;
-        for (int r = 0; r < fh && x + fw <= width_; ++r) {
-            if (fp.row_first[size_t(r)] < fw) x = std::max(x, first_free_[size_t(y + r)] - fp.row_first[size_t(r)]);
+        // A row whose longest free run is too short rules the row out at once.
+        if (longest_[size_t(y + fp.tightest)] < fp.longest[size_t(fp.tightest)]) continue;
+        bool runs_long_enough = true;
+        for (int r = 0; r < fh && runs_long_enough; ++r) runs_long_enough = longest_[size_t(y + r)] >= fp.longest[size_t(r)];
+        if (!runs_long_enough) continue;
+        // The corners where every span lies in a free run, narrowed row by
+        // row (the tightest row first: it leaves the fewest).
+        candidates_.assign(1, {0, width_ - fw + 1});
+        for (int n = 0; n < fh && !candidates_.empty(); ++n) {
+            const int r = n == 0 ? fp.tightest : (n <= fp.tightest ? n - 1 : n);
+            for (int k = fp.covered.offsets[size_t(r)]; k < fp.covered.offsets[size_t(r) + 1] && !candidates_.empty(); ++k) {
+                keep_inside(candidates_, runs_[size_t(y + r)], fp.covered.spans[size_t(k)].first,
+                            fp.covered.spans[size_t(k)].second, next_);
+                candidates_.swap(next_);
+            }
         }
-        while (x + fw <= width_) {
-            // A span over an occupied texel c can only clear it by starting
-            // after c: jump there (no fitting position is skipped).
-            int jump = x;
-            const int dy = y - fp.reach, dx = x - fp.reach;
-            for (int r = 0; r < fp.dilated.height && jump == x; ++r) {
-                const int row = dy + r;
-                if (row < 0 || row >= height_) continue;
-                for (int k = fp.dilated.offsets[size_t(r)]; k < fp.dilated.offsets[size_t(r) + 1]; ++k) {
-                    const auto [lo, hi] = fp.dilated.spans[size_t(k)];
-                    const int c = last_occupied(row, std::max(0, dx + lo), std::min(width_, dx + hi));
-                    if (c >= 0) {
-                        jump = std::max(jump, c - lo + fp.reach + 1);
-                        break;
-                    }
-                }
-            }
-            if (jump == x) {
-                out_x = x;
-                out_y = y;
-                return true;
-            }
-            x = jump;
+        if (!candidates_.empty()) {
+            out_x = candidates_.front().first;
+            out_y = y;
+            return true;
         }
     }
     return false;
 }
 
 void Occupancy::place(const Footprint& fp, int x, int y) {
-    for (int r = 0; r < fp.covered.height; ++r) {
-        const int row = y + r;
+    const SpanRows& d = fp.dilated;
+    for (int r = 0; r < d.height; ++r) {
+        const int row = y - fp.reach + r;
+        if (row < 0 || row >= height_) continue;
         uint64_t* words = bits_.data() + size_t(row) * size_t(words_);
-        for (int k = fp.covered.offsets[size_t(r)]; k < fp.covered.offsets[size_t(r) + 1]; ++k) {
-            const auto [lo, hi] = fp.covered.spans[size_t(k)];
-            for (int c = x + lo; c < x + hi; ++c) words[c >> 6] |= uint64_t(1) << (c & 63);
+        for (int k = d.offsets[size_t(r)]; k < d.offsets[size_t(r) + 1]; ++k) {
+            const int lo = std::max(0, x - fp.reach + d.spans[size_t(k)].first);
+            const int hi = std::min(width_, x - fp.reach + d.spans[size_t(k)].second);
+            for (int c = lo; c < hi; ++c) words[c >> 6] |= uint64_t(1) << (c & 63);
         }
-        int& first = first_free_[size_t(row)];
-        while (first < width_ && (words[first >> 6] >> (first & 63) & 1)) ++first;
+        update_runs(row);
     }
 }
 

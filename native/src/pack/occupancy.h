@@ -1,7 +1,9 @@
-// The atlas's occupied texels (the placed charts' undilated footprints) as
-// bit rows, and the first-fit placement rule: a chart goes to the first
-// position in scan order (rows top to bottom, then columns left to right)
-// where its dilated footprint meets no occupied texel.
+// The atlas's blocked texels and the first-fit placement rule: a chart goes
+// to the first position in scan order (rows top to bottom, then columns left
+// to right) where its footprint fits inside the atlas and meets no blocked
+// texel. Blocked texels are the placed charts' dilated footprints; the
+// dilation is symmetric, so a footprint meeting none is as far from every
+// placed footprint as the padding asks.
 #pragma once
 
 #include <cstdint>
@@ -16,19 +18,19 @@ public:
     Occupancy(int width, int height);
 
     // The first position (column, row) of the footprint's corner where it
-    // fits inside the atlas and its dilation meets no occupied texel; false
-    // if none.
+    // fits; false if none.
     bool first_fit(const Footprint& fp, int& x, int& y) const;
-    // Marks the footprint's covered texels at (x, y) occupied.
+    // Blocks the footprint's dilation at (x, y).
     void place(const Footprint& fp, int x, int y);
 
 private:
-    // The last occupied column in [begin, end) of a row, or -1.
-    int last_occupied(int row, int begin, int end) const;
+    void update_runs(int row);
 
     int width_, height_, words_;
-    std::vector<uint64_t> bits_;       // row-major, words_ per row
-    std::vector<int32_t> first_free_;  // per row: every column before it is occupied
+    std::vector<uint64_t> bits_;             // blocked texels, row-major, words_ per row
+    std::vector<std::vector<Span>> runs_;    // per row, its free runs [first, second), ascending
+    std::vector<int32_t> longest_;           // per row, its longest free run
+    mutable std::vector<Span> candidates_, next_;  // first_fit's scratch (one Occupancy per thread)
 };
 
 }  // namespace lmrefine::pack
