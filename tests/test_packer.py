@@ -71,14 +71,27 @@ def test_report_transforms_reproduce_the_output():
     scales = np.linspace(0.5, 2.0, lmrefine.find_charts(uvs, tris).max() + 1)
     out, report = lmrefine.pack_charts(uvs, tris, None, scales, 256, 2.0)
     np.testing.assert_allclose(report["chart_scales"], report["global_scale"] * scales)
-    chart_of_uv = np.empty(len(uvs), np.int64)
-    chart_of_uv[tris.ravel()] = np.repeat(report["chart_ids"], 3)
     for c in range(report["charts"]):
         corners = np.unique(tris[report["chart_ids"] == c])
-        expected = (report["chart_scales"][c] * (rotation(report["rotations"][c]) @ uvs[corners].T.astype(np.float64)).T
-                    + report["offsets"][c])
-        np.testing.assert_allclose(out[corners], expected, atol=1e-6)
+        m = report["transforms"][c]
+        np.testing.assert_allclose(out[corners], uvs[corners] @ m[:, :2].T + m[:, 2], atol=1e-6)
+        expected = report["chart_scales"][c] * (rotation(report["rotations"][c]))
+        np.testing.assert_allclose(m[:, :2], expected, atol=1e-12)
+    np.testing.assert_array_equal(report["offsets"], report["transforms"][:, :, 2])
     assert set(np.unique(report["rotations"])) <= {0, 1}
+
+
+def test_quarter_turns_keep_the_texel_shape_on_a_non_square_atlas():
+    uvs, tris = merge(grid_chart(1, (0, 0), (1.0, 0.25)), grid_chart(1, (0, 0.5), (0.25, 1.5)))
+    out, report = lmrefine.pack_charts(uvs, tris, None, None, (64, 256), 2.0)
+    assert lmrefine.check_layout(out, tris, (64, 256), 2.0)["valid"]
+    for c in range(2):
+        corners = out[np.unique(tris[report["chart_ids"] == c])] * (256, 64)  # in texels
+        source = uvs[np.unique(tris[report["chart_ids"] == c])] * (256, 64)
+        extent, source_extent = np.ptp(corners, axis=0), np.ptp(source, axis=0)
+        if report["rotations"][c]:
+            source_extent = source_extent[::-1]
+        np.testing.assert_allclose(extent, source_extent * report["chart_scales"][c], rtol=1e-5)
 
 
 def test_relative_scales_are_kept_and_quarter_turns_can_be_refused():

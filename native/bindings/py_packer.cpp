@@ -107,7 +107,7 @@ py::tuple pack(const py::handle& uvs_in, const py::handle& triangles_in, const p
     for (double& s : chart_scales) s *= result.global_scale;
     report["chart_scales"] = py_util::to_numpy(std::move(chart_scales), {py::ssize_t(chart_count)});
     report["rotations"] = py_util::to_numpy(std::move(result.rotations), {py::ssize_t(chart_count)});
-    report["offsets"] = py_util::to_numpy(std::move(result.offsets), {py::ssize_t(chart_count), 2});
+    report["transforms"] = py_util::to_numpy(std::move(result.transforms), {py::ssize_t(chart_count), 2, 3});
     report["chart_ids"] = py_util::to_numpy(std::move(chart_ids), {py::ssize_t(layout.triangle_count)});
     report["charts"] = chart_count;
     report["trials"] = result.trials;

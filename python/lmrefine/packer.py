@@ -78,10 +78,14 @@ def pack_charts(uvs, triangles, charts, scales, resolution, padding=2.0, rotatio
           area alone (total chart area = atlas area).
         * chart_scales (C,) float64: each chart's linear scale from input to
           output, ``global_scale * scales``.
-        * rotations (C,) int32: quarter turns counter-clockwise, 0 or 1.
-        * offsets (C, 2) float64: a chart's corner moves to
-          ``chart_scales[c] * R(rotations[c]) @ uv + offsets[c]`` (R a
-          counter-clockwise quarter turn; uv after the tolerance snap).
+        * rotations (C,) int32: quarter turns counter-clockwise on the
+          image, 0 or 1 (turned in texel space, so a chart's texel shape is
+          kept on a non-square atlas too).
+        * transforms (C, 2, 3) float64: chart c's corner ``uv`` (after the
+          tolerance snap) moves to ``transforms[c, :, :2] @ uv +
+          transforms[c, :, 2]``; on a square atlas the 2 x 2 part is
+          ``chart_scales[c]`` times the identity or a quarter turn.
+        * offsets (C, 2) float64: ``transforms[:, :, 2]``.
         * chart_ids (T,) int32: the charts packed (``charts`` or found).
         * charts, trials (placements the scale search tried),
           footprint_texels, padding, resolution (height, width), seconds.
@@ -94,4 +98,5 @@ def pack_charts(uvs, triangles, charts, scales, resolution, padding=2.0, rotatio
     """
     new_uvs, report = _native.pack_charts(uvs, triangles, resolution, float(padding), charts=charts, scales=scales,
                                           rotate=bool(rotations), progress=progress, tolerance=float(tolerance))
+    report["offsets"] = report["transforms"][:, :, 2]
     return PackResult(new_uvs, report)

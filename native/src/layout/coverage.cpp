@@ -30,9 +30,9 @@ int first_true(int lo, int hi, double guess, Holds&& holds) {
 
 }  // namespace
 
-TriangleCover::TriangleCover(const glm::dvec2 p[3], int width, int height) {
-    const double xmin = std::min({p[0].x, p[1].x, p[2].x}), xmax = std::max({p[0].x, p[1].x, p[2].x});
-    const double ymin = std::min({p[0].y, p[1].y, p[2].y}), ymax = std::max({p[0].y, p[1].y, p[2].y});
+TriangleCover::TriangleCover(const glm::dvec2 p[3], int width, int height, double grow) {
+    const double xmin = std::min({p[0].x, p[1].x, p[2].x}) - grow, xmax = std::max({p[0].x, p[1].x, p[2].x}) + grow;
+    const double ymin = std::min({p[0].y, p[1].y, p[2].y}) - grow, ymax = std::max({p[0].y, p[1].y, p[2].y}) + grow;
     c0_ = std::max(0, int(std::floor(xmin)));
     c1_ = std::min(width - 1, int(std::ceil(xmax)));
     r0_ = std::max(0, int(std::floor(ymin)));
@@ -49,7 +49,7 @@ TriangleCover::TriangleCover(const glm::dvec2 p[3], int width, int height) {
             tmin_[e] = std::min(tmin_[e], t);
             tmax_[e] = std::max(tmax_[e], t);
         }
-        touch_[e] = kTouch * scale;
+        touch_[e] = kTouch * scale - grow * scale;
         inverse_ax_[e] = axis_[e].x != 0.0 ? 1.0 / axis_[e].x : 0.0;
     }
 }

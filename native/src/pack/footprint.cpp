@@ -33,12 +33,11 @@ SpanRows to_spans(const std::vector<uint8_t>& bits, int width, int height) {
 }  // namespace
 
 std::vector<glm::dvec2> local_pixels(const ChartPiece& piece, const std::vector<glm::dvec2>& uvs, double scale,
-                                     int quarter_turns, int width, int height) {
+                                     int width, int height) {
     std::vector<glm::dvec2> local(piece.corners.size());
     glm::dvec2 low(INFINITY);
     for (size_t k = 0; k < piece.corners.size(); ++k) {
-        glm::dvec2 uv = uvs[size_t(piece.corners[k])] * scale;
-        if (quarter_turns & 1) uv = glm::dvec2(-uv.y, uv.x);
+        const glm::dvec2 uv = uvs[size_t(piece.corners[k])] * scale;
         local[k] = glm::dvec2(uv.x * width, -uv.y * height);
         low = glm::min(low, local[k]);
     }
@@ -46,11 +45,12 @@ std::vector<glm::dvec2> local_pixels(const ChartPiece& piece, const std::vector<
     return local;
 }
 
+glm::dvec2 turn_local(const glm::dvec2& p, int width) { return {p.y, double(width) - p.x}; }
+
 Footprint make_footprint(const ChartPiece& piece, const UvLayout& layout, const std::vector<glm::dvec2>& local,
                          double padding) {
-    glm::dvec2 high(0.0);
-    for (const auto& p : local) high = glm::max(high, p);
-    const int width = std::max(1, int(std::ceil(high.x + kInset))), height = std::max(1, int(std::ceil(high.y + kInset)));
+    const glm::ivec2 size = footprint_size(local);
+    const int width = size.x, height = size.y;
     std::vector<uint8_t> bits(size_t(width) * size_t(height), 0);
     // A point grown by kInset: the up to four texels its square meets.
     auto set_point = [&](const glm::dvec2& p) {
@@ -63,20 +63,13 @@ Footprint make_footprint(const ChartPiece& piece, const UvLayout& layout, const 
         const auto it = std::lower_bound(piece.corners.begin(), piece.corners.end(), int64_t(uv_index));
         return local[size_t(it - piece.corners.begin())];
     };
-    // The triangle grown by a square of half-side kInset meets a texel iff
-    // one of its four diagonal shifts by kInset does (the shifted unit
-    // squares tile the grown one).
-    static const glm::dvec2 kShifts[4] = {{-kInset, -kInset}, {kInset, -kInset}, {-kInset, kInset}, {kInset, kInset}};
     for (int64_t t : piece.triangles) {
         glm::dvec2 p[3];
         for (int k = 0; k < 3; ++k) p[k] = local_of(layout.triangles[3 * t + k]);
-        for (const glm::dvec2& shift : kShifts) {
-            const glm::dvec2 q[3] = {p[0] + shift, p[1] + shift, p[2] + shift};
-            const TriangleCover cover(q, width, height);
-            for (int r = cover.row_begin(); r < cover.row_end(); ++r) {
-                const auto [begin, end] = cover.columns(r);
-                std::fill(bits.begin() + r * width + begin, bits.begin() + r * width + end, uint8_t(1));
-            }
+        const TriangleCover cover(p, width, height, kInset);
+        for (int r = cover.row_begin(); r < cover.row_end(); ++r) {
+            const auto [begin, end] = cover.columns(r);
+            std::fill(bits.begin() + r * width + begin, bits.begin() + r * width + end, uint8_t(1));
         }
         // Slivers (and zero-area triangles, which cover nothing) still occupy
         // the texels their corners and edges pass through.
@@ -90,7 +83,27 @@ Footprint make_footprint(const ChartPiece& piece, const UvLayout& layout, const 
         }
     }
     for (const auto& p : local) set_point(p);
-    return footprint_of_bits(bits, width, height, padding);
+    Footprint fp = footprint_of_bits(bits, width, height, padding);
+    fp.bits = std::move(bits);
+    return fp;
+}
+
+glm::ivec2 footprint_size(const std::vector<glm::dvec2>& local) {
+    glm::dvec2 high(0.0);
+    for (const auto& p : local) high = glm::max(high, p);
+    return {std::max(1, int(std::ceil(high.x + kInset))), std::max(1, int(std::ceil(high.y + kInset)))};
+}
+
+Footprint turned_footprint(const Footprint& fp, double padding) {
+    const int width = fp.covered.width, height = fp.covered.height;
+    // Texel (column c, row r) goes to (column r, row width - 1 - c).
+    std::vector<uint8_t> bits(size_t(width) * size_t(height), 0);
+    for (int r = 0; r < height; ++r) {
+        for (int c = 0; c < width; ++c) bits[size_t(width - 1 - c) * size_t(height) + size_t(r)] = fp.bits[size_t(r) * size_t(width) + size_t(c)];
+    }
+    Footprint turned = footprint_of_bits(bits, height, width, padding);
+    turned.bits = std::move(bits);
+    return turned;
 }
 
 Footprint footprint_of_bits(const std::vector<uint8_t>& bits, int width, int height, double padding) {

@@ -36,6 +36,7 @@ struct Footprint {
     int64_t texels = 0;  // covered texels
     std::vector<int32_t> longest;  // per covered row, its longest span
     int tightest = 0;              // the covered row with the longest span
+    std::vector<uint8_t> bits;     // covered texels, row-major (make_footprint and turned_footprint only)
 };
 
 // One chart as the packer sees it: its triangles and used UV indices.
@@ -45,14 +46,24 @@ struct ChartPiece {
 };
 
 // The chart's corners in footprint pixel coordinates (x right, y down, the
-// bounding box's corner at (kInset, kInset)) for a linear scale and quarter
-// turns, indexed like piece.corners. `uvs` are the (welded) input UVs.
+// bounding box's corner at (kInset, kInset)) for a linear scale, indexed
+// like piece.corners. `uvs` are the (welded) input UVs.
 std::vector<glm::dvec2> local_pixels(const ChartPiece& piece, const std::vector<glm::dvec2>& uvs, double scale,
-                                     int quarter_turns, int width, int height);
+                                     int width, int height);
+
+// The footprint's size (columns, rows) for those local pixels.
+glm::ivec2 footprint_size(const std::vector<glm::dvec2>& local);
 
 // The footprint of the chart at those local pixels; `padding` in texels.
 Footprint make_footprint(const ChartPiece& piece, const UvLayout& layout, const std::vector<glm::dvec2>& local,
                          double padding);
+
+// A quarter turn counter-clockwise (on the image, so in UV too), in texel
+// space: the footprint's texels turned, and a local point of a footprint
+// `width` columns wide moved with them. Exact on the texel lattice, so the
+// turned chart lies in the turned footprint as the chart in the footprint.
+Footprint turned_footprint(const Footprint& fp, double padding);
+glm::dvec2 turn_local(const glm::dvec2& p, int width);
 
 // The footprint of a bitmap ((height * width) bytes, nonzero = covered).
 Footprint footprint_of_bits(const std::vector<uint8_t>& bits, int width, int height, double padding);

@@ -47,13 +47,16 @@ Trial run_trial(const Problem& problem, double global_scale, Progress* progress)
     const size_t count = problem.pieces.size();
     const int turn_options = problem.options.rotate ? 2 : 1;
     std::vector<Footprint> footprints(count * size_t(turn_options));
-    parallel_for(int64_t(footprints.size()), 16, [&](int64_t begin, int64_t end) {
-        for (int64_t k = begin; k < end; ++k) {
-            const size_t c = size_t(k) / size_t(turn_options);
-            const int turns = int(k % turn_options);
-            const auto local = pack::local_pixels(problem.pieces[c], problem.uvs, global_scale * problem.scales[c], turns,
+    parallel_for(int64_t(count), 16, [&](int64_t begin, int64_t end) {
+        for (int64_t c = begin; c < end; ++c) {
+            const auto local = pack::local_pixels(problem.pieces[size_t(c)], problem.uvs, global_scale * problem.scales[size_t(c)],
                                                   problem.options.width, problem.options.height);
-            footprints[size_t(k)] = pack::make_footprint(problem.pieces[c], problem.layout, local, problem.options.padding);
+            Footprint& upright = footprints[size_t(c) * size_t(turn_options)];
+            upright = pack::make_footprint(problem.pieces[size_t(c)], problem.layout, local, problem.options.padding);
+            if (turn_options > 1) footprints[size_t(c) * 2 + 1] = pack::turned_footprint(upright, problem.options.padding);
+            for (int turns = 0; turns < turn_options; ++turns) {
+                std::vector<uint8_t>().swap(footprints[size_t(c) * size_t(turn_options) + size_t(turns)].bits);
+            }
         }
     });
     // Largest first (footprint texels, then bounding box), ties by chart id.
@@ -236,27 +239,37 @@ PackResult pack_charts(const UvLayout& layout, const std::vector<int32_t>& trian
     // The output: each chart's local pixels at its placement, back to UV.
     result.uvs.assign(layout.uvs, layout.uvs + 2 * layout.uv_count);
     result.rotations.assign(size_t(chart_count), 0);
-    result.offsets.assign(2 * size_t(chart_count), 0.0);
+    result.transforms.assign(6 * size_t(chart_count), 0.0);
+    const double w = options.width, h = options.height;
     for (int32_t c = 0; c < chart_count; ++c) {
         const ChartPiece& piece = pieces[size_t(c)];
         const Placement& at = best.placements[size_t(c)];
+        const double scale = low * scales[size_t(c)];
         result.rotations[size_t(c)] = at.turns;
-        const auto local = pack::local_pixels(piece, uvs, low * scales[size_t(c)], at.turns, options.width, options.height);
-        if (!piece.corners.empty()) {
-            // local = (u' W, -v' H) - shift for the rotated, scaled uv'; the
-            // first corner gives the shift, hence the offset.
-            const size_t i = size_t(piece.corners[0]);
-            glm::dvec2 uv = uvs[i] * (low * scales[size_t(c)]);
-            if (at.turns & 1) uv = glm::dvec2(-uv.y, uv.x);
-            const glm::dvec2 p = local[0] + glm::dvec2(at.x, at.y);
-            result.offsets[2 * size_t(c)] = p.x / options.width - uv.x;
-            result.offsets[2 * size_t(c) + 1] = 1.0 - p.y / options.height - uv.y;
+        std::vector<glm::dvec2> local = pack::local_pixels(piece, uvs, scale, options.width, options.height);
+        const int footprint_width = pack::footprint_size(local).x;
+        for (auto& p : local) {
+            if (at.turns) p = pack::turn_local(p, footprint_width);
+            p += glm::dvec2(at.x, at.y);
         }
         for (size_t k = 0; k < piece.corners.size(); ++k) {
-            const glm::dvec2 p = local[k] + glm::dvec2(at.x, at.y);
             const size_t i = size_t(piece.corners[k]);
-            result.uvs[2 * i] = float(std::clamp(p.x / options.width, 0.0, 1.0));
-            result.uvs[2 * i + 1] = float(std::clamp(1.0 - p.y / options.height, 0.0, 1.0));
+            result.uvs[2 * i] = float(std::clamp(local[k].x / w, 0.0, 1.0));
+            result.uvs[2 * i + 1] = float(std::clamp(1.0 - local[k].y / h, 0.0, 1.0));
+        }
+        // The affine map uv -> output uv: scale, the quarter turn in texel
+        // space (uv axes scaled by the atlas's aspect), and the translation
+        // that takes the first corner where it went.
+        double* m = &result.transforms[6 * size_t(c)];
+        if (at.turns) {
+            m[0] = 0.0, m[1] = -scale * h / w, m[3] = scale * w / h, m[4] = 0.0;
+        } else {
+            m[0] = scale, m[1] = 0.0, m[3] = 0.0, m[4] = scale;
+        }
+        if (!piece.corners.empty()) {
+            const glm::dvec2 uv = uvs[size_t(piece.corners[0])];
+            m[2] = local[0].x / w - (m[0] * uv.x + m[1] * uv.y);
+            m[5] = 1.0 - local[0].y / h - (m[3] * uv.x + m[4] * uv.y);
         }
     }
     if (progress) progress->finish();

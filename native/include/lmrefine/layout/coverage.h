@@ -32,7 +32,10 @@ void validate_layout(const UvLayout& layout);
 // that does not depend on the texel computed once here.
 class TriangleCover {
 public:
-    TriangleCover(const glm::dvec2 p[3], int width, int height);
+    // `grow` > 0 (texels) also covers texels the triangle misses by less
+    // than that (along its edge normals and the axes: a superset of the
+    // triangle grown by a disc of that radius), as the packer's footprints need.
+    TriangleCover(const glm::dvec2 p[3], int width, int height, double grow = 0.0);
     TriangleCover(const UvLayout& layout, int64_t triangle, int width, int height);
 
     // Rows [row_begin, row_end) may hold covered texels (empty if the

@@ -26,9 +26,10 @@ struct PackResult {
     std::vector<float> uvs;          // (uv_count, 2), the input's where no triangle uses a UV
     double global_scale = 0;         // each chart's linear scale is global_scale * scales[c]
     double scale_bound = 0;          // the area bound on global_scale (total chart area = atlas)
-    std::vector<int32_t> rotations;  // per chart, quarter turns counter-clockwise (0 or 1)
-    // Per chart (u, v): a (welded) corner moves to scale_c * R(rotations[c]) * uv + offset.
-    std::vector<double> offsets;
+    std::vector<int32_t> rotations;  // per chart, quarter turns counter-clockwise on the image (0 or 1)
+    // Per chart, a 2 x 3 row-major affine map: a (welded) corner uv moves to
+    // M[:, :2] uv + M[:, 2]. Quarter turns are turns in texel space.
+    std::vector<double> transforms;
     int trials = 0;                  // placements tried by the scale search
     int64_t footprint_texels = 0;    // texels of the placed footprints (undilated)
 };
