@@ -212,3 +212,38 @@ def test_progress_reports_and_cancels():
     assert seen and seen[-1][0] == pytest.approx(1.0)
     with pytest.raises(lmrefine.CancelledError):
         lmrefine.pack_charts(uvs, tris, None, None, 128, 2.0, progress=lambda f, stage: False)
+
+
+def reference_first_fit(occupied, chart, padding):
+    """The placement rule, plainly: the first (x, y) in scan order (rows,
+    then columns) where every covered texel of `chart` is inside the atlas
+    and farther than `padding` from every occupied texel, measured between
+    texel squares (hypot(max(0, |di| - 1), max(0, |dj| - 1)), a shared texel
+    always too close); distance exactly `padding` is allowed."""
+    height, width = occupied.shape
+    ch, cw = chart.shape
+    taken = np.argwhere(occupied)
+    covered = np.argwhere(chart)
+    for y in range(height - ch + 1):
+        for x in range(width - cw + 1):
+            if len(taken) == 0:
+                return x, y
+            d = np.abs((covered + (y, x))[:, None, :] - taken[None, :, :])
+            gap = np.maximum(d - 1, 0)
+            too_close = (gap ** 2).sum(-1) < padding ** 2
+            too_close |= (d == 0).all(-1)
+            if not too_close.any():
+                return x, y
+    return None
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_placement_rule_matches_the_plain_reference(seed):
+    rng = np.random.default_rng(seed)
+    height, width = rng.integers(6, 26, 2)
+    occupied = rng.random((height, width)) < rng.uniform(0.0, 0.08)
+    occupied[: rng.integers(0, height // 2)] |= rng.random((1, width)) < 0.5  # a denser top, as packing makes
+    chart = rng.random(tuple(rng.integers(1, 6, 2))) < 0.7
+    chart[0, 0] |= not chart.any()
+    padding = float(rng.choice([0.0, 0.5, 1.0, 1.5, 2.0, 2.5, 3.0]))
+    assert lmrefine._native._first_fit(occupied, chart, padding) == reference_first_fit(occupied, chart, padding)

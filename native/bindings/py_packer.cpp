@@ -122,6 +122,27 @@ py::tuple pack(const py::handle& uvs_in, const py::handle& triangles_in, const p
 }  // namespace
 
 void bind_packer(py::module_& m) {
+    m.def(
+        "_first_fit",
+        [](const py::array_t<uint8_t, py::array::c_style | py::array::forcecast>& occupied,
+           const py::array_t<uint8_t, py::array::c_style | py::array::forcecast>& chart, double padding) -> py::object {
+            if (occupied.ndim() != 2 || chart.ndim() != 2 || chart.shape(0) < 1 || chart.shape(1) < 1 ||
+                occupied.shape(0) < 1 || occupied.shape(1) < 1) {
+                throw py::value_error("occupied and chart must be non-empty 2-D masks");
+            }
+            if (!(padding >= 0.0) || padding > 1e4) throw py::value_error("padding must be in [0, 1e4] texels");
+            std::vector<uint8_t> atlas(occupied.data(), occupied.data() + occupied.size());
+            std::vector<uint8_t> bits(chart.data(), chart.data() + chart.size());
+            int x = 0, y = 0;
+            if (!first_fit_position(atlas, int(occupied.shape(1)), int(occupied.shape(0)), bits, int(chart.shape(1)),
+                                    int(chart.shape(0)), padding, x, y)) {
+                return py::none();
+            }
+            return py::make_tuple(x, y);
+        },
+        py::arg("occupied"), py::arg("chart"), py::arg("padding"),
+        "The packer's placement rule on masks (tests): the first (x, y) in scan order where `chart` fits "
+        "`occupied` with the padding, or None.");
     m.def("pack_charts", &pack, py::arg("uvs"), py::arg("triangles"), py::arg("resolution"), py::arg("padding") = 2.0,
           py::kw_only(), py::arg("charts") = py::none(), py::arg("scales") = py::none(), py::arg("rotate") = true,
           py::arg("progress") = py::none(), py::arg("tolerance") = 1e-5,

@@ -277,3 +277,15 @@ PackResult pack_charts(const UvLayout& layout, const std::vector<int32_t>& trian
 }
 
 }  // namespace lmrefine
+
+namespace lmrefine {
+
+bool first_fit_position(const std::vector<uint8_t>& occupied, int width, int height,
+                        const std::vector<uint8_t>& chart, int chart_width, int chart_height, double padding, int& x,
+                        int& y) {
+    pack::Occupancy occupancy(width, height);
+    occupancy.place(pack::footprint_of_bits(occupied, width, height, padding), 0, 0);
+    return occupancy.first_fit(pack::footprint_of_bits(chart, chart_width, chart_height, padding), x, y);
+}
+
+}  // namespace lmrefine
