@@ -32,6 +32,23 @@ def test_gutter_is_the_exact_distance_between_charts_in_texels():
     assert lmrefine.check_layout(uvs, tris, (R, 2 * R))["min_gutter_texels"] == pytest.approx(6.0, abs=1e-4)
 
 
+
+def test_a_chart_off_by_rounding_is_one_chart_with_the_tolerance():
+    # A plane whose second half is off by 2e-7 (Blender's layouts are not
+    # bit-exact): bit-exact joining reads two touching charts (gutter 0).
+    uvs, tris = plane(8)
+    noisy = uvs.copy()
+    noisy[len(uvs) // 2:] += np.float32(2e-7)
+    exact = lmrefine.check_layout(noisy, tris, R)
+    assert exact["charts"] > 1 and not exact["valid"]
+    joined = lmrefine.check_layout(noisy, tris, R, tolerance=lmrefine.CHART_TOLERANCE)
+    assert joined["charts"] == 1 and joined["valid"]
+    # Charts farther apart than the tolerance stay apart.
+    uvs, tris = merge(square(0.1, 0.1, 0.3), square(0.4 + 3 / R, 0.1, 0.3))
+    assert lmrefine.check_layout(uvs, tris, R, tolerance=lmrefine.CHART_TOLERANCE)["charts"] == 2
+    with pytest.raises(ValueError, match="tolerance"):
+        lmrefine.check_layout(uvs, tris, R, tolerance=-1.0)
+
 def test_far_apart_charts_report_their_true_gutter():
     uvs, tris = merge(square(0.0, 0.0, 0.1), square(0.8, 0.8, 0.1))
     gap = np.hypot(0.7, 0.7) * R

@@ -247,3 +247,18 @@ def test_placement_rule_matches_the_plain_reference(seed):
     chart[0, 0] |= not chart.any()
     padding = float(rng.choice([0.0, 0.5, 1.0, 1.5, 2.0, 2.5, 3.0]))
     assert lmrefine._native._first_fit(occupied, chart, padding) == reference_first_fit(occupied, chart, padding)
+
+
+def test_a_triangle_smaller_than_the_tolerance_is_not_collapsed():
+    # A sliver whose short edge (5e-6) is below the tolerance, beside a quad
+    # sharing its long corner: snapping its two close corners together would
+    # make it degenerate.
+    quad_uvs, quad_tris = grid_chart(1, (0.2, 0.2), (0.5, 0.5))
+    sliver = np.array([[0.5, 0.5], [0.9, 0.2], [0.9 + 5e-6, 0.2]], np.float32)
+    uvs = np.concatenate([quad_uvs, sliver])
+    tris = np.concatenate([quad_tris, np.array([[len(quad_uvs), len(quad_uvs) + 1, len(quad_uvs) + 2]])]).astype(np.int32)
+    assert lmrefine.check_layout(uvs, tris, 256, 2.0)["degenerate"] == 0
+    out, report = lmrefine.pack_charts(uvs, tris, None, None, 256, 2.0)
+    assert report["charts"] == 1
+    check = lmrefine.check_layout(out, tris, 256, 2.0)
+    assert check["valid"], check

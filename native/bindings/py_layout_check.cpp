@@ -1,5 +1,7 @@
 #include <pybind11/pybind11.h>
 
+#include <cmath>
+
 #include <memory>
 #include <tuple>
 #include <vector>
@@ -99,7 +101,7 @@ std::vector<uint8_t> checker_gutter(const LayoutChecker& checker) {
 
 py::dict check(const py::handle& uvs_in, const py::handle& triangles_in, const py::handle& resolution,
                double padding, const py::handle& reference_in, bool failing_charts,
-               bool relative_gutter) {
+               bool relative_gutter, double tolerance) {
     auto uvs = py_util::require_points(uvs_in, "uvs", 2);
     auto triangles = py_util::require_indices(triangles_in, "triangles", 3, /*allow_empty=*/true);
     const auto [height, width] = py_util::parse_resolution(resolution);
@@ -111,12 +113,16 @@ py::dict check(const py::handle& uvs_in, const py::handle& triangles_in, const p
                                   std::to_string(uvs.shape(0)) + "; pass the original layout of the same mesh");
         }
     }
+    if (!(tolerance >= 0.0) || !std::isfinite(tolerance)) {
+        throw py::value_error("tolerance must be a finite UV distance >= 0 (got " + std::to_string(tolerance) +
+                              "); 0 joins bit-identical corners only");
+    }
     UvLayout layout{uvs.data(), uvs.shape(0), triangles.data(), triangles.shape(0)};
     LayoutReport r;
     {
         py::gil_scoped_release release;
         r = check_layout(layout, width, height, padding, reference_in.is_none() ? nullptr : reference.data(),
-                         failing_charts, relative_gutter);
+                         failing_charts, relative_gutter, tolerance);
     }
     return report_dict(r, relative_gutter, failing_charts);
 }
@@ -139,7 +145,7 @@ another owner (uncovered, another chart, or two charts). Pass as
 )doc");
     m.def("check_layout", &check, py::arg("uvs"), py::arg("triangles"), py::arg("resolution"),
           py::arg("padding") = 2.0, py::kw_only(), py::arg("reference_uvs") = py::none(),
-          py::arg("failing_charts") = false, py::arg("relative_gutter") = false,
+          py::arg("failing_charts") = false, py::arg("relative_gutter") = false, py::arg("tolerance") = 0.0,
           R"doc(Check a UV layout for use as a lightmap layout at a resolution.
 
 Args:
@@ -159,6 +165,11 @@ Args:
         (pairs closer than that), and ``failing_charts`` then lists their
         charts rather than every chart closer than padding. ``valid`` stays
         absolute (min_gutter_texels >= padding).
+    tolerance (float): charts are ``find_charts(..., tolerance=tolerance)``:
+        corners closer than this UV distance join charts. 0 (default) joins
+        bit-identical corners only; pass ``lmrefine.CHART_TOLERANCE`` for a
+        Blender layout that was not welded (its islands are not bit-exact,
+        so they would read as touching charts, gutter 0).
 
 Returns:
     dict: flipped, degenerate (zero area to float precision), overlapping
@@ -167,8 +178,8 @@ Returns:
     [0, 1]), min_gutter_texels (exact smallest distance between two charts'
     boundaries in texels; inf with fewer than two charts), charts, and valid
     (nothing flipped, degenerate, overlapping or out of bounds, and
-    min_gutter_texels >= padding). Charts are those of find_charts (of the
-    reference layout when given).
+    min_gutter_texels >= padding). Charts are those of find_charts with the
+    tolerance (of the reference layout when given).
 
 Raises:
     ValueError: bad shapes, indices out of range, NaN UVs, resolution <= 0.

@@ -208,13 +208,13 @@ struct LayoutChecker::Gutter {
     PairDistances pairs;
 };
 
-LayoutChecker::LayoutChecker(const UvLayout& original, int width, int height, double padding)
+LayoutChecker::LayoutChecker(const UvLayout& original, int width, int height, double padding, double chart_tolerance)
     : original_(original), width_(width), height_(height), padding_(padding) {
     LMREFINE_REQUIRE(width > 0 && height > 0, "resolution must be positive, got " + std::to_string(height) +
                                                   "x" + std::to_string(width));
     LMREFINE_REQUIRE(padding >= 0, "padding must be >= 0 texels");
     validate_layout(original);
-    charts_ = find_charts(original);
+    charts_ = find_charts(original, chart_tolerance);
     orientation_.resize(size_t(original.triangle_count));
     for (int64_t t = 0; t < original.triangle_count; ++t) {
         orientation_[size_t(t)] = int8_t(orientation(pixel_triangle(original, original.uvs, t, width, height)));
@@ -397,16 +397,19 @@ LayoutReport LayoutChecker::check_against(const UvLayout& layout, const LayoutRa
 }
 
 LayoutReport check_layout(const UvLayout& layout, int width, int height, double padding,
-                          const float* reference_uvs, bool list_failing_charts, bool relative_gutter) {
+                          const float* reference_uvs, bool list_failing_charts, bool relative_gutter,
+                          double chart_tolerance) {
     LMREFINE_REQUIRE(!relative_gutter || reference_uvs,
                      "relative_gutter compares with the original layout: pass reference_uvs");
     LMREFINE_REQUIRE(width > 0 && height > 0, "resolution must be positive, got " + std::to_string(height) +
                                                   "x" + std::to_string(width));
     LMREFINE_REQUIRE(padding >= 0, "padding must be >= 0 texels");
     validate_layout(layout);
-    if (!reference_uvs) return LayoutChecker(layout, width, height, padding).check_original(list_failing_charts);
+    if (!reference_uvs) {
+        return LayoutChecker(layout, width, height, padding, chart_tolerance).check_original(list_failing_charts);
+    }
     const LayoutChecker checker({reference_uvs, layout.uv_count, layout.triangles, layout.triangle_count}, width,
-                                height, padding);
+                                height, padding, chart_tolerance);
     return checker.check(layout.uvs, list_failing_charts, relative_gutter);
 }
 

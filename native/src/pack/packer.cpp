@@ -17,6 +17,7 @@
 #include "lmrefine/core/progress.h"
 #include "lmrefine/layout/chart.h"
 #include "occupancy.h"
+#include "weld.h"
 
 namespace lmrefine {
 namespace {
@@ -142,15 +143,8 @@ PackResult pack_charts(const UvLayout& layout, const std::vector<int32_t>& trian
     }
     for (auto& piece : pieces) std::sort(piece.corners.begin(), piece.corners.end());
 
-    // Corners of one chart welded by the tolerance move as one corner, so the
-    // output's charts are the ones packed, even for find_charts without a tolerance.
-    std::vector<glm::dvec2> uvs(size_t(layout.uv_count));
-    const std::vector<int64_t> weld = weld_corners(layout, options.weld_tolerance);
-    for (int64_t i = 0; i < layout.uv_count; ++i) {
-        int64_t source = weld[size_t(i)];
-        if (chart_of_uv[size_t(source)] != chart_of_uv[size_t(i)]) source = i;
-        uvs[size_t(i)] = glm::dvec2(layout.uvs[2 * source], layout.uvs[2 * source + 1]);
-    }
+    // Corners of one chart within the tolerance snap together (weld.h).
+    const std::vector<glm::dvec2> uvs = pack::snapped_uvs(layout, chart_of_uv, options.weld_tolerance);
 
     // The area bound: the charts' total texel area at the global scale cannot exceed the atlas.
     double area = 0.0, box_area = 0.0;

@@ -43,9 +43,10 @@ struct LayoutReport {
 // closer than min(padding, their reference distance), and failing_charts
 // lists their charts (instead of every chart closer than padding). `valid`
 // stays absolute.
+// Charts are find_charts(reference or layout, chart_tolerance).
 LayoutReport check_layout(const UvLayout& layout, int width, int height, double padding,
                           const float* reference_uvs = nullptr, bool list_failing_charts = false,
-                          bool relative_gutter = false);
+                          bool relative_gutter = false, double chart_tolerance = 0.0);
 
 // Checks of one original layout and of its warped versions (same triangles,
 // moved UVs), as the refiner's back-off rounds make them: what depends only
@@ -55,7 +56,7 @@ LayoutReport check_layout(const UvLayout& layout, int width, int height, double 
 // outlive the checker. Caches fill on first use (once, thread-safe).
 class LayoutChecker {
 public:
-    LayoutChecker(const UvLayout& original, int width, int height, double padding);
+    LayoutChecker(const UvLayout& original, int width, int height, double padding, double chart_tolerance = 0.0);
     ~LayoutChecker();
 
     const Charts& charts() const { return charts_; }
