@@ -66,6 +66,21 @@ def test_every_output_passes_check_layout_with_the_padding(kind, resolution, pad
     assert 0 < report["global_scale"] <= report["scale_bound"] * (1 + 1e-6)
 
 
+@pytest.mark.parametrize("subdivision", [1, 3])
+@pytest.mark.parametrize("kind", ["lightmap_pack", "concave", "slivers"])
+def test_every_subdivision_keeps_the_padding(kind, subdivision):
+    uvs, tris = kinds()[kind]
+    out, report = lmrefine.pack_charts(uvs, tris, None, None, 128, 2.0, subdivision=subdivision)
+    assert lmrefine.check_layout(out, tris, 128, 2.0)["valid"]
+
+
+def test_sub_texel_positions_fit_small_charts_denser():
+    uvs, tris = lightmap_pack(charts_across=20, seed=5)
+    whole = lmrefine.pack_charts(uvs, tris, None, None, 256, 2.0, subdivision=1).report
+    halves = lmrefine.pack_charts(uvs, tris, None, None, 256, 2.0, subdivision=2).report
+    assert halves["area_utilisation"] > whole["area_utilisation"]
+
+
 def test_report_transforms_reproduce_the_output():
     uvs, tris = kinds()["mixed_sizes"]
     scales = np.linspace(0.5, 2.0, lmrefine.find_charts(uvs, tris).max() + 1)
@@ -177,16 +192,17 @@ def test_corners_within_the_tolerance_are_snapped_into_one_chart():
     (dict(charts=np.array([0, 0, 1, 1])), "charts"),
     (dict(charts=np.array([0, -1, 1])), "charts"),
     (dict(tolerance=-1.0), "tolerance"),
+    (dict(subdivision=0), "subdivision"),
     (dict(resolution=4, padding=50.0), "fit"),
 ])
 def test_bad_input_raises_a_clear_value_error(change, message):
     uvs, tris = merge(grid_chart(1, (0, 0), (0.5, 0.5)), grid_chart(1, (0.6, 0.6), (0.9, 0.9)))
     tris = tris[[0, 1, 2]]
-    args = dict(charts=np.array([0, 0, 1]), scales=None, resolution=64, padding=2.0, tolerance=1e-5)
+    args = dict(charts=np.array([0, 0, 1]), scales=None, resolution=64, padding=2.0, tolerance=1e-5, subdivision=2)
     args.update(change)
     with pytest.raises(ValueError, match=message):
         lmrefine.pack_charts(uvs, tris, args["charts"], args["scales"], args["resolution"], args["padding"],
-                             tolerance=args["tolerance"])
+                             tolerance=args["tolerance"], subdivision=args["subdivision"])
 
 
 def test_a_uv_index_shared_by_two_charts_is_refused():

@@ -1,6 +1,7 @@
 #include <pybind11/pybind11.h>
 
 #include <chrono>
+#include <cmath>
 #include <string>
 
 #include "lmrefine/core/error.h"
@@ -14,6 +15,20 @@ namespace py = pybind11;
 namespace lmrefine::bindings {
 namespace {
 
+// The layout's total triangle area in UV units (the atlas is 1): its chart
+// area, whatever the texel grid; overlapping triangles count twice.
+double uv_area(const UvLayout& layout) {
+    double area = 0.0;
+    for (int64_t t = 0; t < layout.triangle_count; ++t) {
+        const int32_t* tri = layout.triangles + 3 * t;
+        const double ax = layout.uvs[2 * tri[0]], ay = layout.uvs[2 * tri[0] + 1];
+        const double bx = layout.uvs[2 * tri[1]] - ax, by = layout.uvs[2 * tri[1] + 1] - ay;
+        const double cx = layout.uvs[2 * tri[2]] - ax, cy = layout.uvs[2 * tri[2] + 1] - ay;
+        area += 0.5 * std::abs(bx * cy - by * cx);
+    }
+    return area;
+}
+
 double utilisation(const UvLayout& layout, int width, int height) {
     const std::vector<uint8_t> mask = coverage_mask(layout, width, height);
     int64_t covered = 0;
@@ -23,7 +38,7 @@ double utilisation(const UvLayout& layout, int width, int height) {
 
 py::tuple pack(const py::handle& uvs_in, const py::handle& triangles_in, const py::handle& resolution,
                   double padding, const py::handle& charts_in, const py::handle& scales_in, bool rotate,
-                  py::object progress_callback, double tolerance) {
+                  py::object progress_callback, double tolerance, int subdivision) {
     const auto start = std::chrono::steady_clock::now();
     auto uvs = py_util::require_points(uvs_in, "uvs", 2, /*allow_empty=*/true);
     auto triangles = py_util::require_indices(triangles_in, "triangles", 3, /*allow_empty=*/true);
@@ -32,6 +47,7 @@ py::tuple pack(const py::handle& uvs_in, const py::handle& triangles_in, const p
     options.padding = padding;
     options.rotate = rotate;
     options.weld_tolerance = tolerance;
+    options.subdivision = subdivision;
     if (!(padding >= 0.0) || !std::isfinite(padding)) {
         throw py::value_error("padding must be a finite number of texels >= 0 (got " + std::to_string(padding) + ")");
     }
@@ -89,18 +105,22 @@ py::tuple pack(const py::handle& uvs_in, const py::handle& triangles_in, const p
     }
 
     py_util::PythonProgress progress(std::move(progress_callback));
-    double utilisation_in = 0, utilisation_out = 0;
+    double utilisation_in = 0, utilisation_out = 0, area_in = 0, area_out = 0;
     PackResult result = progress.run([&](Progress& p) {
         PackResult r = pack_charts(layout, chart_ids, chart_count, scales, options, &p);
         const UvLayout out{r.uvs.data(), layout.uv_count, layout.triangles, layout.triangle_count};
         utilisation_out = utilisation(out, options.width, options.height);
         utilisation_in = utilisation(layout, options.width, options.height);
+        area_out = uv_area(out);
+        area_in = uv_area(layout);
         return r;
     });
 
     py::dict report;
     report["utilisation"] = utilisation_out;
     report["utilisation_input"] = utilisation_in;
+    report["area_utilisation"] = area_out;
+    report["area_utilisation_input"] = area_in;
     report["global_scale"] = result.global_scale;
     report["scale_bound"] = result.scale_bound;
     std::vector<double> chart_scales(scales);
@@ -145,7 +165,7 @@ void bind_packer(py::module_& m) {
         "`occupied` with the padding, or None.");
     m.def("pack_charts", &pack, py::arg("uvs"), py::arg("triangles"), py::arg("resolution"), py::arg("padding") = 2.0,
           py::kw_only(), py::arg("charts") = py::none(), py::arg("scales") = py::none(), py::arg("rotate") = true,
-          py::arg("progress") = py::none(), py::arg("tolerance") = 1e-5,
+          py::arg("progress") = py::none(), py::arg("tolerance") = 1e-5, py::arg("subdivision") = 2,
           R"doc(The atlas packer's native entry; use lmrefine.pack_charts (python/lmrefine/packer.py,
 documented there and in docs/packer.md). Returns (uvs, report).)doc");
 }

@@ -31,7 +31,7 @@ class PackResult(NamedTuple):
 
 
 def pack_charts(uvs, triangles, charts, scales, resolution, padding=2.0, rotations=True, progress=None, *,
-                tolerance=CHART_TOLERANCE):
+                tolerance=CHART_TOLERANCE, subdivision=2):
     """Pack a layout's charts into one atlas, [0, 1]^2, as large as it allows.
 
     Every chart moves as a whole: chart c is scaled by
@@ -65,6 +65,9 @@ def pack_charts(uvs, triangles, charts, scales, resolution, padding=2.0, rotatio
         tolerance: UV distance within which a chart's corners are one
             corner: they are snapped together in the output (and, with
             ``charts=None``, join charts).
+        subdivision: footprints and positions on a grid this many times
+            finer than the texels (1-8): charts land on sub-texel positions,
+            so small charts lose less to the grid; time grows about linearly.
 
     Returns:
         PackResult ``(uvs, report)``. ``uvs`` (N, 2) float32: the packed
@@ -73,7 +76,13 @@ def pack_charts(uvs, triangles, charts, scales, resolution, padding=2.0, rotatio
 
         * utilisation: fraction of the atlas's texels covered by charts in
           the output (``coverage_mask``); utilisation_input: the same for
-          the input (its texels inside [0, 1]^2).
+          the input (its texels inside [0, 1]^2). Texels a chart only
+          touches count: a chart off the texel grid covers more texels
+          than one aligned to it at the same size.
+        * area_utilisation: the output's chart area over the atlas area
+          (triangle areas, no texel grid): the texel density the atlas
+          reaches; area_utilisation_input: the same for the input
+          (overlapping triangles count twice).
         * global_scale: the scale found; scale_bound: its upper bound from
           area alone (total chart area = atlas area).
         * chart_scales (C,) float64: each chart's linear scale from input to
@@ -97,6 +106,7 @@ def pack_charts(uvs, triangles, charts, scales, resolution, padding=2.0, rotatio
         lmrefine.CancelledError: the progress callback returned False.
     """
     new_uvs, report = _native.pack_charts(uvs, triangles, resolution, float(padding), charts=charts, scales=scales,
-                                          rotate=bool(rotations), progress=progress, tolerance=float(tolerance))
+                                          rotate=bool(rotations), progress=progress, tolerance=float(tolerance),
+                                          subdivision=int(subdivision))
     report["offsets"] = report["transforms"][:, :, 2]
     return PackResult(new_uvs, report)

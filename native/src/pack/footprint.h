@@ -16,9 +16,9 @@ namespace lmrefine::pack {
 
 // The chart is grown by this (texels) before it is rasterized, so footprints
 // `padding` apart keep the charts padding + 2 kInset apart: the output's
-// rounding to float32 (5e-4 texel at 16384^2) cannot bring them closer than
+// rounding to float32 (2e-3 grid units at 16384^2 subdivided twice) cannot bring them closer than
 // the padding.
-constexpr double kInset = 2e-3;
+constexpr double kInset = 4e-3;
 
 using Span = std::pair<int32_t, int32_t>;  // columns [first, second)
 

@@ -106,6 +106,12 @@ PackResult pack_charts(const UvLayout& layout, const std::vector<int32_t>& trian
     if (!(options.padding >= 0.0) || options.padding > 1e4) {
         LMREFINE_THROW(InvalidArgument, "padding must be >= 0 texels and finite (got " + std::to_string(options.padding) + ")");
     }
+    if (options.subdivision < 1 || options.subdivision > 8 ||
+        int64_t(std::max(options.width, options.height)) * options.subdivision > (int64_t(1) << 16)) {
+        LMREFINE_THROW(InvalidArgument, "subdivision must be in [1, 8] with resolution * subdivision <= 65536 (got " +
+                                            std::to_string(options.subdivision) + " at " + std::to_string(options.height) +
+                                            " x " + std::to_string(options.width) + "); use subdivision 1 for huge atlases");
+    }
     if (int64_t(triangle_chart.size()) != layout.triangle_count) {
         LMREFINE_THROW(InvalidArgument, "charts must have one entry per triangle: got " + std::to_string(triangle_chart.size()) +
                                             " for " + std::to_string(layout.triangle_count) + " triangles");
@@ -120,6 +126,12 @@ PackResult pack_charts(const UvLayout& layout, const std::vector<int32_t>& trian
                                                 std::to_string(scales[size_t(c)]));
         }
     }
+
+    // Everything below works on the subdivided grid: "texels" are sub-texels.
+    PackOptions grid = options;
+    grid.width *= options.subdivision;
+    grid.height *= options.subdivision;
+    grid.padding *= options.subdivision;
 
     // Charts' triangles and UV indices; a UV index may belong to one chart only.
     std::vector<int32_t> chart_of_uv(size_t(layout.uv_count), -1);
@@ -163,15 +175,15 @@ PackResult pack_charts(const UvLayout& layout, const std::vector<int32_t>& trian
             low = glm::min(low, uvs[size_t(i)]);
             high = glm::max(high, uvs[size_t(i)]);
         }
-        const double s2 = scales[size_t(c)] * scales[size_t(c)] * options.width * options.height;
+        const double s2 = scales[size_t(c)] * scales[size_t(c)] * grid.width * grid.height;
         area += chart_area * s2;
         if (!piece.corners.empty()) box_area += (high.x - low.x) * (high.y - low.y) * s2;
     }
-    const double atlas = double(options.width) * options.height;
+    const double atlas = double(grid.width) * grid.height;
     double bound = area > 0 ? std::sqrt(atlas / area) : box_area > 0 ? std::sqrt(atlas / box_area) : 1.0;
     if (!std::isfinite(bound) || bound > 1e12) bound = 1e12;
 
-    Problem problem{layout, pieces, uvs, scales, options};
+    Problem problem{layout, pieces, uvs, scales, grid};
     PackResult result;
     result.scale_bound = bound;
     if (progress) progress->begin("pack", 40);
@@ -230,19 +242,19 @@ PackResult pack_charts(const UvLayout& layout, const std::vector<int32_t>& trian
         }
     }
     result.global_scale = low;
-    result.footprint_texels = best.texels;
+    result.footprint_texels = double(best.texels) / (double(options.subdivision) * options.subdivision);
 
     // The output: each chart's local pixels at its placement, back to UV.
     result.uvs.assign(layout.uvs, layout.uvs + 2 * layout.uv_count);
     result.rotations.assign(size_t(chart_count), 0);
     result.transforms.assign(6 * size_t(chart_count), 0.0);
-    const double w = options.width, h = options.height;
+    const double w = grid.width, h = grid.height;
     for (int32_t c = 0; c < chart_count; ++c) {
         const ChartPiece& piece = pieces[size_t(c)];
         const Placement& at = best.placements[size_t(c)];
         const double scale = low * scales[size_t(c)];
         result.rotations[size_t(c)] = at.turns;
-        std::vector<glm::dvec2> local = pack::local_pixels(piece, uvs, scale, options.width, options.height);
+        std::vector<glm::dvec2> local = pack::local_pixels(piece, uvs, scale, grid.width, grid.height);
         const int footprint_width = pack::footprint_size(local).x;
         for (auto& p : local) {
             if (at.turns) p = pack::turn_local(p, footprint_width);

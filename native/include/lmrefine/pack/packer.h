@@ -20,6 +20,10 @@ struct PackOptions {
     double padding = 2.0;       // texels between charts, >= 0
     bool rotate = true;         // allow 90-degree turns
     double weld_tolerance = 0;  // corners of one chart closer than this (UV) are snapped together
+    // Footprints and positions on a grid this many times finer than the
+    // texels: charts land on sub-texel positions, so a small chart wastes
+    // less than a texel to the grid (docs/packer.md has it measured).
+    int subdivision = 2;
 };
 
 struct PackResult {
@@ -31,7 +35,7 @@ struct PackResult {
     // M[:, :2] uv + M[:, 2]. Quarter turns are turns in texel space.
     std::vector<double> transforms;
     int trials = 0;                  // placements tried by the scale search
-    int64_t footprint_texels = 0;    // texels of the placed footprints (undilated)
+    double footprint_texels = 0;     // texels of the placed footprints (undilated; sub-texels / subdivision^2)
 };
 
 // triangle_chart: chart id per triangle in [0, chart_count); a UV index used
