@@ -131,7 +131,8 @@ def speed():
 
 
 def scenes():
-    print(f"{'scene':16} {'layout':8} {'size':>5} {'input':>6} {'packed':>7} {'shelf':>6} {'charts':>7} {'seconds':>8} "
+    print("texels covered (coverage_mask) / chart area (triangles), over the atlas; shelf: texels covered")
+    print(f"{'scene':16} {'layout':8} {'size':>5} {'input':>13} {'packed':>13} {'shelf':>6} {'charts':>7} {'seconds':>8} "
           f"{'valid':>6}")
     for name in sorted(f[:-4] for f in os.listdir(SAMPLES) if f.endswith(".npz")):
         data = np.load(os.path.join(SAMPLES, name + ".npz"))
@@ -144,9 +145,10 @@ def scenes():
                 seconds, (out, report) = best_of(1, lambda: lmrefine.pack_charts(uvs, tris, None, None, resolution, 2.0))
                 valid = lmrefine.check_layout(out, tris, resolution, 2.0)["valid"]
                 shelf = lmrefine.coverage_mask(shelf_pack(uvs, tris, resolution, 2.0)[0], tris, resolution).mean()
-                print(f"{name:16} {layout[3:]:8} {resolution:5} {report['utilisation_input']:6.3f} "
-                      f"{report['utilisation']:7.3f} {shelf:6.3f} {report['charts']:7} {seconds:8.3f} {str(valid):>6}",
-                      flush=True)
+                print(f"{name:16} {layout[3:]:8} {resolution:5} "
+                      f"{report['utilisation_input']:6.3f}/{report['area_utilisation_input']:.3f} "
+                      f"{report['utilisation']:6.3f}/{report['area_utilisation']:.3f} {shelf:6.3f} {report['charts']:7} "
+                      f"{seconds:8.3f} {str(valid):>6}", flush=True)
 
 
 if __name__ == "__main__":
