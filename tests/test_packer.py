@@ -278,3 +278,21 @@ def test_a_triangle_smaller_than_the_tolerance_is_not_collapsed():
     assert report["charts"] == 1
     check = lmrefine.check_layout(out, tris, 256, 2.0)
     assert check["valid"], check
+
+
+@pytest.mark.parametrize("uvs", [
+    [[0.1, 0.1], [0.6, 0.1], [0.6, 0.1 + 1e-7]],          # a needle: tiny area, long side
+    [[0.1, 0.1], [0.6, 0.6], [0.6, 0.6 + 2e-5]],          # a diagonal needle: a huge box at the area bound
+    [[0.1, 0.1], [0.6, 0.1], [0.3, 0.1]],                 # collinear: zero area
+    [[0.2, 0.2], [0.2, 0.2], [0.2, 0.2]],                 # one point
+])
+def test_degenerate_charts_do_not_blow_up_the_scale(uvs):
+    uvs = np.array(uvs, np.float32)
+    square_uvs, square_tris = grid_chart(1, (0.5, 0.5), (0.7, 0.7))
+    all_uvs, tris = merge((uvs, np.array([[0, 1, 2]], np.int32)), (square_uvs, square_tris))
+    for layout in ((uvs, np.array([[0, 1, 2]], np.int32)), (all_uvs, tris)):
+        out, report = lmrefine.pack_charts(*layout, None, None, 64, 2.0)
+        assert np.isfinite(report["global_scale"]) and report["global_scale"] > 0
+        assert (out >= 0).all() and (out <= 1).all()
+        check = lmrefine.check_layout(out, layout[1], 64, 2.0)
+        assert check["overlapping"] == 0 and check["min_gutter_texels"] >= 2.0

@@ -83,8 +83,9 @@ def pack_charts(uvs, triangles, charts, scales, resolution, padding=2.0, rotatio
           (triangle areas, no texel grid): the texel density the atlas
           reaches; area_utilisation_input: the same for the input
           (overlapping triangles count twice).
-        * global_scale: the scale found; scale_bound: its upper bound from
-          area alone (total chart area = atlas area).
+        * global_scale: the scale found; scale_bound: its upper bound (total
+          chart area = atlas area, and every chart's bounding box inside
+          the atlas).
         * chart_scales (C,) float64: each chart's linear scale from input to
           output, ``global_scale * scales``.
         * rotations (C,) int32: quarter turns counter-clockwise on the

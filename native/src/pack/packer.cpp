@@ -160,8 +160,11 @@ PackResult pack_charts(const UvLayout& layout, const std::vector<int32_t>& trian
     // Corners of one chart within the tolerance snap together (weld.h).
     const std::vector<glm::dvec2> uvs = pack::snapped_uvs(layout, chart_of_uv, options.weld_tolerance);
 
-    // The area bound: the charts' total texel area at the global scale cannot exceed the atlas.
-    double area = 0.0, box_area = 0.0;
+    // The area bound: the charts' total texel area at the global scale cannot
+    // exceed the atlas; and the box bound: each chart's bounding box must fit
+    // the atlas upright or turned (a needle of tiny area would otherwise ask
+    // for footprints of billions of cells).
+    double area = 0.0, box_area = 0.0, box_bound = INFINITY;
     for (int32_t c = 0; c < chart_count; ++c) {
         const ChartPiece& piece = pieces[size_t(c)];
         double chart_area = 0.0;
@@ -177,10 +180,18 @@ PackResult pack_charts(const UvLayout& layout, const std::vector<int32_t>& trian
         }
         const double s2 = scales[size_t(c)] * scales[size_t(c)] * grid.width * grid.height;
         area += chart_area * s2;
-        if (!piece.corners.empty()) box_area += (high.x - low.x) * (high.y - low.y) * s2;
+        if (piece.corners.empty()) continue;
+        box_area += (high.x - low.x) * (high.y - low.y) * s2;
+        const double ex = (high.x - low.x) * scales[size_t(c)] * grid.width;   // cells at global scale 1
+        const double ey = (high.y - low.y) * scales[size_t(c)] * grid.height;
+        const double W = grid.width, H = grid.height;
+        double fits = std::min(W / ex, H / ey);
+        if (options.rotate) fits = std::max(fits, std::min(W / ey, H / ex));
+        box_bound = std::min(box_bound, fits);
     }
     const double atlas = double(grid.width) * grid.height;
     double bound = area > 0 ? std::sqrt(atlas / area) : box_area > 0 ? std::sqrt(atlas / box_area) : 1.0;
+    bound = std::min(bound, box_bound);
     if (!std::isfinite(bound) || bound > 1e12) bound = 1e12;
 
     Problem problem{layout, pieces, uvs, scales, grid};

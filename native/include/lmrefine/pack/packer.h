@@ -29,7 +29,7 @@ struct PackOptions {
 struct PackResult {
     std::vector<float> uvs;          // (uv_count, 2), the input's where no triangle uses a UV
     double global_scale = 0;         // each chart's linear scale is global_scale * scales[c]
-    double scale_bound = 0;          // the area bound on global_scale (total chart area = atlas)
+    double scale_bound = 0;          // bound on global_scale: chart area = atlas, every box inside it
     std::vector<int32_t> rotations;  // per chart, quarter turns counter-clockwise on the image (0 or 1)
     // Per chart, a 2 x 3 row-major affine map: a (welded) corner uv moves to
     // M[:, :2] uv + M[:, 2]. Quarter turns are turns in texel space.
