@@ -20,7 +20,6 @@
 import argparse
 import os
 import sys
-import time
 
 import numpy as np
 
@@ -28,18 +27,10 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, "..", "tests"))
 sys.path.insert(0, HERE)
 import lmrefine  # noqa: E402
+from bench_refine import best_of  # noqa: E402
 from layouts import grid_chart, merge  # noqa: E402
 
 SAMPLES = os.path.join(HERE, "..", "blend_samples")
-
-
-def best_of(runs, work):
-    times, result = [], None
-    for _ in range(runs):
-        start = time.perf_counter()
-        result = work()
-        times.append(time.perf_counter() - start)
-    return min(times), result
 
 
 def many_charts(count=5000, seed=1):

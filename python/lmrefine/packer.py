@@ -66,8 +66,9 @@ def pack_charts(uvs, triangles, charts, scales, resolution, padding=2.0, rotatio
             corner: they are snapped together in the output (and, with
             ``charts=None``, join charts).
         subdivision: footprints and positions on a grid this many times
-            finer than the texels (1-8): charts land on sub-texel positions,
-            so small charts lose less to the grid; time grows about linearly.
+            finer than the texels (1-8, resolution * subdivision <= 32768):
+            charts land on sub-texel positions, so small charts lose less to
+            the grid; time grows about linearly.
 
     Returns:
         PackResult ``(uvs, report)``. ``uvs`` (N, 2) float32: the packed

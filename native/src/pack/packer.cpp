@@ -107,8 +107,8 @@ PackResult pack_charts(const UvLayout& layout, const std::vector<int32_t>& trian
         LMREFINE_THROW(InvalidArgument, "padding must be >= 0 texels and finite (got " + std::to_string(options.padding) + ")");
     }
     if (options.subdivision < 1 || options.subdivision > 8 ||
-        int64_t(std::max(options.width, options.height)) * options.subdivision > (int64_t(1) << 16)) {
-        LMREFINE_THROW(InvalidArgument, "subdivision must be in [1, 8] with resolution * subdivision <= 65536 (got " +
+        int64_t(std::max(options.width, options.height)) * options.subdivision > (int64_t(1) << 15)) {
+        LMREFINE_THROW(InvalidArgument, "subdivision must be in [1, 8] with resolution * subdivision <= 32768 (got " +
                                             std::to_string(options.subdivision) + " at " + std::to_string(options.height) +
                                             " x " + std::to_string(options.width) + "); use subdivision 1 for huge atlases");
     }
