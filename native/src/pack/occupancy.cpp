@@ -63,10 +63,10 @@ void Occupancy::update_runs(int row) {
     longest_[size_t(row)] = longest;
 }
 
-bool Occupancy::first_fit(const Footprint& fp, int& out_x, int& out_y) const {
+bool Occupancy::first_fit(const Footprint& fp, int& out_x, int& out_y, int last_row) const {
     const int fw = fp.covered.width, fh = fp.covered.height;
     if (fw > width_ || fh > height_) return false;
-    for (int y = 0; y + fh <= height_; ++y) {
+    for (int y = 0; y + fh <= height_ && y <= last_row; ++y) {
         // A row whose longest free run is too short rules the row out at once.
         if (longest_[size_t(y + fp.tightest)] < fp.longest[size_t(fp.tightest)]) continue;
         bool runs_long_enough = true;

@@ -1,15 +1,15 @@
 // The scale search: the largest global scale at which the greedy first-fit
 // placement (occupancy.cpp) places every chart. Each trial rasterizes every
 // chart's footprint at the trial's scale (footprint.cpp) and places the
-// charts largest first.
+// charts longest side first.
 #include "lmrefine/pack/packer.h"
 
 #include <algorithm>
 #include <cmath>
 #include <numeric>
+#include <string>
 
 #include <glm/common.hpp>
-#include <string>
 
 #include "footprint.h"
 #include "lmrefine/core/error.h"
@@ -38,7 +38,7 @@ struct Trial {
 struct Problem {
     const UvLayout& layout;
     const std::vector<ChartPiece>& pieces;
-    const std::vector<glm::dvec2>& uvs;  // welded, double
+    const std::vector<glm::dvec2>& uvs;  // snapped (weld.h), double
     const std::vector<double>& scales;
     const PackOptions& options;
 };
@@ -81,7 +81,9 @@ Trial run_trial(const Problem& problem, double global_scale, Progress* progress)
         Placement best;
         for (int turns = 0; turns < turn_options; ++turns) {
             int x, y;
-            if (!occupancy.first_fit(footprints[size_t(c) * size_t(turn_options) + size_t(turns)], x, y)) continue;
+            // The other turn only wins at an earlier row (or the same row, further left).
+            const Footprint& f = footprints[size_t(c) * size_t(turn_options) + size_t(turns)];
+            if (!occupancy.first_fit(f, x, y, found ? best.y : INT32_MAX)) continue;
             if (!found || std::make_pair(y, x) < std::make_pair(best.y, best.x)) best = {x, y, turns};
             found = true;
         }
