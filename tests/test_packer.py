@@ -153,6 +153,16 @@ def test_deterministic_and_independent_of_where_charts_start():
     assert third.report["global_scale"] == pytest.approx(first.report["global_scale"], rel=1e-6)
 
 
+def test_the_result_does_not_depend_on_the_thread_count(monkeypatch):
+    uvs, tris = kinds()["mixed_sizes"]
+    results = []
+    for threads in ("1", "2", "5"):
+        monkeypatch.setenv("LMREFINE_THREADS", threads)
+        results.append(lmrefine.pack_charts(uvs, tris, None, None, 256, 2.0).uvs)
+    for other in results[1:]:
+        np.testing.assert_array_equal(other, results[0])
+
+
 def test_uniform_repack_of_smart_uv_layout_uses_more_of_the_atlas():
     uvs, tris = smart_uv(256, margin_texels=8)
     out, report = lmrefine.pack_charts(uvs, tris, None, None, 256, 2.0)

@@ -41,7 +41,7 @@ def pack_charts(uvs, triangles, charts, scales, resolution, padding=2.0, rotatio
     every chart fits; charts are fitted by their conservative texel footprint
     at ``resolution`` (the texels ``coverage_mask`` would mark), dilated by
     ``padding``, so concave charts nest and small charts fill holes.
-    Deterministic: the same input gives the same output on any machine and
+    Deterministic: the same input gives the same output, whatever the
     thread count. Give all objects that share an atlas in one call.
 
     Args:
