@@ -32,7 +32,8 @@ struct Placement {
 struct Trial {
     bool fits = false;
     std::vector<Placement> placements;  // per chart
-    int64_t texels = 0;
+    int64_t texels = 0;        // footprint cells placed
+    int64_t total_texels = 0;  // footprint cells of every chart (upright)
 };
 
 struct Problem {
@@ -73,6 +74,7 @@ Trial run_trial(const Problem& problem, double global_scale, Progress* progress)
 
     Trial trial;
     trial.placements.resize(count);
+    for (size_t c = 0; c < count; ++c) trial.total_texels += footprints[c * size_t(turn_options)].texels;
     pack::Occupancy occupancy(problem.options.width, problem.options.height);
     for (size_t n = 0; n < count; ++n) {
         if ((n & 63) == 0 && progress && progress->cancelled()) return trial;
@@ -220,7 +222,10 @@ PackResult pack_charts(const UvLayout& layout, const std::vector<int32_t>& trian
             low = guess;
         } else {
             high = guess;
-            guess *= 0.7;
+            // The next guess shrinks by the square root of the area that did
+            // not fit (charts placed / all, in footprint cells), a little more.
+            const double placed = t.total_texels > 0 ? double(t.texels) / double(t.total_texels) : 0.5;
+            guess *= std::clamp(0.98 * std::sqrt(placed), 0.5, 0.97);
             if (guess < bound * 1e-9) {
                 LMREFINE_THROW(InvalidArgument,
                                std::to_string(chart_count) + " charts do not fit a " + std::to_string(options.height) +
