@@ -306,3 +306,48 @@ def test_degenerate_charts_do_not_blow_up_the_scale(uvs):
         assert (out >= 0).all() and (out <= 1).all()
         check = lmrefine.check_layout(out, layout[1], 64, 2.0)
         assert check["overlapping"] == 0 and check["min_gutter_texels"] >= 2.0
+
+
+def random_soup(rng):
+    """Grid charts, loose triangles and fans (star-shaped, concave) anywhere
+    in [-1, 1]^2, overlapping; every other seed with shared UV indices."""
+    parts = []
+    for _ in range(rng.integers(1, 60)):
+        kind = rng.integers(0, 3)
+        if kind == 0:
+            lo = rng.uniform(-1, 1, 2)
+            parts.append(grid_chart(int(rng.integers(1, 4)), lo, lo + rng.uniform(1e-4, 0.5, 2)))
+        elif kind == 1:
+            parts.append((rng.uniform(-1, 1, (3, 2)).astype(np.float32), np.array([[0, 1, 2]], np.int32)))
+        else:
+            centre, k = rng.uniform(0, 1, 2), int(rng.integers(3, 9))
+            angles, radii = np.sort(rng.uniform(0, 2 * np.pi, k)), rng.uniform(0.01, 0.2, k)
+            rim = np.c_[centre[0] + radii * np.cos(angles), centre[1] + radii * np.sin(angles)]
+            fan = np.array([p for i in range(k) for p in (centre, rim[i], rim[(i + 1) % k])], np.float32)
+            parts.append((fan, np.arange(3 * k, dtype=np.int32).reshape(-1, 3)))
+    return merge(*parts)
+
+
+@pytest.mark.parametrize("seed", range(30))
+def test_random_layouts_scales_and_settings_stay_valid(seed):
+    rng = np.random.default_rng(seed)
+    uvs, tris = random_soup(rng)
+    if seed % 2:
+        keys, inverse = np.unique(uvs, axis=0, return_inverse=True)
+        uvs, tris = keys.astype(np.float32), inverse.reshape(-1).astype(np.int32)[tris]
+    resolution = (int(rng.integers(16, 300)), int(rng.integers(16, 300)))
+    padding = float(rng.choice([0.0, 0.5, 1.0, 2.0, 3.7]))
+    charts = lmrefine.find_charts(uvs, tris, tolerance=lmrefine.CHART_TOLERANCE)
+    scales = rng.uniform(0.2, 3.0, charts.max() + 1)
+    try:
+        out, report = lmrefine.pack_charts(uvs, tris, charts, scales, resolution, padding,
+                                           rotations=bool(rng.integers(0, 2)), subdivision=int(rng.integers(1, 4)))
+    except ValueError as error:
+        assert "do not fit" in str(error)
+        return
+    check = lmrefine.check_layout(out, tris, resolution, padding)
+    before = lmrefine.check_layout(uvs, tris, resolution, padding)
+    assert check["overlapping"] == 0 and check["out_of_bounds"] == 0
+    assert check["min_gutter_texels"] >= padding
+    assert check["degenerate"] <= before["degenerate"]
+    np.testing.assert_allclose(report["chart_scales"], report["global_scale"] * scales)
