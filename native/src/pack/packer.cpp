@@ -302,10 +302,6 @@ PackResult pack_charts(const UvLayout& layout, const std::vector<int32_t>& trian
     return result;
 }
 
-}  // namespace lmrefine
-
-namespace lmrefine {
-
 bool first_fit_position(const std::vector<uint8_t>& occupied, int width, int height,
                         const std::vector<uint8_t>& chart, int chart_width, int chart_height, double padding, int& x,
                         int& y) {

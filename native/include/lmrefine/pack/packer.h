@@ -2,8 +2,9 @@
 // multiple of 90 degrees, a translation) into [0, 1]^2 at a lightmap
 // resolution, with at least `padding` texels between charts as check_layout
 // measures it, as large as the atlas allows. Charts are fitted by their
-// conservative texel footprint (what coverage_mask rasterizes), not by their
-// bounding boxes. Details and measurements: docs/packer.md.
+// conservative footprint on a grid of (by default) half texels (the cells
+// they overlap, rasterized as coverage_mask does), not by their bounding
+// boxes. Details and measurements: docs/packer.md.
 #pragma once
 
 #include <cstdint>
@@ -44,10 +45,6 @@ struct PackResult {
 // depend on the thread count.
 PackResult pack_charts(const UvLayout& layout, const std::vector<int32_t>& triangle_chart, int32_t chart_count,
                        const std::vector<double>& scales, const PackOptions& options, Progress* progress = nullptr);
-
-}  // namespace lmrefine
-
-namespace lmrefine {
 
 // The placement rule alone, on bitmaps (a test's window on the kernel):
 // the first (x, y) in scan order where `chart` ((chart_height * chart_width)
