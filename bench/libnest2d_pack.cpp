@@ -1,5 +1,5 @@
 // libnest2d (Debian libnest2d-dev) packing charts' outlines, for
-// bench_libnest2d.py only: the measurement lmrefine's packer was compared
+// compare_libnest2d.py only: the measurement lmrefine's packer was compared
 // with (docs/packer.md). Not part of lmrefine.
 //
 // stdin:  resolution padding rotations iterations

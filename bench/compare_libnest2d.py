@@ -10,9 +10,10 @@ items, plus 0.01 texel for rounding). Both outputs are measured the same way: ut
 coverage_mask of the output layout, validity = check_layout with the padding.
 
 Needs `apt-get install libnest2d-dev libpolyclipping-dev libnlopt-cxx-dev`
-(a measurement only: lmrefine does not use libnest2d).
+(a measurement only: lmrefine does not use libnest2d; named compare_*, not
+bench_*, so `make bench` / bench/run.py do not need those packages).
 
-    PYTHONPATH=python /usr/bin/python3 bench/bench_libnest2d.py [--resolution 512] [--iterations 8] [--timeout 600]
+    PYTHONPATH=python /usr/bin/python3 bench/compare_libnest2d.py [--resolution 512] [--iterations 8] [--timeout 600]
 """
 
 import argparse
