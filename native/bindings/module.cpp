@@ -38,6 +38,11 @@ PYBIND11_MODULE(_native, m) {
             PyErr_SetString(PyExc_MemoryError, e.what());
         } catch (const lmrefine::Error& e) {
             PyErr_SetString(PyExc_RuntimeError, e.what());
+        } catch (const py::cast_error& e) {
+            // A safety net: arguments are read through py_util's checked
+            // readers, which name the argument; a cast that slips past them
+            // is still a wrong type, not a runtime failure.
+            PyErr_SetString(PyExc_TypeError, e.what());
         }
     });
 

@@ -24,8 +24,8 @@ py::dict run(const py::handle& energy_in, const py::handle& mask_in, const py::h
     input.energy = energy.data();
     py::array_t<uint8_t, py::array::c_style | py::array::forcecast> mask;
     if (!mask_in.is_none()) {
-        mask = py::array_t<uint8_t, py::array::c_style | py::array::forcecast>::ensure(mask_in);
-        if (!mask || mask.ndim() != 2 || mask.shape(0) != input.height || mask.shape(1) != input.width) {
+        mask = py_util::contiguous<uint8_t>(mask_in, "mask");
+        if (mask.ndim() != 2 || mask.shape(0) != input.height || mask.shape(1) != input.width) {
             throw py::value_error("mask must be a (H, W) boolean array matching energy's " +
                                   std::to_string(input.height) + "x" + std::to_string(input.width));
         }
@@ -33,8 +33,8 @@ py::dict run(const py::handle& energy_in, const py::handle& mask_in, const py::h
     }
     py::array_t<uint8_t, py::array::c_style | py::array::forcecast> rigid;
     if (!rigid_in.is_none()) {
-        rigid = py::array_t<uint8_t, py::array::c_style | py::array::forcecast>::ensure(rigid_in);
-        if (!rigid || rigid.ndim() != 2 || rigid.shape(0) != input.height || rigid.shape(1) != input.width) {
+        rigid = py_util::contiguous<uint8_t>(rigid_in, "rigid");
+        if (rigid.ndim() != 2 || rigid.shape(0) != input.height || rigid.shape(1) != input.width) {
             throw py::value_error("rigid must be a (H, W) boolean array matching energy's " +
                                   std::to_string(input.height) + "x" + std::to_string(input.width));
         }

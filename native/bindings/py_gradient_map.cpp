@@ -38,7 +38,7 @@ py::array_t<float> compute(const py::handle& image_in, const py::handle& mask_in
             throw py::value_error("mask must have the image's shape (" + std::to_string(height) + ", " +
                                   std::to_string(width) + "), got " + py_util::shape_string(raw));
         }
-        mask = BoolArray::ensure(raw);
+        mask = py_util::contiguous<bool>(raw, "mask");
     }
     // bool and uint8 share a layout.
     const uint8_t* mask_data = mask ? reinterpret_cast<const uint8_t*>(mask->data()) : nullptr;

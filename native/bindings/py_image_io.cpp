@@ -23,7 +23,7 @@ PixelFormat parse_format(const std::optional<std::string>& format) {
 }
 
 py::object read(const py::object& path) {
-    const std::string file = py::str(path).cast<std::string>();
+    const std::string file = py_util::path_param(path, "path");
     ImageBuffer image;
     {
         py::gil_scoped_release release;
@@ -34,7 +34,7 @@ py::object read(const py::object& path) {
 
 void write(const py::object& path, const py::handle& array, const std::optional<std::string>& format,
            std::optional<bool> srgb) {
-    const std::string file = py::str(path).cast<std::string>();
+    const std::string file = py_util::path_param(path, "path");
     auto pixels = py_util::require_float32(array, "array", {2, 3});
     WriteOptions options;
     options.format = parse_format(format);

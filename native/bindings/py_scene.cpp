@@ -14,16 +14,16 @@ namespace lmrefine::bindings {
 namespace {
 
 glm::vec3 vec3_param(const py::handle& value, const char* name) {
-    auto array = py::array_t<float, py::array::c_style | py::array::forcecast>::ensure(value);
-    if (!array || array.size() != 3) throw py::value_error(std::string(name) + " must be 3 numbers (x, y, z) or (r, g, b)");
+    auto array = py_util::contiguous<float>(value, name);
+    if (array.size() != 3) throw py::value_error(std::string(name) + " must be 3 numbers (x, y, z) or (r, g, b)");
     return {array.data()[0], array.data()[1], array.data()[2]};
 }
 
 // Blender's matrix_world as rows (np.array(obj.matrix_world) or nested
 // lists); glm is column-major.
 glm::mat4 matrix_param(const py::handle& value) {
-    auto array = py::array_t<float, py::array::c_style | py::array::forcecast>::ensure(value);
-    if (!array || array.ndim() != 2 || array.shape(0) != 4 || array.shape(1) != 4) {
+    auto array = py_util::contiguous<float>(value, "matrix");
+    if (array.ndim() != 2 || array.shape(0) != 4 || array.shape(1) != 4) {
         throw py::value_error("matrix must be a 4x4 world matrix (Blender's obj.matrix_world, row by row)");
     }
     glm::mat4 m;
@@ -66,8 +66,8 @@ int add_mesh(Scene& scene, const py::handle& positions_in, const py::handle& tri
         in.normals = normals.data();
         in.normal_count = normals.shape(0);
     }
-    auto base_color = py::array_t<float, py::array::c_style | py::array::forcecast>::ensure(base_color_in);
-    if (!base_color || !((base_color.ndim() == 1 && base_color.shape(0) == 3) ||
+    auto base_color = py_util::contiguous<float>(base_color_in, "base_color");
+    if (!((base_color.ndim() == 1 && base_color.shape(0) == 3) ||
                          (base_color.ndim() == 2 && base_color.shape(1) == 3))) {
         throw py::value_error("base_color must be one RGB colour (3,) or one per triangle (T, 3)");
     }
@@ -94,7 +94,7 @@ int add_light(Scene& scene, const std::string& kind, const py::kwargs& params) {
             throw py::value_error("pass either matrix= or position/direction/axis_x, not both: the matrix "
                                   "already places the light (got matrix and " + key + ")");
         }
-        if (key == "energy") light.energy = value.cast<float>();
+        if (key == "energy") light.energy = float(py_util::real_param(value, "energy"));
         else if (key == "color") light.color = vec3_param(value, "color");
         else if (key == "position") light.position = vec3_param(value, "position");
         else if (key == "direction") light.direction = vec3_param(value, "direction");
@@ -107,13 +107,13 @@ int add_light(Scene& scene, const std::string& kind, const py::kwargs& params) {
             }
         }
         else if (key == "matrix") continue;  // applied below, once shape and sizes are known
-        else if (key == "shadow_soft_size") light.shadow_soft_size = value.cast<float>();
-        else if (key == "angle") light.angle = value.cast<float>();
-        else if (key == "spot_size") light.spot_size = value.cast<float>();
-        else if (key == "spot_blend") light.spot_blend = value.cast<float>();
-        else if (key == "shape") light.shape = parse_shape(value.cast<std::string>());
-        else if (key == "size") light.size = value.cast<float>();
-        else if (key == "size_y") light.size_y = value.cast<float>();
+        else if (key == "shadow_soft_size") light.shadow_soft_size = float(py_util::real_param(value, "shadow_soft_size"));
+        else if (key == "angle") light.angle = float(py_util::real_param(value, "angle"));
+        else if (key == "spot_size") light.spot_size = float(py_util::real_param(value, "spot_size"));
+        else if (key == "spot_blend") light.spot_blend = float(py_util::real_param(value, "spot_blend"));
+        else if (key == "shape") light.shape = parse_shape(py_util::string_param(value, "shape"));
+        else if (key == "size") light.size = float(py_util::real_param(value, "size"));
+        else if (key == "size_y") light.size_y = float(py_util::real_param(value, "size_y"));
         else {
             throw py::value_error("unknown light parameter \"" + key + "\"; use energy, color, position, direction, "
                                   "axis_x, matrix, shadow_soft_size, angle, spot_size, spot_blend, shape, size, "
@@ -194,7 +194,7 @@ Raises:
             py::arg("color"), "Uniform sky radiance (Blender's world Background colour at strength 1).")
         .def("degenerate_triangles",
              [](const Scene& scene, int mesh) {
-                 if (mesh < 0 || mesh >= int(scene.meshes().size())) throw py::index_error("no mesh " + std::to_string(mesh));
+                 if (mesh < 0 || mesh >= int(scene.meshes().size())) throw py::value_error("mesh must be a mesh id from add_mesh, 0 to " + std::to_string(int(scene.meshes().size()) - 1) + ", got " + std::to_string(mesh));
                  return scene.meshes()[size_t(mesh)].degenerate_count;
              },
              py::arg("mesh"), "Number of zero-area triangles of a mesh (skipped by the baker).")

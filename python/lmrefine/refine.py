@@ -43,16 +43,27 @@ class RefineResult:
     report: dict = field(default_factory=dict)
 
 
+_MAX_RESOLUTION = 1 << 24  # as the native side (numpy_util.cpp parse_resolution)
+
+
+def _resolution_side(value, name):
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+        raise TypeError(f"{name} must be an int, got {type(value).__name__}")
+    if not 1 <= value <= _MAX_RESOLUTION:
+        raise ValueError(f"{name} must be between 1 and {_MAX_RESOLUTION}, got {value}")
+    return int(value)
+
+
 def _resolution(resolution):
-    if isinstance(resolution, (int, np.integer)):
-        height = width = int(resolution)
+    if isinstance(resolution, (int, np.integer)) and not isinstance(resolution, (bool, np.bool_)):
+        height = width = _resolution_side(resolution, "resolution")
+    elif isinstance(resolution, (tuple, list, np.ndarray)):
+        if len(resolution) != 2:
+            raise ValueError(f"resolution must be an int or (height, width), got {resolution!r}")
+        height = _resolution_side(resolution[0], "resolution height")
+        width = _resolution_side(resolution[1], "resolution width")
     else:
-        try:
-            height, width = (int(x) for x in resolution)
-        except (TypeError, ValueError):
-            raise ValueError(f"resolution must be an int or (height, width), got {resolution!r}") from None
-    if height <= 0 or width <= 0:
-        raise ValueError(f"resolution must be positive, got {height}x{width}")
+        raise TypeError(f"resolution must be an int or (height, width), got {type(resolution).__name__}")
     return height, width
 
 
