@@ -59,9 +59,13 @@ int64_t int_param(const py::handle& value, const char* name, int64_t min, int64_
     if (!index) throw py::error_already_set();
     int overflow = 0;
     const long long n = PyLong_AsLongLongAndOverflow(index.ptr(), &overflow);
-    if (overflow != 0 || n < min || n > max) {
-        throw py::value_error(std::string(name) + " must be between " + std::to_string(min) + " and " +
-                              std::to_string(max) + ", got " + py::str(index).cast<std::string>());
+    if (overflow < 0 || (overflow == 0 && n < min)) {
+        throw py::value_error(std::string(name) + (min == 1 ? " must be positive" : " must be >= " + std::to_string(min)) +
+                              ", got " + py::str(index).cast<std::string>());
+    }
+    if (overflow > 0 || n > max) {
+        throw py::value_error(std::string(name) + " must be at most " + std::to_string(max) + ", got " +
+                              py::str(index).cast<std::string>());
     }
     return n;
 }
@@ -192,12 +196,12 @@ std::pair<int, int> parse_resolution(const py::handle& resolution, const char* w
             throw py::value_error("resolution must be an int or (height, width), got " +
                                   std::to_string(py::len(sequence)) + " numbers");
         }
-        height = int_param(sequence[0], "resolution height", 1, kMax);
-        width = int_param(sequence[1], "resolution width", 1, kMax);
+        height = int_param(sequence[0], "resolution", 1, kMax);
+        width = int_param(sequence[1], "resolution", 1, kMax);
     } else {
         throw py::type_error("resolution must be an int or (height, width), got " + type_name(resolution));
     }
-    require_memory(std::string(what) + " at " + std::to_string(height) + "x" + std::to_string(width),
+    if (bytes_per_texel > 0) require_memory(std::string(what) + " at " + std::to_string(height) + "x" + std::to_string(width),
                    saturating_product({uint64_t(height), uint64_t(width), bytes_per_texel}),
                    "lower the resolution");
     return {int(height), int(width)};

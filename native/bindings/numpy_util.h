@@ -67,7 +67,8 @@ std::string path_param(const py::handle& value, const char* name);
 
 // A lightmap resolution: an int (square) or (height, width), each in
 // [1, 2^24]; the texels times `bytes_per_texel` must fit in memory
-// (MemoryError naming `what` otherwise). Returns (height, width).
+// (MemoryError naming `what` otherwise; 0 skips the check, for a caller
+// with its own estimate). Returns (height, width).
 std::pair<int, int> parse_resolution(const py::handle& resolution, const char* what = "a lightmap",
                                      uint64_t bytes_per_texel = 16);
 

@@ -45,7 +45,7 @@ py::tuple bake_native(const Scene& scene, const py::handle& resolution, const st
                       int samples, uint64_t seed, const py::object& progress, int dilation, bool denoise, int bounces,
                       float ao_distance, bool atlas) {
     BakeOptions options = make_options(passes, samples, seed, bounces, ao_distance);
-    std::tie(options.height, options.width) = py_util::parse_resolution(resolution);
+    std::tie(options.height, options.width) = py_util::parse_resolution(resolution, "baking", 0);
     options.dilation = dilation;
     options.denoise = denoise;
     options.atlas = atlas;

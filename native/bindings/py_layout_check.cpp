@@ -39,7 +39,7 @@ public:
                     double padding) {
         auto uvs = py_util::require_points(uvs_in, "uvs", 2);
         auto triangles = py_util::require_indices(triangles_in, "triangles", 3, /*allow_empty=*/true);
-        std::tie(height_, width_) = py_util::parse_resolution(resolution);
+        std::tie(height_, width_) = py_util::parse_resolution(resolution, "a layout check");
         uvs_.assign(uvs.data(), uvs.data() + uvs.size());
         triangles_.assign(triangles.data(), triangles.data() + triangles.size());
         const UvLayout layout{uvs_.data(), uvs.shape(0), triangles_.data(), triangles.shape(0)};
@@ -102,7 +102,7 @@ py::dict check(const py::handle& uvs_in, const py::handle& triangles_in, const p
                bool relative_gutter) {
     auto uvs = py_util::require_points(uvs_in, "uvs", 2);
     auto triangles = py_util::require_indices(triangles_in, "triangles", 3, /*allow_empty=*/true);
-    const auto [height, width] = py_util::parse_resolution(resolution);
+    const auto [height, width] = py_util::parse_resolution(resolution, "a layout check");
     py_util::FloatArray reference;
     if (!reference_in.is_none()) {
         reference = py_util::require_points(reference_in, "reference_uvs", 2);

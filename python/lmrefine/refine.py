@@ -49,8 +49,10 @@ _MAX_RESOLUTION = 1 << 24  # as the native side (numpy_util.cpp parse_resolution
 def _resolution_side(value, name):
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
         raise TypeError(f"{name} must be an int, got {type(value).__name__}")
-    if not 1 <= value <= _MAX_RESOLUTION:
-        raise ValueError(f"{name} must be between 1 and {_MAX_RESOLUTION}, got {value}")
+    if value < 1:
+        raise ValueError(f"{name} must be positive, got {value}")
+    if value > _MAX_RESOLUTION:
+        raise ValueError(f"{name} must be at most {_MAX_RESOLUTION}, got {value}")
     return int(value)
 
 
@@ -60,8 +62,8 @@ def _resolution(resolution):
     elif isinstance(resolution, (tuple, list, np.ndarray)):
         if len(resolution) != 2:
             raise ValueError(f"resolution must be an int or (height, width), got {resolution!r}")
-        height = _resolution_side(resolution[0], "resolution height")
-        width = _resolution_side(resolution[1], "resolution width")
+        height = _resolution_side(resolution[0], "resolution")
+        width = _resolution_side(resolution[1], "resolution")
     else:
         raise TypeError(f"resolution must be an int or (height, width), got {type(resolution).__name__}")
     return height, width
