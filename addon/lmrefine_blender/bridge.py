@@ -125,18 +125,38 @@ def write_uv_layer(mesh, uv_name, uvs):
     return layer
 
 
-def degenerate_counts(mesh, layout, resolution):
-    """(faces with zero 3-D area, triangles with zero UV area at `resolution`)."""
-    areas = np.empty(len(mesh.polygons), dtype=np.float32)
-    mesh.polygons.foreach_get("area", areas)
-    zero_3d = int(np.count_nonzero(areas <= 0.0))
-    corners = layout.uvs[layout.triangles].astype(np.float64) * resolution  # texel units
-    edge1 = corners[:, 1] - corners[:, 0]
-    edge2 = corners[:, 2] - corners[:, 0]
+# As the baker (native/src/bake/scene.cpp): a triangle is degenerate when
+# twice its area is below this fraction of its longest edge squared, and no
+# coordinate may exceed MAX_COORDINATE.
+FLAT_3D = 1e-7
+MAX_COORDINATE = 1e9
+
+
+def geometry_problems(obj, layout, resolution):
+    """(triangles of zero area in 3-D (world space, as baked), triangles of zero
+    UV area at `resolution` that do have 3-D area, vertices that are NaN/Inf
+    or beyond MAX_COORDINATE in world space)."""
+    mesh = obj.data
+    positions = np.empty(len(mesh.vertices) * 3, dtype=np.float64)
+    mesh.vertices.foreach_get("co", positions)
+    matrix = np.array(obj.matrix_world, dtype=np.float64)
+    with np.errstate(all="ignore"):
+        world = positions.reshape(-1, 3) @ matrix[:3, :3].T + matrix[:3, 3]
+    bad_vertices = int(np.count_nonzero(~(np.abs(world) <= MAX_COORDINATE).all(axis=1)))
+    vertex_of_loop = np.empty(len(mesh.loops), dtype=np.int32)
+    mesh.loops.foreach_get("vertex_index", vertex_of_loop)
+    corners = world[vertex_of_loop[layout.triangles]]
+    with np.errstate(all="ignore"):
+        e1, e2, e3 = corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0], corners[:, 2] - corners[:, 1]
+        area2 = np.linalg.norm(np.cross(e1, e2), axis=1)
+        longest = np.max([np.einsum("ij,ij->i", e, e) for e in (e1, e2, e3)], axis=0)
+        flat = ~(area2 > FLAT_3D * longest)
+    uv = layout.uvs[layout.triangles].astype(np.float64) * resolution  # texel units
+    edge1, edge2 = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
     texel_area = 0.5 * np.abs(edge1[:, 0] * edge2[:, 1] - edge1[:, 1] * edge2[:, 0])
     # A millionth of a texel: a triangle that small carries no texel of its own.
-    zero_uv = int(np.count_nonzero(texel_area < 1e-6))
-    return zero_3d, zero_uv
+    zero_uv = int(np.count_nonzero((texel_area < 1e-6) & ~flat))
+    return int(np.count_nonzero(flat)), zero_uv, bad_vertices
 
 
 # ----------------------------------------------------------------- geometry
