@@ -67,10 +67,11 @@ demo: build
 evaluate: build
 	PYTHONPATH=python $(PYTHON) -m lmrefine evaluate --out evaluate_out
 
-# Rebuild the sample scenes (blend_samples/*.blend and their .npz) in Blender.
+# Rebuild the sample scenes (blend_samples/*.blend and their .npz) in Blender;
+# `make samples SCENES=atrium` rebuilds only the scenes named.
 samples:
 	blender -b --factory-startup --python-exit-code 1 \
-		--python blend_samples/make_samples.py -- blend_samples
+		--python blend_samples/make_samples.py -- blend_samples $(SCENES)
 
 # The Blender add-on as one installable zip: the add-on, the lmrefine package
 # and its compiled extension (docs/blender.md).

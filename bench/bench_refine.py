@@ -19,9 +19,7 @@ import numpy as np
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tests"))
 import lmrefine  # noqa: E402
-from layouts import finite_difference_gradient, plane, shadow_edge_lightmap  # noqa: E402
-
-HAVE_WAVELET = hasattr(lmrefine, "gradient_map")
+from layouts import plane, shadow_edge_lightmap  # noqa: E402
 
 
 def best_of(runs, work):
@@ -40,17 +38,12 @@ def scene(resolution, position=0.5, angle=0.3, quads=128):
 
 
 def refine(lightmap, uvs, tris, resolution, **options):
-    if HAVE_WAVELET:
-        return lmrefine.refine_uvs(lightmap, uvs, tris, resolution, **options)
-    mask = lmrefine.coverage_mask(uvs, tris, resolution)
-    gradient = finite_difference_gradient(lightmap, mask)
-    return lmrefine.refine_uvs(None, uvs, tris, resolution, gradient=gradient, mask=mask, **options)
+    return lmrefine.refine_uvs(lightmap, uvs, tris, resolution, **options)
 
 
 def whole_refinement():
     print(f"threads: {os.environ.get('LMREFINE_THREADS', os.cpu_count())}; load average: "
-          f"{os.getloadavg()[0]:.1f} (a shared machine: compare ratios); gradient map: "
-          + ("lmrefine.gradient_map (D4)" if HAVE_WAVELET else "finite differences (gradient_map not built in)"))
+          f"{os.getloadavg()[0]:.1f} (a shared machine: compare ratios); gradient map: lmrefine.gradient_map (D4)")
     print(f"{'size':>6} {'seconds':>8} {'steps':>6} {'ns/texel':>9} {'vs 256^2':>9} {'widening':>9} {'valid':>6}"
           f"   setup / gradient / automaton / warp+check (s)")
     base = None

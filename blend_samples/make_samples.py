@@ -304,7 +304,42 @@ def game_level():
     return {"passes": ["direct"]}
 
 
-SCENES = {"courtyard": courtyard, "room": room, "fence_and_tree": fence_and_tree, "game_level": game_level}
+def atrium():
+    """An atrium (holdout: never used to tune constants): a floor ringed by
+    columns under an open lattice roof whose beams cast a grid of sun
+    shadows, a back wall; a sun, a spot light and a rectangular area light."""
+    make_object("Floor", lambda bm: grid_faces(bm, (-5, -5, 0), (10, 0, 0), (0, 10, 0), 34, 34), (0.72, 0.7, 0.66),
+                closed=False)
+    make_object("BackWall", lambda bm: box_faces(bm, (0, 4.85, 1.6), (10, 0.3, 3.2), 0.4), (0.68, 0.64, 0.6))
+
+    def columns(bm):
+        for x in (-3.6, -1.2, 1.2, 3.6):
+            for y in (-3.6, 3.6):
+                cylinder_faces(bm, (x, y, 0), 0.2, 3.2, segments=10, cell=0.4)
+    make_object("Columns", columns, (0.82, 0.78, 0.7))
+
+    def lattice(bm):
+        for k in range(13):
+            t = -3.6 + 0.6 * k
+            box_faces(bm, (t, 0, 3.3), (0.12, 7.6, 0.16), cell=9.0)
+            box_faces(bm, (0, t, 3.5), (7.6, 0.12, 0.16), cell=9.0)
+    make_object("Lattice", lattice, (0.5, 0.45, 0.4), receiver=False)
+    add_light("Sun", "SUN", (0, 0, 10), (math.radians(35), 0.0, math.radians(210)), energy=3.5,
+              angle=math.radians(0.7))
+    spot_at = Vector((4.2, -4.2, 2.8))
+    add_light("Spot", "SPOT", spot_at, aim(spot_at, (1.5, -1.0, 0.0)), energy=600.0, shadow_soft_size=0.1,
+              spot_size=math.radians(55), spot_blend=0.2, color=(1.0, 0.85, 0.7))
+    area_at = Vector((-2.5, 2.0, 2.6))
+    add_light("Panel", "AREA", area_at, aim(area_at, (-2.5, 1.0, 0.0)), energy=250.0, shape="RECTANGLE",
+              size=1.2, size_y=0.4, color=(0.7, 0.8, 1.0))
+    set_world((0.05, 0.07, 0.1))
+    return {"passes": ["direct"]}
+
+
+# Which scenes tune the refiner's constants and which only report is in
+# docs/evaluation.md ("Tuning scenes and holdout scenes").
+SCENES = {"courtyard": courtyard, "room": room, "fence_and_tree": fence_and_tree, "game_level": game_level,
+          "atrium": atrium}
 
 
 # --------------------------------------------------------------------------- UVs and export

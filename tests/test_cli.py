@@ -4,7 +4,6 @@ import sys
 from pathlib import Path
 
 import numpy as np
-import pytest
 
 import lmrefine
 from lmrefine import cli
@@ -12,7 +11,6 @@ from lmrefine import cli
 ROOT = Path(__file__).resolve().parents[1]
 
 
-@pytest.mark.skipif(not hasattr(lmrefine._native, "gradient_map"), reason="needs the gradient map")
 def test_gradient_map_of_the_bundled_sample(tmp_path):
     sample = ROOT / "blend_samples"
     assert cli.main(["gradient-map", str(sample / "courtyard_lightmap.exr"), "--layout",
@@ -35,7 +33,6 @@ def test_gradient_map_of_the_bundled_sample(tmp_path):
     assert "Gradient map summary" in (tmp_path / "summary.md").read_text()
 
 
-@pytest.mark.skipif(not hasattr(lmrefine._native, "gradient_map"), reason="needs the gradient map")
 def test_gradient_map_command_with_mask_image_and_errors(tmp_path):
     image = np.zeros((32, 32), np.float32)
     image[:, 16:] = 1.0

@@ -10,11 +10,6 @@ import lmrefine
 from lmrefine import cli
 from lmrefine.sample_scenes import SampleScene, load_sample
 
-needs_pipeline = pytest.mark.skipif(
-    not all(hasattr(lmrefine, name) for name in ("bake", "refine_uvs", "check_layout"))
-    or not hasattr(lmrefine._native, "gradient_map"),
-    reason="needs the baker, the refiner and the gradient map")
-
 FIGURES = ("resolution", "rmse_baseline", "rmse_refined", "transition_rmse_baseline", "transition_rmse_refined",
            "transition_widening", "equal_error_resolution_ratio", "timings")
 
@@ -58,7 +53,6 @@ def test_a_saved_scene_loads_back(tmp_path):
     assert loaded.lights == scene.lights and loaded.objects == ["West", "East"] and loaded.passes == ("direct",)
 
 
-@needs_pipeline
 @pytest.mark.slow
 def test_the_pipeline_reports_every_figure_with_sensible_values(tmp_path):
     scene = tiny_scene()
@@ -94,9 +88,8 @@ def test_the_pipeline_reports_every_figure_with_sensible_values(tmp_path):
         assert ratio > 1
     # The ground truth is much less noisy than the errors it measures.
     assert 0 <= report["truth_noise_rmse"] < 0.2 * report["rmse_baseline"]
-    for stage in ("bake baseline", "refine", "bake refined", "ground truth", "bake resolution sweep", "metrics",
-                  "pictures"):
-        assert report["timings"][stage] >= 0
+    assert set(report["timings"]) == {"bake baseline", "refine", "bake refined", "ground truth",
+                                      "bake resolution sweep", "metrics", "pictures", "total"}
     assert report["timings"]["total"] == pytest.approx(sum(v for k, v in report["timings"].items() if k != "total"))
     # Per object: both halves, each with the same figures.
     assert [o["object"] for o in report["objects"]] == ["West", "East"]
@@ -114,7 +107,6 @@ def test_the_pipeline_reports_every_figure_with_sensible_values(tmp_path):
     assert "tiny" in text and "equal-error" in text
 
 
-@needs_pipeline
 @pytest.mark.slow
 def test_demo_runs_the_pipeline_on_the_bundled_courtyard(tmp_path, capsys):
     assert cli.main(["demo", "--resolution", "64", "--points", "2000", "--samples", "4", "--truth-samples", "32",
@@ -130,7 +122,6 @@ def test_demo_runs_the_pipeline_on_the_bundled_courtyard(tmp_path, capsys):
     assert summary["width"] == 64 and summary["channels"]["r"]["max"] > 0
 
 
-@needs_pipeline
 def test_evaluate_rejects_bad_arguments(tmp_path, capsys):
     assert cli.main(["evaluate", "no_such_scene", "--out", str(tmp_path)]) == 2
     assert "no sample scene" in capsys.readouterr().err

@@ -1,5 +1,5 @@
 """refine_uvs: the whole refinement, from a gradient map to a valid refined
-layout (method §4, §5, §7)."""
+layout (docs/method.md §4, §5, §7)."""
 
 import numpy as np
 import pytest
@@ -109,7 +109,7 @@ def test_smart_uv_layout_stays_valid_and_is_refined():
 
 def test_a_layout_packed_tighter_than_the_padding_is_still_refined():
     # Packed with a 1.2-texel margin but refined at the default padding 2:
-    # every chart pair keeps at least its original distance (method §7),
+    # every chart pair keeps at least its original distance (docs/method.md §7),
     # and the shadow edge still gets more texels.
     resolution = 128
     uvs, tris = lightmap_pack(charts_across=4, margin_texels=1.2, resolution=resolution, quads=6)
@@ -148,17 +148,31 @@ def test_random_layouts_and_gradient_maps_always_give_valid_layouts(rng):
         assert result.report["density_min"] >= 0.25 - 1e-4 and result.report["density_max"] <= 8 + 1e-3
 
 
-def test_report_fields():
+def test_report_figures_agree_with_the_layout_returned():
     uvs, tris, gradient = edge_scene(64, 16)
-    report = lmrefine.refine_uvs(None, uvs, tris, 64, gradient=gradient).report
-    for key in ("transition_widening", "density_min", "density_max", "steps", "limited_by",
-                "triangle_density", "strength_used", "passes", "levels", "seconds"):
-        assert key in report
-    assert report["triangle_density"].shape == (len(tris),)
+    result = lmrefine.refine_uvs(None, uvs, tris, 64, gradient=gradient)
+    report = result.report
+    # Measured on the output: per-triangle UV area ratios and the grid's cell areas.
+    def area(u):
+        corners = u[tris].astype(np.float64)
+        a, b = corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
+        return 0.5 * np.abs(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0])
+    np.testing.assert_allclose(report["triangle_density"], area(result.uvs) / area(uvs), rtol=1e-4)
+    cells = lmrefine.grid_cell_areas(result.grid)
+    assert report["density_min"] == pytest.approx(cells.min(), rel=1e-5)
+    assert report["density_max"] == pytest.approx(cells.max(), rel=1e-5)
+    assert 0.25 - 1e-4 <= report["density_min"] < 1 < report["density_max"] <= 8 + 1e-3
+    assert report["transition_widening"] > 2.0  # a hard edge across a finely cut plane
+    assert report["backoff"] == 1.0 and report["backoff_area"] == 0.0
+    assert report["strength_used"] == pytest.approx(24.0 * report["backoff"])
+    assert report["passes"] == 1 and report["border"] == "same" and report["edge_shrink"] == 0.8
+    assert set(report["limited_by"]) <= {"step_cap", "max_magnification", "min_shrink"}
     assert report["steps"] == sum(level["steps"] for level in report["levels"])
+    assert [level["block"] for level in report["levels"]][-1] == 1
+    assert set(report["timings"]) == {"setup", "gradient_map", "automaton", "warp_and_check"}
+    assert report["check"]["valid"] and report["check"]["flipped"] == 0
 
 
-@pytest.mark.skipif(not hasattr(lmrefine, "gradient_map"), reason="gradient_map lands with the wavelet branch")
 def test_lightmap_path_uses_the_wavelet_gradient_map():
     uvs, tris = plane(48)
     result = lmrefine.refine_uvs(shadow_edge_lightmap(R), uvs, tris, R)

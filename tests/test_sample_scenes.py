@@ -9,7 +9,7 @@ import lmrefine
 from lmrefine import sample_scenes
 
 ROOT = Path(__file__).resolve().parents[1]
-NAMES = ("courtyard", "room", "fence_and_tree", "game_level")
+NAMES = ("courtyard", "room", "fence_and_tree", "game_level", "atrium")
 
 
 def test_every_bundled_scene_loads_with_consistent_arrays():
@@ -35,8 +35,28 @@ def test_every_bundled_scene_loads_with_consistent_arrays():
         assert scene.lights and all(light["kind"] in sample_scenes.LIGHT_PROPERTIES for light in scene.lights)
 
 
+def test_every_bundled_scene_is_either_for_tuning_or_for_reporting():
+    tuning, reporting = set(sample_scenes.TUNING_SCENES), set(sample_scenes.REPORTING_SCENES)
+    assert tuning == {"courtyard", "game_level", "fence_and_tree"}
+    assert not tuning & reporting
+    assert tuning | reporting == set(sample_scenes.sample_names()) == set(NAMES)
+
+
+def test_atrium_has_a_sun_a_spot_and_a_rectangular_area_light_over_valid_layouts():
+    scene = sample_scenes.load_sample("atrium")
+    lights = {light["kind"]: light for light in scene.lights}
+    assert sorted(lights) == ["area", "spot", "sun"]
+    assert lights["area"]["shape"].upper() == "RECTANGLE" and lights["area"]["size"] != lights["area"]["size_y"]
+    assert len(scene.occluder_triangles) > 0  # the lattice roof casts, is not lightmapped
+    for variant, resolution in (("smart", 256), ("lightmap", 512)):
+        uvs, triangles = scene.layout(variant)
+        report = lmrefine.check_layout(uvs, triangles, resolution, padding=2)
+        assert report["valid"] and report["min_gutter_texels"] >= 2.0, (variant, report)
+    assert (ROOT / "blend_samples" / "atrium.blend").stat().st_size < 300_000
+
+
 def test_receivers_are_tessellated_finely_enough_to_move_texels():
-    # The method moves vertices only (method.md section 5): the big receivers
+    # The method moves vertices only (docs/method.md §5): the big receivers
     # must be cut into cells of about 0.3 m, not one quad.
     for name in NAMES:
         scene = sample_scenes.load_sample(name)
@@ -51,12 +71,15 @@ def test_unknown_sample_names_the_known_ones():
         sample_scenes.load_sample("no_such_scene")
 
 
-@pytest.mark.skipif(not hasattr(lmrefine, "Scene"), reason="needs the baker (lmrefine.Scene)")
 def test_to_scene_builds_a_bakeable_scene():
     scene = sample_scenes.load_sample("fence_and_tree")
     uvs, _ = scene.layout("smart")
     built = scene.to_scene(uvs)
-    assert built is not None
+    # The receivers, the occluders (fence and tree) as a second mesh, every light.
+    assert built.mesh_count == 2 and built.light_count == len(scene.lights) == 1
+    atrium = sample_scenes.load_sample("atrium")
+    built = atrium.to_scene(atrium.layout("smart")[0])
+    assert built.mesh_count == 2 and built.light_count == 3
     with pytest.raises(ValueError, match="per corner"):
         scene.to_scene(uvs[:10])
 
@@ -88,7 +111,6 @@ def test_blend_files_hold_the_exported_scenes(tmp_path):
         assert (ROOT / "blend_samples" / f"{name}.blend").stat().st_size < 400_000
 
 
-@pytest.mark.skipif(not hasattr(lmrefine, "Scene"), reason="needs the baker (lmrefine.Scene)")
 def test_scene_files_place_lights_by_matrix_and_older_files_still_load(tmp_path):
     """A light's matrix (make_samples.py writes matrix_world) places it with
     its spin and scale; a file without one (older) keeps Blender's default

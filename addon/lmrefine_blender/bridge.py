@@ -63,10 +63,6 @@ def default_source_layer(mesh):
     return names[0] if names else None
 
 
-# Blender's own tolerance for "these face corners share a UV" (STD_UV_CONNECT_LIMIT).
-UV_CONNECT_LIMIT = 1e-4
-
-
 def read_layout(mesh, uv_name):
     """The loop UVs of `uv_name` and the loop triangles of an (original) mesh, welded.
 
@@ -76,8 +72,10 @@ def read_layout(mesh, uv_name):
     layout would read as many charts touching each other. Corners of the same
     vertex within Blender's connect limit therefore get one UV, and UVs a
     rounding error outside [0, 1] are clamped. The refined map is computed
-    from this welded layout; the source map is never written.
+    from this welded layout; the source map is never written (the rule:
+    lmrefine.layout_input.weld_uvs).
     """
+    from lmrefine.layout_input import weld_uvs  # here: the add-on registers even without the core
     mesh.calc_loop_triangles()
     triangles = np.empty(len(mesh.loop_triangles) * 3, dtype=np.int32)
     mesh.loop_triangles.foreach_get("loops", triangles)
@@ -85,24 +83,6 @@ def read_layout(mesh, uv_name):
     loop_vertex = np.empty(len(mesh.loops), dtype=np.int32)
     mesh.loops.foreach_get("vertex_index", loop_vertex)
     return Layout(weld_uvs(uvs, loop_vertex), triangles.reshape(-1, 3))
-
-
-def weld_uvs(uvs, loop_vertex, limit=UV_CONNECT_LIMIT):
-    """Give corners of one vertex whose UVs lie within `limit` the same UV; returns a new array."""
-    welded = uvs.copy()
-    if len(uvs) == 0:
-        return welded
-    order = np.lexsort((uvs[:, 1], uvs[:, 0], loop_vertex))
-    sorted_uvs = uvs[order]
-    new_group = np.ones(len(order), dtype=bool)
-    new_group[1:] = ((loop_vertex[order][1:] != loop_vertex[order][:-1])
-                     | (np.abs(np.diff(sorted_uvs, axis=0)) > limit).any(axis=1))
-    first = np.flatnonzero(new_group)[np.cumsum(new_group) - 1]  # each corner's group leader
-    welded[order] = sorted_uvs[first]
-    # Within the limit of the unit square counts as inside (packers round to 1.0000001).
-    edge = ((welded < 0.0) & (welded > -limit)) | ((welded > 1.0) & (welded < 1.0 + limit))
-    welded[edge] = np.clip(welded[edge], 0.0, 1.0)
-    return welded
 
 
 def read_uv_layer(mesh, uv_name):
@@ -125,38 +105,18 @@ def write_uv_layer(mesh, uv_name, uvs):
     return layer
 
 
-# As the baker (native/src/bake/scene.cpp): a triangle is degenerate when
-# twice its area is below this fraction of its longest edge squared, and no
-# coordinate may exceed MAX_COORDINATE.
-FLAT_3D = 1e-7
-MAX_COORDINATE = 1e9
-
-
 def geometry_problems(obj, layout, resolution):
-    """(triangles of zero area in 3-D (world space, as baked), triangles of zero
-    UV area at `resolution` that do have 3-D area, vertices that are NaN/Inf
-    or beyond MAX_COORDINATE in world space)."""
+    """lmrefine.layout_input.geometry_problems of `obj` (world space, as baked)."""
+    from lmrefine.layout_input import geometry_problems
     mesh = obj.data
     positions = np.empty(len(mesh.vertices) * 3, dtype=np.float64)
     mesh.vertices.foreach_get("co", positions)
     matrix = np.array(obj.matrix_world, dtype=np.float64)
     with np.errstate(all="ignore"):
         world = positions.reshape(-1, 3) @ matrix[:3, :3].T + matrix[:3, 3]
-    bad_vertices = int(np.count_nonzero(~(np.abs(world) <= MAX_COORDINATE).all(axis=1)))
-    vertex_of_loop = np.empty(len(mesh.loops), dtype=np.int32)
-    mesh.loops.foreach_get("vertex_index", vertex_of_loop)
-    corners = world[vertex_of_loop[layout.triangles]]
-    with np.errstate(all="ignore"):
-        e1, e2, e3 = corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0], corners[:, 2] - corners[:, 1]
-        area2 = np.linalg.norm(np.cross(e1, e2), axis=1)
-        longest = np.max([np.einsum("ij,ij->i", e, e) for e in (e1, e2, e3)], axis=0)
-        flat = ~(area2 > FLAT_3D * longest)
-    uv = layout.uvs[layout.triangles].astype(np.float64) * resolution  # texel units
-    edge1, edge2 = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
-    texel_area = 0.5 * np.abs(edge1[:, 0] * edge2[:, 1] - edge1[:, 1] * edge2[:, 0])
-    # A millionth of a texel: a triangle that small carries no texel of its own.
-    zero_uv = int(np.count_nonzero((texel_area < 1e-6) & ~flat))
-    return int(np.count_nonzero(flat)), zero_uv, bad_vertices
+    corner_vertex = np.empty(len(mesh.loops), dtype=np.int32)
+    mesh.loops.foreach_get("vertex_index", corner_vertex)
+    return geometry_problems(world, corner_vertex, layout.uvs, layout.triangles, resolution)
 
 
 # ----------------------------------------------------------------- geometry

@@ -121,6 +121,7 @@ def import_core():
 
 def validate(context, objects, options):
     """Targets for `objects`, or a UserError naming the first problem and its fix."""
+    import_core()  # the layout rules below are lmrefine's
     if context.mode != 'OBJECT':
         mode = context.mode.replace("_", " ").title()
         raise UserError(f"Refine Lightmap UVs works in Object Mode, not {mode}: switch to Object Mode (Tab, or "
@@ -235,6 +236,8 @@ def run(context, targets, options, journal, image_dir=None):
     (default: next to the .blend, or packed into it when it was never saved).
     """
     lmrefine = import_core()
+    from lmrefine.backoff import failures
+    from lmrefine.layout_input import describe_problems
     outcome = Outcome(objects=[t.obj.name for t in targets])
     outcome.warnings += [f"Skipped: {message}" for message in getattr(targets, "skipped", [])]
     for target in targets:
@@ -295,8 +298,9 @@ def run(context, targets, options, journal, image_dir=None):
         done += 1
         # An independent check of the promise refine_uvs makes: never worse than the source layout.
         source_check = lmrefine.check_layout(layout.uvs, layout.triangles, resolution, padding=padding)
-        check = lmrefine.check_layout(result.uvs, layout.triangles, resolution, padding=padding)
-        worse = layout_regressions(check, source_check, padding)
+        check = lmrefine.check_layout(result.uvs, layout.triangles, resolution, padding=padding,
+                                      reference_uvs=layout.uvs, relative_gutter=True)
+        worse = failures(check, source_check, padding)
         if worse:
             raise RuntimeError(f"refine_uvs returned a layout for '{name}' that is worse than the source "
                                f"({', '.join(worse)}: {dict(check)}); this is a bug in lmrefine, please report "
@@ -304,7 +308,7 @@ def run(context, targets, options, journal, image_dir=None):
         if not source_check["valid"]:
             outcome.warnings.append(
                 f"'{name}': UV map '{target.source}' was already invalid at {resolution} texels "
-                f"({_describe_problems(source_check, padding)}); the refined map is no worse, but lightmap "
+                f"({describe_problems(source_check, padding)}); the refined map is no worse, but lightmap "
                 "bleeding may show: repack the source map (UV > Lightmap Pack)")
         report = {key: value for key, value in result.report.items() if key != "triangle_density"}
         report["check_layout"] = dict(check)
@@ -344,28 +348,6 @@ def run(context, targets, options, journal, image_dir=None):
             image = bpy.data.images[image_name]
             outcome.image_files[image_name] = _save_image(image, image_dir)
     return outcome
-
-
-def layout_regressions(check, source, padding):
-    """What makes a refined layout's check worse than its source's (empty: acceptable)."""
-    worse = []
-    for key in ("flipped", "degenerate", "overlapping"):
-        if check[key] > source[key]:
-            worse.append(key)
-    if check["out_of_bounds"]:
-        worse.append("out_of_bounds")
-    # float32 UVs carry about 1e-4 texel of rounding at 4k.
-    if check["min_gutter_texels"] < min(padding, source["min_gutter_texels"]) - 1e-4:
-        worse.append("gutter")
-    return worse
-
-
-def _describe_problems(check, padding):
-    problems = [f"{check[key]} {key}" for key in ("flipped", "degenerate", "overlapping", "out_of_bounds")
-                if check[key]]
-    if check["min_gutter_texels"] < padding:
-        problems.append(f"charts {check['min_gutter_texels']:.2f} texels apart, padding is {padding}")
-    return ", ".join(problems)
 
 
 def _plain(value):

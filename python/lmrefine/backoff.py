@@ -1,4 +1,4 @@
-"""Backing off a deformed grid until the layout it gives is valid (method §7).
+"""Backing off a deformed grid until the layout it gives is valid (docs/method.md §7).
 
 The full warp can break a layout where triangles are large next to strong
 deformation (a triangle's edges stay straight while the grid bends), or

@@ -171,7 +171,7 @@ def build_parser():
                     "error, transition widening, equal-error resolution). Writes report.md, report.json and "
                     "pictures per scene. Metrics: docs/evaluation.md.")
     evaluate.add_argument("scenes", nargs="*",
-                          help="bundled sample names (courtyard, room, fence_and_tree, game_level) or scene .npz "
+                          help="bundled sample names (courtyard, room, fence_and_tree, game_level, atrium) or scene .npz "
                                "files (default: every bundled sample)")
     evaluate.add_argument("--variant", choices=("smart", "lightmap", "both"), default="smart",
                           help="lightmap UVs: Smart UV Project, Lightmap Pack, or both (default: smart)")

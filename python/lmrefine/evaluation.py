@@ -120,7 +120,7 @@ def _diagnose(result, context):
         notes.append(f"coarse tessellation: a triangle under a transition covers "
                      f"{context['texels_per_transition_triangle']:.0f} texels (median), and the texel density "
                      "is constant inside a triangle, so texels cannot gather at an edge that crosses it "
-                     "(method.md section 5): subdivide the receivers")
+                     "(docs/method.md §5): subdivide the receivers")
     if small_charts:
         notes.append(f"small charts: the charts under transitions cover {context['chart_texels_at_transitions']:.0f} "
                      "texels (median) and the gutters between charts keep their width, so texels can hardly move "

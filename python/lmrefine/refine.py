@@ -1,4 +1,4 @@
-"""refine_uvs: the whole refinement of a lightmap UV layout (method §4, §5, §7).
+"""refine_uvs: the whole refinement of a lightmap UV layout (docs/method.md §4, §5, §7).
 
 gradient map -> energy -> cellular automaton (native, coarse-to-fine) ->
 warp of every UV through the deformed grid -> validity check, backing off
@@ -22,9 +22,8 @@ _SCALE_MIN_FRACTION_OF_MAX = 0.25
 # Chart edges facing the gutter shrink (edge_shrink) only when every chart
 # pair is at least this many texels farther apart than the padding: their
 # cells may move a chart's boundary a fraction of a texel closer, and the
-# guards and the rigid gutter cells between keep the rest. On a pack tighter
-# than that (a 1.2-texel margin in the tests) a pair got 0.001 texel closer
-# and the back-off undid most of the refinement.
+# guards and the rigid gutter cells between keep the rest (why this margin:
+# docs/refiner.md, "Options and defaults").
 _EDGE_SHRINK_GUTTER_MARGIN = 0.5
 
 
@@ -151,7 +150,7 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
         resolution: the lightmap's int or (height, width).
         padding: the gutter between charts, in texels, the result must
             keep; a chart pair the original packed closer keeps its
-            original distance instead (method §7).
+            original distance instead (docs/method.md §7).
         mask: (H, W) bool chart coverage; default coverage_mask(uvs, ...).
         gradient: a (H, W, 4) float32 gradient map to use instead of
             computing one from the lightmap.
@@ -240,7 +239,7 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
     if not run["converged"]:
         limited_by.append("step_cap")
     if original["min_gutter_texels"] < padding:
-        # method §7: keep the gutter the original had; pairs packed tighter
+        # docs/method.md §7: keep the gutter the original had; pairs packed tighter
         # than the padding keep their own distance (backoff.accept).
         limited_by.append("original_gutter")
         notes.append(f"original gutter {original['min_gutter_texels']:.2f} texels < padding {padding:g}: "

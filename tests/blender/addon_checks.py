@@ -26,21 +26,20 @@ import scenes  # noqa: E402
 from lmrefine_blender import bridge, cycles_bake, pipeline  # noqa: E402
 from lmrefine_blender.journal import Journal  # noqa: E402
 
-HAS_REFINE = hasattr(lmrefine, "refine_uvs") and hasattr(lmrefine, "check_layout")
-HAS_BAKE = hasattr(lmrefine, "bake") and hasattr(lmrefine, "Scene")
 RESOLUTION = 64  # small: the whole group must stay fast
 
-results = {"api": {"refine_uvs": HAS_REFINE, "bake": HAS_BAKE}}
+results = {}
 
 
 def check(*needs):
-    """Run the decorated check now and record its facts (or why it was skipped, or its traceback)."""
-    available = {"refine": HAS_REFINE, "bake": HAS_BAKE}
+    """Run the decorated check now and record its facts (or its traceback).
+    `needs` names the parts of lmrefine it uses; a missing one fails the check."""
+    exports = {"refine": ("refine_uvs", "check_layout"), "bake": ("bake", "Scene")}
 
     def run(function):
-        missing = [name for name in needs if not available[name]]
+        missing = [name for need in needs for name in exports[need] if not hasattr(lmrefine, name)]
         if missing:
-            results[function.__name__] = {"skipped": f"lmrefine lacks {', '.join(missing)} (not merged yet)"}
+            results[function.__name__] = {"exception": f"lmrefine lacks {', '.join(missing)}"}
             return function
         try:
             results[function.__name__] = function()

@@ -15,8 +15,8 @@ constexpr float kPi = 3.14159265358979f;
 constexpr float kInfinity = std::numeric_limits<float>::infinity();
 
 // sin and cos of 2 pi t for t in [0, 1): a reduction to [-pi/4, pi/4] and
-// Taylor polynomials (error < 1e-7, float precision), about 4x cheaper
-// than libm's sincosf, which was 7 % of an AO bake.
+// Taylor polynomials (error < 1e-7, float precision), cheaper than libm's
+// sincosf (docs/baker.md, "Speed").
 void sincos_turn(float t, float& s, float& c) {
     const float q = t * 4.0f;
     const int k = int(q + 0.5f);  // the nearest quarter turn (t >= 0)

@@ -20,7 +20,7 @@ const LiftingStep kHaarSteps[] = {
     {LiftingStep::Update, 0, 1, kHaarUpdate},
 };
 
-// D4 exactly as method.md §3: update 1, predict, update 2, normalize.
+// D4 exactly as docs/method.md §3: update 1, predict, update 2, normalize.
 const double kD4Update1[] = {kSqrt3};
 const double kD4Predict[] = {-(kSqrt3 - 2.0) / 4.0, -kSqrt3 / 4.0};  // s[n-1], s[n]
 constexpr double kD4Update2[] = {-1.0};                              // d[n+1]
@@ -137,7 +137,7 @@ const LiftingScheme& lifting_scheme(Wavelet wavelet) {
     // the orthogonal wavelets, as PyWavelets normalizes them) and |det| 1.
     // Haar, cdf53 and cdf97 then equal PyWavelets' haar, bior2.2 and bior4.4
     // (mode='periodization') exactly, the detail's sign included; the D4
-    // detail keeps method.md's sign (docs/wavelets.md has the relations).
+    // detail keeps the sign of docs/method.md §3 (docs/wavelets.md has the relations).
     static const LiftingScheme haar{kHaarSteps, count_of(kHaarSteps), kSqrt2, -1.0 / kSqrt2};
     static const LiftingScheme d4{kD4Steps, count_of(kD4Steps), (kSqrt3 - 1.0) / kSqrt2, (kSqrt3 + 1.0) / kSqrt2};
     static const LiftingScheme d12{kD12Steps, count_of(kD12Steps), kD12ScaleS, kD12ScaleD};

@@ -1,4 +1,4 @@
-// The cellular automaton (method §4): a grid of nodes over the lightmap, one
+// The cellular automaton (docs/method.md §4): a grid of nodes over the lightmap, one
 // cell per texel, every cell holding energy. Energy diffuses from denser to
 // less dense neighbours (density = energy / cell area) and every edge between
 // two cells moves towards the less dense one, so high-energy cells grow and

@@ -1,4 +1,4 @@
-// The warp: carrying points through a deformed grid (method §5). A grid has
+// The warp: carrying points through a deformed grid (docs/method.md §5). A grid has
 // nodes at known original positions (a tensor grid of columns xs and rows ys
 // in pixel space, see texel_space.h) and their deformed positions; a point is
 // carried to the deformed cell that holds it with its bilinear coordinates

@@ -1,4 +1,4 @@
-// The lightmap baker (method.md §1, step 2): per receiving mesh, or for one
+// The lightmap baker (docs/method.md §1, step 2): per receiving mesh, or for one
 // shared atlas, at a resolution, for each texel its chart covers, the light
 // reaching the surface points behind it. Passes match Cycles' DIFFUSE bake
 // with the colour pass off (direct, indirect, both) and Cycles' AO bake.

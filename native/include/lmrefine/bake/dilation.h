@@ -1,4 +1,4 @@
-// Dilation (method.md §1, step 4): fill the gutter texels next to charts so
+// Dilation (docs/method.md §1, step 4): fill the gutter texels next to charts so
 // that bilinear sampling at a chart border does not show seams.
 #pragma once
 

@@ -58,7 +58,7 @@ void validate_light(Light& light);
 // column 0. An area light's extents are scaled by the lengths of columns 0
 // and 1 (a square or disk with unequal scales becomes a rectangle or
 // ellipse); the scale of point, spot and sun lights is ignored, as Cycles 3.4
-// ignores it (measured: a spot scaled (2, 1, 1) bakes bit-identical). Call
+// ignores it (docs/baker.md, "Orientation: spin and scale"). Call
 // after setting shape, size and size_y; throws InvalidArgument for a
 // non-finite or non-affine matrix, or a zero-length axis.
 void place_light(Light& light, const glm::mat4& matrix);

@@ -1,4 +1,4 @@
-// The gradient map of the thesis (method.md §3): for every lightmap texel,
+// The gradient map of the thesis (docs/method.md §3): for every lightmap texel,
 // how fast the light changes, per direction and sense, from the magnitude of
 // a wavelet detail evaluated at every texel (undecimated / stationary).
 //

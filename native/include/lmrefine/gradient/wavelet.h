@@ -1,5 +1,5 @@
 // One-level discrete wavelet transforms by lifting (Daubechies & Sweldens
-// 1998): Haar, Daubechies D4 (exactly the steps of method.md §3), D12, D20,
+// 1998): Haar, Daubechies D4 (exactly the steps of docs/method.md §3), D12, D20,
 // and the Cohen-Daubechies-Feauveau 5/3 and 9/7 biorthogonal wavelets.
 //
 // 1-D: a signal x of even length N is split into even samples s[n] = x[2n]
@@ -28,7 +28,7 @@ class Progress;
 enum class Wavelet { Haar, D4, D12, D20, Cdf53, Cdf97 };
 
 // How a lifting step reads past the end of a sub-band.
-//  Periodic:  the signal wraps around (x[-1] = x[N-1]); the D4 of method.md §3.
+//  Periodic:  the signal wraps around (x[-1] = x[N-1]); the D4 of docs/method.md §3.
 //  Symmetric: the signal is mirrored about its end samples (x[-k] = x[k],
 //             x[N-1+k] = x[N-1-k]), applied per step to the sub-band it
 //             reads; for the symmetric CDF wavelets this is the classic

@@ -1,5 +1,5 @@
 // Gutter texels: the texels whose cells the automaton may shift but not
-// compress, so the gutter between charts keeps its width (issue 3, method §7).
+// compress, so the gutter between charts keeps its width (issue 3, docs/method.md §7).
 #pragma once
 
 #include <cstdint>

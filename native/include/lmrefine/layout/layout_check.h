@@ -1,4 +1,4 @@
-// Validity of a UV layout at a lightmap resolution (method §7): flipped and
+// Validity of a UV layout at a lightmap resolution (docs/method.md §7): flipped and
 // degenerate triangles, triangles of different charts that overlap, UVs
 // outside [0, 1], and the narrowest gutter between charts in texels.
 #pragma once
