@@ -202,12 +202,16 @@ def renders(obj):
     return obj.visible_get() and not obj.hide_render
 
 
-def export_scene(context, receivers, uv_name_of):
+def export_scene(context, receivers, uv_name_of, left_out=None):
     """Receivers (with the UV map `uv_name_of[obj.name]`) and occluders of the scene.
 
     Returns (receiver exports in `receivers` order, occluder exports): every
     other visible, render-enabled geometry, instances included, casts shadows.
+    An occluder with a vertex at NaN, Inf or beyond 1e9 units (which the baker
+    refuses) is left out and its name appended to `left_out`; a receiver
+    like that is a UserError.
     """
+    from lmrefine.layout_input import MAX_COORDINATE
     depsgraph = context.evaluated_depsgraph_get()
     receiver_names = {obj.name for obj in receivers}
     by_name = {}
@@ -223,6 +227,9 @@ def export_scene(context, receivers, uv_name_of):
             if export is None:
                 raise UserError(f"'{original.name}' has no faces after its modifiers and transform: disable "
                                 "the modifier that removes them, or give the object a non-zero scale")
+            if not (np.abs(export.positions) <= MAX_COORDINATE).all():
+                raise UserError(f"'{original.name}' has vertices at NaN, Inf or beyond 1e9 units after its "
+                                "modifiers and transform: disable the modifier that puts them there")
             by_name[original.name] = export
             continue
         if instance.is_instance:
@@ -231,8 +238,13 @@ def export_scene(context, receivers, uv_name_of):
         elif not renders(original):
             continue
         export = export_mesh(obj_eval, instance.matrix_world, name=original.name)
-        if export is not None:
-            occluders.append(export)
+        if export is None:
+            continue
+        if not (np.abs(export.positions) <= MAX_COORDINATE).all():
+            if left_out is not None and original.name not in left_out:
+                left_out.append(original.name)
+            continue
+        occluders.append(export)
     missing = receiver_names - by_name.keys()
     if missing:
         raise UserError(f"objects {sorted(missing)} are not in the evaluated scene: make them visible in "

@@ -261,7 +261,7 @@ def run(context, targets, options, journal, image_dir=None):
         passes = (options["driving_pass"],)
         if backend_first == 'EMBREE':
             baked = yield from _bake_embree(context, lmrefine, targets, source_of, passes, options, "First bake",
-                                            done * span, span)
+                                            done * span, span, outcome.warnings)
         else:
             baked = yield from _bake_cycles(context, targets, source_of, passes, options, "First bake",
                                             done * span, span)
@@ -327,7 +327,7 @@ def run(context, targets, options, journal, image_dir=None):
     passes = tuple(options["bake_passes"])
     if options["backend"] == 'EMBREE':
         baked = yield from _bake_embree(context, lmrefine, targets, refined_of, passes, options, "Second bake",
-                                        done * span, span)
+                                        done * span, span, outcome.warnings)
     else:
         baked = yield from _bake_cycles(context, targets, refined_of, passes, options, "Second bake",
                                         done * span, span)
@@ -363,9 +363,16 @@ def _plain(value):
     return value
 
 
-def _bake_embree(context, lmrefine, targets, uv_name_of, passes, options, label, start, span):
-    """Bake `passes` with lmrefine's baker; returns {pass: {object name: (R, R, 4) float32}}."""
-    receivers, occluders = bridge.export_scene(context, [t.obj for t in targets], uv_name_of)
+def _bake_embree(context, lmrefine, targets, uv_name_of, passes, options, label, start, span, warnings):
+    """Bake `passes` with lmrefine's baker; returns {pass: {object name: (R, R, 4) float32}}.
+    Occluders left out of the bake are named in `warnings` (once)."""
+    left_out = []
+    receivers, occluders = bridge.export_scene(context, [t.obj for t in targets], uv_name_of, left_out)
+    for name in left_out:
+        warning = (f"'{name}' casts no shadow in the bake: it has vertices at NaN, Inf or beyond 1e9 units; "
+                   "fix or delete them (Edit Mode > Select > Select All by Trait), or check its transform")
+        if warning not in warnings:
+            warnings.append(warning)
     scene = lmrefine.Scene()
     ids = {}
     for export in receivers:
