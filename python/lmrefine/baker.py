@@ -72,8 +72,8 @@ def bake(scene, resolution, passes=("direct",), samples=16, seed=0, progress=Non
         lmrefine.CancelledError: the progress callback returned False.
     """
     names = _pass_names(passes)
-    maps, stats = _native._bake(scene, resolution, list(names), int(samples), int(seed), progress, int(dilation),
-                                bool(denoise), int(bounces), float(ao_distance), bool(atlas))
+    maps, stats = _native._bake(scene, resolution, list(names), samples, seed, progress, dilation,
+                                bool(denoise), bounces, ao_distance, bool(atlas))
     by_pass = {name: {} for name in names}
     for mesh, images in maps:
         key = "atlas" if mesh < 0 else mesh
@@ -95,6 +95,6 @@ def evaluate(scene, points, normals, passes=("direct",), samples=64, seed=0, pro
         numpy.ndarray: float32 (P, 3) with one pass, else ``{pass: (P, 3)}``.
     """
     names = _pass_names(passes)
-    values, _stats = _native._evaluate(scene, points, normals, list(names), int(samples), int(seed), progress,
-                                       int(bounces), float(ao_distance))
+    values, _stats = _native._evaluate(scene, points, normals, list(names), samples, seed, progress,
+                                       bounces, ao_distance)
     return values[0] if len(names) == 1 else dict(zip(names, values))

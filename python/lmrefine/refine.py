@@ -105,6 +105,8 @@ def _gradient(lightmap, gradient, mask, shape, wavelet, progress):
     if lightmap is None:
         raise ValueError("pass a lightmap, or a gradient map with gradient=")
     lightmap = np.asarray(lightmap)
+    if lightmap.ndim not in (2, 3):
+        raise ValueError(f"the lightmap must be an (H, W) or (H, W, C) array, got shape {lightmap.shape}")
     if lightmap.shape[:2] != shape:
         raise ValueError(f"the lightmap is {lightmap.shape[0]}x{lightmap.shape[1]} but the resolution is "
                          f"{shape[0]}x{shape[1]}; refine at the resolution the lightmap was baked at")
@@ -200,8 +202,10 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
         raise ValueError(f"strength must be >= 0, got {strength}")
     if border not in BORDER_MODES:
         raise ValueError(f"border must be one of {BORDER_MODES}, got {border!r}")
-    if not (isinstance(passes, (int, np.integer)) and passes >= 1):
-        raise ValueError(f"passes must be an integer >= 1, got {passes!r}")
+    if not isinstance(passes, (int, np.integer)) or isinstance(passes, bool):
+        raise TypeError(f"passes must be an int, got {type(passes).__name__}")
+    if not 1 <= passes <= 64:
+        raise ValueError(f"passes must be in [1, 64], got {passes!r}")
     if not 0 < edge_shrink <= 1:
         raise ValueError(f"edge_shrink must be in (0, 1] (1: chart edges keep their size), got {edge_shrink}")
     # The original is analysed once (charts, rasterization, chart distances)
