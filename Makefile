@@ -12,7 +12,7 @@ DEBIAN_PACKAGES := cmake g++ make pkg-config pybind11-dev libembree-dev \
 	libopenimageio-dev libglm-dev python3-dev python3-numpy python3-pytest \
 	python3-pywt python3-matplotlib blender
 
-.PHONY: all deps build install test test-asan bench demo evaluate samples sample-lightmap addon-zip clean
+.PHONY: all deps build install test test-asan fuzz bench demo evaluate samples sample-lightmap addon-zip clean
 
 all: build
 
@@ -54,6 +54,17 @@ test-asan: deps
 	LD_PRELOAD="$$($(CXX) -print-file-name=libasan.so) $$($(CXX) -print-file-name=libstdc++.so)" ASAN_OPTIONS=detect_leaks=0 \
 		UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 LMREFINE_PYTHONPATH=$(ASAN_DIR)/package \
 		$(PYTHON) -m pytest tests -q -m "not blender and not slow" -p no:cacheprovider
+
+# The fuzz suite (tests/fuzz, docs/robustness.md): FUZZ_CASES hostile calls of
+# the Python API, each in a forked child with a timeout, then FUZZ_BLENDER_CASES
+# runs of the add-on's operator on broken meshes in one headless Blender.
+# Prints the outcome counts; fails on any crash, hang, unpromised exception,
+# invalid layout or modified input. FUZZ_SEED=n repeats a run.
+FUZZ_CASES         ?= 10000
+FUZZ_BLENDER_CASES ?= 300
+fuzz: build
+	$(PYTHON) tests/fuzz/run.py --cases $(FUZZ_CASES) --blender-cases $(FUZZ_BLENDER_CASES) \
+		$(if $(FUZZ_SEED),--seed $(FUZZ_SEED))
 
 bench: build
 	PYTHONPATH=python $(PYTHON) bench/run.py

@@ -197,6 +197,27 @@ def export_mesh(obj_eval, matrix_world, uv_name=None, name=None):
         obj_eval.to_mesh_clear()
 
 
+def evaluated_problem(depsgraph, obj, uv_name):
+    """What keeps `obj`, as its modifiers and transform make it, from being
+    baked (a message naming the fix), or None. The bake exports the same."""
+    from lmrefine.layout_input import MAX_COORDINATE
+    obj_eval = obj.evaluated_get(depsgraph)
+    try:
+        export = export_mesh(obj_eval, obj_eval.matrix_world, uv_name=uv_name, name=obj.name)
+    except UserError as error:
+        return str(error)
+    if export is None:
+        return (f"'{obj.name}' has no faces after its modifiers and transform: disable the modifier that removes "
+                "them, or give the object a non-zero scale")
+    if not (np.abs(export.positions) <= MAX_COORDINATE).all():
+        return (f"'{obj.name}' has vertices at NaN, Inf or beyond 1e9 units after its modifiers and transform: "
+                "disable the modifier that puts them there, or check the object's scale")
+    if not np.isfinite(export.uvs).all():
+        return (f"'{obj.name}' has NaN or Inf UVs in '{uv_name}' after its modifiers: disable the modifier that "
+                "makes them, or re-unwrap")
+    return None
+
+
 def renders(obj):
     """Whether a (non-instanced) object takes part in a bake: visible and enabled for render."""
     return obj.visible_get() and not obj.hide_render

@@ -134,11 +134,12 @@ def validate(context, objects, options):
     resolution = options["resolution"]
     owners = {}
     targets = Targets()
+    depsgraph = context.evaluated_depsgraph_get()
     # Bad geometry in one object skips it (reported, with its fix); the
     # others are refined. Only when every object is skipped does the run stop.
     for obj in meshes:
         try:
-            targets.append(_validate_object(obj, options, owners, resolution))
+            targets.append(_validate_object(obj, options, owners, resolution, depsgraph))
         except UserError as error:
             targets.skipped.append(str(error))
     if not targets:
@@ -154,7 +155,7 @@ class Targets(list):
         self.skipped = []
 
 
-def _validate_object(obj, options, owners, resolution):
+def _validate_object(obj, options, owners, resolution, depsgraph):
     """The Target for one mesh object, or a UserError naming its problem and fix."""
     mesh = obj.data
     if obj.library is not None or mesh.library is not None:
@@ -185,6 +186,10 @@ def _validate_object(obj, options, owners, resolution):
     layout = bridge.read_layout(mesh, source)
     if len(layout.triangles) == 0:
         raise UserError(f"'{obj.name}' has no faces: nothing to lightmap")
+    not_finite = int(np.count_nonzero(~np.isfinite(layout.uvs).all(axis=1)))
+    if not_finite:
+        raise UserError(f"UV map '{source}' of '{obj.name}' has {not_finite} UVs that are NaN or Inf: re-unwrap it "
+                        "(UV > Lightmap Pack)")
     outside = int(np.count_nonzero(((layout.uvs < 0.0) | (layout.uvs > 1.0)).any(axis=1)))
     if outside:
         raise UserError(f"UV map '{source}' of '{obj.name}' has {outside} UVs outside [0, 1]; a lightmap "
@@ -200,6 +205,9 @@ def _validate_object(obj, options, owners, resolution):
     if zero_uv:
         raise UserError(f"'{obj.name}' has {zero_uv} triangles of zero area in UV map '{source}': "
                         "re-unwrap it (UV > Lightmap Pack) so every face has its own texels")
+    problem = bridge.evaluated_problem(depsgraph, obj, source)
+    if problem:
+        raise UserError(problem)
     target = Target(obj, source, refined, layout, zero_area=zero_3d)
     if options["first_lightmap"] == 'IMAGE':
         target.image = _first_image(obj, source, options)

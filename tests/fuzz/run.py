@@ -35,14 +35,17 @@ def run_blender_cases(count, seed, timeout):
     if blender is None:
         return Counter({"skipped: Blender is not installed": count}), {}
     counts, examples, start = Counter(), {}, 0
+    env = dict(os.environ, LMREFINE_FUZZ_DUMP_AFTER=str(max(1.0, timeout - 10)))
     log = os.path.join(os.environ.get("TMPDIR", "/tmp"), f"lmrefine_fuzz_blender_{os.getpid()}.jsonl")
     while start < count:
         if os.path.exists(log):
             os.unlink(log)
+        # Output goes to a file: a pipe nobody reads while the cases run would fill and block Blender.
+        output_file = open(log + ".out", "w+")
         process = subprocess.Popen(
             [blender, "-b", "--factory-startup", "--python-exit-code", "1", "--python",
              os.path.join(HERE, "blender_cases.py"), "--", REPO, log, str(seed), str(start), str(count - start)],
-            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+            stdout=output_file, stderr=subprocess.STDOUT, env=env)
         # One case must finish within `timeout`: the log grows a line per case.
         done, last_change, size = start, time.monotonic(), -1
         while process.poll() is None:
@@ -53,7 +56,11 @@ def run_blender_cases(count, seed, timeout):
             elif time.monotonic() - last_change > timeout:
                 process.kill()
                 break
-        output = process.communicate()[0]
+        process.wait()
+        output_file.seek(0)
+        output = output_file.read()
+        output_file.close()
+        os.unlink(log + ".out")
         lines = open(log).read().splitlines() if os.path.exists(log) else []
         results = [json.loads(line) for line in lines if line.startswith("{")]
         for result in results:
@@ -69,7 +76,7 @@ def run_blender_cases(count, seed, timeout):
             index = started[-1]
             outcome = "hang" if process.returncode in (-9, None) else "crash"
             counts[outcome] += 1
-            examples.setdefault(outcome, []).append((index, output[-1500:]))
+            examples.setdefault(outcome, []).append((index, output[-6000:]))
             done = index + 1
         elif process.returncode != 0 and done < count:
             counts["harness error"] += 1

@@ -19,6 +19,7 @@ the child dies. Outcomes:
     harness error           the case itself could not be built (a bug in the suite)
 """
 
+import faulthandler
 import json
 import os
 import select
@@ -32,7 +33,8 @@ from collections import Counter
 import numpy as np
 
 PROMISED = ("ValueError", "TypeError", "OSError", "MemoryError", "CancelledError")
-TARGET_ZERO = ("crash", "hang", "other exception", "invalid layout", "input modified", "harness error")
+TARGET_ZERO = ("crash", "hang", "other exception", "invalid layout", "input modified", "scene modified",
+               "good object not refined", "harness error")
 
 
 def _snapshot(value, depth=0):
@@ -110,6 +112,7 @@ def _child(lm, seed, index, write_fd, stderr_path):
         fd = os.open(stderr_path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
         os.dup2(fd, 2)
         os.dup2(fd, 1)
+        faulthandler.enable(file=2)  # a crash's Python traceback goes to this case's file (pytest's goes elsewhere)
         try:
             outcome, detail = run_case(lm, seed, index)
         except BaseException:  # noqa: BLE001  (the judging itself failed)
