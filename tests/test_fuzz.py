@@ -68,7 +68,7 @@ def test_a_crash_and_a_hang_are_caught_and_counted(monkeypatch):
         return "ok", ""
 
     monkeypatch.setattr(runner, "run_case", fake_run_case)
-    counts, examples = runner.run(0, 4, jobs=2, timeout=2.0)
+    counts, examples = runner.run(0, 4, jobs=2, timeout=2.0, fresh=False)
     assert counts == {"crash": 1, "hang": 1, "other exception KeyError": 1, "ok": 1}
     assert runner.failures(counts) == {"crash": 1, "hang": 1, "other exception KeyError": 1}
     assert "signal 11" in examples["crash"][0][1]

@@ -2,6 +2,7 @@
 #include <pybind11/stl.h>
 
 #include <memory>
+#include <limits>
 #include <string>
 
 #include "lmrefine/core/error.h"
@@ -193,8 +194,15 @@ Raises:
             [](Scene& scene, const py::handle& color) { scene.set_world(vec3_param(color, "color")); },
             py::arg("color"), "Uniform sky radiance (Blender's world Background colour at strength 1).")
         .def("degenerate_triangles",
-             [](const Scene& scene, int mesh) {
-                 if (mesh < 0 || mesh >= int(scene.meshes().size())) throw py::value_error("mesh must be a mesh id from add_mesh, 0 to " + std::to_string(int(scene.meshes().size()) - 1) + ", got " + std::to_string(mesh));
+             [](const Scene& scene, const py::handle& mesh_in) {
+                 const int64_t mesh = py_util::int_param(mesh_in, "mesh", std::numeric_limits<int64_t>::min(),
+                                                         std::numeric_limits<int64_t>::max());
+                 const int64_t count = int64_t(scene.meshes().size());
+                 if (mesh < 0 || mesh >= count) {
+                     throw py::value_error(count == 0 ? "mesh must be a mesh id from add_mesh; the scene has no mesh yet"
+                                                      : "mesh must be a mesh id from add_mesh, 0 to " +
+                                                            std::to_string(count - 1) + ", got " + std::to_string(mesh));
+                 }
                  return scene.meshes()[size_t(mesh)].degenerate_count;
              },
              py::arg("mesh"), "Number of zero-area triangles of a mesh (skipped by the baker).")

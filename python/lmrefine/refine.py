@@ -198,8 +198,13 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
     start = time.perf_counter()
     shape = _resolution(resolution)
     uvs, triangles = _layout(uvs, triangles)
+    for name, value in (("strength", strength), ("edge_shrink", edge_shrink), ("padding", padding)):
+        if isinstance(value, (bool, str, bytes)) or not isinstance(value, (int, float, np.integer, np.floating)):
+            raise TypeError(f"{name} must be a number, got {type(value).__name__}")
     if not strength >= 0:
         raise ValueError(f"strength must be >= 0, got {strength}")
+    if not isinstance(border, str):
+        raise TypeError(f"border must be a str, one of {BORDER_MODES}, got {type(border).__name__}")
     if border not in BORDER_MODES:
         raise ValueError(f"border must be one of {BORDER_MODES}, got {border!r}")
     if not isinstance(passes, (int, np.integer)) or isinstance(passes, bool):

@@ -122,8 +122,16 @@ def _child(lm, seed, index, write_fd, stderr_path):
         os._exit(0)
 
 
-def run(seed, count, jobs=2, timeout=30.0, start=0, on_result=None):
-    """Runs cases start .. start+count-1; returns (Counter of outcomes, {outcome: [(index, detail)]})."""
+def run(seed, count, jobs=2, timeout=30.0, start=0, on_result=None, fresh=True):
+    """Runs cases start .. start+count-1; returns (Counter of outcomes, {outcome: [(index, detail)]}).
+
+    fresh: fork the cases from a new interpreter that has never called
+    lmrefine (a process that has, like pytest after the baker's tests, holds
+    Embree's and the thread pool's threads, and a fork of it can deadlock);
+    the parent only collects the outcomes.
+    """
+    if fresh:
+        return _run_in_fresh_process(seed, count, jobs, timeout, start, on_result)
     import lmrefine as lm
 
     os.environ.setdefault("LMREFINE_THREADS", "1")  # `jobs` children share the cores
@@ -198,6 +206,39 @@ def run(seed, count, jobs=2, timeout=30.0, start=0, on_result=None):
     return counts, examples
 
 
+def _run_in_fresh_process(seed, count, jobs, timeout, start, on_result):
+    import subprocess
+
+    command = [sys.executable, os.path.abspath(__file__), str(seed), str(count), str(jobs), str(timeout), str(start)]
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, text=True,
+                               env=dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p)))
+    counts, examples = Counter(), {}
+    for line in process.stdout:
+        index, outcome, detail = json.loads(line)
+        counts[outcome] += 1
+        if outcome != "ok" and not outcome.startswith("promised"):
+            examples.setdefault(outcome, []).append((index, detail))
+        if on_result is not None:
+            on_result(index, outcome, detail)
+    if process.wait() != 0:
+        counts["harness error"] += 1
+        examples.setdefault("harness error", []).append((-1, f"the case server exited with {process.returncode}"))
+    return counts, examples
+
+
+def _serve(argv):
+    """`runner.py SEED COUNT JOBS TIMEOUT START`: run the cases here, one JSON line per outcome on stdout."""
+    seed, count, jobs, timeout, start = int(argv[0]), int(argv[1]), int(argv[2]), float(argv[3]), int(argv[4])
+    here = os.path.dirname(os.path.abspath(__file__))
+    sys.path[:0] = [here, os.path.dirname(here)]
+
+    def emit(index, outcome, detail):
+        sys.stdout.write(json.dumps([index, outcome, detail]) + "\n")
+        sys.stdout.flush()
+
+    run(seed, count, jobs=jobs, timeout=timeout, start=start, on_result=emit, fresh=False)
+
+
 def _tail(path, limit=1500):
     try:
         with open(path, "rb") as file:
@@ -230,3 +271,7 @@ def summary(counts, examples, seed):
 
 def failures(counts):
     return {outcome: n for outcome, n in counts.items() if outcome.startswith(TARGET_ZERO)}
+
+
+if __name__ == "__main__":
+    _serve(sys.argv[1:])
