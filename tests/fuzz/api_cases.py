@@ -71,9 +71,9 @@ def maybe(rng, valid, make_hostile, p=0.5):
     return make_hostile(valid, rng) if rng.random() < p else valid
 
 
-def mutate(kwargs, rng, makers):
-    """Replace one or two arguments of a valid call by hostile values (or none, VALID_FRACTION of the time)."""
-    if rng.random() < VALID_FRACTION:
+def mutate(kwargs, rng, makers, valid_fraction=VALID_FRACTION):
+    """Replace one or two arguments of a valid call by hostile values (or none, valid_fraction of the time)."""
+    if rng.random() < valid_fraction:
         return kwargs, []
     names = list(makers)
     chosen = list(rng.choice(names, size=min(len(names), int(rng.integers(1, 3))), replace=False))
@@ -370,19 +370,23 @@ def _scene_call(lm, rng):
             kwargs["uvs"] = np.vstack([kwargs["uvs"], rng.uniform(0, 1, (3, 2))]).astype(np.float32)
             if "normals" in kwargs:
                 kwargs["normals"] = np.tile(np.float32([0, 0, 1]), (9, 1))
+        # Mostly valid meshes, so the bake itself runs often enough to be tested.
         kwargs, chosen = mutate(kwargs, rng, {"positions": as_array, "triangles": as_array, "uvs": as_array,
-                                              "normals": as_array, "base_color": as_array, "receiver": as_number})
+                                              "normals": as_array, "base_color": as_array, "receiver": as_number},
+                                valid_fraction=0.6)
         notes.append(f"add_mesh {chosen}")
         try:
             scene.add_mesh(**kwargs)
         except (ValueError, TypeError, MemoryError):
             pass  # a refused mesh: the scene goes on without it
+    if rng.random() < 0.8:
+        scene.add_light("point", energy=50.0, position=(0.0, 0.0, 2.0))
     for _ in range(int(rng.integers(0, 3))):
         kind = str(rng.choice(["point", "spot", "sun", "area"]))
         params = {"energy": float(rng.uniform(1, 100)), "position": (0.0, 0.0, 2.0)}
         if kind == "sun":
             params = {"energy": 3.0, "direction": (0.1, 0.2, -1.0)}
-        if rng.random() < 0.6:
+        if rng.random() < 0.4:
             key = str(rng.choice(["energy", "color", "position", "direction", "axis_x", "matrix", "shape", "size",
                                   "size_y", "angle", "spot_size", "spot_blend", "shadow_soft_size", "bogus"]))
             params[key] = hostile.scalar(rng) if rng.random() < 0.7 else hostile.array_like(np.eye(4), rng)

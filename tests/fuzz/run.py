@@ -26,6 +26,10 @@ sys.path[:0] = [PYTHONPATH, TESTS, HERE]
 import runner  # noqa: E402
 
 
+RERUN_BLENDER = ("blender -b --factory-startup --python tests/fuzz/blender_cases.py -- . /tmp/case.jsonl "
+                 "{seed} {index} 1")
+
+
 def run_blender_cases(count, seed, timeout):
     """The add-on cases in one Blender, restarted after a case that kills it; returns (Counter, examples)."""
     import json
@@ -113,8 +117,7 @@ def main(argv=None):
     if args.blender_cases:
         clock = time.perf_counter()
         blender_counts, blender_examples = run_blender_cases(args.blender_cases, args.seed, args.timeout)
-        print("Blender add-on: " + runner.summary(blender_counts, blender_examples, args.seed)
-              .replace("tests/fuzz/run.py --seed", "tests/fuzz/blender_cases.py, seed"))
+        print("Blender add-on: " + runner.summary(blender_counts, blender_examples, args.seed, RERUN_BLENDER))
         print(f"  ({time.perf_counter() - clock:.0f} s)")
         failed.update({f"blender {k}": v for k, v in runner.failures(blender_counts).items()})
     print("FAILED: " + ", ".join(f"{v} {k}" for k, v in failed.items()) if failed else "All targets met.")

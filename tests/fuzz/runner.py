@@ -254,7 +254,10 @@ def _remove(path):
         pass
 
 
-def summary(counts, examples, seed):
+RERUN_API = "tests/fuzz/run.py --seed {seed} --only {index}"
+
+
+def summary(counts, examples, seed, rerun=RERUN_API):
     """The outcome counts as printed lines, and the failures with how to rerun one."""
     lines = [f"{sum(counts.values())} cases (seed {seed}):"]
     for outcome, number in sorted(counts.items(), key=lambda item: (item[0] != "ok", item[0])):
@@ -264,7 +267,7 @@ def summary(counts, examples, seed):
         lines.append(f"  target 0 {category}: {total}")
     for outcome, cases in sorted(examples.items()):
         for index, detail in cases[:3]:
-            lines.append(f"  - {outcome}, case {index} (rerun: tests/fuzz/run.py --seed {seed} --only {index}):")
+            lines.append(f"  - {outcome}, case {index} (rerun: {rerun.format(seed=seed, index=index)}):")
             lines.append("      " + detail.strip().replace("\n", "\n      ")[:1500])
     return "\n".join(lines)
 
