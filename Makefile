@@ -44,14 +44,16 @@ test: build
 # The native tests under AddressSanitizer + UndefinedBehaviorSanitizer. The
 # sanitized module is built into its own folder so it never replaces the
 # release one; libasan (and libstdc++, so its throw interceptor finds the
-# real __cxa_throw) must be preloaded into the (unsanitized) Python.
+# real __cxa_throw) must be preloaded into the (unsanitized) Python. A failed
+# allocation returns null as in a release build (numpy then raises
+# MemoryError) instead of aborting.
 test-asan: deps
 	cmake -S . -B $(ASAN_DIR) -DCMAKE_BUILD_TYPE=RelWithDebInfo -DLMREFINE_SANITIZE=ON \
 		-DPython_EXECUTABLE=$(PYTHON) -DLMREFINE_MODULE_DIR=$(CURDIR)/$(ASAN_DIR)/package/lmrefine
 	cmake --build $(ASAN_DIR) -j $(JOBS)
 	tar -C python --exclude="_native*.so" --exclude=__pycache__ -cf - lmrefine | tar -C $(ASAN_DIR)/package -xf -
 	ln -sfn $(CURDIR)/blend_samples $(ASAN_DIR)/blend_samples
-	LD_PRELOAD="$$($(CXX) -print-file-name=libasan.so) $$($(CXX) -print-file-name=libstdc++.so)" ASAN_OPTIONS=detect_leaks=0 \
+	LD_PRELOAD="$$($(CXX) -print-file-name=libasan.so) $$($(CXX) -print-file-name=libstdc++.so)" ASAN_OPTIONS=detect_leaks=0:allocator_may_return_null=1 \
 		UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 LMREFINE_PYTHONPATH=$(ASAN_DIR)/package \
 		$(PYTHON) -m pytest tests -q -m "not blender and not slow" -p no:cacheprovider
 

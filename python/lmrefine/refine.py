@@ -135,6 +135,8 @@ def _energy(gradient, mask, strength, directional):
 def identity_grid(resolution):
     """The undeformed (H + 1, W + 1, 2) grid: node (i, j) at u = j / W, v = 1 - i / H."""
     height, width = _resolution(resolution)
+    _native._require_memory(f"an identity grid of {height}x{width} texels", 24.0 * (height + 1) * (width + 1),
+                            "pass a smaller resolution")
     u = np.arange(width + 1) / width
     v = 1 - np.arange(height + 1) / height
     return np.stack(np.broadcast_arrays(u[None, :], v[:, None]), axis=-1).astype(np.float32)
