@@ -240,3 +240,70 @@ def test_inputs_are_never_modified_by_bad_calls():
             call()
     np.testing.assert_array_equal(uvs, before[0])
     np.testing.assert_array_equal(triangles, before[1])
+
+
+# --- found by the fuzz suite (tests/fuzz) ----------------------------------------------------
+
+_E = np.ones((4, 4), np.float32)
+_UVS = np.float32([[0, 0], [1, 0], [0, 1]])
+_TRIS = np.array([[0, 1, 2]])
+
+
+def _mesh_scene():
+    scene = lmrefine.Scene()
+    positions, triangles, uvs = floor()
+    scene.add_mesh(positions, triangles, uvs=uvs)
+    scene.add_light("point", energy=10.0, position=(0, 0, 1))
+    return scene
+
+
+@pytest.mark.parametrize("call, error, name", [
+    (lambda: lmrefine.run_automaton(_E, max_steps=1.5), TypeError, "max_steps"),
+    (lambda: lmrefine.run_automaton(_E, diffusion="0.1"), TypeError, "diffusion"),
+    (lambda: lmrefine.run_automaton(_E, coarse_to_fine="yes"), TypeError, "coarse_to_fine"),
+    (lambda: lmrefine.dwt2(_E, wavelet=5), TypeError, "wavelet"),
+    (lambda: lmrefine.dwt(_E[0], mode=None), TypeError, "mode"),
+    (lambda: lmrefine.gradient_map(_E, wavelet="\udcff"), ValueError, "wavelet"),
+    (lambda: lmrefine.check_layout(_UVS, _TRIS, 8, padding="2"), TypeError, "padding"),
+    (lambda: lmrefine.check_layout(_UVS, _TRIS, 8, failing_charts="x"), TypeError, "failing_charts"),
+    (lambda: lmrefine.LayoutChecker(_UVS, _TRIS, 8, None), TypeError, "padding"),
+    (lambda: lmrefine.write_image("x.png", _E, format=3), TypeError, "format"),
+    (lambda: lmrefine.write_image("x.png", _E, srgb="on"), TypeError, "srgb"),
+    (lambda: lmrefine.Scene().add_mesh(*floor()[:2], receiver="no"), TypeError, "receiver"),
+    (lambda: lmrefine.Scene().add_light(None, energy=1.0), TypeError, "kind"),
+    (lambda: lmrefine.bake(_mesh_scene(), 8, samples=float("inf")), TypeError, "samples"),
+    (lambda: lmrefine.bake(_mesh_scene(), 8, seed=-1), ValueError, "seed"),
+    (lambda: lmrefine.bake("scene", 8), TypeError, "scene"),
+    (lambda: lmrefine.bake(_mesh_scene(), 8, passes=3), TypeError, "passes"),
+    (lambda: lmrefine.evaluate(_mesh_scene(), np.zeros((1, 3)), np.ones((1, 3)), ao_distance=None), TypeError,
+     "ao_distance"),
+    (lambda: lmrefine.refine_uvs(_E[0], _UVS, _TRIS, 4), ValueError, "lightmap"),
+    (lambda: lmrefine.refine_uvs(_E, _UVS, _TRIS, 4, strength="1"), TypeError, "strength"),
+])
+def test_a_wrong_argument_is_named_never_a_generic_cast_error(call, error, name):
+    with pytest.raises(error, match=name) as raised:
+        call()
+    assert "incompatible function arguments" not in str(raised.value)
+    assert "Unable to cast" not in str(raised.value)
+
+
+@pytest.mark.parametrize("call, match", [
+    (lambda: lmrefine.run_automaton(_E, max_steps=2**31 - 1), "max_steps must be at most 10000"),
+    (lambda: lmrefine.run_automaton(_E, passes=10**6), "passes must be at most 64"),
+    (lambda: lmrefine.refine_uvs(_E, _UVS, _TRIS, 4, passes=2**31 - 1), r"passes must be in \[1, 64\]"),
+])
+def test_step_and_pass_counts_are_bounded_so_nothing_runs_for_days(call, match):
+    with pytest.raises(ValueError, match=match):
+        call()
+
+
+def test_identity_grid_checks_memory_before_allocating():
+    with pytest.raises(MemoryError, match="identity grid of 46341x46341 texels needs about"):
+        lmrefine.identity_grid(46341)
+
+
+def test_an_undecodable_file_name_is_written_as_its_bytes(tmp_path):
+    path = str(tmp_path) + "/x\udcff.png"  # what os.fsdecode gives for the byte 0xff
+    lmrefine.write_image(path, np.zeros((2, 2), np.float32))
+    assert os.path.exists(os.fsencode(path))
+    assert lmrefine.read_image(path).shape == (2, 2, 1)

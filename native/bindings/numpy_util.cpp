@@ -88,7 +88,24 @@ std::string string_param(const py::handle& value, const char* name) {
     if (!py::isinstance<py::str>(value)) {
         throw py::type_error(std::string(name) + " must be a str, got " + type_name(value));
     }
-    return value.cast<std::string>();
+    Py_ssize_t size = 0;
+    const char* utf8 = PyUnicode_AsUTF8AndSize(value.ptr(), &size);
+    if (utf8 == nullptr) {  // lone surrogates have no UTF-8
+        PyErr_Clear();
+        throw py::value_error(std::string(name) + " is not valid text (it holds a lone surrogate), got " +
+                              py::repr(value).cast<std::string>());
+    }
+    return std::string(utf8, size_t(size));
+}
+
+bool bool_param(const py::handle& value, const char* name) {
+    const bool is_numpy_bool = py::isinstance(value, py::module_::import("numpy").attr("bool_"));
+    if (!py::isinstance<py::bool_>(value) && !is_numpy_bool && !PyLong_Check(value.ptr())) {
+        throw py::type_error(std::string(name) + " must be a bool, got " + type_name(value));
+    }
+    const int truth = PyObject_IsTrue(value.ptr());
+    if (truth < 0) throw py::error_already_set();
+    return truth != 0;
 }
 
 std::string path_param(const py::handle& value, const char* name) {
@@ -101,7 +118,9 @@ std::string path_param(const py::handle& value, const char* name) {
     if (!py::isinstance<py::str>(path)) {
         throw py::type_error(std::string(name) + " must be a str path, got " + type_name(path));
     }
-    const std::string text = path.cast<std::string>();
+    // The file system's bytes, as Python's own open() makes them (undecodable
+    // bytes come back from their surrogate escapes).
+    const std::string text = py::module_::import("os").attr("fsencode")(path).cast<std::string>();
     if (text.find('\0') != std::string::npos) {
         throw py::value_error(std::string(name) + " contains a NUL character; a file name cannot hold one");
     }

@@ -61,6 +61,8 @@ int64_t int_param(const py::handle& value, const char* name, int64_t min, int64_
 double real_param(const py::handle& value, const char* name);
 // A str.
 std::string string_param(const py::handle& value, const char* name);
+// A flag: bool, numpy.bool_ or an int (its truth).
+bool bool_param(const py::handle& value, const char* name);
 // A file path: str or os.PathLike; NUL characters are rejected (the C
 // library would cut the name at the first one).
 std::string path_param(const py::handle& value, const char* name);

@@ -32,8 +32,12 @@ py::object read(const py::object& path) {
     return py_util::to_numpy(std::move(image.pixels), {image.height, image.width, image.channels});
 }
 
-void write(const py::object& path, const py::handle& array, const std::optional<std::string>& format,
-           std::optional<bool> srgb) {
+void write(const py::object& path, const py::handle& array, const py::handle& format_in,
+           const py::handle& srgb_in) {
+    std::optional<std::string> format;
+    if (!format_in.is_none()) format = py_util::string_param(format_in, "format");
+    std::optional<bool> srgb;
+    if (!srgb_in.is_none()) srgb = py_util::bool_param(srgb_in, "srgb");
     const std::string file = py_util::path_param(path, "path");
     auto pixels = py_util::require_float32(array, "array", {2, 3});
     WriteOptions options;

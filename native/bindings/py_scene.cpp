@@ -43,7 +43,8 @@ AreaShape parse_shape(const std::string& shape) {
 }
 
 int add_mesh(Scene& scene, const py::handle& positions_in, const py::handle& triangles_in, const py::handle& uvs_in,
-             const py::handle& normals_in, const py::handle& base_color_in, bool receiver) {
+             const py::handle& normals_in, const py::handle& base_color_in, const py::handle& receiver_in) {
+    const bool receiver = py_util::bool_param(receiver_in, "receiver");
     auto positions = py_util::require_points(positions_in, "positions", 3);
     auto triangles = py_util::require_indices(triangles_in, "triangles", 3);
     MeshInput in;
@@ -77,7 +78,8 @@ int add_mesh(Scene& scene, const py::handle& positions_in, const py::handle& tri
     return scene.add_mesh(in);
 }
 
-int add_light(Scene& scene, const std::string& kind, const py::kwargs& params) {
+int add_light(Scene& scene, const py::handle& kind_in, const py::kwargs& params) {
+    const std::string kind = py_util::string_param(kind_in, "kind");
     Light light;
     if (kind == "point") light.kind = LightKind::Point;
     else if (kind == "spot") light.kind = LightKind::Spot;
@@ -136,7 +138,7 @@ World space, transforms applied. Receivers get a lightmap; occluders
         .def(py::init<>())
         .def("add_mesh", &add_mesh, py::arg("positions"), py::arg("triangles"), py::arg("uvs") = py::none(),
              py::arg("normals") = py::none(), py::arg("base_color") = py::make_tuple(0.8, 0.8, 0.8),
-             py::arg("receiver") = true,
+             py::arg("receiver") = py::bool_(true),
              R"doc(Add a triangle mesh; returns its id (0, 1, ...).
 
 Args:

@@ -15,6 +15,8 @@ the child dies. Outcomes:
     hang                    the child outlived the timeout and was killed
     other exception <type>  raised anything else
     invalid layout          refine_uvs returned a layout worse than its input
+    unclear message <type>  a promised exception with an empty message or pybind11's
+                            generic wording, which names no argument
     input modified          an argument's contents changed
     harness error           the case itself could not be built (a bug in the suite)
 """
@@ -22,6 +24,7 @@ the child dies. Outcomes:
 import faulthandler
 import json
 import os
+import re
 import select
 import signal
 import sys
@@ -34,7 +37,10 @@ import numpy as np
 
 PROMISED = ("ValueError", "TypeError", "OSError", "MemoryError", "CancelledError")
 TARGET_ZERO = ("crash", "hang", "other exception", "invalid layout", "input modified", "scene modified",
-               "good object not refined", "harness error")
+               "good object not refined", "unclear message", "harness error")
+# pybind11's own wording for a failed cast: it names no argument (the bindings read arguments with
+# py_util's readers, which do).
+UNCLEAR = re.compile(r"incompatible function arguments|Unable to cast|cannot create a pybind11")
 
 
 def _snapshot(value, depth=0):
@@ -91,6 +97,8 @@ def run_case(lm, seed, index):
         outcome = "promised CancelledError"
     except (ValueError, TypeError, OSError, MemoryError) as error:
         outcome, detail = f"promised {type(error).__name__}", f"{case.description}: {error}"
+        if UNCLEAR.search(str(error)) or not str(error).strip():
+            outcome = f"unclear message {type(error).__name__}"
     except Exception as error:  # noqa: BLE001
         outcome = f"other exception {type(error).__name__}"
         detail = f"{case.description}: {traceback.format_exc(limit=6)}"
