@@ -12,7 +12,7 @@ DEBIAN_PACKAGES := cmake g++ make pkg-config pybind11-dev libembree-dev \
 	libopenimageio-dev libglm-dev python3-dev python3-numpy python3-pytest \
 	python3-pywt python3-matplotlib blender
 
-.PHONY: all deps build install test test-asan bench demo evaluate samples sample-lightmap addon-zip clean
+.PHONY: all deps build install test test-asan fuzz bench demo evaluate samples sample-lightmap addon-zip clean
 
 all: build
 
@@ -44,16 +44,29 @@ test: build
 # The native tests under AddressSanitizer + UndefinedBehaviorSanitizer. The
 # sanitized module is built into its own folder so it never replaces the
 # release one; libasan (and libstdc++, so its throw interceptor finds the
-# real __cxa_throw) must be preloaded into the (unsanitized) Python.
+# real __cxa_throw) must be preloaded into the (unsanitized) Python. A failed
+# allocation returns null as in a release build (numpy then raises
+# MemoryError) instead of aborting.
 test-asan: deps
 	cmake -S . -B $(ASAN_DIR) -DCMAKE_BUILD_TYPE=RelWithDebInfo -DLMREFINE_SANITIZE=ON \
 		-DPython_EXECUTABLE=$(PYTHON) -DLMREFINE_MODULE_DIR=$(CURDIR)/$(ASAN_DIR)/package/lmrefine
 	cmake --build $(ASAN_DIR) -j $(JOBS)
 	tar -C python --exclude="_native*.so" --exclude=__pycache__ -cf - lmrefine | tar -C $(ASAN_DIR)/package -xf -
 	ln -sfn $(CURDIR)/blend_samples $(ASAN_DIR)/blend_samples
-	LD_PRELOAD="$$($(CXX) -print-file-name=libasan.so) $$($(CXX) -print-file-name=libstdc++.so)" ASAN_OPTIONS=detect_leaks=0 \
+	LD_PRELOAD="$$($(CXX) -print-file-name=libasan.so) $$($(CXX) -print-file-name=libstdc++.so)" ASAN_OPTIONS=detect_leaks=0:allocator_may_return_null=1 \
 		UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 LMREFINE_PYTHONPATH=$(ASAN_DIR)/package \
 		$(PYTHON) -m pytest tests -q -m "not blender and not slow" -p no:cacheprovider
+
+# The fuzz suite (tests/fuzz, docs/robustness.md): FUZZ_CASES hostile calls of
+# the Python API, each in a forked child with a timeout, then FUZZ_BLENDER_CASES
+# runs of the add-on's operator on broken meshes in one headless Blender.
+# Prints the outcome counts; fails on any crash, hang, unpromised exception,
+# invalid layout or modified input. FUZZ_SEED=n repeats a run.
+FUZZ_CASES         ?= 10000
+FUZZ_BLENDER_CASES ?= 300
+fuzz: build
+	$(PYTHON) tests/fuzz/run.py --cases $(FUZZ_CASES) --blender-cases $(FUZZ_BLENDER_CASES) \
+		$(if $(FUZZ_SEED),--seed $(FUZZ_SEED))
 
 bench: build
 	PYTHONPATH=python $(PYTHON) bench/run.py

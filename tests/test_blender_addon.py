@@ -74,10 +74,9 @@ ERRORS = {
     "error_no_uv_layer": "'Bare' has no UV map",
     "error_missing_source_layer": "has no UV map 'NoSuchMap'",
     "error_edit_mode": "works in Object Mode, not Edit Mesh",
-    "error_zero_area_faces": "1 faces of zero area",
+    "error_only_bad_objects": "'Flat' has no area in 3-D",
     "error_linked_library": "is linked from",
     "error_hidden_object": "'Floor' is hidden",
-    "error_shared_mesh": "share mesh 'FloorMesh'",
     "error_image_not_found": "No lightmap image found for 'Floor'",
     "error_image_file_missing": "has no pixels",
     "error_image_wrong_size": "is 16x16 but Resolution is 64",
@@ -92,6 +91,41 @@ def test_error_is_reported_and_changes_nothing(facts, name):
     value = fact(facts, name)
     assert value["outcome"] == "CANCELLED"
     assert value["message"] is not None and ERRORS[name] in value["message"]
+    assert value["changed"] == []
+
+
+def test_bad_objects_are_skipped_with_their_fix_and_the_others_refined(facts):
+    value = fact(facts, "skip_bad_objects_refines_the_others")
+    assert value["error"] is None and value["objects"] == ["Floor"]
+    skipped = value["skipped"]
+    assert len(skipped) == 4
+    for name, advice in (("FloorTwin", "share mesh 'FloorMesh'"), ("Bare", "has no UV map"),
+                         ("Flat", "has no area in 3-D"), ("Broken", "1 vertices at NaN, Inf or beyond 1e9")):
+        assert any(f"'{name}'" in w and advice in w for w in skipped), (name, skipped)
+    # The broken mesh is left out of the bake as an occluder too (the baker refuses NaN), and says so.
+    assert any(w.startswith("'Broken' casts no shadow in the bake") for w in value["warnings"])
+    # Only the floor (its mesh, its material's preview) and the new images changed; the skipped meshes did not.
+    assert value["changed"] == ["images", "material:FloorMaterial", "mesh:FloorMesh"]
+    assert value["operator"] == "FINISHED", value["message"]
+
+
+def test_zero_area_faces_are_skipped_and_counted(facts):
+    value = fact(facts, "zero_area_faces_are_skipped_and_counted")
+    assert value["error"] is None and value["objects"] == ["Sliver"] and value["refined"]
+    assert any("1 triangles of zero area in 3-D were skipped" in w for w in value["warnings"])
+
+
+def test_a_core_refusal_skips_only_that_object(facts):
+    value = fact(facts, "core_refusal_skips_the_object")
+    assert value["error"] is None and value["objects"] == ["Floor"] and value["floor_refined"]
+    assert len(value["skipped"]) == 1 and "'Blocker' could not be refined: uvs: refused" in value["skipped"][0]
+    assert value["box_unchanged"]
+
+
+def test_a_late_core_failure_leaves_the_scene_unchanged(facts):
+    value = fact(facts, "core_failure_late_leaves_the_scene_unchanged")
+    assert value["calls"] == 2 and value["outcome"] == "CANCELLED"
+    assert "RuntimeError: baker failed for the test" in value["message"]
     assert value["changed"] == []
 
 

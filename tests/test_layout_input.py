@@ -41,15 +41,23 @@ def test_weld_names_a_bad_argument():
         layout_input.weld_uvs(np.zeros((4, 3)), np.zeros(4, int))
 
 
-def test_zero_area_counts_faces_and_uv_triangles_below_a_millionth_of_a_texel():
+def test_geometry_problems_counts_flat_triangles_zero_uv_triangles_and_broken_vertices():
+    positions = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0],    # a real triangle
+                          [2, 0, 0], [3, 0, 0], [4, 0, 0],    # collinear: zero area in 3-D
+                          [np.nan, 0, 0], [0, 2e9, 0]], float)
     uvs = np.array([[0, 0], [1, 0], [0, 1],              # half the map
                     [0, 0], [1e-3, 0], [0, 1e-3],         # 0.5e-6 of the map: 0.033 texels at 256
                     [0, 0], [1e-6, 0], [0, 1e-6]],        # 0.5e-12: 3e-8 texels
                    np.float32)
     triangles = np.arange(9).reshape(3, 3)
-    assert layout_input.zero_area_counts([1.0, 0.0, 2.0, -0.0], uvs, triangles, 256) == (2, 1)
+    # Corners 6..8 put the tiny UV triangle on the real 3-D triangle: it has no texel of its own.
+    corner_vertex = np.array([0, 1, 2, 3, 4, 5, 0, 1, 2])
+    assert layout_input.geometry_problems(positions, corner_vertex, uvs, triangles, 256) == (1, 1, 2)
+    # The same tiny UV triangle on the collinear corners needs no texels: only counted as flat.
+    corner_vertex = np.array([0, 1, 2, 0, 1, 2, 3, 4, 5])
+    assert layout_input.geometry_problems(positions, corner_vertex, uvs, triangles, 256) == (1, 0, 2)
     # At 64 texels the second triangle is 0.002 texels: still not zero.
-    assert layout_input.zero_area_counts([1.0], uvs, triangles, 64) == (0, 1)
+    assert layout_input.geometry_problems(positions[:3], corner_vertex[:6] % 3, uvs[:6], triangles[:2], 64) == (0, 0, 0)
 
 
 def test_describe_problems_in_words():

@@ -347,7 +347,9 @@ def test_random_layouts_scales_and_settings_stay_valid(seed):
         return
     check = lmrefine.check_layout(out, tris, resolution, padding)
     before = lmrefine.check_layout(uvs, tris, resolution, padding)
-    assert check["overlapping"] == 0 and check["out_of_bounds"] == 0
-    assert check["min_gutter_texels"] >= padding
+    # charts move rigidly: overlaps inside a chart (folds, stacked faces) stay, none is added between charts
+    assert check["overlapping"] <= before["overlapping"] and check["out_of_bounds"] == 0
+    if before["overlapping"] == 0:
+        assert check["min_gutter_texels"] >= padding
     assert check["degenerate"] <= before["degenerate"]
     np.testing.assert_allclose(report["chart_scales"], report["global_scale"] * scales)

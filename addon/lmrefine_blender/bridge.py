@@ -105,12 +105,18 @@ def write_uv_layer(mesh, uv_name, uvs):
     return layer
 
 
-def degenerate_counts(mesh, layout, resolution):
-    """(faces with zero 3-D area, triangles with zero UV area at `resolution`)."""
-    from lmrefine.layout_input import zero_area_counts
-    areas = np.empty(len(mesh.polygons), dtype=np.float32)
-    mesh.polygons.foreach_get("area", areas)
-    return zero_area_counts(areas, layout.uvs, layout.triangles, resolution)
+def geometry_problems(obj, layout, resolution):
+    """lmrefine.layout_input.geometry_problems of `obj` (world space, as baked)."""
+    from lmrefine.layout_input import geometry_problems
+    mesh = obj.data
+    positions = np.empty(len(mesh.vertices) * 3, dtype=np.float64)
+    mesh.vertices.foreach_get("co", positions)
+    matrix = np.array(obj.matrix_world, dtype=np.float64)
+    with np.errstate(all="ignore"):
+        world = positions.reshape(-1, 3) @ matrix[:3, :3].T + matrix[:3, 3]
+    corner_vertex = np.empty(len(mesh.loops), dtype=np.int32)
+    mesh.loops.foreach_get("vertex_index", corner_vertex)
+    return geometry_problems(world, corner_vertex, layout.uvs, layout.triangles, resolution)
 
 
 # ----------------------------------------------------------------- geometry
@@ -191,17 +197,42 @@ def export_mesh(obj_eval, matrix_world, uv_name=None, name=None):
         obj_eval.to_mesh_clear()
 
 
+def evaluated_problem(depsgraph, obj, uv_name):
+    """What keeps `obj`, as its modifiers and transform make it, from being
+    baked (a message naming the fix), or None. The bake exports the same."""
+    from lmrefine.layout_input import MAX_COORDINATE
+    obj_eval = obj.evaluated_get(depsgraph)
+    try:
+        export = export_mesh(obj_eval, obj_eval.matrix_world, uv_name=uv_name, name=obj.name)
+    except UserError as error:
+        return str(error)
+    if export is None:
+        return (f"'{obj.name}' has no faces after its modifiers and transform: disable the modifier that removes "
+                "them, or give the object a non-zero scale")
+    if not (np.abs(export.positions) <= MAX_COORDINATE).all():
+        return (f"'{obj.name}' has vertices at NaN, Inf or beyond 1e9 units after its modifiers and transform: "
+                "disable the modifier that puts them there, or check the object's scale")
+    if not np.isfinite(export.uvs).all():
+        return (f"'{obj.name}' has NaN or Inf UVs in '{uv_name}' after its modifiers: disable the modifier that "
+                "makes them, or re-unwrap")
+    return None
+
+
 def renders(obj):
     """Whether a (non-instanced) object takes part in a bake: visible and enabled for render."""
     return obj.visible_get() and not obj.hide_render
 
 
-def export_scene(context, receivers, uv_name_of):
+def export_scene(context, receivers, uv_name_of, left_out=None):
     """Receivers (with the UV map `uv_name_of[obj.name]`) and occluders of the scene.
 
     Returns (receiver exports in `receivers` order, occluder exports): every
     other visible, render-enabled geometry, instances included, casts shadows.
+    An occluder with a vertex at NaN, Inf or beyond 1e9 units (which the baker
+    refuses) is left out and its name appended to `left_out`; a receiver
+    like that is a UserError.
     """
+    from lmrefine.layout_input import MAX_COORDINATE
     depsgraph = context.evaluated_depsgraph_get()
     receiver_names = {obj.name for obj in receivers}
     by_name = {}
@@ -217,6 +248,9 @@ def export_scene(context, receivers, uv_name_of):
             if export is None:
                 raise UserError(f"'{original.name}' has no faces after its modifiers and transform: disable "
                                 "the modifier that removes them, or give the object a non-zero scale")
+            if not (np.abs(export.positions) <= MAX_COORDINATE).all():
+                raise UserError(f"'{original.name}' has vertices at NaN, Inf or beyond 1e9 units after its "
+                                "modifiers and transform: disable the modifier that puts them there")
             by_name[original.name] = export
             continue
         if instance.is_instance:
@@ -225,8 +259,13 @@ def export_scene(context, receivers, uv_name_of):
         elif not renders(original):
             continue
         export = export_mesh(obj_eval, instance.matrix_world, name=original.name)
-        if export is not None:
-            occluders.append(export)
+        if export is None:
+            continue
+        if not (np.abs(export.positions) <= MAX_COORDINATE).all():
+            if left_out is not None and original.name not in left_out:
+                left_out.append(original.name)
+            continue
+        occluders.append(export)
     missing = receiver_names - by_name.keys()
     if missing:
         raise UserError(f"objects {sorted(missing)} are not in the evaluated scene: make them visible in "

@@ -51,6 +51,7 @@ class Target:
     refined: str
     layout: bridge.Layout
     image: object = None  # first lightmap, when it comes from an existing image
+    zero_area: int = 0  # triangles of zero area in 3-D: they need no texels, the baker skips them
 
 
 @dataclass
@@ -132,53 +133,85 @@ def validate(context, objects, options):
         raise UserError("No bake pass chosen: enable at least one of Direct, Indirect, Combined, AO")
     resolution = options["resolution"]
     owners = {}
-    targets = []
+    targets = Targets()
+    depsgraph = context.evaluated_depsgraph_get()
+    # Bad geometry in one object skips it (reported, with its fix); the
+    # others are refined. Only when every object is skipped does the run stop.
     for obj in meshes:
-        mesh = obj.data
-        if obj.library is not None or mesh.library is not None:
-            library = (obj.library or mesh.library).filepath
-            raise UserError(f"'{obj.name}' is linked from {library}: make it local (Object > Relations > "
-                            "Make Local > Selected Objects and Data) to change its UV maps")
-        if not obj.visible_get():
-            raise UserError(f"'{obj.name}' is hidden: show it (Object > Show/Hide, or its collection), since "
-                            "both bakers only see visible objects")
-        if mesh.name in owners:
-            raise UserError(f"'{owners[mesh.name]}' and '{obj.name}' share mesh '{mesh.name}': UV maps belong "
-                            "to the mesh, so select only one of them")
-        owners[mesh.name] = obj.name
-        if len(mesh.uv_layers) == 0:
-            raise UserError(f"'{obj.name}' has no UV map: add one for the lightmap (Object Data > UV Maps > +, "
-                            "then UV > Lightmap Pack)")
-        source = options["source_layer"] or bridge.default_source_layer(mesh)
-        if source is None:
-            raise UserError(f"'{obj.name}' has only refined UV maps: set Source UV Map to the one to refine")
-        if source not in mesh.uv_layers:
-            available = ", ".join(layer.name for layer in mesh.uv_layers)
-            raise UserError(f"'{obj.name}' has no UV map '{source}' (it has: {available}): pick the lightmap "
-                            "UV map in the panel")
-        refined = source + REFINED_SUFFIX
-        if refined not in mesh.uv_layers and len(mesh.uv_layers) >= 8:
-            raise UserError(f"'{obj.name}' already has 8 UV maps, Blender's limit: remove one to make room "
-                            f"for '{refined}'")
-        layout = bridge.read_layout(mesh, source)
-        if len(layout.triangles) == 0:
-            raise UserError(f"'{obj.name}' has no faces: nothing to lightmap")
-        outside = int(np.count_nonzero(((layout.uvs < 0.0) | (layout.uvs > 1.0)).any(axis=1)))
-        if outside:
-            raise UserError(f"UV map '{source}' of '{obj.name}' has {outside} UVs outside [0, 1]; a lightmap "
-                            "layout must lie inside the unit square: repack it (UV > Lightmap Pack or Pack Islands)")
-        zero_3d, zero_uv = bridge.degenerate_counts(mesh, layout, resolution)
-        if zero_3d:
-            raise UserError(f"'{obj.name}' has {zero_3d} faces of zero area: remove them (Edit Mode > Mesh > "
-                            "Clean Up > Degenerate Dissolve), then run again")
-        if zero_uv:
-            raise UserError(f"'{obj.name}' has {zero_uv} triangles of zero area in UV map '{source}': "
-                            "re-unwrap it (UV > Lightmap Pack) so every face has its own texels")
-        target = Target(obj, source, refined, layout)
-        if options["first_lightmap"] == 'IMAGE':
-            target.image = _first_image(obj, source, options)
-        targets.append(target)
+        try:
+            targets.append(_validate_object(obj, options, owners, resolution, depsgraph))
+        except UserError as error:
+            targets.skipped.append(str(error))
+    if not targets:
+        raise UserError(" ".join(targets.skipped))
     return targets
+
+
+class Targets(list):
+    """The objects to refine, plus why the others were skipped (one message each)."""
+
+    def __init__(self):
+        super().__init__()
+        self.skipped = []
+
+
+def _validate_object(obj, options, owners, resolution, depsgraph):
+    """The Target for one mesh object, or a UserError naming its problem and fix."""
+    mesh = obj.data
+    if obj.library is not None or mesh.library is not None:
+        library = (obj.library or mesh.library).filepath
+        raise UserError(f"'{obj.name}' is linked from {library}: make it local (Object > Relations > "
+                        "Make Local > Selected Objects and Data) to change its UV maps")
+    if not obj.visible_get():
+        raise UserError(f"'{obj.name}' is hidden: show it (Object > Show/Hide, or its collection), since "
+                        "both bakers only see visible objects")
+    if mesh.name in owners:
+        raise UserError(f"'{owners[mesh.name]}' and '{obj.name}' share mesh '{mesh.name}': UV maps belong "
+                        "to the mesh, so select only one of them")
+    owners[mesh.name] = obj.name
+    if len(mesh.uv_layers) == 0:
+        raise UserError(f"'{obj.name}' has no UV map: add one for the lightmap (Object Data > UV Maps > +, "
+                        "then UV > Lightmap Pack)")
+    source = options["source_layer"] or bridge.default_source_layer(mesh)
+    if source is None:
+        raise UserError(f"'{obj.name}' has only refined UV maps: set Source UV Map to the one to refine")
+    if source not in mesh.uv_layers:
+        available = ", ".join(layer.name for layer in mesh.uv_layers)
+        raise UserError(f"'{obj.name}' has no UV map '{source}' (it has: {available}): pick the lightmap "
+                        "UV map in the panel")
+    refined = source + REFINED_SUFFIX
+    if refined not in mesh.uv_layers and len(mesh.uv_layers) >= 8:
+        raise UserError(f"'{obj.name}' already has 8 UV maps, Blender's limit: remove one to make room "
+                        f"for '{refined}'")
+    layout = bridge.read_layout(mesh, source)
+    if len(layout.triangles) == 0:
+        raise UserError(f"'{obj.name}' has no faces: nothing to lightmap")
+    not_finite = int(np.count_nonzero(~np.isfinite(layout.uvs).all(axis=1)))
+    if not_finite:
+        raise UserError(f"UV map '{source}' of '{obj.name}' has {not_finite} UVs that are NaN or Inf: re-unwrap it "
+                        "(UV > Lightmap Pack)")
+    outside = int(np.count_nonzero(((layout.uvs < 0.0) | (layout.uvs > 1.0)).any(axis=1)))
+    if outside:
+        raise UserError(f"UV map '{source}' of '{obj.name}' has {outside} UVs outside [0, 1]; a lightmap "
+                        "layout must lie inside the unit square: repack it (UV > Lightmap Pack or Pack Islands)")
+    zero_3d, zero_uv, bad_vertices = bridge.geometry_problems(obj, layout, resolution)
+    if bad_vertices:
+        raise UserError(f"'{obj.name}' has {bad_vertices} vertices at NaN, Inf or beyond 1e9 units in world "
+                        "space: fix or delete them (Edit Mode > Select > Select All by Trait), or check the "
+                        "object's transform, then run again")
+    if zero_3d == len(layout.triangles):
+        raise UserError(f"'{obj.name}' has no area in 3-D (zero scale, or only degenerate faces): give it a "
+                        "non-zero scale or real faces")
+    if zero_uv:
+        raise UserError(f"'{obj.name}' has {zero_uv} triangles of zero area in UV map '{source}': "
+                        "re-unwrap it (UV > Lightmap Pack) so every face has its own texels")
+    problem = bridge.evaluated_problem(depsgraph, obj, source)
+    if problem:
+        raise UserError(problem)
+    target = Target(obj, source, refined, layout, zero_area=zero_3d)
+    if options["first_lightmap"] == 'IMAGE':
+        target.image = _first_image(obj, source, options)
+    return target
 
 
 def _first_image(obj, source, options):
@@ -214,6 +247,12 @@ def run(context, targets, options, journal, image_dir=None):
     from lmrefine.backoff import failures
     from lmrefine.layout_input import describe_problems
     outcome = Outcome(objects=[t.obj.name for t in targets])
+    outcome.warnings += [f"Skipped: {message}" for message in getattr(targets, "skipped", [])]
+    for target in targets:
+        if target.zero_area:
+            outcome.warnings.append(f"'{target.obj.name}': {target.zero_area} triangles of zero area in 3-D "
+                                    "were skipped (they need no texels); Mesh > Clean Up > Degenerate "
+                                    "Dissolve removes them")
     resolution = options["resolution"]
     padding = options["padding"]
     backend_first = options["first_lightmap"]
@@ -230,7 +269,7 @@ def run(context, targets, options, journal, image_dir=None):
         passes = (options["driving_pass"],)
         if backend_first == 'EMBREE':
             baked = yield from _bake_embree(context, lmrefine, targets, source_of, passes, options, "First bake",
-                                            done * span, span)
+                                            done * span, span, outcome.warnings)
         else:
             baked = yield from _bake_cycles(context, targets, source_of, passes, options, "First bake",
                                             done * span, span)
@@ -246,15 +285,24 @@ def run(context, targets, options, journal, image_dir=None):
     # 2. Refine every layout (native, off the main thread), check it, write it.
     clock = time.perf_counter()
     refined_uvs = {}
-    for target in targets:
+    for target in list(targets):
         name = target.obj.name
         layout = target.layout
-        result = yield NativeWork(
-            f"Refining {name}",
-            lambda progress, lightmap=lightmaps[name], layout=layout: lmrefine.refine_uvs(
-                lightmap, layout.uvs, layout.triangles, resolution, padding=padding, progress=progress,
-                **options["refine_options"]),
-            done * span, span)
+        try:
+            result = yield NativeWork(
+                f"Refining {name}",
+                lambda progress, lightmap=lightmaps[name], layout=layout: lmrefine.refine_uvs(
+                    lightmap, layout.uvs, layout.triangles, resolution, padding=padding, progress=progress,
+                    **options["refine_options"]),
+                done * span, span)
+        except (ValueError, TypeError, MemoryError) as error:
+            # The core refused this object's input: skip it, refine the others
+            # (nothing of it was written yet).
+            outcome.warnings.append(f"Skipped: '{name}' could not be refined: {error}")
+            targets = [t for t in targets if t is not target]
+            outcome.objects.remove(name)
+            done += 1
+            continue
         done += 1
         # An independent check of the promise refine_uvs makes: never worse than the source layout.
         source_check = lmrefine.check_layout(layout.uvs, layout.triangles, resolution, padding=padding)
@@ -275,6 +323,8 @@ def run(context, targets, options, journal, image_dir=None):
         report["source_check_layout"] = dict(source_check)
         outcome.reports[name] = _plain(report)
         refined_uvs[name] = result.uvs
+    if not targets:
+        raise UserError(" ".join(w for w in outcome.warnings if w.startswith("Skipped: ")))
     for target in targets:
         _write_refined_layer(target, refined_uvs[target.obj.name], journal)
     outcome.timings["refine"] = time.perf_counter() - clock
@@ -285,7 +335,7 @@ def run(context, targets, options, journal, image_dir=None):
     passes = tuple(options["bake_passes"])
     if options["backend"] == 'EMBREE':
         baked = yield from _bake_embree(context, lmrefine, targets, refined_of, passes, options, "Second bake",
-                                        done * span, span)
+                                        done * span, span, outcome.warnings)
     else:
         baked = yield from _bake_cycles(context, targets, refined_of, passes, options, "Second bake",
                                         done * span, span)
@@ -321,9 +371,16 @@ def _plain(value):
     return value
 
 
-def _bake_embree(context, lmrefine, targets, uv_name_of, passes, options, label, start, span):
-    """Bake `passes` with lmrefine's baker; returns {pass: {object name: (R, R, 4) float32}}."""
-    receivers, occluders = bridge.export_scene(context, [t.obj for t in targets], uv_name_of)
+def _bake_embree(context, lmrefine, targets, uv_name_of, passes, options, label, start, span, warnings):
+    """Bake `passes` with lmrefine's baker; returns {pass: {object name: (R, R, 4) float32}}.
+    Occluders left out of the bake are named in `warnings` (once)."""
+    left_out = []
+    receivers, occluders = bridge.export_scene(context, [t.obj for t in targets], uv_name_of, left_out)
+    for name in left_out:
+        warning = (f"'{name}' casts no shadow in the bake: it has vertices at NaN, Inf or beyond 1e9 units; "
+                   "fix or delete them (Edit Mode > Select > Select All by Trait), or check its transform")
+        if warning not in warnings:
+            warnings.append(warning)
     scene = lmrefine.Scene()
     ids = {}
     for export in receivers:
@@ -446,12 +503,15 @@ def run_blocking(job, progress=None, should_stop=None):
     `progress(fraction, label)` is told the overall progress; `should_stop()`
     returning True cancels the running native call (lmrefine.CancelledError).
     """
-    value = None
+    value, error = None, None
     while True:
         try:
-            work = job.send(value)
+            # A failed native call goes back into the job, which may skip the
+            # object it was for; whatever the job does not handle comes out here.
+            work = job.throw(error) if error is not None else job.send(value)
         except StopIteration as stop:
             return stop.value
+        error = None
         if progress is not None:
             progress(work.start, work.label)
         if work.call is None:
@@ -460,7 +520,10 @@ def run_blocking(job, progress=None, should_stop=None):
                 raise Cancelled()
             value = None
         else:
-            value = work.call(_progress_callback(work, progress, should_stop or (lambda: False)))
+            try:
+                value = work.call(_progress_callback(work, progress, should_stop or (lambda: False)))
+            except Exception as failure:  # noqa: BLE001  (handed to the job, re-raised if it does not handle it)
+                value, error = None, failure
 
 
 def _progress_callback(work, report, should_stop):

@@ -2,7 +2,11 @@
 // re-exports it. One bind_* function per concept, each in py_<concept>.cpp.
 #include <pybind11/pybind11.h>
 
+#include <algorithm>
+#include <string>
+
 #include "lmrefine/core/error.h"
+#include "lmrefine/core/memory.h"
 
 namespace py = pybind11;
 
@@ -39,6 +43,11 @@ PYBIND11_MODULE(_native, m) {
             PyErr_SetString(PyExc_MemoryError, e.what());
         } catch (const lmrefine::Error& e) {
             PyErr_SetString(PyExc_RuntimeError, e.what());
+        } catch (const py::cast_error& e) {
+            // A safety net: arguments are read through py_util's checked
+            // readers, which name the argument; a cast that slips past them
+            // is still a wrong type, not a runtime failure.
+            PyErr_SetString(PyExc_TypeError, e.what());
         }
     });
 
@@ -53,4 +62,13 @@ PYBIND11_MODULE(_native, m) {
     lmrefine::bindings::bind_gradient_map(m);
     lmrefine::bindings::bind_scene(m);
     lmrefine::bindings::bind_baker(m);
+
+    // The memory rule of the native core, for the allocations the Python
+    // half makes itself (MemoryError before allocating, with the same words).
+    m.def(
+        "_require_memory",
+        [](const std::string& what, double bytes, const std::string& advice) {
+            lmrefine::require_memory(what, uint64_t(std::max(0.0, std::min(bytes, 1.8e19))), advice);
+        },
+        py::arg("what"), py::arg("bytes"), py::arg("advice"));
 }

@@ -1,7 +1,11 @@
 #include "numpy_util.h"
 
 #include <algorithm>
+#include <cmath>
 #include <limits>
+
+#include "lmrefine/core/error.h"
+#include "lmrefine/core/memory.h"
 
 namespace lmrefine::py_util {
 
@@ -17,6 +21,111 @@ std::string shape_string(const py::array& array) {
 
 std::string dtype_name(const py::array& array) {
     return py::str(array.dtype()).cast<std::string>();
+}
+
+namespace {
+
+std::string type_name(const py::handle& object) {
+    return py::str(py::type::of(object).attr("__name__")).cast<std::string>();
+}
+
+}  // namespace
+
+py::array contiguous_array(const py::handle& object, const char* name, const py::dtype& dtype) {
+    if (py::isinstance<py::array>(object)) {
+        auto array = py::reinterpret_borrow<py::array>(object);
+        const bool as_is = array.dtype().equal(dtype) && (array.flags() & py::array::c_style);
+        if (as_is) return array;
+        require_memory(std::string("a contiguous ") + py::str(py::handle(dtype)).cast<std::string>() + " copy of " + name +
+                           " " + shape_string(array),
+                       saturating_product({uint64_t(array.size()), uint64_t(dtype.itemsize())}),
+                       std::string("pass a smaller ") + name);
+    }
+    try {
+        return py::module_::import("numpy").attr("ascontiguousarray")(object, dtype);
+    } catch (py::error_already_set& e) {
+        const std::string message = std::string(name) + " cannot be converted to a " +
+                                    py::str(py::handle(dtype)).cast<std::string>() + " array: " + e.what();
+        if (e.matches(PyExc_MemoryError)) throw ResourceError(message);
+        throw py::value_error(message);
+    }
+}
+
+int64_t int_param(const py::handle& value, const char* name, int64_t min, int64_t max) {
+    if (py::isinstance<py::bool_>(value) || !PyIndex_Check(value.ptr())) {
+        throw py::type_error(std::string(name) + " must be an int, got " + type_name(value));
+    }
+    py::object index = py::reinterpret_steal<py::object>(PyNumber_Index(value.ptr()));
+    if (!index) throw py::error_already_set();
+    int overflow = 0;
+    const long long n = PyLong_AsLongLongAndOverflow(index.ptr(), &overflow);
+    if (overflow < 0 || (overflow == 0 && n < min)) {
+        throw py::value_error(std::string(name) + (min == 1 ? " must be positive" : " must be >= " + std::to_string(min)) +
+                              ", got " + py::str(index).cast<std::string>());
+    }
+    if (overflow > 0 || n > max) {
+        throw py::value_error(std::string(name) + " must be at most " + std::to_string(max) + ", got " +
+                              py::str(index).cast<std::string>());
+    }
+    return n;
+}
+
+double real_param(const py::handle& value, const char* name) {
+    if (py::isinstance<py::bool_>(value) || py::isinstance<py::str>(value) || !PyNumber_Check(value.ptr()) ||
+        (py::isinstance<py::array>(value) && py::reinterpret_borrow<py::array>(value).ndim() != 0)) {
+        throw py::type_error(std::string(name) + " must be a number, got " + type_name(value));
+    }
+    const double x = PyFloat_AsDouble(value.ptr());
+    if (x == -1.0 && PyErr_Occurred()) {
+        PyErr_Clear();
+        throw py::type_error(std::string(name) + " must be a real number, got " + type_name(value));
+    }
+    if (!std::isfinite(x)) throw py::value_error(std::string(name) + " must be finite, got " + std::to_string(x));
+    return x;
+}
+
+std::string string_param(const py::handle& value, const char* name) {
+    if (!py::isinstance<py::str>(value)) {
+        throw py::type_error(std::string(name) + " must be a str, got " + type_name(value));
+    }
+    Py_ssize_t size = 0;
+    const char* utf8 = PyUnicode_AsUTF8AndSize(value.ptr(), &size);
+    if (utf8 == nullptr) {  // lone surrogates have no UTF-8
+        PyErr_Clear();
+        throw py::value_error(std::string(name) + " is not valid text (it holds a lone surrogate), got " +
+                              py::repr(value).cast<std::string>());
+    }
+    return std::string(utf8, size_t(size));
+}
+
+bool bool_param(const py::handle& value, const char* name) {
+    const bool is_numpy_bool = py::isinstance(value, py::module_::import("numpy").attr("bool_"));
+    if (!py::isinstance<py::bool_>(value) && !is_numpy_bool && !PyLong_Check(value.ptr())) {
+        throw py::type_error(std::string(name) + " must be a bool, got " + type_name(value));
+    }
+    const int truth = PyObject_IsTrue(value.ptr());
+    if (truth < 0) throw py::error_already_set();
+    return truth != 0;
+}
+
+std::string path_param(const py::handle& value, const char* name) {
+    py::object path;
+    try {
+        path = py::module_::import("os").attr("fspath")(value);
+    } catch (py::error_already_set&) {
+        throw py::type_error(std::string(name) + " must be a str or os.PathLike, got " + type_name(value));
+    }
+    if (!py::isinstance<py::str>(path)) {
+        throw py::type_error(std::string(name) + " must be a str path, got " + type_name(path));
+    }
+    // The file system's bytes, as Python's own open() makes them (undecodable
+    // bytes come back from their surrogate escapes).
+    const std::string text = py::module_::import("os").attr("fsencode")(path).cast<std::string>();
+    if (text.find('\0') != std::string::npos) {
+        throw py::value_error(std::string(name) + " contains a NUL character; a file name cannot hold one");
+    }
+    if (text.empty()) throw py::value_error(std::string(name) + " is empty; pass a file name");
+    return text;
 }
 
 namespace {
@@ -61,7 +170,7 @@ FloatArray require_float32(const py::handle& object, const char* name, std::init
     for (py::ssize_t i = 0; i < array.ndim(); ++i) {
         if (array.shape(i) == 0) throw py::value_error(std::string(name) + " is empty: shape " + shape_string(array));
     }
-    return FloatArray::ensure(array);
+    return contiguous<float>(array, name);
 }
 
 FloatArray require_points(const py::handle& object, const char* name, int columns, bool allow_empty) {
@@ -71,7 +180,7 @@ FloatArray require_points(const py::handle& object, const char* name, int column
         throw py::value_error(std::string(name) + " must hold real numbers, got dtype " + dtype_name(array));
     }
     require_columns(array, name, columns, allow_empty);
-    return py::array_t<float, py::array::c_style | py::array::forcecast>::ensure(array);
+    return contiguous<float>(array, name);
 }
 
 IndexArray require_indices(const py::handle& object, const char* name, int columns, bool allow_empty) {
@@ -81,9 +190,9 @@ IndexArray require_indices(const py::handle& object, const char* name, int colum
         throw py::value_error(std::string(name) + " must hold integers, got dtype " + dtype_name(array));
     }
     require_columns(array, name, columns, allow_empty);
-    if (array.dtype().equal(py::dtype::of<int32_t>())) return IndexArray::ensure(array);
+    if (array.dtype().equal(py::dtype::of<int32_t>())) return contiguous<int32_t>(array, name);
     // Range-check before narrowing so a huge index is reported, not wrapped.
-    py::array_t<int64_t, py::array::c_style | py::array::forcecast> wide(array);
+    auto wide = contiguous<int64_t>(array, name);
     const int64_t* p = wide.data();
     for (py::ssize_t i = 0; i < wide.size(); ++i) {
         if (p[i] < 0 || p[i] > std::numeric_limits<int32_t>::max()) {
@@ -91,25 +200,30 @@ IndexArray require_indices(const py::handle& object, const char* name, int colum
                                   std::to_string(p[i]) + ", outside the int32 range of valid indices");
         }
     }
-    return py::array_t<int32_t, py::array::c_style | py::array::forcecast>::ensure(array);
+    return contiguous<int32_t>(array, name);
 }
 
-std::pair<int, int> parse_resolution(const py::handle& resolution) {
-    int height = 0, width = 0;
-    if (py::isinstance<py::int_>(resolution)) {
-        height = width = resolution.cast<int>();
-    } else if (py::isinstance<py::sequence>(resolution) && py::len(resolution) == 2) {
+std::pair<int, int> parse_resolution(const py::handle& resolution, const char* what, uint64_t bytes_per_texel) {
+    constexpr int64_t kMax = int64_t(1) << 24;
+    int64_t height = 0, width = 0;
+    if (PyIndex_Check(resolution.ptr()) && !py::isinstance<py::bool_>(resolution)) {
+        height = width = int_param(resolution, "resolution", 1, kMax);
+    } else if (py::isinstance<py::sequence>(resolution) && !py::isinstance<py::str>(resolution) &&
+               !py::isinstance<py::bytes>(resolution)) {
         auto sequence = py::reinterpret_borrow<py::sequence>(resolution);
-        height = sequence[0].cast<int>();
-        width = sequence[1].cast<int>();
+        if (py::len(sequence) != 2) {
+            throw py::value_error("resolution must be an int or (height, width), got " +
+                                  std::to_string(py::len(sequence)) + " numbers");
+        }
+        height = int_param(sequence[0], "resolution", 1, kMax);
+        width = int_param(sequence[1], "resolution", 1, kMax);
     } else {
-        throw py::value_error("resolution must be an int or (height, width)");
+        throw py::type_error("resolution must be an int or (height, width), got " + type_name(resolution));
     }
-    if (height <= 0 || width <= 0) {
-        throw py::value_error("resolution must be positive, got " + std::to_string(height) + "x" +
-                              std::to_string(width));
-    }
-    return {height, width};
+    if (bytes_per_texel > 0) require_memory(std::string(what) + " at " + std::to_string(height) + "x" + std::to_string(width),
+                   saturating_product({uint64_t(height), uint64_t(width), bytes_per_texel}),
+                   "lower the resolution");
+    return {int(height), int(width)};
 }
 
 py::array_t<bool> layout_mask(
@@ -117,7 +231,7 @@ py::array_t<bool> layout_mask(
     const std::function<std::vector<uint8_t>(const UvLayout&, int, int)>& compute) {
     auto uvs = require_points(uvs_in, "uvs", 2);
     auto triangles = require_indices(triangles_in, "triangles", 3, /*allow_empty=*/true);
-    const auto [height, width] = parse_resolution(resolution);
+    const auto [height, width] = parse_resolution(resolution, "a coverage mask");
     UvLayout layout{uvs.data(), uvs.shape(0), triangles.data(), triangles.shape(0)};
     std::vector<uint8_t> mask;
     {

@@ -39,9 +39,40 @@ FloatArray require_points(const py::handle& object, const char* name, int column
 IndexArray require_indices(const py::handle& object, const char* name, int columns,
                            bool allow_empty = false);
 
-// A lightmap resolution: an int (square) or (height, width); both > 0.
-// Returns (height, width).
-std::pair<int, int> parse_resolution(const py::handle& resolution);
+// The one input-validation layer of the boundary: every public function
+// reads its arguments through these, so a wrong type is a TypeError and a
+// bad value a ValueError naming the argument (never pybind11's "Unable to
+// cast"), and a copy is checked against memory before it is made.
+
+// `object` as a C-contiguous array of T: no copy when it already is one;
+// otherwise a copy, checked against memory first (MemoryError naming `name`)
+// and made by numpy, whose failure becomes a ValueError/MemoryError naming
+// `name` (pybind11's ensure() would return a null array).
+py::array contiguous_array(const py::handle& object, const char* name, const py::dtype& dtype);
+template <class T>
+py::array_t<T, py::array::c_style> contiguous(const py::handle& object, const char* name) {
+    return py::reinterpret_borrow<py::array_t<T, py::array::c_style>>(
+        contiguous_array(object, name, py::dtype::of<T>()));
+}
+
+// A Python int (or numpy integer; not bool) in [min, max].
+int64_t int_param(const py::handle& value, const char* name, int64_t min, int64_t max);
+// A real number (int, float or numpy scalar; not bool, not str), finite.
+double real_param(const py::handle& value, const char* name);
+// A str.
+std::string string_param(const py::handle& value, const char* name);
+// A flag: bool, numpy.bool_ or an int (its truth).
+bool bool_param(const py::handle& value, const char* name);
+// A file path: str or os.PathLike; NUL characters are rejected (the C
+// library would cut the name at the first one).
+std::string path_param(const py::handle& value, const char* name);
+
+// A lightmap resolution: an int (square) or (height, width), each in
+// [1, 2^24]; the texels times `bytes_per_texel` must fit in memory
+// (MemoryError naming `what` otherwise; 0 skips the check, for a caller
+// with its own estimate). Returns (height, width).
+std::pair<int, int> parse_resolution(const py::handle& resolution, const char* what = "a lightmap",
+                                     uint64_t bytes_per_texel = 16);
 
 // A per-texel byte mask computed from a UV layout (uvs (N, 2), triangles
 // (T, 3), resolution) with the GIL released, returned as (H, W) bool without

@@ -19,8 +19,11 @@ bool PythonProgress::report(double fraction, const std::string& stage) {
     if (callback_.is_none()) return true;
     try {
         py::object answer = callback_(fraction, stage);
-        // Only an explicit False cancels; None (a plain print callback) goes on.
-        return !(py::isinstance<py::bool_>(answer) && !answer.cast<bool>());
+        // None (a plain print callback) goes on; any other false value cancels.
+        if (answer.is_none()) return true;
+        const int truth = PyObject_IsTrue(answer.ptr());
+        if (truth < 0) throw py::error_already_set();
+        return truth != 0;
     } catch (py::error_already_set& e) {
         error_.emplace(std::move(e));
         return false;

@@ -1,11 +1,14 @@
 // Bridges lmrefine::Progress to Python: a callable progress(fraction, stage)
-// that may return False to cancel, plus Ctrl-C. Long calls run with the GIL
+// that cancels by returning a false value other than None (False, 0,
+// numpy.False_) or by raising, plus Ctrl-C. Every report counts, the last
+// one (fraction 1.0) included. Long calls run with the GIL
 // released; the GIL is taken only to report.
 #pragma once
 
 #include <pybind11/pybind11.h>
 
 #include <optional>
+#include <type_traits>
 #include <utility>
 
 #include "lmrefine/core/error.h"
@@ -23,13 +26,21 @@ public:
     Progress& progress() { return progress_; }
 
     // Runs `work(progress)` with the GIL released. If it was cancelled
-    // because the callback raised or Ctrl-C arrived, that Python exception
-    // is raised; if the callback returned False, lmrefine.CancelledError.
+    // (even by the final report, after the work is done) because the
+    // callback raised or Ctrl-C arrived, that Python exception is raised; if
+    // the callback returned a false value, lmrefine.CancelledError.
     template <class Work>
     auto run(Work&& work) {
         try {
             py::gil_scoped_release release;
-            return work(progress_);
+            if constexpr (std::is_void_v<decltype(work(progress_))>) {
+                work(progress_);
+                progress_.check();
+            } else {
+                auto result = work(progress_);
+                progress_.check();
+                return result;
+            }
         } catch (const Cancelled&) {
             rethrow_python_error();
             throw;

@@ -13,9 +13,14 @@ namespace py = pybind11;
 namespace lmrefine::bindings {
 namespace {
 
-py::dict run(const py::handle& energy_in, const py::handle& mask_in, const py::handle& rigid_in, double diffusion, double rate, double delta,
-             int max_steps, double min_shrink, double max_magnification, double edge_shrink, const std::string& border,
-             bool coarse_to_fine, int passes, bool check_invariants, py::object progress_callback) {
+// Numbers and names arrive as Python objects and go through py_util's
+// readers, so a wrong type is a TypeError naming the argument.
+py::dict run(const py::handle& energy_in, const py::handle& mask_in, const py::handle& rigid_in,
+             const py::handle& diffusion, const py::handle& rate, const py::handle& delta, const py::handle& max_steps,
+             const py::handle& min_shrink, const py::handle& max_magnification, const py::handle& edge_shrink,
+             const py::handle& border, const py::handle& coarse_to_fine, const py::handle& passes,
+             const py::handle& check_invariants,
+             py::object progress_callback) {
     auto energy = py_util::require_float32(energy_in, "energy", {2, 3});
     AutomatonInput input;
     input.height = int(energy.shape(0));
@@ -24,8 +29,8 @@ py::dict run(const py::handle& energy_in, const py::handle& mask_in, const py::h
     input.energy = energy.data();
     py::array_t<uint8_t, py::array::c_style | py::array::forcecast> mask;
     if (!mask_in.is_none()) {
-        mask = py::array_t<uint8_t, py::array::c_style | py::array::forcecast>::ensure(mask_in);
-        if (!mask || mask.ndim() != 2 || mask.shape(0) != input.height || mask.shape(1) != input.width) {
+        mask = py_util::contiguous<uint8_t>(mask_in, "mask");
+        if (mask.ndim() != 2 || mask.shape(0) != input.height || mask.shape(1) != input.width) {
             throw py::value_error("mask must be a (H, W) boolean array matching energy's " +
                                   std::to_string(input.height) + "x" + std::to_string(input.width));
         }
@@ -33,25 +38,25 @@ py::dict run(const py::handle& energy_in, const py::handle& mask_in, const py::h
     }
     py::array_t<uint8_t, py::array::c_style | py::array::forcecast> rigid;
     if (!rigid_in.is_none()) {
-        rigid = py::array_t<uint8_t, py::array::c_style | py::array::forcecast>::ensure(rigid_in);
-        if (!rigid || rigid.ndim() != 2 || rigid.shape(0) != input.height || rigid.shape(1) != input.width) {
+        rigid = py_util::contiguous<uint8_t>(rigid_in, "rigid");
+        if (rigid.ndim() != 2 || rigid.shape(0) != input.height || rigid.shape(1) != input.width) {
             throw py::value_error("rigid must be a (H, W) boolean array matching energy's " +
                                   std::to_string(input.height) + "x" + std::to_string(input.width));
         }
         input.rigid = rigid.data();
     }
     AutomatonOptions options;
-    options.diffusion = diffusion;
-    options.rate = rate;
-    options.delta = delta;
-    options.max_steps = max_steps;
-    options.min_area = min_shrink;
-    options.max_area = max_magnification;
-    options.edge_shrink = edge_shrink;
-    options.border = parse_border_mode(border);
-    options.coarse_to_fine = coarse_to_fine;
-    options.passes = passes;
-    options.check_invariants = check_invariants;
+    options.diffusion = py_util::real_param(diffusion, "diffusion");
+    options.rate = py_util::real_param(rate, "rate");
+    options.delta = py_util::real_param(delta, "delta");
+    options.max_steps = int(py_util::int_param(max_steps, "max_steps", 0, 10000));
+    options.min_area = py_util::real_param(min_shrink, "min_shrink");
+    options.max_area = py_util::real_param(max_magnification, "max_magnification");
+    options.edge_shrink = py_util::real_param(edge_shrink, "edge_shrink");
+    options.border = parse_border_mode(py_util::string_param(border, "border"));
+    options.coarse_to_fine = py_util::bool_param(coarse_to_fine, "coarse_to_fine");
+    options.passes = int(py_util::int_param(passes, "passes", 1, 64));
+    options.check_invariants = py_util::bool_param(check_invariants, "check_invariants");
 
     py_util::PythonProgress progress(std::move(progress_callback));
     AutomatonResult result = progress.run([&](Progress& p) { return run_automaton(input, options, &p); });
@@ -88,12 +93,12 @@ void bind_automaton(py::module_& m) {
     const AutomatonOptions d;
     m.def("run_automaton", &run, py::arg("energy"), py::arg("mask") = py::none(), py::kw_only(),
           py::arg("rigid") = py::none(),
-          py::arg("diffusion") = d.diffusion, py::arg("rate") = d.rate, py::arg("delta") = d.delta,
-          py::arg("max_steps") = d.max_steps, py::arg("min_shrink") = d.min_area,
-          py::arg("max_magnification") = d.max_area, py::arg("edge_shrink") = d.edge_shrink,
-          py::arg("border") = "same",
-          py::arg("coarse_to_fine") = d.coarse_to_fine, py::arg("passes") = d.passes,
-          py::arg("check_invariants") = false, py::arg("progress") = py::none(),
+          py::arg("diffusion") = py::float_(d.diffusion), py::arg("rate") = py::float_(d.rate),
+          py::arg("delta") = py::float_(d.delta), py::arg("max_steps") = py::int_(d.max_steps),
+          py::arg("min_shrink") = py::float_(d.min_area), py::arg("max_magnification") = py::float_(d.max_area),
+          py::arg("edge_shrink") = py::float_(d.edge_shrink), py::arg("border") = py::str("same"),
+          py::arg("coarse_to_fine") = py::bool_(d.coarse_to_fine), py::arg("passes") = py::int_(d.passes),
+          py::arg("check_invariants") = py::bool_(false), py::arg("progress") = py::none(),
           R"doc(Run the cellular automaton on an energy map (see docs/refiner.md).
 
 Args:

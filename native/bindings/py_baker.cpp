@@ -3,6 +3,7 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -16,15 +17,18 @@ namespace py = pybind11;
 namespace lmrefine::bindings {
 namespace {
 
-BakeOptions make_options(const std::vector<std::string>& passes, int samples, uint64_t seed, int bounces,
-                         float ao_distance) {
+// The numbers arrive as Python objects: a float, None or a str is a
+// TypeError and an out-of-range int a ValueError naming the argument, never
+// a failed cast.
+BakeOptions make_options(const std::vector<std::string>& passes, const py::handle& samples, const py::handle& seed,
+                         const py::handle& bounces, const py::handle& ao_distance) {
     BakeOptions options;
     options.passes.clear();
     for (const auto& name : passes) options.passes.push_back(parse_bake_pass(name));
-    options.samples = samples;
-    options.seed = seed;
-    options.bounces = bounces;
-    options.ao_distance = ao_distance;
+    options.samples = int(py_util::int_param(samples, "samples", 1, 1 << 20));
+    options.seed = uint64_t(py_util::int_param(seed, "seed", 0, std::numeric_limits<int64_t>::max()));
+    options.bounces = int(py_util::int_param(bounces, "bounces", 0, 64));
+    options.ao_distance = float(py_util::real_param(ao_distance, "ao_distance"));
     return options;
 }
 
@@ -42,11 +46,12 @@ py::dict stats_dict(const BakeStats& stats) {
 }
 
 py::tuple bake_native(const Scene& scene, const py::handle& resolution, const std::vector<std::string>& passes,
-                      int samples, uint64_t seed, const py::object& progress, int dilation, bool denoise, int bounces,
-                      float ao_distance, bool atlas) {
+                      const py::handle& samples, const py::handle& seed, const py::object& progress,
+                      const py::handle& dilation, bool denoise, const py::handle& bounces,
+                      const py::handle& ao_distance, bool atlas) {
     BakeOptions options = make_options(passes, samples, seed, bounces, ao_distance);
-    std::tie(options.height, options.width) = py_util::parse_resolution(resolution);
-    options.dilation = dilation;
+    std::tie(options.height, options.width) = py_util::parse_resolution(resolution, "baking", 0);
+    options.dilation = int(py_util::int_param(dilation, "dilation", 0, 1 << 24));
     options.denoise = denoise;
     options.atlas = atlas;
     py_util::PythonProgress reporter(progress);
@@ -63,8 +68,8 @@ py::tuple bake_native(const Scene& scene, const py::handle& resolution, const st
 }
 
 py::tuple evaluate_native(const Scene& scene, const py::handle& points_in, const py::handle& normals_in,
-                          const std::vector<std::string>& passes, int samples, uint64_t seed, const py::object& progress,
-                          int bounces, float ao_distance) {
+                          const std::vector<std::string>& passes, const py::handle& samples, const py::handle& seed,
+                          const py::object& progress, const py::handle& bounces, const py::handle& ao_distance) {
     auto points = py_util::require_points(points_in, "points", 3);
     auto normals = py_util::require_points(normals_in, "normals", 3);
     if (normals.shape(0) != points.shape(0)) {

@@ -16,9 +16,9 @@ namespace {
 
 using BoolArray = py::array_t<bool, py::array::c_style>;
 
-py::array_t<float> compute(const py::handle& image_in, const py::handle& mask_in, const std::string& wavelet_name,
+py::array_t<float> compute(const py::handle& image_in, const py::handle& mask_in, const py::handle& wavelet_in,
                            const py::object& callback) {
-    const Wavelet wavelet = parse_wavelet(wavelet_name);
+    const Wavelet wavelet = parse_wavelet(py_util::string_param(wavelet_in, "wavelet"));
     auto image = py_util::require_float32(image_in, "image", {2, 3});
     const int64_t height = image.shape(0), width = image.shape(1);
     const int channels = image.ndim() == 3 ? int(image.shape(2)) : 1;
@@ -38,7 +38,7 @@ py::array_t<float> compute(const py::handle& image_in, const py::handle& mask_in
             throw py::value_error("mask must have the image's shape (" + std::to_string(height) + ", " +
                                   std::to_string(width) + "), got " + py_util::shape_string(raw));
         }
-        mask = BoolArray::ensure(raw);
+        mask = py_util::contiguous<bool>(raw, "mask");
     }
     // bool and uint8 share a layout.
     const uint8_t* mask_data = mask ? reinterpret_cast<const uint8_t*>(mask->data()) : nullptr;

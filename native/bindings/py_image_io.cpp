@@ -23,7 +23,7 @@ PixelFormat parse_format(const std::optional<std::string>& format) {
 }
 
 py::object read(const py::object& path) {
-    const std::string file = py::str(path).cast<std::string>();
+    const std::string file = py_util::path_param(path, "path");
     ImageBuffer image;
     {
         py::gil_scoped_release release;
@@ -32,9 +32,13 @@ py::object read(const py::object& path) {
     return py_util::to_numpy(std::move(image.pixels), {image.height, image.width, image.channels});
 }
 
-void write(const py::object& path, const py::handle& array, const std::optional<std::string>& format,
-           std::optional<bool> srgb) {
-    const std::string file = py::str(path).cast<std::string>();
+void write(const py::object& path, const py::handle& array, const py::handle& format_in,
+           const py::handle& srgb_in) {
+    std::optional<std::string> format;
+    if (!format_in.is_none()) format = py_util::string_param(format_in, "format");
+    std::optional<bool> srgb;
+    if (!srgb_in.is_none()) srgb = py_util::bool_param(srgb_in, "srgb");
+    const std::string file = py_util::path_param(path, "path");
     auto pixels = py_util::require_float32(array, "array", {2, 3});
     WriteOptions options;
     options.format = parse_format(format);

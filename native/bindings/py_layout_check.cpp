@@ -38,10 +38,11 @@ py::dict report_dict(LayoutReport& r, bool relative_gutter, bool failing_charts)
 class PyLayoutChecker {
 public:
     PyLayoutChecker(const py::handle& uvs_in, const py::handle& triangles_in, const py::handle& resolution,
-                    double padding) {
+                    const py::handle& padding_in) {
         auto uvs = py_util::require_points(uvs_in, "uvs", 2);
         auto triangles = py_util::require_indices(triangles_in, "triangles", 3, /*allow_empty=*/true);
-        std::tie(height_, width_) = py_util::parse_resolution(resolution);
+        std::tie(height_, width_) = py_util::parse_resolution(resolution, "a layout check");
+        const double padding = py_util::real_param(padding_in, "padding");
         uvs_.assign(uvs.data(), uvs.data() + uvs.size());
         triangles_.assign(triangles.data(), triangles.data() + triangles.size());
         const UvLayout layout{uvs_.data(), uvs.shape(0), triangles_.data(), triangles.shape(0)};
@@ -49,7 +50,10 @@ public:
         checker_ = std::make_unique<LayoutChecker>(layout, width_, height_, padding);
     }
 
-    py::dict check(const py::handle& uvs_in, bool failing_charts, bool relative_gutter) {
+    py::dict check(const py::handle& uvs_in, const py::handle& failing_charts_in,
+                   const py::handle& relative_gutter_in) {
+        const bool failing_charts = py_util::bool_param(failing_charts_in, "failing_charts");
+        const bool relative_gutter = py_util::bool_param(relative_gutter_in, "relative_gutter");
         LayoutReport r;
         if (uvs_in.is_none()) {
             if (relative_gutter) {
@@ -100,11 +104,15 @@ std::vector<uint8_t> checker_gutter(const LayoutChecker& checker) {
 }
 
 py::dict check(const py::handle& uvs_in, const py::handle& triangles_in, const py::handle& resolution,
-               double padding, const py::handle& reference_in, bool failing_charts,
-               bool relative_gutter, double tolerance) {
+               const py::handle& padding_in, const py::handle& reference_in, const py::handle& failing_charts_in,
+               const py::handle& relative_gutter_in, const py::handle& tolerance_in) {
+    const bool failing_charts = py_util::bool_param(failing_charts_in, "failing_charts");
+    const bool relative_gutter = py_util::bool_param(relative_gutter_in, "relative_gutter");
+    const double tolerance = py_util::real_param(tolerance_in, "tolerance");
     auto uvs = py_util::require_points(uvs_in, "uvs", 2);
     auto triangles = py_util::require_indices(triangles_in, "triangles", 3, /*allow_empty=*/true);
-    const auto [height, width] = py_util::parse_resolution(resolution);
+    const auto [height, width] = py_util::parse_resolution(resolution, "a layout check");
+    const double padding = py_util::real_param(padding_in, "padding");
     py_util::FloatArray reference;
     if (!reference_in.is_none()) {
         reference = py_util::require_points(reference_in, "reference_uvs", 2);
@@ -145,7 +153,8 @@ another owner (uncovered, another chart, or two charts). Pass as
 )doc");
     m.def("check_layout", &check, py::arg("uvs"), py::arg("triangles"), py::arg("resolution"),
           py::arg("padding") = 2.0, py::kw_only(), py::arg("reference_uvs") = py::none(),
-          py::arg("failing_charts") = false, py::arg("relative_gutter") = false, py::arg("tolerance") = 0.0,
+          py::arg("failing_charts") = py::bool_(false), py::arg("relative_gutter") = py::bool_(false),
+          py::arg("tolerance") = py::float_(0.0),
           R"doc(Check a UV layout for use as a lightmap layout at a resolution.
 
 Args:
@@ -203,10 +212,10 @@ Raises:
     ValueError: bad shapes, indices out of range, NaN UVs, resolution <= 0,
         padding < 0.
 )doc")
-        .def(py::init<const py::handle&, const py::handle&, const py::handle&, double>(), py::arg("uvs"),
+        .def(py::init<const py::handle&, const py::handle&, const py::handle&, const py::handle&>(), py::arg("uvs"),
              py::arg("triangles"), py::arg("resolution"), py::arg("padding") = 2.0)
         .def("check", &PyLayoutChecker::check, py::arg("uvs") = py::none(), py::kw_only(),
-             py::arg("failing_charts") = false, py::arg("relative_gutter") = false,
+             py::arg("failing_charts") = py::bool_(false), py::arg("relative_gutter") = py::bool_(false),
              R"doc(check_layout of the original (uvs=None), or of a warped version of it.
 
 With ``uvs`` (N, 2) (the original's triangles), the same as

@@ -37,13 +37,18 @@ double utilisation(const UvLayout& layout, int width, int height) {
 }
 
 py::tuple pack(const py::handle& uvs_in, const py::handle& triangles_in, const py::handle& resolution,
-                  double padding, const py::handle& charts_in, const py::handle& scales_in, bool rotate,
-                  py::object progress_callback, double tolerance, int subdivision) {
+                  const py::handle& padding_in, const py::handle& charts_in, const py::handle& scales_in,
+                  const py::handle& rotate_in, py::object progress_callback, const py::handle& tolerance_in,
+                  const py::handle& subdivision_in) {
+    const double padding = py_util::real_param(padding_in, "padding");
+    const bool rotate = py_util::bool_param(rotate_in, "rotations");
+    const double tolerance = py_util::real_param(tolerance_in, "tolerance");
+    const int subdivision = int(py_util::int_param(subdivision_in, "subdivision", 1, 8));
     const auto start = std::chrono::steady_clock::now();
     auto uvs = py_util::require_points(uvs_in, "uvs", 2, /*allow_empty=*/true);
     auto triangles = py_util::require_indices(triangles_in, "triangles", 3, /*allow_empty=*/true);
     PackOptions options;
-    std::tie(options.height, options.width) = py_util::parse_resolution(resolution);
+    std::tie(options.height, options.width) = py_util::parse_resolution(resolution, "a packed atlas");
     options.padding = padding;
     options.rotate = rotate;
     options.weld_tolerance = tolerance;
@@ -163,9 +168,10 @@ void bind_packer(py::module_& m) {
         py::arg("occupied"), py::arg("chart"), py::arg("padding"),
         "The packer's placement rule on masks (tests): the first (x, y) in scan order where `chart` fits "
         "`occupied` with the padding, or None.");
-    m.def("pack_charts", &pack, py::arg("uvs"), py::arg("triangles"), py::arg("resolution"), py::arg("padding") = 2.0,
-          py::kw_only(), py::arg("charts") = py::none(), py::arg("scales") = py::none(), py::arg("rotate") = true,
-          py::arg("progress") = py::none(), py::arg("tolerance") = 1e-5, py::arg("subdivision") = 2,
+    m.def("pack_charts", &pack, py::arg("uvs"), py::arg("triangles"), py::arg("resolution"), py::arg("padding") = py::float_(2.0),
+          py::kw_only(), py::arg("charts") = py::none(), py::arg("scales") = py::none(),
+          py::arg("rotate") = py::bool_(true), py::arg("progress") = py::none(), py::arg("tolerance") = py::float_(1e-5),
+          py::arg("subdivision") = py::int_(2),
           R"doc(The atlas packer's native entry; use lmrefine.pack_charts (python/lmrefine/packer.py,
 documented there and in docs/packer.md). Returns (uvs, report).)doc");
 }

@@ -2,6 +2,7 @@
 #include <pybind11/stl.h>
 
 #include <memory>
+#include <limits>
 #include <string>
 
 #include "lmrefine/core/error.h"
@@ -14,16 +15,16 @@ namespace lmrefine::bindings {
 namespace {
 
 glm::vec3 vec3_param(const py::handle& value, const char* name) {
-    auto array = py::array_t<float, py::array::c_style | py::array::forcecast>::ensure(value);
-    if (!array || array.size() != 3) throw py::value_error(std::string(name) + " must be 3 numbers (x, y, z) or (r, g, b)");
+    auto array = py_util::contiguous<float>(value, name);
+    if (array.size() != 3) throw py::value_error(std::string(name) + " must be 3 numbers (x, y, z) or (r, g, b)");
     return {array.data()[0], array.data()[1], array.data()[2]};
 }
 
 // Blender's matrix_world as rows (np.array(obj.matrix_world) or nested
 // lists); glm is column-major.
 glm::mat4 matrix_param(const py::handle& value) {
-    auto array = py::array_t<float, py::array::c_style | py::array::forcecast>::ensure(value);
-    if (!array || array.ndim() != 2 || array.shape(0) != 4 || array.shape(1) != 4) {
+    auto array = py_util::contiguous<float>(value, "matrix");
+    if (array.ndim() != 2 || array.shape(0) != 4 || array.shape(1) != 4) {
         throw py::value_error("matrix must be a 4x4 world matrix (Blender's obj.matrix_world, row by row)");
     }
     glm::mat4 m;
@@ -42,7 +43,8 @@ AreaShape parse_shape(const std::string& shape) {
 }
 
 int add_mesh(Scene& scene, const py::handle& positions_in, const py::handle& triangles_in, const py::handle& uvs_in,
-             const py::handle& normals_in, const py::handle& base_color_in, bool receiver) {
+             const py::handle& normals_in, const py::handle& base_color_in, const py::handle& receiver_in) {
+    const bool receiver = py_util::bool_param(receiver_in, "receiver");
     auto positions = py_util::require_points(positions_in, "positions", 3);
     auto triangles = py_util::require_indices(triangles_in, "triangles", 3);
     MeshInput in;
@@ -66,8 +68,8 @@ int add_mesh(Scene& scene, const py::handle& positions_in, const py::handle& tri
         in.normals = normals.data();
         in.normal_count = normals.shape(0);
     }
-    auto base_color = py::array_t<float, py::array::c_style | py::array::forcecast>::ensure(base_color_in);
-    if (!base_color || !((base_color.ndim() == 1 && base_color.shape(0) == 3) ||
+    auto base_color = py_util::contiguous<float>(base_color_in, "base_color");
+    if (!((base_color.ndim() == 1 && base_color.shape(0) == 3) ||
                          (base_color.ndim() == 2 && base_color.shape(1) == 3))) {
         throw py::value_error("base_color must be one RGB colour (3,) or one per triangle (T, 3)");
     }
@@ -76,7 +78,8 @@ int add_mesh(Scene& scene, const py::handle& positions_in, const py::handle& tri
     return scene.add_mesh(in);
 }
 
-int add_light(Scene& scene, const std::string& kind, const py::kwargs& params) {
+int add_light(Scene& scene, const py::handle& kind_in, const py::kwargs& params) {
+    const std::string kind = py_util::string_param(kind_in, "kind");
     Light light;
     if (kind == "point") light.kind = LightKind::Point;
     else if (kind == "spot") light.kind = LightKind::Spot;
@@ -94,7 +97,7 @@ int add_light(Scene& scene, const std::string& kind, const py::kwargs& params) {
             throw py::value_error("pass either matrix= or position/direction/axis_x, not both: the matrix "
                                   "already places the light (got matrix and " + key + ")");
         }
-        if (key == "energy") light.energy = value.cast<float>();
+        if (key == "energy") light.energy = float(py_util::real_param(value, "energy"));
         else if (key == "color") light.color = vec3_param(value, "color");
         else if (key == "position") light.position = vec3_param(value, "position");
         else if (key == "direction") light.direction = vec3_param(value, "direction");
@@ -107,13 +110,13 @@ int add_light(Scene& scene, const std::string& kind, const py::kwargs& params) {
             }
         }
         else if (key == "matrix") continue;  // applied below, once shape and sizes are known
-        else if (key == "shadow_soft_size") light.shadow_soft_size = value.cast<float>();
-        else if (key == "angle") light.angle = value.cast<float>();
-        else if (key == "spot_size") light.spot_size = value.cast<float>();
-        else if (key == "spot_blend") light.spot_blend = value.cast<float>();
-        else if (key == "shape") light.shape = parse_shape(value.cast<std::string>());
-        else if (key == "size") light.size = value.cast<float>();
-        else if (key == "size_y") light.size_y = value.cast<float>();
+        else if (key == "shadow_soft_size") light.shadow_soft_size = float(py_util::real_param(value, "shadow_soft_size"));
+        else if (key == "angle") light.angle = float(py_util::real_param(value, "angle"));
+        else if (key == "spot_size") light.spot_size = float(py_util::real_param(value, "spot_size"));
+        else if (key == "spot_blend") light.spot_blend = float(py_util::real_param(value, "spot_blend"));
+        else if (key == "shape") light.shape = parse_shape(py_util::string_param(value, "shape"));
+        else if (key == "size") light.size = float(py_util::real_param(value, "size"));
+        else if (key == "size_y") light.size_y = float(py_util::real_param(value, "size_y"));
         else {
             throw py::value_error("unknown light parameter \"" + key + "\"; use energy, color, position, direction, "
                                   "axis_x, matrix, shadow_soft_size, angle, spot_size, spot_blend, shape, size, "
@@ -135,7 +138,7 @@ World space, transforms applied. Receivers get a lightmap; occluders
         .def(py::init<>())
         .def("add_mesh", &add_mesh, py::arg("positions"), py::arg("triangles"), py::arg("uvs") = py::none(),
              py::arg("normals") = py::none(), py::arg("base_color") = py::make_tuple(0.8, 0.8, 0.8),
-             py::arg("receiver") = true,
+             py::arg("receiver") = py::bool_(true),
              R"doc(Add a triangle mesh; returns its id (0, 1, ...).
 
 Args:
@@ -193,8 +196,15 @@ Raises:
             [](Scene& scene, const py::handle& color) { scene.set_world(vec3_param(color, "color")); },
             py::arg("color"), "Uniform sky radiance (Blender's world Background colour at strength 1).")
         .def("degenerate_triangles",
-             [](const Scene& scene, int mesh) {
-                 if (mesh < 0 || mesh >= int(scene.meshes().size())) throw py::index_error("no mesh " + std::to_string(mesh));
+             [](const Scene& scene, const py::handle& mesh_in) {
+                 const int64_t mesh = py_util::int_param(mesh_in, "mesh", std::numeric_limits<int64_t>::min(),
+                                                         std::numeric_limits<int64_t>::max());
+                 const int64_t count = int64_t(scene.meshes().size());
+                 if (mesh < 0 || mesh >= count) {
+                     throw py::value_error(count == 0 ? "mesh must be a mesh id from add_mesh; the scene has no mesh yet"
+                                                      : "mesh must be a mesh id from add_mesh, 0 to " +
+                                                            std::to_string(count - 1) + ", got " + std::to_string(mesh));
+                 }
                  return scene.meshes()[size_t(mesh)].degenerate_count;
              },
              py::arg("mesh"), "Number of zero-area triangles of a mesh (skipped by the baker).")

@@ -35,9 +35,9 @@ std::vector<FloatArray> unpack_bands(const py::handle& coeffs, size_t count, con
     return bands;
 }
 
-py::tuple dwt_1d(const py::handle& signal_in, const std::string& wavelet_name, const std::string& mode_name) {
-    const Wavelet wavelet = parse_wavelet(wavelet_name);
-    const BoundaryMode mode = parse_boundary_mode(mode_name);
+py::tuple dwt_1d(const py::handle& signal_in, const py::handle& wavelet_in, const py::handle& mode_in) {
+    const Wavelet wavelet = parse_wavelet(py_util::string_param(wavelet_in, "wavelet"));
+    const BoundaryMode mode = parse_boundary_mode(py_util::string_param(mode_in, "mode"));
     auto signal = py_util::require_float32(signal_in, "signal", {1});
     const int64_t length = signal.shape(0);
     std::vector<float> approx(size_t(length / 2)), detail(size_t(length / 2));
@@ -49,9 +49,9 @@ py::tuple dwt_1d(const py::handle& signal_in, const std::string& wavelet_name, c
                           py_util::to_numpy(std::move(detail), {length / 2}));
 }
 
-py::array_t<float> idwt_1d(const py::handle& coeffs, const std::string& wavelet_name, const std::string& mode_name) {
-    const Wavelet wavelet = parse_wavelet(wavelet_name);
-    const BoundaryMode mode = parse_boundary_mode(mode_name);
+py::array_t<float> idwt_1d(const py::handle& coeffs, const py::handle& wavelet_in, const py::handle& mode_in) {
+    const Wavelet wavelet = parse_wavelet(py_util::string_param(wavelet_in, "wavelet"));
+    const BoundaryMode mode = parse_boundary_mode(py_util::string_param(mode_in, "mode"));
     auto bands = unpack_bands(coeffs, 2, "(approx, detail)", {1});
     const int64_t half = bands[0].shape(0);
     std::vector<float> signal(size_t(2 * half));
@@ -62,10 +62,10 @@ py::array_t<float> idwt_1d(const py::handle& coeffs, const std::string& wavelet_
     return py_util::to_numpy(std::move(signal), {2 * half});
 }
 
-py::tuple dwt_2d(const py::handle& image_in, const std::string& wavelet_name, const std::string& mode_name,
+py::tuple dwt_2d(const py::handle& image_in, const py::handle& wavelet_in, const py::handle& mode_in,
                  const py::object& callback) {
-    const Wavelet wavelet = parse_wavelet(wavelet_name);
-    const BoundaryMode mode = parse_boundary_mode(mode_name);
+    const Wavelet wavelet = parse_wavelet(py_util::string_param(wavelet_in, "wavelet"));
+    const BoundaryMode mode = parse_boundary_mode(py_util::string_param(mode_in, "mode"));
     auto image = py_util::require_float32(image_in, "image", {2});
     const int64_t height = image.shape(0), width = image.shape(1);
     const py::ssize_t hh = height / 2, hw = width / 2;
@@ -81,10 +81,10 @@ py::tuple dwt_2d(const py::handle& image_in, const std::string& wavelet_name, co
     return py::make_tuple(ll, lh, hl, hhb);
 }
 
-py::array_t<float> idwt_2d(const py::handle& coeffs, const std::string& wavelet_name, const std::string& mode_name,
+py::array_t<float> idwt_2d(const py::handle& coeffs, const py::handle& wavelet_in, const py::handle& mode_in,
                            const py::object& callback) {
-    const Wavelet wavelet = parse_wavelet(wavelet_name);
-    const BoundaryMode mode = parse_boundary_mode(mode_name);
+    const Wavelet wavelet = parse_wavelet(py_util::string_param(wavelet_in, "wavelet"));
+    const BoundaryMode mode = parse_boundary_mode(py_util::string_param(mode_in, "mode"));
     auto bands = unpack_bands(coeffs, 4, "(LL, LH, HL, HH)", {2});
     const py::ssize_t hh = bands[0].shape(0), hw = bands[0].shape(1);
     py::array_t<float> image({2 * hh, 2 * hw});  // uninitialized: idwt2 writes every value

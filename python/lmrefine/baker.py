@@ -22,8 +22,21 @@ class BakeResult(dict):
         self.stats = stats
 
 
+def _check_scene(scene):
+    if not isinstance(scene, _native.Scene):
+        raise TypeError(f"scene must be an lmrefine.Scene, got {type(scene).__name__}")
+
+
 def _pass_names(passes):
-    names = (passes,) if isinstance(passes, str) else tuple(passes)
+    if isinstance(passes, str):
+        names = (passes,)
+    elif isinstance(passes, (tuple, list)):
+        names = tuple(passes)
+    else:
+        raise TypeError(f"passes must be a str or a tuple of str (some of {PASSES}), got {type(passes).__name__}")
+    for name in names:
+        if not isinstance(name, str):
+            raise TypeError(f"passes must hold str (some of {PASSES}), got {type(name).__name__}")
     if not names:
         raise ValueError(f"passes is empty; ask for some of {PASSES}")
     for name in names:
@@ -71,9 +84,10 @@ def bake(scene, resolution, passes=("direct",), samples=16, seed=0, progress=Non
             (estimated before allocating; the message gives the estimate).
         lmrefine.CancelledError: the progress callback returned False.
     """
+    _check_scene(scene)
     names = _pass_names(passes)
-    maps, stats = _native._bake(scene, resolution, list(names), int(samples), int(seed), progress, int(dilation),
-                                bool(denoise), int(bounces), float(ao_distance), bool(atlas))
+    maps, stats = _native._bake(scene, resolution, list(names), samples, seed, progress, dilation,
+                                bool(denoise), bounces, ao_distance, bool(atlas))
     by_pass = {name: {} for name in names}
     for mesh, images in maps:
         key = "atlas" if mesh < 0 else mesh
@@ -94,7 +108,8 @@ def evaluate(scene, points, normals, passes=("direct",), samples=64, seed=0, pro
     Returns:
         numpy.ndarray: float32 (P, 3) with one pass, else ``{pass: (P, 3)}``.
     """
+    _check_scene(scene)
     names = _pass_names(passes)
-    values, _stats = _native._evaluate(scene, points, normals, list(names), int(samples), int(seed), progress,
-                                       int(bounces), float(ao_distance))
+    values, _stats = _native._evaluate(scene, points, normals, list(names), samples, seed, progress,
+                                       bounces, ao_distance)
     return values[0] if len(names) == 1 else dict(zip(names, values))

@@ -3,10 +3,10 @@
 The Blender add-on reads a UV map and a mesh into numpy and asks these
 functions what to do with them, so the rules are tested here with plain
 arrays: corners of one vertex that differ by a rounding error get one UV
-(`weld_uvs`), and faces or UV triangles of zero area are refused before they
-reach the refiner (`zero_area_counts`). Whether a refined layout is worse
-than its source is `lmrefine.backoff.failures`, the rule refine_uvs itself
-applies.
+(`weld_uvs`), and broken vertices or UV triangles of zero area are found
+before they reach the refiner (`geometry_problems`). Whether a refined
+layout is worse than its source is `lmrefine.backoff.failures`, the rule
+refine_uvs itself applies.
 """
 
 import numpy as np
@@ -54,18 +54,40 @@ def weld_uvs(uvs, corner_vertex, limit=UV_CONNECT_LIMIT):
     return welded
 
 
-def zero_area_counts(face_areas, uvs, triangles, resolution):
-    """(faces of zero 3-D area, UV triangles of zero area at `resolution`).
+# As the baker (native/src/bake/scene.cpp): a triangle has zero area in 3-D
+# when twice its area is below FLAT_3D times its longest edge squared, and
+# no coordinate may lie beyond MAX_COORDINATE.
+FLAT_3D = 1e-7
+MAX_COORDINATE = 1e9
 
-    face_areas: (F,) the mesh's face areas; uvs (L, 2) and triangles (T, 3)
-    the layout; resolution: the lightmap's side in texels. A UV triangle
-    counts as zero when it covers less than ZERO_UV_AREA_TEXELS texels."""
-    zero_3d = int(np.count_nonzero(np.asarray(face_areas) <= 0.0))
-    corners = np.asarray(uvs, np.float64)[np.asarray(triangles)] * resolution  # texel units
-    edge1 = corners[:, 1] - corners[:, 0]
-    edge2 = corners[:, 2] - corners[:, 0]
+
+def geometry_problems(positions, corner_vertex, uvs, triangles, resolution):
+    """(triangles of zero area in 3-D, triangles of zero UV area at
+    `resolution` that do have 3-D area, vertices at NaN, Inf or beyond
+    MAX_COORDINATE).
+
+    positions: (V, 3) vertex positions (world space, as baked);
+    corner_vertex: (L,) the vertex of each corner; uvs (L, 2) and triangles
+    (T, 3, corner indices) the layout; resolution: the lightmap's side in
+    texels. Triangles of zero 3-D area need no texels (the baker skips
+    them), so their UV area does not matter; a UV triangle covering less
+    than ZERO_UV_AREA_TEXELS texels of a real 3-D triangle has no texel of
+    its own.
+    """
+    positions = np.asarray(positions, np.float64).reshape(-1, 3)
+    triangles = np.asarray(triangles)
+    with np.errstate(all="ignore"):
+        bad_vertices = int(np.count_nonzero(~(np.abs(positions) <= MAX_COORDINATE).all(axis=1)))
+        corners = positions[np.asarray(corner_vertex)[triangles]]
+        e1, e2, e3 = corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0], corners[:, 2] - corners[:, 1]
+        area2 = np.linalg.norm(np.cross(e1, e2), axis=1)
+        longest = np.max([np.einsum("ij,ij->i", e, e) for e in (e1, e2, e3)], axis=0) if len(e1) else area2
+        flat = ~(area2 > FLAT_3D * longest)
+    uv = np.asarray(uvs, np.float64)[triangles] * resolution  # texel units
+    edge1, edge2 = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
     texel_area = 0.5 * np.abs(edge1[:, 0] * edge2[:, 1] - edge1[:, 1] * edge2[:, 0])
-    return zero_3d, int(np.count_nonzero(texel_area < ZERO_UV_AREA_TEXELS))
+    zero_uv = int(np.count_nonzero((texel_area < ZERO_UV_AREA_TEXELS) & ~flat))
+    return int(np.count_nonzero(flat)), zero_uv, bad_vertices
 
 
 def describe_problems(check, padding):

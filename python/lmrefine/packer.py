@@ -56,8 +56,10 @@ def pack_charts(uvs, triangles, charts, scales, resolution, padding=2.0, rotatio
         resolution: int or (height, width), the target lightmap.
         padding: smallest distance between two charts in texels, as
             ``check_layout`` measures it (exact distance between chart
-            boundaries); the output always passes
-            ``check_layout(uvs, triangles, resolution, padding)``.
+            boundaries); the output passes
+            ``check_layout(uvs, triangles, resolution, padding)`` whenever
+            the input has no overlaps or degenerate triangles inside a chart
+            (those move with their chart and stay; none is added).
         rotations: allow quarter turns.
         progress: callable ``progress(fraction, stage)``; returning False
             cancels (lmrefine.CancelledError). The native work runs with the
@@ -107,8 +109,8 @@ def pack_charts(uvs, triangles, charts, scales, resolution, padding=2.0, rotatio
             scale (a resolution too small for the padding and chart count).
         lmrefine.CancelledError: the progress callback returned False.
     """
-    new_uvs, report = _native.pack_charts(uvs, triangles, resolution, float(padding), charts=charts, scales=scales,
-                                          rotate=bool(rotations), progress=progress, tolerance=float(tolerance),
-                                          subdivision=int(subdivision))
+    new_uvs, report = _native.pack_charts(uvs, triangles, resolution, padding, charts=charts, scales=scales,
+                                          rotate=rotations, progress=progress, tolerance=tolerance,
+                                          subdivision=subdivision)
     report["offsets"] = report["transforms"][:, :, 2]
     return PackResult(new_uvs, report)

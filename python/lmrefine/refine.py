@@ -42,16 +42,29 @@ class RefineResult:
     report: dict = field(default_factory=dict)
 
 
+_MAX_RESOLUTION = 1 << 24  # as the native side (numpy_util.cpp parse_resolution)
+
+
+def _resolution_side(value, name):
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+        raise TypeError(f"{name} must be an int, got {type(value).__name__}")
+    if value < 1:
+        raise ValueError(f"{name} must be positive, got {value}")
+    if value > _MAX_RESOLUTION:
+        raise ValueError(f"{name} must be at most {_MAX_RESOLUTION}, got {value}")
+    return int(value)
+
+
 def _resolution(resolution):
-    if isinstance(resolution, (int, np.integer)):
-        height = width = int(resolution)
+    if isinstance(resolution, (int, np.integer)) and not isinstance(resolution, (bool, np.bool_)):
+        height = width = _resolution_side(resolution, "resolution")
+    elif isinstance(resolution, (tuple, list, np.ndarray)):
+        if len(resolution) != 2:
+            raise ValueError(f"resolution must be an int or (height, width), got {resolution!r}")
+        height = _resolution_side(resolution[0], "resolution")
+        width = _resolution_side(resolution[1], "resolution")
     else:
-        try:
-            height, width = (int(x) for x in resolution)
-        except (TypeError, ValueError):
-            raise ValueError(f"resolution must be an int or (height, width), got {resolution!r}") from None
-    if height <= 0 or width <= 0:
-        raise ValueError(f"resolution must be positive, got {height}x{width}")
+        raise TypeError(f"resolution must be an int or (height, width), got {type(resolution).__name__}")
     return height, width
 
 
@@ -92,6 +105,8 @@ def _gradient(lightmap, gradient, mask, shape, wavelet, progress):
     if lightmap is None:
         raise ValueError("pass a lightmap, or a gradient map with gradient=")
     lightmap = np.asarray(lightmap)
+    if lightmap.ndim not in (2, 3):
+        raise ValueError(f"the lightmap must be an (H, W) or (H, W, C) array, got shape {lightmap.shape}")
     if lightmap.shape[:2] != shape:
         raise ValueError(f"the lightmap is {lightmap.shape[0]}x{lightmap.shape[1]} but the resolution is "
                          f"{shape[0]}x{shape[1]}; refine at the resolution the lightmap was baked at")
@@ -120,6 +135,8 @@ def _energy(gradient, mask, strength, directional):
 def identity_grid(resolution):
     """The undeformed (H + 1, W + 1, 2) grid: node (i, j) at u = j / W, v = 1 - i / H."""
     height, width = _resolution(resolution)
+    _native._require_memory(f"an identity grid of {height}x{width} texels", 24.0 * (height + 1) * (width + 1),
+                            "pass a smaller resolution")
     u = np.arange(width + 1) / width
     v = 1 - np.arange(height + 1) / height
     return np.stack(np.broadcast_arrays(u[None, :], v[:, None]), axis=-1).astype(np.float32)
@@ -183,12 +200,19 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
     start = time.perf_counter()
     shape = _resolution(resolution)
     uvs, triangles = _layout(uvs, triangles)
+    for name, value in (("strength", strength), ("edge_shrink", edge_shrink), ("padding", padding)):
+        if isinstance(value, (bool, str, bytes)) or not isinstance(value, (int, float, np.integer, np.floating)):
+            raise TypeError(f"{name} must be a number, got {type(value).__name__}")
     if not strength >= 0:
         raise ValueError(f"strength must be >= 0, got {strength}")
+    if not isinstance(border, str):
+        raise TypeError(f"border must be a str, one of {BORDER_MODES}, got {type(border).__name__}")
     if border not in BORDER_MODES:
         raise ValueError(f"border must be one of {BORDER_MODES}, got {border!r}")
-    if not (isinstance(passes, (int, np.integer)) and passes >= 1):
-        raise ValueError(f"passes must be an integer >= 1, got {passes!r}")
+    if not isinstance(passes, (int, np.integer)) or isinstance(passes, bool):
+        raise TypeError(f"passes must be an int, got {type(passes).__name__}")
+    if not 1 <= passes <= 64:
+        raise ValueError(f"passes must be in [1, 64], got {passes!r}")
     if not 0 < edge_shrink <= 1:
         raise ValueError(f"edge_shrink must be in (0, 1] (1: chart edges keep their size), got {edge_shrink}")
     # The original is analysed once (charts, rasterization, chart distances)

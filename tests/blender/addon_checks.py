@@ -8,7 +8,6 @@ is loaded from the repository (addon/ and python/ on sys.path), never from an
 installed copy.
 """
 
-import hashlib
 import json
 import os
 import sys
@@ -23,6 +22,7 @@ import numpy as np  # noqa: E402
 import lmrefine  # noqa: E402
 import lmrefine_blender  # noqa: E402
 import scenes  # noqa: E402
+from scene_state import _array, _digest, changed, fingerprint  # noqa: E402,F401
 from lmrefine_blender import bridge, cycles_bake, pipeline  # noqa: E402
 from lmrefine_blender.journal import Journal  # noqa: E402
 
@@ -57,55 +57,11 @@ def register():
 
 # --------------------------------------------------------------- utilities
 
-def _digest(*items):
-    h = hashlib.sha256()
-    for item in items:
-        h.update(item.tobytes() if isinstance(item, np.ndarray) else repr(item).encode())
-    return h.hexdigest()[:16]
-
-
-def _array(collection, attribute, width, dtype=np.float32):
-    values = np.empty(len(collection) * width, dtype=dtype)
-    collection.foreach_get(attribute, values)
-    return values
-
-
-def fingerprint():
-    """Digests of everything the add-on may touch, by part, so a failing test says which part changed."""
-    parts = {}
-    for mesh in bpy.data.meshes:
-        layers = [(layer.name, layer.active, layer.active_render, _digest(_array(layer.data, "uv", 2)))
-                  for layer in mesh.uv_layers]
-        parts[f"mesh:{mesh.name}"] = _digest(
-            _array(mesh.vertices, "co", 3), _array(mesh.loops, "vertex_index", 1, np.int32),
-            _array(mesh.polygons, "loop_start", 1, np.int32), layers, mesh.uv_layers.active_index,
-            [m.name if m else None for m in mesh.materials])
-    for material in bpy.data.materials:
-        tree = material.node_tree
-        nodes = [(n.name, n.bl_idname, getattr(n, "image", None) and n.image.name) for n in tree.nodes] if tree else []
-        links = [(l.from_node.name, l.to_node.name) for l in tree.links] if tree else []
-        active = tree.nodes.active.name if tree and tree.nodes.active else None
-        parts[f"material:{material.name}"] = _digest(nodes, links, active)
-    parts["images"] = _digest(sorted(image.name for image in bpy.data.images))
-    parts["materials"] = _digest(sorted(m.name for m in bpy.data.materials))
-    view_layer = bpy.context.view_layer
-    parts["selection"] = _digest(sorted(o.name for o in view_layer.objects if o.select_get()),
-                                 view_layer.objects.active.name if view_layer.objects.active else None)
-    scene = bpy.context.scene
-    parts["render"] = _digest(scene.render.engine)
-    parts["result"] = _digest(scene.lmrefine.result.valid, scene.lmrefine.result.message)
-    return parts
-
-
 def geometry_digest(mesh):
     """Vertices, topology, normals and material indices: what a refinement must never touch."""
     return _digest(_array(mesh.vertices, "co", 3), _array(mesh.loops, "vertex_index", 1, np.int32),
                    _array(mesh.polygons, "loop_start", 1, np.int32), _array(mesh.polygons, "loop_total", 1, np.int32),
                    _array(mesh.polygons, "material_index", 1, np.int32), _array(mesh.polygons, "use_smooth", 1, bool))
-
-
-def changed(before, after):
-    return sorted(key for key in set(before) | set(after) if before.get(key) != after.get(key))
 
 
 def refine(undo=False, how='EXEC_DEFAULT'):
@@ -206,8 +162,9 @@ def error_edit_mode():
 
 
 @check()
-def error_zero_area_faces():
-    return _error_case(lambda: scenes.select_only(scenes.degenerate_mesh()))
+def error_only_bad_objects():
+    """Every selected object is skipped: the run stops, naming each with its fix."""
+    return _error_case(lambda: scenes.select_only(scenes.bare_mesh(), scenes.flat_mesh()))
 
 
 @check()
@@ -238,17 +195,6 @@ def error_linked_library():
         linked = target.objects[0]
         bpy.context.scene.collection.objects.link(linked)
         scenes.select_only(linked)
-
-    return _error_case(prepare)
-
-
-@check()
-def error_shared_mesh():
-    def prepare():
-        floor = bpy.data.objects["Floor"]
-        twin = bpy.data.objects.new("FloorTwin", floor.data)
-        bpy.context.scene.collection.objects.link(twin)
-        scenes.select_only(floor, twin)
 
     return _error_case(prepare)
 
@@ -301,6 +247,99 @@ def error_image_from_refined_bake():
 @check()
 def error_no_bake_pass():
     return _error_case(lambda: settings(bake_passes=set()))
+
+
+# --------------------------------------------------- skip and report, rollback
+
+def _run_pipeline(objects):
+    """validate + run_blocking on `objects`: (outcome or None, warnings, error message or None)."""
+    options = pipeline.settings_snapshot(bpy.context.scene.lmrefine)
+    journal = Journal()
+    try:
+        targets = pipeline.validate(bpy.context, objects, options)
+        outcome = pipeline.run_blocking(pipeline.run(bpy.context, targets, options, journal))
+    except Exception as error:
+        journal.rollback()
+        return None, [], f"{type(error).__name__}: {error}"
+    journal.commit()
+    return outcome, outcome.warnings, None
+
+
+@check("refine", "bake")
+def skip_bad_objects_refines_the_others():
+    """Floor with four broken objects: Floor is refined, each other one is skipped and named with its fix,
+    and the skipped objects are untouched."""
+    fresh_shadow_scene(first_lightmap='EMBREE', backend='EMBREE', bake_passes={'DIRECT'})
+    floor = bpy.data.objects["Floor"]
+    twin = bpy.data.objects.new("FloorTwin", floor.data)
+    bpy.context.scene.collection.objects.link(twin)
+    broken = [twin, scenes.bare_mesh(), scenes.flat_mesh(), scenes.nan_mesh()]
+    scenes.select_only(floor, *broken)
+    before = fingerprint()
+    outcome, warnings, error = _run_pipeline([floor, *broken])
+    after = fingerprint()
+    skipped = [w for w in warnings if w.startswith("Skipped: ")]
+    operator_outcome, message = refine()  # the same through the operator: it finishes
+    return {"error": error, "objects": outcome and outcome.objects, "skipped": skipped, "warnings": warnings,
+            "changed": changed(before, after), "operator": operator_outcome, "message": message}
+
+
+@check("refine", "bake")
+def zero_area_faces_are_skipped_and_counted():
+    """A mesh with one face of zero area in 3-D is refined; the face is counted in a warning."""
+    fresh_shadow_scene(first_lightmap='EMBREE', backend='EMBREE', bake_passes={'DIRECT'})
+    sliver = scenes.degenerate_mesh()
+    scenes.select_only(sliver)
+    outcome, warnings, error = _run_pipeline([sliver])
+    return {"error": error, "objects": outcome and outcome.objects, "warnings": warnings,
+            "refined": "Lightmap_refined" in sliver.data.uv_layers}
+
+
+@check("refine", "bake")
+def core_refusal_skips_the_object():
+    """refine_uvs refusing one object's input (ValueError) skips that object; the other is refined."""
+    fresh_shadow_scene(first_lightmap='EMBREE', backend='EMBREE', bake_passes={'DIRECT'})
+    floor, box = bpy.data.objects["Floor"], bpy.data.objects["Blocker"]
+    original = lmrefine.refine_uvs
+
+    def refuse_the_box(lightmap, uvs, triangles, *args, **kwargs):
+        if len(triangles) == 12:
+            raise ValueError("uvs: refused for the test")
+        return original(lightmap, uvs, triangles, *args, **kwargs)
+
+    box_before = fingerprint()["mesh:Cube"]
+    lmrefine.refine_uvs = refuse_the_box
+    try:
+        outcome, warnings, error = _run_pipeline([floor, box])
+    finally:
+        lmrefine.refine_uvs = original
+    return {"error": error, "objects": outcome and outcome.objects,
+            "skipped": [w for w in warnings if w.startswith("Skipped: ")],
+            "box_unchanged": fingerprint()["mesh:Cube"] == box_before,
+            "floor_refined": "Lightmap_refined" in floor.data.uv_layers}
+
+
+@check("refine", "bake")
+def core_failure_late_leaves_the_scene_unchanged():
+    """The second bake failing (after the refined maps were written) rolls the whole scene back,
+    through the operator, and leaves no undo step behind."""
+    fresh_shadow_scene(first_lightmap='EMBREE', backend='EMBREE', bake_passes={'DIRECT'})
+    scenes.select_only(bpy.data.objects["Floor"], bpy.data.objects["Blocker"])
+    original, calls = lmrefine.bake, []
+
+    def fail_second(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 2:
+            raise RuntimeError("baker failed for the test")
+        return original(*args, **kwargs)
+
+    before = fingerprint()
+    lmrefine.bake = fail_second
+    try:
+        outcome, message = refine()
+    finally:
+        lmrefine.bake = original
+    return {"outcome": outcome, "message": message, "calls": len(calls), "changed": changed(before, fingerprint())}
 
 
 # ----------------------------------------------------------------- bridge

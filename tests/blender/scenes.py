@@ -100,6 +100,30 @@ def degenerate_mesh():
     return obj
 
 
+def _mesh_object(name, vertices, faces, uvs=None):
+    mesh = bpy.data.meshes.new(name + "Mesh")
+    mesh.from_pydata(vertices, [], faces)
+    mesh.update()
+    if uvs is not None:
+        layer = mesh.uv_layers.new(name="Lightmap")
+        layer.data.foreach_set("uv", np.asarray(uvs, np.float32).ravel())
+    obj = bpy.data.objects.new(name, mesh)
+    bpy.context.scene.collection.objects.link(obj)
+    return obj
+
+
+def flat_mesh():
+    """A mesh 'Flat' whose only face has zero area in 3-D (collinear vertices)."""
+    return _mesh_object("Flat", [(0, 0, 0), (1, 0, 0), (2, 0, 0)], [(0, 1, 2)],
+                        [(0.1, 0.1), (0.9, 0.1), (0.5, 0.9)])
+
+
+def nan_mesh():
+    """A mesh 'Broken': a triangle with one vertex at NaN."""
+    return _mesh_object("Broken", [(0, 0, 0), (1, 0, 0), (float("nan"), 1, 0)], [(0, 1, 2)],
+                        [(0.1, 0.1), (0.9, 0.1), (0.5, 0.9)])
+
+
 def bare_mesh():
     """A mesh 'Bare' with no UV map at all."""
     mesh = bpy.data.meshes.new("BareMesh")

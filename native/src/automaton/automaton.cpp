@@ -225,14 +225,15 @@ AutomatonResult run_automaton(const AutomatonInput& input, const AutomatonOption
                      "diffusion must be in [0, 0.25] (above 0.25 a cell could give away more energy than it has)");
     LMREFINE_REQUIRE(options.rate > 0 && options.rate <= 1, "rate must be in (0, 1]");
     LMREFINE_REQUIRE(options.delta > 0, "delta must be positive");
-    LMREFINE_REQUIRE(options.max_steps >= 0, "max_steps must be >= 0");
+    // Bounded so a mistyped value cannot run for days (the defaults are 8 and 1).
+    LMREFINE_REQUIRE(options.max_steps >= 0 && options.max_steps <= 10000, "max_steps must be in [0, 10000]");
     LMREFINE_REQUIRE(options.min_area > 0 && options.min_area <= 1,
                      "min_shrink must be in (0, 1]: the smallest allowed cell area relative to its original area");
     LMREFINE_REQUIRE(options.max_area >= 1, "max_magnification must be >= 1");
     LMREFINE_REQUIRE(options.edge_shrink > 0 && options.edge_shrink <= 1,
                      "edge_shrink must be in (0, 1]: the smallest area of a chart's edge texel relative to its "
                      "original area (1 = rigid)");
-    LMREFINE_REQUIRE(options.passes >= 1, "passes must be >= 1");
+    LMREFINE_REQUIRE(options.passes >= 1 && options.passes <= 64, "passes must be in [1, 64]");
     const int64_t values = int64_t(input.width) * input.height * input.channels;
     for (int64_t k = 0; k < values; ++k) {
         if (!(input.energy[k] >= 0) || !std::isfinite(input.energy[k])) {

@@ -1,12 +1,9 @@
 #include "lmrefine/bake/baker.h"
 
-#include <unistd.h>
-
 #include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cmath>
-#include <cstdio>
 #include <string>
 #include <vector>
 
@@ -17,6 +14,7 @@
 #include "lmrefine/bake/denoise.h"
 #include "lmrefine/bake/dilation.h"
 #include "lmrefine/core/error.h"
+#include "lmrefine/core/memory.h"
 #include "lmrefine/core/parallel.h"
 #include "lmrefine/core/progress.h"
 #include "ray_tracer.h"
@@ -37,17 +35,6 @@ std::vector<std::vector<int>> map_meshes(const Scene& scene, bool atlas) {
         }
     }
     return maps;
-}
-
-uint64_t physical_memory() {
-    const long pages = sysconf(_SC_PHYS_PAGES), page = sysconf(_SC_PAGE_SIZE);
-    return pages > 0 && page > 0 ? uint64_t(pages) * uint64_t(page) : (uint64_t(1) << 34);
-}
-
-std::string gib(uint64_t bytes) {
-    char text[32];
-    std::snprintf(text, sizeof text, "%.2f GiB", double(bytes) / double(uint64_t(1) << 30));
-    return text;
 }
 
 // Per-texel results of one map while it is baked.
@@ -226,13 +213,8 @@ uint64_t bake_memory_estimate(const Scene& scene, const BakeOptions& options) {
 BakeResult bake(const Scene& scene, const BakeOptions& options, Progress& progress) {
     const auto started = Clock::now();
     validate_bake_options(scene, options, /*texels=*/true);
-    const uint64_t required = bake_memory_estimate(scene, options), available = physical_memory();
-    if (required > available / 2) {
-        LMREFINE_THROW(ResourceError, "baking at " + std::to_string(options.height) + "x" +
-                                          std::to_string(options.width) + " needs about " + gib(required) +
-                                          " of memory, more than half of this machine's " + gib(available) +
-                                          "; lower the resolution or bake fewer passes or meshes at once");
-    }
+    require_memory("baking at " + std::to_string(options.height) + "x" + std::to_string(options.width),
+                   bake_memory_estimate(scene, options), "lower the resolution or bake fewer passes or meshes at once");
     BakeResult result;
     const RayTracer tracer(scene);
     const IntegratorSettings settings{options.bounces, options.ao_distance};

@@ -29,6 +29,9 @@ EvaluateResult evaluate(const Scene& scene, const float* points, const float* no
         const float length = glm::length(n);
         LMREFINE_REQUIRE(std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z),
                          "points[" + std::to_string(i) + "] is NaN or Inf");
+        LMREFINE_REQUIRE(std::abs(p.x) <= kMaxCoordinate && std::abs(p.y) <= kMaxCoordinate &&
+                             std::abs(p.z) <= kMaxCoordinate,
+                         "points[" + std::to_string(i) + "] has a coordinate beyond +-1e9; pass points in the scene");
         LMREFINE_REQUIRE(std::isfinite(length) && length > 0.0f,
                          "normals[" + std::to_string(i) + "] is zero, NaN or Inf; pass the unit normal of the lit side");
         surface[size_t(i)] = {p, n / length, n / length};

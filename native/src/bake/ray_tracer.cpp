@@ -2,6 +2,7 @@
 
 #include <embree3/rtcore.h>
 
+#include <cmath>
 #include <limits>
 #include <mutex>
 #include <string>
@@ -41,6 +42,19 @@ void on_embree_error(void* user, RTCError code, const char* message) {
         impl->error = message ? message : "unknown error";
         impl->error_code = code;
     }
+}
+
+// What Embree asserts on (RayK::valid): finite origin and direction below
+// ~1.8e18, tnear and tfar not NaN. Scene and points are checked where they
+// come in; this guard keeps any ray that still slips through (a light placed
+// absurdly far, a sliver triangle's NaN normal) from aborting the process:
+// it is not traced, and counts as blocked (no light along it).
+constexpr float kEmbreeLarge = 1e18f;
+bool ray_valid(const glm::vec3& origin, const glm::vec3& direction, float tfar) {
+    for (int k = 0; k < 3; ++k) {
+        if (!(std::abs(origin[k]) <= kEmbreeLarge) || !(std::abs(direction[k]) <= kEmbreeLarge)) return false;
+    }
+    return tfar >= 0.0f;  // false for NaN; +inf is fine
 }
 
 RTCRay make_ray(const glm::vec3& origin, const glm::vec3& direction, float tfar) {
@@ -100,6 +114,7 @@ RayTracer::~RayTracer() = default;
 bool RayTracer::occluded(const glm::vec3& origin, const glm::vec3& direction, float tfar) const {
     RTCIntersectContext context;
     rtcInitIntersectContext(&context);
+    if (!ray_valid(origin, direction, tfar)) return true;
     RTCRay ray = make_ray(origin, direction, tfar);
     rtcOccluded1(impl_->scene, &context, &ray);
     return ray.tfar < 0.0f;  // Embree sets tfar to -inf on a hit
@@ -127,7 +142,7 @@ void occluded_packets(RTCScene scene, const Ray* rays, size_t count, uint8_t* bl
         for (int j = 0; j < N; ++j) {
             const bool live = begin + size_t(j) < count;
             const Ray& r = rays[live ? begin + size_t(j) : begin];
-            valid[j] = live ? -1 : 0;
+            valid[j] = live && ray_valid(r.origin, r.direction, r.tfar) ? -1 : 0;
             packet.org_x[j] = r.origin.x;
             packet.org_y[j] = r.origin.y;
             packet.org_z[j] = r.origin.z;
@@ -142,7 +157,9 @@ void occluded_packets(RTCScene scene, const Ray* rays, size_t count, uint8_t* bl
             packet.flags[j] = 0;
         }
         Packet<N>::occluded(valid, scene, &context, &packet);
-        for (int j = 0; j < N && begin + size_t(j) < count; ++j) blocked[begin + size_t(j)] = packet.tfar[j] < 0.0f;
+        for (int j = 0; j < N && begin + size_t(j) < count; ++j) {
+            blocked[begin + size_t(j)] = valid[j] == 0 || packet.tfar[j] < 0.0f;
+        }
     }
 }
 
@@ -155,6 +172,7 @@ void RayTracer::occluded(const Ray* rays, size_t count, uint8_t* blocked) const 
 bool RayTracer::intersect(const glm::vec3& origin, const glm::vec3& direction, float tfar, Hit& hit) const {
     RTCIntersectContext context;
     rtcInitIntersectContext(&context);
+    if (!ray_valid(origin, direction, tfar)) return false;
     RTCRayHit rayhit;
     rayhit.ray = make_ray(origin, direction, tfar);
     rayhit.hit.geomID = RTC_INVALID_GEOMETRY_ID;
@@ -174,6 +192,7 @@ int64_t RayTracer::occluded_batch(const float* rays, int64_t begin, int64_t end)
     int64_t count = 0;
     for (int64_t i = begin; i < end; ++i) {
         const float* r = rays + 7 * i;
+        if (!ray_valid({r[0], r[1], r[2]}, {r[3], r[4], r[5]}, r[6])) continue;
         RTCRay ray = make_ray({r[0], r[1], r[2]}, {r[3], r[4], r[5]}, r[6]);
         rtcOccluded1(impl_->scene, &context, &ray);
         count += ray.tfar < 0.0f;

@@ -41,6 +41,13 @@ int Scene::add_mesh(const MeshInput& in) {
                          std::to_string(in.base_color_count) + " colours for " +
                          std::to_string(in.triangle_count) + " triangles");
     require_finite(in.positions, in.vertex_count, 3, where, "positions");
+    for (int64_t i = 0; i < in.vertex_count * 3; ++i) {
+        if (std::abs(in.positions[i]) > kMaxCoordinate) {
+            LMREFINE_THROW(InvalidArgument, where + "positions[" + std::to_string(i / 3) + "] has a coordinate of " +
+                                                std::to_string(in.positions[i]) + ", beyond +-1e9; fix the broken "
+                                                "vertex or scale the scene down");
+        }
+    }
     Mesh mesh;
     mesh.receiver = in.receiver;
     mesh.positions.resize(size_t(in.vertex_count));

@@ -1,6 +1,7 @@
 #include "lmrefine/core/image_io.h"
 
 #include <OpenImageIO/imageio.h>
+#include <sys/stat.h>
 
 #include <algorithm>
 #include <cmath>
@@ -8,6 +9,7 @@
 #include <string>
 
 #include "lmrefine/core/error.h"
+#include "lmrefine/core/memory.h"
 
 namespace lmrefine {
 namespace {
@@ -37,11 +39,32 @@ bool is_colour_channel(int c, int channels) {
 
 const char* supported_list() { return ".exr, .hdr, .png, .tif/.tiff or .jpg"; }
 
+void require_path(const std::string& path) {
+    LMREFINE_REQUIRE(!path.empty(), "the image path is empty; pass a file name");
+    LMREFINE_REQUIRE(path.find('\0') == std::string::npos,
+                     "the image path contains a NUL character; a file name cannot hold one");
+}
+
+// Only regular files are read: a device (/dev/zero), a FIFO or a directory
+// would make the decoder read forever or fail obscurely.
+void require_regular_file(const std::string& path) {
+    struct stat info {};
+    if (stat(path.c_str(), &info) != 0) {
+        LMREFINE_THROW(IoError, "cannot read image '" + path + "': no such file (check the path)");
+    }
+    if (!S_ISREG(info.st_mode)) {
+        LMREFINE_THROW(IoError, "cannot read image '" + path + "': not a regular file (a directory, device or pipe); "
+                                "pass an image file");
+    }
+}
+
 }  // namespace
 
 ImageBuffer read_image(const std::string& path) {
     // Lightmap alpha is coverage, not opacity: keep colour unassociated
     // (OpenImageIO would otherwise premultiply PNG colour by alpha).
+    require_path(path);
+    require_regular_file(path);
     OIIO::ImageSpec config;
     config.attribute("oiio:UnassociatedAlpha", 1);
     auto input = OIIO::ImageInput::open(path, &config);
@@ -58,6 +81,12 @@ ImageBuffer read_image(const std::string& path) {
     if (image.height <= 0 || image.width <= 0 || image.channels <= 0) {
         LMREFINE_THROW(IoError, "image '" + path + "' is empty");
     }
+    // The header's size is checked before anything is allocated: a corrupt
+    // or hostile header can declare 100000^2 pixels.
+    require_memory("reading '" + path + "' (" + std::to_string(image.width) + "x" + std::to_string(image.height) +
+                       ", " + std::to_string(image.channels) + " channels as float32)",
+                   saturating_product({uint64_t(image.height), uint64_t(image.width), uint64_t(image.channels), 4}),
+                   "the file's header declares an image too large to read");
     image.pixels.resize(size_t(image.height) * image.width * image.channels);
     if (!input->read_image(0, 0, 0, image.channels, OIIO::TypeDesc::FLOAT, image.pixels.data())) {
         LMREFINE_THROW(IoError, "cannot read pixels of '" + path + "': " + input->geterror());
@@ -77,6 +106,7 @@ ImageBuffer read_image(const std::string& path) {
 
 void write_image(const std::string& path, const float* pixels, int height, int width,
                  int channels, const WriteOptions& options) {
+    require_path(path);
     LMREFINE_REQUIRE(height > 0 && width > 0, "cannot write an empty image to '" + path + "'");
     LMREFINE_REQUIRE(channels >= 1 && channels <= 4,
                      "cannot write '" + path + "': expected 1 to 4 channels, got " +

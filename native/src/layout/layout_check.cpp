@@ -73,6 +73,71 @@ bool triangles_overlap(const Triangle& a, const Triangle& b) {
     return true;
 }
 
+// Is the point inside the triangle or on its boundary (within kTouch texels)?
+bool contains(const Triangle& p, const glm::dvec2& x) {
+    const double area = cross(p[1] - p[0], p[2] - p[0]);
+    const double sign = area >= 0 ? 1.0 : -1.0;
+    for (int e = 0; e < 3; ++e) {
+        const glm::dvec2 edge = p[(e + 1) % 3] - p[e];
+        const double length = glm::length(edge);
+        if (sign * cross(edge, x - p[e]) < -kTouch * length) return false;
+    }
+    return true;
+}
+
+// Triangles of one chart that share an area: stacked faces (identical corner
+// UVs join them into one chart), or a chart folded onto itself. Candidates
+// are texel centres inside two of the chart's triangles; the separating-axis
+// test confirms them. Pairs of different charts are left to the caller.
+void mark_overlaps_inside_charts(const UvLayout& layout, const LayoutRaster& raster, const Charts& charts,
+                                 const std::vector<int8_t>& skip, std::vector<uint8_t>& overlapping) {
+    const int width = raster.width(), height = raster.height();
+    std::vector<std::vector<std::pair<int32_t, int32_t>>> stacked_in_band(size_t(raster.band_count()));
+    parallel_for(raster.band_count(), 1, [&](int64_t band_begin, int64_t band_end) {
+        std::vector<uint8_t> count;
+        for (int64_t band = band_begin; band < band_end; ++band) {
+            const int row0 = int(band) * LayoutRaster::kBandRows;
+            count.assign(size_t(LayoutRaster::kBandRows) * size_t(width), 0);
+            auto centres = [&](int64_t t, int row, int begin, int end, auto&& at_centre) {
+                if (skip[size_t(t)]) return;
+                const Triangle p = pixel_triangle(layout, layout.uvs, t, width, height);
+                for (int col = begin; col < end; ++col) {
+                    if (contains(p, {col + 0.5, row + 0.5})) at_centre(size_t(row - row0) * width + col);
+                }
+            };
+            raster.for_each_span_in_band(int(band), [&](int64_t t, int row, int begin, int end) {
+                centres(t, row, begin, end, [&](size_t k) { count[k] = uint8_t(std::min(count[k] + 1, 2)); });
+            });
+            auto& found = stacked_in_band[size_t(band)];
+            raster.for_each_span_in_band(int(band), [&](int64_t t, int row, int begin, int end) {
+                centres(t, row, begin, end, [&](size_t k) {
+                    if (count[k] > 1) found.emplace_back(int32_t(size_t(row0) * width + k), int32_t(t));
+                });
+            });
+        }
+    });
+    std::vector<std::pair<int32_t, int32_t>> stacked;  // (texel, triangle)
+    for (const auto& found : stacked_in_band) stacked.insert(stacked.end(), found.begin(), found.end());
+    std::sort(stacked.begin(), stacked.end());
+    for (size_t begin = 0; begin < stacked.size();) {
+        size_t end = begin;
+        while (end < stacked.size() && stacked[end].first == stacked[begin].first) ++end;
+        for (size_t p = begin; p < end; ++p) {
+            const int32_t a = stacked[p].second;
+            for (size_t q = p + 1; q < end; ++q) {
+                const int32_t b = stacked[q].second;
+                if (charts.triangle_chart[size_t(a)] != charts.triangle_chart[size_t(b)]) continue;
+                if (overlapping[size_t(a)] && overlapping[size_t(b)]) continue;
+                if (triangles_overlap(pixel_triangle(layout, layout.uvs, a, width, height),
+                                      pixel_triangle(layout, layout.uvs, b, width, height))) {
+                    overlapping[size_t(a)] = overlapping[size_t(b)] = 1;
+                }
+            }
+        }
+        begin = end;
+    }
+}
+
 double point_segment_distance(const glm::dvec2& p, const glm::dvec2& a, const glm::dvec2& b) {
     const glm::dvec2 ab = b - a;
     const double length2 = glm::dot(ab, ab);
@@ -347,6 +412,7 @@ LayoutReport LayoutChecker::check_against(const UvLayout& layout, const LayoutRa
         }
         begin = end;
     }
+    mark_overlaps_inside_charts(layout, raster, charts, skip, overlapping);
     for (size_t t = 0; t < T; ++t) {
         report.overlapping += overlapping[t];
         if (overlapping[t]) failing[size_t(charts.triangle_chart[t])] = 1;

@@ -13,6 +13,11 @@
 
 namespace lmrefine {
 
+// Largest coordinate a position (or a point given to evaluate) may have. Rays
+// start at float positions offset relative to the scene's size: beyond this
+// a scene loses all precision, and near 1e18 Embree rejects the ray.
+constexpr float kMaxCoordinate = 1e9f;
+
 struct Mesh {
     std::vector<glm::vec3> positions;    // (V)
     std::vector<int32_t> triangles;      // (T * 3) indices into positions
@@ -43,7 +48,8 @@ struct MeshInput {
 class Scene {
 public:
     // Validates and copies the mesh; returns its id (0, 1, ...). Throws
-    // InvalidArgument naming the first bad value: NaN/Inf positions or
+    // InvalidArgument naming the first bad value: NaN/Inf positions (or
+    // beyond kMaxCoordinate) or
     // normals, indices out of range, receiver without UVs, UVs outside [0, 1],
     // base colours outside [0, 1]. Zero-area triangles are kept (their index
     // stays valid) but skipped by the baker and counted in degenerate_count.

@@ -1,0 +1,40 @@
+#include "lmrefine/core/memory.h"
+
+#include <unistd.h>
+
+#include <cstdio>
+#include <limits>
+
+#include "lmrefine/core/error.h"
+
+namespace lmrefine {
+
+uint64_t physical_memory() {
+    const long pages = sysconf(_SC_PHYS_PAGES), page = sysconf(_SC_PAGE_SIZE);
+    return pages > 0 && page > 0 ? uint64_t(pages) * uint64_t(page) : (uint64_t(1) << 34);
+}
+
+std::string gib(uint64_t bytes) {
+    char text[48];
+    std::snprintf(text, sizeof text, "%.2f GiB", double(bytes) / double(uint64_t(1) << 30));
+    return text;
+}
+
+void require_memory(const std::string& what, uint64_t bytes, const std::string& advice) {
+    const uint64_t available = physical_memory();
+    if (bytes > available / 2) {
+        LMREFINE_THROW(ResourceError, what + " needs about " + gib(bytes) + " of memory, more than half of this machine's " +
+                                          gib(available) + "; " + advice);
+    }
+}
+
+uint64_t saturating_product(std::initializer_list<uint64_t> factors) {
+    uint64_t product = 1;
+    for (uint64_t f : factors) {
+        if (f != 0 && product > std::numeric_limits<uint64_t>::max() / f) return std::numeric_limits<uint64_t>::max();
+        product *= f;
+    }
+    return product;
+}
+
+}  // namespace lmrefine
