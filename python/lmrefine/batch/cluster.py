@@ -40,7 +40,7 @@ class Cluster:
             dask.config.set({"distributed.scheduler.allowed-failures": max(0, retries)})
             self.local = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
                                       dashboard_address=dashboard, silence_logs=logging.ERROR,
-                                      host="127.0.0.1")
+                                      host="127.0.0.1", preload=["lmrefine.batch.worker_setup"])
             self.client = Client(self.local)
             self.threads = max(1, cores // self.workers)
         self.dashboard = self._dashboard_link()
