@@ -10,7 +10,7 @@ DEMO_OUT  ?= demo_out
 # Everything comes from Debian 12 packages.
 DEBIAN_PACKAGES := cmake g++ make pkg-config pybind11-dev libembree-dev \
 	libopenimageio-dev libglm-dev python3-dev python3-numpy python3-pytest \
-	python3-pywt python3-matplotlib blender
+	python3-pywt python3-matplotlib python3-distributed blender
 
 .PHONY: all deps build install test test-asan fuzz bench demo evaluate samples sample-lightmap addon-zip clean
 

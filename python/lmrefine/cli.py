@@ -190,13 +190,23 @@ def build_parser():
     demo.add_argument("--wavelet", choices=WAVELETS, default="d4", help="wavelet of the gradient-map pictures")
     demo.add_argument("--out", default="demo_out", help="output folder (default: demo_out)")
     demo.set_defaults(run=lambda args: run_demo(_demo_scenes(args)))
+
+    from .batch.cli import add_batch_parser
+
+    add_batch_parser(commands)
     return parser
 
 
 def main(argv=None):
+    argv = list(sys.argv[1:] if argv is None else argv)
+    extra = []
+    if argv[:1] == ["batch"] and "--" in argv:  # batch: flags after `--` go to the add-on as they are
+        extra = argv[argv.index("--") + 1:]
+        argv = argv[:argv.index("--")]
     args = build_parser().parse_args(argv)
+    args.extra = extra
     try:
-        args.run(args)
+        result = args.run(args)
     except (CliError, ValueError, OSError, MemoryError) as error:
         print(f"lmrefine {args.command}: error: {error}", file=sys.stderr)
         return 2
@@ -206,4 +216,6 @@ def main(argv=None):
     except KeyboardInterrupt:
         print(f"\nlmrefine {args.command}: interrupted", file=sys.stderr)
         return 130
+    if args.command == "batch" and not result["ok"]:
+        return 1  # a level failed: the summary says which and where its log is
     return 0

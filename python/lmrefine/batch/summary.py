@@ -1,0 +1,49 @@
+"""The end of a batch: a table on the terminal and OUT/summary.json."""
+
+import os
+
+from .manifest import write_json_atomic
+
+COLUMNS = ("level", "status", "seconds", "objects", "attempts")
+
+
+def level_rows(levels, manifest, skipped):
+    rows = []
+    for level in levels:
+        record = manifest.record(level.name) or {}
+        status = record.get("status", "pending")
+        if level.name in skipped and status == "done":
+            status = "skipped (done before)"
+        rows.append({"level": level.name, "status": status, "seconds": record.get("seconds"),
+                     "objects": record.get("objects"), "attempts": record.get("attempts"),
+                     "error": record.get("error"), "log": record.get("log"), "outputs": record.get("outputs")})
+    return rows
+
+
+def summary_table(rows):
+    def cell(row, key):
+        value = row[key]
+        if value is None:
+            return "-"
+        return f"{value:.1f}" if isinstance(value, float) else str(value)
+
+    table = [list(COLUMNS)] + [[cell(row, key) for key in COLUMNS] for row in rows]
+    widths = [max(len(line[i]) for line in table) for i in range(len(COLUMNS))]
+    lines = ["  ".join(text.ljust(width) for text, width in zip(line, widths)).rstrip() for line in table]
+    lines.insert(1, "  ".join("-" * width for width in widths))
+    for row in rows:
+        if row["status"] == "failed":
+            lines.append(f"{row['level']}: {row['error']} (log: {row['log']})")
+    return "\n".join(lines)
+
+
+def write_summary(out_dir, rows, wall_seconds, workers):
+    counts = {}
+    for row in rows:
+        key = "skipped" if row["status"].startswith("skipped") else row["status"]
+        counts[key] = counts.get(key, 0) + 1
+    summary = {"levels": rows, "counts": counts, "wall_seconds": wall_seconds, "workers": workers,
+               "ok": counts.get("failed", 0) == 0 and all(r["status"] in ("done", "skipped (done before)")
+                                                          for r in rows)}
+    write_json_atomic(os.path.join(out_dir, "summary.json"), summary)
+    return summary
