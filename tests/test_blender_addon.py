@@ -376,6 +376,35 @@ def test_batch_rejects_bad_flags(facts, work_dir):
     assert "unknown pass" in process.stderr
 
 
+def test_batch_objects_all_selected_and_collection():
+    """--objects all | selected | collection:NAME on a bundled sample, judged in one Blender process."""
+    probe = (
+        "import bpy, importlib.util, json\n"
+        f"spec = importlib.util.spec_from_file_location('lmrefine_batch', {BATCH!r})\n"
+        "batch = importlib.util.module_from_spec(spec); spec.loader.exec_module(batch)\n"
+        "scene = bpy.context.scene\n"
+        "group = bpy.data.collections.new('Walls'); scene.collection.children.link(group)\n"
+        "inner = bpy.data.collections.new('Inner'); group.children.link(inner)\n"
+        "group.objects.link(bpy.data.objects['LowWall']); inner.objects.link(bpy.data.objects['Well'])\n"
+        "for obj in scene.objects: obj.select_set(obj.name in ('Floor', 'Well'))\n"
+        "out = {}\n"
+        "for spec_text in ('all', 'selected', 'collection:Walls', 'Floor,Well', 'collection:Nope', 'Nope'):\n"
+        "    try: out[spec_text] = batch.object_names(batch._csv(spec_text), scene)\n"
+        "    except batch.pipeline.UserError as error: out[spec_text] = 'error: ' + str(error)\n"
+        "print('PROBE', json.dumps(out))\n"
+    )
+    process = run_blender(os.path.join(REPO, "blend_samples", "courtyard.blend"), "--python-expr", probe)
+    assert process.returncode == 0, process.stderr[-2000:]
+    names = json.loads(next(line for line in process.stdout.splitlines() if line.startswith("PROBE"))[6:])
+    assert names["all"] == ["ArcadeNorth", "ArcadeWest", "Floor", "LowWall", "Well"]
+    assert names["selected"] == ["Floor", "Well"]
+    assert names["collection:Walls"] == ["LowWall", "Well"]  # child collections count
+    assert names["Floor,Well"] == ["Floor", "Well"]
+    assert names["collection:Nope"].startswith("error: --objects collection:Nope: no such collection")
+    assert "Walls" in names["collection:Nope"]
+    assert names["Nope"].startswith("error: no object(s) named Nope") and "--objects all" in names["Nope"]
+
+
 def test_batch_refines_bakes_and_reports(facts, work_dir):
     blend = fact(facts, "save_scene_for_batch")["path"]
     out = work_dir / "batch_ok"

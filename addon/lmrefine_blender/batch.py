@@ -51,7 +51,10 @@ def build_parser():
                     "--out. Flags left out keep the scene's lmrefine settings.",
     )
     parser.add_argument("--objects", type=_csv, required=True,
-                        help="comma-separated object names to refine (mesh objects)")
+                        help="what to refine: 'all' (every mesh object of the scene with a UV map), "
+                             "'selected' (the objects selected when the .blend was saved), "
+                             "'collection:NAME' (the mesh objects in that collection and its children), "
+                             "or comma-separated object names")
     parser.add_argument("--out", required=True, help="output folder (created if missing)")
     parser.add_argument("--source-layer", help="lightmap UV map to refine (default: a map named like "
                         "'Lightmap'/'UVMap.001', else the second map)")
@@ -116,20 +119,50 @@ def _progress(fraction, label, state={"shown": None}):
         print(f"lmrefine: {100 * fraction:3.0f}% {label}", flush=True)
 
 
+def _meshes_with_uvs(objects):
+    return [obj.name for obj in objects if obj.type == 'MESH' and len(obj.data.uv_layers) > 0]
+
+
+def object_names(spec, scene):
+    """The object names an --objects value means in this scene (raises pipeline.UserError when it means none)."""
+    if spec == ["all"]:
+        names = _meshes_with_uvs(scene.objects)
+        what = "the scene"
+    elif spec == ["selected"]:
+        names = [obj.name for obj in scene.objects if obj.select_get()]
+        what = "the selection saved in the .blend"
+    elif len(spec) == 1 and spec[0].startswith("collection:"):
+        wanted = spec[0][len("collection:"):]
+        collection = bpy.data.collections.get(wanted)
+        if collection is None:
+            known = ", ".join(sorted(c.name for c in bpy.data.collections)) or "none"
+            raise pipeline.UserError(f"--objects collection:{wanted}: no such collection (collections: {known})")
+        names = _meshes_with_uvs(collection.all_objects)
+        what = f"collection '{wanted}'"
+    else:
+        missing = [name for name in spec if name not in bpy.data.objects]
+        if missing:
+            meshes = ", ".join(sorted(_meshes_with_uvs(scene.objects))[:20]) or "none"
+            raise pipeline.UserError(f"no object(s) named {', '.join(missing)} in {bpy.data.filepath} "
+                                     f"(mesh objects with UV maps: {meshes}; or use --objects all)")
+        return list(spec)
+    if not names:
+        raise pipeline.UserError(f"--objects {','.join(spec)}: no mesh object with a UV map in {what}")
+    return sorted(names)
+
+
 def run(args):
     """The batch job; returns the report dict (raises pipeline.UserError and the job's errors)."""
     if not bpy.data.filepath:
         raise pipeline.UserError("no .blend opened: run `blender -b scene.blend --python batch.py -- ...`")
     scene = bpy.context.scene
-    missing = [name for name in args.objects if name not in bpy.data.objects]
-    if missing:
-        raise pipeline.UserError(f"no object(s) named {', '.join(missing)} in {bpy.data.filepath}")
+    names = object_names(args.objects, scene)
     out = os.path.abspath(args.out)
     blend_copy = os.path.join(out, os.path.basename(bpy.data.filepath))
     if os.path.abspath(bpy.data.filepath) == blend_copy:
         raise pipeline.UserError(f"--out {args.out} is the folder of the input .blend, whose copy would "
                                  "overwrite it: choose another folder")
-    objects = [bpy.data.objects[name] for name in args.objects]
+    objects = [bpy.data.objects[name] for name in names]
     not_meshes = [f"'{obj.name}' ({obj.type.lower()})" for obj in objects if obj.type != 'MESH']
     if not_meshes:
         raise pipeline.UserError(f"--objects names objects that are not meshes: {', '.join(not_meshes)}")
