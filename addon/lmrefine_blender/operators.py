@@ -21,14 +21,21 @@ def _report_outcome(operator, context, outcome, seconds):
     result = context.scene.lmrefine.result
     result.valid = True
     result.objects = ", ".join(outcome.objects)
+    result.moved = summary["moved"]
     result.transition_widening = summary["transition_widening"]
     result.density_min = summary["density_min"]
     result.density_max = summary["density_max"]
     result.limited_by = summary["limited_by"]
     result.timings = "  ".join(f"{stage} {value:.2f}s" for stage, value in outcome.timings.items())
-    result.message = (f"Refined {len(outcome.objects)} object(s) in {seconds:.1f}s: transitions widened "
-                      f"{summary['transition_widening']:.2f}x, texel density "
-                      f"{summary['density_min']:.2f}x to {summary['density_max']:.2f}x")
+    if summary["moved"] == 0:
+        result.message = (f"Nothing moved: the refined UV maps of {len(outcome.objects)} object(s) equal their "
+                          f"source maps ({seconds:.1f}s; the warnings say why)")
+    else:
+        still = len(outcome.objects) - summary["moved"]
+        result.message = (f"Refined {len(outcome.objects)} object(s) in {seconds:.1f}s: texels at light changes "
+                          f"{summary['transition_widening']:.2f}x their area, texel density "
+                          f"{summary['density_min']:.2f}x to {summary['density_max']:.2f}x"
+                          + (f"; {still} did not move (see warnings)" if still else ""))
     for warning in outcome.warnings:
         operator.report({'WARNING'}, warning)
     operator.report({'INFO'}, result.message)

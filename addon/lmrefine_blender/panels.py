@@ -89,8 +89,14 @@ class LMREFINE_PT_refine_result(_LightmapTab, bpy.types.Panel):
             return
         column = layout.column(align=True)
         column.label(text=f"Objects: {result.objects}")
-        column.label(text=f"Transition widening: {result.transition_widening:.2f}x")
-        column.label(text=f"Texel density: {result.density_min:.2f}x to {result.density_max:.2f}x")
+        if result.moved == 0:  # every figure below would be 1x: say what happened instead
+            column.label(text="Nothing moved", icon='ERROR')
+            column.label(text="Refined map = source map")
+            column.label(text="The Info log says why")
+        else:
+            column.label(text=f"Moved: {result.moved} object(s)")
+            column.label(text=f"Edges: {result.transition_widening:.2f}x texels")
+            column.label(text=f"Density: {result.density_min:.2f}x to {result.density_max:.2f}x")
         if result.limited_by:
             column.label(text=f"Limited by: {result.limited_by}", icon='INFO')
         for entry in result.timings.split("  "):

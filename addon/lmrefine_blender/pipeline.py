@@ -65,14 +65,17 @@ class Outcome:
 
     def summary(self):
         reports = list(self.reports.values())
+        # Measured on the refined layouts (refine_uvs's report); objects that did not move count as 1x.
         widening = float(np.mean([r["transition_widening"] for r in reports]))
         low = min(r["density_min"] for r in reports)
         high = max(r["density_max"] for r in reports)
+        moved = sum(1 for r in reports if r.get("moved", True))
         limits = set()
         for report in reports:
             limited_by = report.get("limited_by") or []
             limits.update([limited_by] if isinstance(limited_by, str) else limited_by)
         return {
+            "moved": moved,
             "transition_widening": widening,
             "density_min": float(low),
             "density_max": float(high),
@@ -318,6 +321,10 @@ def run(context, targets, options, journal, image_dir=None):
                 f"'{name}': UV map '{target.source}' was already invalid at {resolution} texels "
                 f"({describe_problems(source_check, padding)}); the refined map is no worse, but lightmap "
                 "bleeding may show: repack the source map (UV > Lightmap Pack)")
+        black = f"'{name}': the first lightmap is black"  # already said, with its advice
+        if not result.report["moved"] and not any(w.startswith(black) for w in outcome.warnings):
+            why = next((n for n in result.report["notes"] if n.startswith("nothing moved")), "nothing moved")
+            outcome.warnings.append(f"'{name}': {why}")
         report = {key: value for key, value in result.report.items() if key != "triangle_density"}
         report["check_layout"] = dict(check)
         report["source_check_layout"] = dict(source_check)

@@ -58,6 +58,7 @@ class LMREFINE_PG_result(bpy.types.PropertyGroup):
 
     valid: BoolProperty(name="Has Result", default=False)
     objects: StringProperty(name="Objects", description="Objects the last run refined")
+    moved: IntProperty(name="Moved", description="Objects whose refined UV map differs from the source map")
     transition_widening: FloatProperty(
         name="Transition Widening",
         description="Texel density at light/shadow transitions, relative to before (higher = sharper edges)")

@@ -176,10 +176,13 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
         progress: callable progress(fraction, stage); returning False cancels.
 
     Returns:
-        RefineResult with uvs, grid and report. report holds:
-        transition_widening (mean texel-density ratio over covered texels in
-        the top decile of gradient energy), density_min, density_max (over
-        covered texels), triangle_density (T,) new / old UV area, steps,
+        RefineResult with uvs, grid and report. Its figures are measured on
+        the layout returned, never on the automaton's grid: moved (False
+        when the output equals the input; notes then say why),
+        transition_widening (summed new / old UV area of the triangles on
+        the top decile of gradient energy; 1.0 when nothing moved),
+        density_min, density_max (smallest and largest new / old UV area
+        of a triangle), triangle_density (T,) new / old UV area, steps,
         levels, converged, backoff (the smallest fraction of the full
         deformation kept anywhere; 1.0 = none backed off), backoff_area
         (fraction of grid nodes that backed off), strength_used (strength x
@@ -270,12 +273,23 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
         limited_by.append("max_magnification")
     if covered_areas.min() <= min_shrink * 1.001:
         limited_by.append("min_shrink")
+    # Every figure is measured on the layout returned (triangle UV areas), not on the grid.
+    density = _triangle_density(uvs, new_uvs, triangles)
+    moved = not np.array_equal(new_uvs, uvs)
+    if not moved:
+        why = ("strength is 0" if strength == 0 else "the lightmap has no light change inside the charts"
+               if not np.any(scalar_energy[mask] > 0) else
+               "every deformation broke the layout and was backed off (" + ", ".join(limited_by) + ")"
+               if limited_by else "the automaton found nothing to even out")
+        notes.append(f"nothing moved: {why}; the layout returned is the input")
+    measured = density[np.isfinite(density) & (density > 0)]
 
     report = {
-        "transition_widening": _transition_widening(areas, scalar_energy, mask),
-        "density_min": float(covered_areas.min()),
-        "density_max": float(covered_areas.max()),
-        "triangle_density": _triangle_density(uvs, new_uvs, triangles),
+        "moved": moved,
+        "transition_widening": _transition_widening(uvs, new_uvs, triangles, scalar_energy, mask),
+        "density_min": float(measured.min()) if measured.size else 1.0,
+        "density_max": float(measured.max()) if measured.size else 1.0,
+        "triangle_density": density,
         "steps": int(run["steps"]),
         "levels": run["levels"],
         "converged": bool(run["converged"]),
@@ -295,23 +309,38 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
     return RefineResult(uvs=new_uvs, grid=grid, report=report)
 
 
-def _transition_widening(areas, energy, mask):
-    """Mean texel-density ratio (deformed cell area, in texels) over the
-    covered texels whose gradient energy is in the top decile; 1.0 if no
-    covered texel has any gradient energy."""
+def _transition_widening(old, new, triangles, energy, mask):
+    """New / old UV area of the triangles at light changes, on the output layout.
+
+    A triangle is at a light change when one of four points inside it (its
+    centroid and the midpoints towards its corners, in the input layout)
+    falls on a covered texel whose gradient energy is in the top decile of
+    the covered texels. The figure is their summed new area over their
+    summed old area; 1.0 when no covered texel has gradient energy or no
+    triangle lies on one."""
     covered = energy[mask]
-    if covered.size == 0 or covered.max() <= 0:
+    if covered.size == 0 or covered.max() <= 0 or len(triangles) == 0:
         return 1.0
-    threshold = np.percentile(covered, 90.0)
-    top = mask & (energy >= threshold) & (energy > 0)
-    return float(areas[top].mean())
+    threshold = max(float(np.percentile(covered, 90.0)), np.finfo(np.float32).tiny)
+    height, width = energy.shape
+    corners = old[triangles].astype(np.float64)  # (T, 3, 2)
+    centroid = corners.mean(axis=1, keepdims=True)
+    points = np.concatenate([centroid, 0.5 * (corners + centroid)], axis=1)  # (T, 4, 2)
+    cols = np.clip(np.floor(points[..., 0] * width), 0, width - 1).astype(np.int64)
+    rows = np.clip(np.floor((1.0 - points[..., 1]) * height), 0, height - 1).astype(np.int64)
+    at_change = (mask[rows, cols] & (energy[rows, cols] >= threshold)).any(axis=1)
+    before, after = _signed_areas(old, triangles)[at_change], _signed_areas(new, triangles)[at_change]
+    keep = before > 0
+    return float(after[keep].sum() / before[keep].sum()) if keep.any() else 1.0
+
+
+def _signed_areas(uv, triangles):
+    a, b, c = (uv[triangles[:, k]].astype(np.float64) for k in range(3))
+    return 0.5 * ((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
 
 
 def _triangle_density(old, new, triangles):
     """New UV area / old UV area per triangle (NaN where the old area is 0)."""
-    def area(uv):
-        a, b, c = (uv[triangles[:, k]].astype(np.float64) for k in range(3))
-        return 0.5 * ((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
-    before, after = area(old), area(new)
+    before, after = _signed_areas(old, triangles), _signed_areas(new, triangles)
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.where(before != 0, after / before, np.nan)
