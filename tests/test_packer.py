@@ -353,3 +353,12 @@ def test_random_layouts_scales_and_settings_stay_valid(seed):
         assert check["min_gutter_texels"] >= padding
     assert check["degenerate"] <= before["degenerate"]
     np.testing.assert_allclose(report["chart_scales"], report["global_scale"] * scales)
+
+
+def test_charts_that_fit_only_collapsed_are_refused():
+    """Absurd scale ratios would pack a chart at 1e-30 of its size: a line, not a chart."""
+    from layouts import grid_chart, merge
+    uvs, tris = merge(grid_chart(2, (0.1, 0.1), (0.4, 0.4)), grid_chart(2, (0.6, 0.6), (0.9, 0.9)))
+    charts = lmrefine.find_charts(uvs, tris)
+    with pytest.raises(ValueError, match="collapse to lines"):
+        lmrefine.pack_charts(uvs, tris, charts, np.array([1.0, 1e-30]), 64, 2.0)

@@ -52,7 +52,7 @@ def test_strength_zero_is_the_identity():
 
 def test_hard_shadow_edge_gets_three_times_the_texels_and_flat_areas_shrink():
     uvs, tris, gradient = edge_scene()
-    result = lmrefine.refine_uvs(None, uvs, tris, R, gradient=gradient)
+    result = lmrefine.refine_uvs(None, uvs, tris, R, gradient=gradient, repack=False)  # the automaton alone
     report = result.report
     assert report["transition_widening"] >= 3.0
     # Triangles on the edge (in pixel space: x cos a + y sin a = R / 2).
@@ -149,17 +149,20 @@ def test_random_layouts_and_gradient_maps_always_give_valid_layouts(rng):
         gradient = finite_difference_gradient(np.pad(lightmap, ((0, resolution - lightmap.shape[0]),
                                                                 (0, resolution - lightmap.shape[1]))), mask)
         padding = float(rng.uniform(0.5, margin))
+        repack = bool(rng.random() < 0.5)
         result = lmrefine.refine_uvs(None, uvs, tris, resolution, padding=padding, gradient=gradient,
-                                     strength=float(rng.uniform(1, 12)), directional=bool(rng.random() < 0.3))
+                                     strength=float(rng.uniform(1, 12)), directional=bool(rng.random() < 0.3),
+                                     repack=repack)
         assert_valid(result, uvs, tris, resolution, padding)
         assert 0 <= result.report["backoff"] <= 1
-        # Cell bounds [0.25, 8]; a triangle inside a cell may sample a little beyond them.
-        assert result.report["density_min"] >= 0.25 / 1.1 and result.report["density_max"] <= 8 * 1.1
+        if not (repack and result.report["repack"]["used"]):
+            # Cell bounds [0.25, 8]; a triangle inside a cell may sample a little beyond them.
+            assert result.report["density_min"] >= 0.25 / 1.1 and result.report["density_max"] <= 8 * 1.1
 
 
 def test_report_figures_agree_with_the_layout_returned():
     uvs, tris, gradient = edge_scene(64, 16)
-    result = lmrefine.refine_uvs(None, uvs, tris, 64, gradient=gradient)
+    result = lmrefine.refine_uvs(None, uvs, tris, 64, gradient=gradient, repack=False)
     report = result.report
     # Measured on the output: per-triangle UV area ratios, never the grid's cell areas.
     def area(u):
@@ -295,3 +298,45 @@ def test_a_layout_that_did_not_move_is_reported_as_such():
     flat = lmrefine.refine_uvs(None, uvs, tris, 64, gradient=np.zeros_like(gradient))
     assert flat.report["moved"] is False
     assert any("no light change" in note for note in flat.report["notes"])
+
+
+def two_chart_scene(resolution=64):
+    """Two equal square charts side by side; a hard shadow edge crosses only the left one."""
+    from layouts import grid_chart, merge
+    left = grid_chart(16, (0.05, 0.3), (0.45, 0.7))
+    right = grid_chart(16, (0.55, 0.3), (0.95, 0.7))
+    uvs, tris = merge(left, right)
+    lightmap = np.ones((resolution, resolution), np.float32)
+    lightmap[:, int(0.25 * resolution):int(0.5 * resolution)] = 0.05
+    return uvs, tris, lightmap
+
+
+def test_repack_gives_the_chart_with_light_changes_more_texels_than_the_flat_one():
+    uvs, tris, lightmap = two_chart_scene()
+    result = lmrefine.refine_uvs(lightmap, uvs, tris, 64, padding=2)
+    repack = result.report["repack"]
+    assert repack is not None and repack["used"] is True and repack["charts"] == 2
+    left, right = repack["chart_scales"]  # chart ids follow find_charts: the left chart comes first
+    assert left > 1.5 * right
+    assert repack["utilisation_after"] > repack["utilisation_before"]
+    assert repack["predicted_error"] < 0.95
+    check = lmrefine.check_layout(result.uvs, tris, 64, 2)
+    assert check["valid"] and check["min_gutter_texels"] >= 2
+    # Measured on the output: the edge chart's triangles grew, the flat chart's did not grow as much.
+    density = result.report["triangle_density"]
+    half = len(tris) // 2
+    assert np.nanmean(density[:half]) > 2 * np.nanmean(density[half:])
+    again = lmrefine.refine_uvs(lightmap, uvs, tris, 64, padding=2)
+    np.testing.assert_array_equal(again.uvs, result.uvs)  # deterministic
+
+
+def test_repack_off_is_the_in_chart_refinement_and_flat_maps_never_repack():
+    uvs, tris, lightmap = two_chart_scene()
+    off = lmrefine.refine_uvs(lightmap, uvs, tris, 64, padding=2, repack=False)
+    assert off.report["repack"] is None
+    np.testing.assert_array_equal(off.uvs, lmrefine.warp_uvs(uvs, off.grid))
+    flat = lmrefine.refine_uvs(np.ones((64, 64), np.float32), uvs, tris, 64, padding=2)
+    np.testing.assert_array_equal(flat.uvs, uvs)
+    assert flat.report["moved"] is False
+    with pytest.raises(ValueError, match="min_chart_scale"):
+        lmrefine.refine_uvs(lightmap, uvs, tris, 64, min_chart_scale=2.0)

@@ -66,6 +66,8 @@ def evaluation_options(args):
         refine_options["strength"] = args.strength
     if args.refine_passes is not None:
         refine_options["passes"] = args.refine_passes
+    if args.no_repack:
+        refine_options["repack"] = False
     return EvaluationOptions(resolution=args.resolution, samples=args.samples, truth_samples=args.truth_samples,
                              points=args.points, seed=args.seed, multipliers=args.multipliers,
                              padding=args.padding, denoise=args.denoise, bake_pass=args.bake_pass,
@@ -136,6 +138,8 @@ def add_evaluation_arguments(parser, resolution, points):
                         help="gutter in texels the refined layout must keep (default: 2, or the original's if smaller)")
     parser.add_argument("--strength", type=float, help="refine_uvs strength (default: refine_uvs' own)")
     parser.add_argument("--refine-passes", type=int, help="refine_uvs passes (default: refine_uvs' own)")
+    parser.add_argument("--no-repack", action="store_true",
+                        help="refine inside charts only (refine_uvs repack=False): no chart scaling or packing")
     parser.add_argument("--denoise", action="store_true", help="denoise every bake (edge-aware)")
     parser.add_argument("--pass", dest="bake_pass", choices=("direct", "ao", "indirect", "combined"),
                         help="light to bake and compare (default: the scene's own: direct, combined for the room)")

@@ -113,4 +113,19 @@ def pack_charts(uvs, triangles, charts, scales, resolution, padding=2.0, rotatio
                                           rotate=rotations, progress=progress, tolerance=tolerance,
                                           subdivision=subdivision)
     report["offsets"] = report["transforms"][:, :, 2]
+    if _flat_count(new_uvs, triangles) > _flat_count(uvs, triangles):
+        # The scale search can end at a scale so small (absurd scales, a
+        # padding wider than the atlas) that charts collapse in float32.
+        raise ValueError(f"the charts fit only at a global scale of {report['global_scale']:.3g}, where their "
+                         "triangles collapse to lines: lower the padding, raise the resolution or give scales "
+                         "within a sane range (their ratio sets how small the smallest chart gets)")
     return PackResult(new_uvs, report)
+
+
+def _flat_count(uvs, triangles):
+    """Triangles check_layout calls degenerate (collinear corners, relative area below 1e-7)."""
+    corners = np.asarray(uvs, np.float64)[np.asarray(triangles)]
+    e1, e2, e3 = corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0], corners[:, 2] - corners[:, 1]
+    cross = np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+    longest = np.max([np.sum(e * e, axis=1) for e in (e1, e2, e3)], axis=0)
+    return int(np.count_nonzero(~(cross > 1e-7 * longest)))

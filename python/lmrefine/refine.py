@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import _native, backoff
+from . import _native, allocation, backoff
 
 BORDER_MODES = ("same", "border_rule", "extra_ring")
 
@@ -144,7 +144,8 @@ def identity_grid(resolution):
 
 def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gradient=None, strength=24.0,
                max_magnification=8.0, min_shrink=0.25, edge_shrink=0.8, delta=0.02, passes=1, border="same",
-               directional=False, wavelet="d4", diffusion=0.05, max_steps=8, progress=None):
+               directional=False, wavelet="d4", diffusion=0.05, max_steps=8, progress=None, repack=True,
+               min_chart_scale=0.5, max_chart_scale=2.0):
     """Refine a lightmap UV layout: more texels where light changes fast.
 
     Args:
@@ -174,6 +175,16 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
         wavelet: passed to gradient_map.
         diffusion, max_steps: automaton details (see run_automaton).
         progress: callable progress(fraction, stage); returning False cancels.
+        repack: after the in-chart refinement, scale each chart by its
+            signal (the error model in docs/refiner.md, "Chart scaling")
+            and pack all charts into one atlas with lmrefine.pack_charts
+            (rotations, at least `padding` texels apart). Kept only if the
+            model predicts less error than the unpacked result and the
+            packed layout passes the same checks; report["repack"] says
+            what happened (None when off). `grid` stays the automaton's
+            in-chart deformation, before the charts are scaled and moved.
+        min_chart_scale, max_chart_scale: bounds on a chart's linear scale
+            relative to the median chart, for repack.
 
     Returns:
         RefineResult with uvs, grid and report. Its figures are measured on
@@ -267,6 +278,29 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
         limited_by += failed
 
     timings["warp_and_check"] = time.perf_counter() - clock
+    repack_report = None
+    if repack and strength > 0:
+        clock = time.perf_counter()
+        if not 0 < min_chart_scale <= 1 <= max_chart_scale < np.inf:
+            raise ValueError(f"need 0 < min_chart_scale <= 1 <= max_chart_scale (finite), got {min_chart_scale} "
+                             f"and {max_chart_scale}")
+        packed, repack_report = allocation.repack(uvs, new_uvs, triangles, scalar_energy, shape, float(padding),
+                                                  float(min_chart_scale), float(max_chart_scale), progress)
+        if packed is not None:
+            packed_check = _native.check_layout(packed, triangles, shape, padding)
+            worse = backoff.failures(packed_check, original, padding)
+            if worse:
+                repack_report["used"] = False
+                notes.append(f"repack not used: the packed layout failed {', '.join(worse)}")
+            else:
+                new_uvs, check = packed, packed_check
+        elif "reason" in repack_report:
+            notes.append(f"repack not used: {repack_report['reason']}")
+        else:
+            notes.append(f"repack not used: the error model predicts {repack_report['predicted_error']:.3f} of the "
+                         f"unpacked error and the atlas would cover {repack_report['utilisation_after']:.0%} of "
+                         f"the texels (the input: {repack_report['utilisation_before']:.0%})")
+        timings["repack"] = time.perf_counter() - clock
     areas = _native.grid_cell_areas(grid)
     covered_areas = areas[mask] if mask.any() else np.ones(1, np.float32)
     if covered_areas.max() >= max_magnification * 0.999:
@@ -305,6 +339,7 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
         "timings": timings,
         "original_check": original,
         "check": check,
+        "repack": repack_report,
     }
     return RefineResult(uvs=new_uvs, grid=grid, report=report)
 

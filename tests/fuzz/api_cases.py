@@ -274,7 +274,8 @@ def case_refine_uvs(lm, rng):
               "padding": as_number, "mask": as_array, "gradient": as_array, "strength": as_number,
               "max_magnification": as_number, "min_shrink": as_number, "edge_shrink": as_number,
               "delta": as_number, "passes": as_number, "border": as_string, "directional": as_number,
-              "wavelet": as_string, "diffusion": as_number, "max_steps": as_number, "progress": as_progress}
+              "wavelet": as_string, "diffusion": as_number, "max_steps": as_number, "progress": as_progress,
+              "repack": as_number, "min_chart_scale": as_number, "max_chart_scale": as_number}
     kwargs, chosen = mutate(kwargs, rng, makers)
     layout = (kwargs["uvs"], kwargs["triangles"], kwargs["resolution"], kwargs["padding"])
     return Case("refine_uvs", _call(lm.refine_uvs, dict(kwargs)), list(kwargs.values()), layout=layout,

@@ -1,0 +1,95 @@
+"""Chart-level texel allocation: each chart's scale from its signal, then one packed atlas.
+
+The error model (docs/refiner.md, "Chart scaling"): a chart c whose linear
+texel scale is s_c (texels per UV unit, relative to the input layout) has a
+reconstruction error dominated by its light changes, which falls as
+E_c / s_c, where E_c is the gradient energy the chart covers in the first
+bake. For a fixed texel budget sum_c A_c s_c^2 (A_c the chart's UV area) the
+error sum_c E_c / s_c is smallest at s_c proportional to (E_c / A_c)^(1/3)
+(Lagrange). Flat charts would shrink to nothing: a floor on the energy
+density and bounds on the relative scale keep every chart large enough for
+bilinear lookup and dilation. The packer (lmrefine.pack_charts) then finds
+the largest global scale at which all charts fit.
+"""
+
+import numpy as np
+
+from .packer import CHART_TOLERANCE, pack_charts
+from ._native import find_charts
+
+# Energy-density floor, relative to the mean over charts: a flat chart is
+# treated as if it had this much light change, so it shrinks by at most
+# (FLOOR)^(1/3) before the scale bounds apply.
+ENERGY_FLOOR = 0.05
+# repack is kept when the model predicts at most this fraction of the
+# unpacked error, and the packed atlas covers at least this fraction of the
+# texels the input covered (docs/refiner.md, "Chart scaling").
+REQUIRED_GAIN = 0.95
+MIN_UTILISATION_KEPT = 0.95
+
+
+def triangle_energy(uvs, triangles, energy):
+    """Gradient energy each triangle covers: the mean energy at four points
+    inside it (centroid, midpoints towards its corners; in the layout `uvs`)
+    times its area in texels."""
+    height, width = energy.shape
+    corners = uvs[triangles].astype(np.float64)
+    centroid = corners.mean(axis=1, keepdims=True)
+    points = np.concatenate([centroid, 0.5 * (corners + centroid)], axis=1)
+    cols = np.clip(np.floor(points[..., 0] * width), 0, width - 1).astype(np.int64)
+    rows = np.clip(np.floor((1.0 - points[..., 1]) * height), 0, height - 1).astype(np.int64)
+    a, b, c = corners[:, 0], corners[:, 1], corners[:, 2]
+    area = 0.5 * np.abs((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
+    return energy[rows, cols].astype(np.float64).mean(axis=1) * area * width * height
+
+
+def chart_scales(uvs, triangles, charts, energy, min_scale=0.5, max_scale=2.0):
+    """Relative linear scale per chart from the error model above, clamped to
+    [min_scale, max_scale] around the median chart; also returns (E_c, A_c)."""
+    count = int(charts.max()) + 1 if len(charts) else 0
+    chart_energy = np.bincount(charts, weights=triangle_energy(uvs, triangles, energy), minlength=count)
+    corners = uvs[triangles].astype(np.float64)
+    a, b, c = corners[:, 0], corners[:, 1], corners[:, 2]
+    area = 0.5 * np.abs((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
+    chart_area = np.bincount(charts, weights=area, minlength=count)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        density = np.where(chart_area > 0, chart_energy / np.maximum(chart_area, 1e-300), 0.0)
+    mean = float(np.average(density, weights=chart_area)) if chart_area.sum() > 0 else 0.0
+    if not mean > 0:
+        return np.ones(count), chart_energy, chart_area
+    raw = np.cbrt(density + ENERGY_FLOOR * mean)
+    scales = raw / np.median(raw[chart_area > 0])
+    return np.clip(scales, min_scale, max_scale), chart_energy, chart_area
+
+
+def repack(source_uvs, refined_uvs, triangles, energy, resolution, padding, min_scale, max_scale, progress=None):
+    """Scale the charts of `refined_uvs` by their signal (measured on the
+    source layout `source_uvs`, where `energy` was baked) and pack them into
+    one atlas. Returns (uvs, report); uvs is None when the packed layout is
+    not better than `refined_uvs` by the error model (the report says so)."""
+    charts = find_charts(source_uvs, triangles, tolerance=CHART_TOLERANCE)
+    scales, chart_energy, _ = chart_scales(source_uvs, triangles, charts, energy, min_scale, max_scale)
+    try:
+        packed, pack_report = pack_charts(refined_uvs, triangles, charts, scales, resolution, padding,
+                                          progress=progress)
+    except ValueError as error:  # the charts do not fit at a usable scale: keep the unpacked layout
+        return None, {"charts": int(len(scales)), "used": False, "reason": str(error)}
+    final = pack_report["chart_scales"]  # linear scale of each chart against refined_uvs
+    total = chart_energy.sum()
+    # Predicted error of the packed layout relative to refined_uvs (1.0 = the same).
+    predicted = float((chart_energy / np.maximum(final, 1e-12)).sum() / total) if total > 0 else 1.0
+    report = {
+        "charts": int(len(scales)),
+        "chart_scales": np.asarray(final, np.float64),
+        "signal_scales": scales,
+        "global_scale": float(pack_report["global_scale"]),
+        "utilisation_before": float(pack_report["utilisation_input"]),
+        "utilisation_after": float(pack_report["utilisation"]),
+        "predicted_error": predicted,
+    }
+    # The model sees only the edge term: it misses what small charts lose to
+    # the texel grid and the gutters, so it must promise a clear gain, and
+    # the packed atlas may not cover fewer texels than the input did.
+    report["used"] = bool(predicted < REQUIRED_GAIN
+                          and report["utilisation_after"] >= MIN_UTILISATION_KEPT * report["utilisation_before"])
+    return (packed if report["used"] else None), report
