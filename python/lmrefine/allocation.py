@@ -28,19 +28,30 @@ REQUIRED_GAIN = 0.95
 MIN_UTILISATION_KEPT = 0.95
 
 
-def triangle_energy(uvs, triangles, energy):
-    """Gradient energy each triangle covers: the mean energy at four points
-    inside it (centroid, midpoints towards its corners; in the layout `uvs`)
-    times its area in texels."""
-    height, width = energy.shape
+def triangle_texels(uvs, triangles, shape):
+    """(rows, cols), each (T, 4): the texels under four points inside each
+    triangle (its centroid and the midpoints towards its corners)."""
+    height, width = shape
     corners = uvs[triangles].astype(np.float64)
     centroid = corners.mean(axis=1, keepdims=True)
     points = np.concatenate([centroid, 0.5 * (corners + centroid)], axis=1)
     cols = np.clip(np.floor(points[..., 0] * width), 0, width - 1).astype(np.int64)
     rows = np.clip(np.floor((1.0 - points[..., 1]) * height), 0, height - 1).astype(np.int64)
-    a, b, c = corners[:, 0], corners[:, 1], corners[:, 2]
-    area = 0.5 * np.abs((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
-    return energy[rows, cols].astype(np.float64).mean(axis=1) * area * width * height
+    return rows, cols
+
+
+def signed_areas(uvs, triangles):
+    """Signed UV area per triangle (counter-clockwise positive), float64."""
+    a, b, c = (uvs[triangles[:, k]].astype(np.float64) for k in range(3))
+    return 0.5 * ((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
+
+
+def triangle_energy(uvs, triangles, energy):
+    """Gradient energy each triangle covers: the mean energy at its four
+    points (triangle_texels) times its area in texels."""
+    rows, cols = triangle_texels(uvs, triangles, energy.shape)
+    texels = np.abs(signed_areas(uvs, triangles)) * energy.shape[0] * energy.shape[1]
+    return energy[rows, cols].astype(np.float64).mean(axis=1) * texels
 
 
 def chart_scales(uvs, triangles, charts, energy, min_scale=0.5, max_scale=2.0):
@@ -48,10 +59,7 @@ def chart_scales(uvs, triangles, charts, energy, min_scale=0.5, max_scale=2.0):
     [min_scale, max_scale] around the median chart; also returns (E_c, A_c)."""
     count = int(charts.max()) + 1 if len(charts) else 0
     chart_energy = np.bincount(charts, weights=triangle_energy(uvs, triangles, energy), minlength=count)
-    corners = uvs[triangles].astype(np.float64)
-    a, b, c = corners[:, 0], corners[:, 1], corners[:, 2]
-    area = 0.5 * np.abs((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
-    chart_area = np.bincount(charts, weights=area, minlength=count)
+    chart_area = np.bincount(charts, weights=np.abs(signed_areas(uvs, triangles)), minlength=count)
     with np.errstate(divide="ignore", invalid="ignore"):
         density = np.where(chart_area > 0, chart_energy / np.maximum(chart_area, 1e-300), 0.0)
     mean = float(np.average(density, weights=chart_area)) if chart_area.sum() > 0 else 0.0

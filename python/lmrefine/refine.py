@@ -357,25 +357,16 @@ def _transition_widening(old, new, triangles, energy, mask):
     if covered.size == 0 or covered.max() <= 0 or len(triangles) == 0:
         return 1.0
     threshold = max(float(np.percentile(covered, 90.0)), np.finfo(np.float32).tiny)
-    height, width = energy.shape
-    corners = old[triangles].astype(np.float64)  # (T, 3, 2)
-    centroid = corners.mean(axis=1, keepdims=True)
-    points = np.concatenate([centroid, 0.5 * (corners + centroid)], axis=1)  # (T, 4, 2)
-    cols = np.clip(np.floor(points[..., 0] * width), 0, width - 1).astype(np.int64)
-    rows = np.clip(np.floor((1.0 - points[..., 1]) * height), 0, height - 1).astype(np.int64)
+    rows, cols = allocation.triangle_texels(old, triangles, energy.shape)
     at_change = (mask[rows, cols] & (energy[rows, cols] >= threshold)).any(axis=1)
-    before, after = _signed_areas(old, triangles)[at_change], _signed_areas(new, triangles)[at_change]
+    before = allocation.signed_areas(old, triangles)[at_change]
+    after = allocation.signed_areas(new, triangles)[at_change]
     keep = before > 0
     return float(after[keep].sum() / before[keep].sum()) if keep.any() else 1.0
 
 
-def _signed_areas(uv, triangles):
-    a, b, c = (uv[triangles[:, k]].astype(np.float64) for k in range(3))
-    return 0.5 * ((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
-
-
 def _triangle_density(old, new, triangles):
     """New UV area / old UV area per triangle (NaN where the old area is 0)."""
-    before, after = _signed_areas(old, triangles), _signed_areas(new, triangles)
+    before, after = allocation.signed_areas(old, triangles), allocation.signed_areas(new, triangles)
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.where(before != 0, after / before, np.nan)
