@@ -311,10 +311,12 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
     density = _triangle_density(uvs, new_uvs, triangles)
     moved = not np.array_equal(new_uvs, uvs)
     if not moved:
+        broke = [kind for kind in limited_by if kind in ("flipped", "overlapping", "gutter", "degenerate", "grid")]
         why = ("strength is 0" if strength == 0 else "the lightmap has no light change inside the charts"
                if not np.any(scalar_energy[mask] > 0) else
-               "every deformation broke the layout and was backed off (" + ", ".join(limited_by) + ")"
-               if limited_by else "the automaton found nothing to even out")
+               "every deformation broke the layout and was backed off (" + ", ".join(broke) + ")" if broke else
+               "the deformation left every UV in place: UVs on chart borders keep their place, and here every "
+               "UV is on one (small charts, e.g. one per face)")
         notes.append(f"nothing moved: {why}; the layout returned is the input")
     measured = density[np.isfinite(density) & (density > 0)]
 
