@@ -340,3 +340,17 @@ def test_repack_off_is_the_in_chart_refinement_and_flat_maps_never_repack():
     assert flat.report["moved"] is False
     with pytest.raises(ValueError, match="min_chart_scale"):
         lmrefine.refine_uvs(lightmap, uvs, tris, 64, min_chart_scale=2.0)
+
+
+def test_repack_accepts_a_chart_that_already_overlapped_itself():
+    """A stacked face in the input overlaps in every layout; it must not veto the repack."""
+    uvs, tris, lightmap = two_chart_scene()
+    tris = np.concatenate([tris, tris[:1]])  # the first face twice: an overlap inside the left chart
+    source = lmrefine.check_layout(uvs, tris, 64, 2)
+    assert source["overlapping"] > 0
+    result = lmrefine.refine_uvs(lightmap, uvs, tris, 64, padding=2)
+    assert result.report["repack"]["used"] is True
+    check = lmrefine.check_layout(result.uvs, tris, 64, 2, failing_charts=True)
+    before = lmrefine.check_layout(uvs, tris, 64, 2, failing_charts=True)
+    assert set(check["failing_charts"].tolist()) <= set(before["failing_charts"].tolist())
+    assert check["flipped"] == 0 and check["out_of_bounds"] == 0 and check["min_gutter_texels"] >= 2
