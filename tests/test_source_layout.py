@@ -1,0 +1,44 @@
+"""Where the native code may use its heavy libraries: only the bake stage
+includes Embree, and only the image I/O file includes OpenImageIO (README,
+repository layout). Any other stage stays buildable and testable without them."""
+
+import os
+import re
+
+import pytest
+
+NATIVE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "native")
+INCLUDE = re.compile(r'^\s*#\s*include\s*[<"]([^>"]+)[>"]', re.MULTILINE)
+
+# library: (how its headers start, the only places that may include them)
+ALLOWED = {
+    "Embree": (("embree3/", "embree4/"), ("src/bake/",)),
+    "OpenImageIO": (("OpenImageIO/",), ("src/core/image_io.cpp",)),
+}
+
+
+def native_includes():
+    """{path relative to native/: [included header, ...]} for every C++ file."""
+    found = {}
+    for folder, _, files in os.walk(NATIVE):
+        for name in files:
+            if name.endswith((".h", ".hpp", ".cpp", ".cc")):
+                path = os.path.join(folder, name)
+                with open(path, encoding="utf-8") as source:
+                    found[os.path.relpath(path, NATIVE).replace(os.sep, "/")] = INCLUDE.findall(source.read())
+    return found
+
+
+@pytest.mark.parametrize("library", sorted(ALLOWED))
+def test_library_included_only_where_allowed(library):
+    prefixes, places = ALLOWED[library]
+    users = sorted(path for path, headers in native_includes().items()
+                   if any(header.startswith(prefixes) for header in headers))
+    assert users, f"no native file includes {library}: the scan is broken or the library moved"
+    outside = [path for path in users if not path.startswith(places)]
+    assert outside == [], f"{library} is included outside {', '.join(places)}: {outside}"
+
+
+def test_scan_sees_every_stage():
+    stages = {path.split("/")[1] for path in native_includes() if path.startswith("src/")}
+    assert {"core", "gradient", "layout", "automaton", "bake"} <= stages
