@@ -8,11 +8,11 @@ JOBS      ?= $(shell nproc)
 DEMO_OUT  ?= demo_out
 
 # Everything comes from Debian 12 packages.
-DEBIAN_PACKAGES := cmake g++ make pkg-config pybind11-dev libembree-dev \
+DEBIAN_PACKAGES := cmake g++ clang make pkg-config pybind11-dev libembree-dev \
 	libopenimageio-dev libglm-dev python3-dev python3-numpy python3-pytest \
 	python3-pywt python3-matplotlib python3-distributed blender
 
-.PHONY: all deps build install test test-asan fuzz bench demo evaluate samples sample-lightmap addon-zip clean
+.PHONY: all deps build install test test-asan check-compilers fuzz bench demo evaluate samples sample-lightmap addon-zip clean
 
 all: build
 
@@ -37,9 +37,21 @@ install: build
 
 # Every test against the release build, then the native ones again under
 # the sanitizers (a memory error in the core fails CI, not a user's scene).
-test: build
+test: build check-compilers
 	PYTHONPATH=python $(PYTHON) -m pytest tests -q
 	$(MAKE) --no-print-directory test-asan
+
+# Every native source compiled (front end only, about a minute) with clang
+# and gcc as portable C++17: -Wpedantic -Werror, so a warning or a language
+# extension either compiler reports fails the build. The release build is gcc.
+CHECK_CXXFLAGS := -fsyntax-only -std=c++17 -Wall -Wextra -Wno-unused-parameter -Wpedantic -Werror -fvisibility=hidden \
+	-Inative/include -Inative/src -DLMREFINE_VERSION='"check"'
+check-compilers: deps
+	@for compiler in clang++ g++; do \
+		echo "$$compiler: $$($$compiler --version | head -1)"; \
+		find native/src native/bindings -name '*.cpp' | sort | xargs -P $(JOBS) -n 4 \
+			$$compiler $(CHECK_CXXFLAGS) $$(python3-config --includes) || exit 1; \
+	done
 
 # The native tests under AddressSanitizer + UndefinedBehaviorSanitizer. The
 # sanitized module is built into its own folder so it never replaces the

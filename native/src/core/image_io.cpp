@@ -1,11 +1,12 @@
 #include "lmrefine/core/image_io.h"
 
 #include <OpenImageIO/imageio.h>
-#include <sys/stat.h>
 
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
+#include <system_error>
 #include <string>
 
 #include "lmrefine/core/error.h"
@@ -48,11 +49,12 @@ void require_path(const std::string& path) {
 // Only regular files are read: a device (/dev/zero), a FIFO or a directory
 // would make the decoder read forever or fail obscurely.
 void require_regular_file(const std::string& path) {
-    struct stat info {};
-    if (stat(path.c_str(), &info) != 0) {
+    std::error_code error;
+    const std::filesystem::file_status status = std::filesystem::status(path, error);  // follows links, as open does
+    if (error || !std::filesystem::exists(status)) {
         LMREFINE_THROW(IoError, "cannot read image '" + path + "': no such file (check the path)");
     }
-    if (!S_ISREG(info.st_mode)) {
+    if (!std::filesystem::is_regular_file(status)) {
         LMREFINE_THROW(IoError, "cannot read image '" + path + "': not a regular file (a directory, device or pipe); "
                                 "pass an image file");
     }
