@@ -40,6 +40,7 @@ from ._native import (  # noqa: F401  (re-exports)
     write_image,
 )
 from .baker import BakeResult, bake, evaluate  # noqa: F401  (re-exports)
+from .charting import RechartResult, rechart  # noqa: F401
 from .packer import CHART_TOLERANCE, PackResult, pack_charts  # noqa: F401
 from .refine import RefineResult, identity_grid, refine_uvs  # noqa: F401
 
@@ -51,6 +52,7 @@ __all__ = [
     "CancelledError",
     "LayoutChecker",
     "PackResult",
+    "RechartResult",
     "RefineResult",
     "Scene",
     "bake",
@@ -67,6 +69,7 @@ __all__ = [
     "idwt2",
     "pack_charts",
     "read_image",
+    "rechart",
     "refine_uvs",
     "run_automaton",
     "warp_uvs",
