@@ -106,6 +106,7 @@ def rechart(positions, triangles, angle=DEFAULT_ANGLE, resolution=256, padding=2
                                       rotations=rotations, progress=progress)
     check = _native.check_layout(packed, layout_triangles, resolution, padding)
     report["angle"] = float(angle)
+    report["padding"] = float(padding)
     report.update(_distortion(np.asarray(positions, np.float64)[np.asarray(triangles)], packed))
     height, width = pack_report["resolution"]
     report["texels_per_unit"] = float(pack_report["global_scale"] * np.sqrt(height * width))

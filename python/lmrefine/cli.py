@@ -68,10 +68,14 @@ def evaluation_options(args):
         refine_options["passes"] = args.refine_passes
     if args.no_repack:
         refine_options["repack"] = False
+    rechart = getattr(args, "rechart", None)
+    compare = ()
+    if rechart is not None and getattr(args, "compare", False):
+        compare = ("smart", "lightmap") if args.variant == "both" else (args.variant,)
     return EvaluationOptions(resolution=args.resolution, samples=args.samples, truth_samples=args.truth_samples,
                              points=args.points, seed=args.seed, multipliers=args.multipliers,
                              padding=args.padding, denoise=args.denoise, bake_pass=args.bake_pass,
-                             refine_options=refine_options)
+                             refine_options=refine_options, rechart=rechart, compare_variants=compare)
 
 
 def load_scenes(names):
@@ -91,6 +95,8 @@ def run_evaluate(args):
     options.check()
     scenes = load_scenes(args.scenes)
     variants = ("smart", "lightmap") if args.variant == "both" else (args.variant,)
+    if options.rechart is not None:
+        variants = variants[:1]  # the re-charted layout replaces the scene's UVs: one run per scene
     bar = ProgressBar()
     try:
         summary = evaluate_samples(scenes, options, args.out, variants=variants, progress=bar)
@@ -140,6 +146,13 @@ def add_evaluation_arguments(parser, resolution, points):
     parser.add_argument("--refine-passes", type=int, help="refine_uvs passes (default: refine_uvs' own)")
     parser.add_argument("--no-repack", action="store_true",
                         help="refine inside charts only (refine_uvs repack=False): no chart scaling or packing")
+    parser.add_argument("--rechart", type=float, nargs="?", const=66.0, metavar="ANGLE",
+                        help="re-chart the scene's mesh (lmrefine.rechart: charts of faces whose normals are within "
+                             "ANGLE degrees, default 66, conformal unwrap, uniform texel density, packed) and use that "
+                             "layout instead of the scene's own UVs")
+    parser.add_argument("--compare", action="store_true",
+                        help="with --rechart: also bake the scene's own --variant layout(s) uniformly at every "
+                             "multiplier and report the equal-error ratio of the re-charted maps against them")
     parser.add_argument("--denoise", action="store_true", help="denoise every bake (edge-aware)")
     parser.add_argument("--pass", dest="bake_pass", choices=("direct", "ao", "indirect", "combined"),
                         help="light to bake and compare (default: the scene's own: direct, combined for the room)")

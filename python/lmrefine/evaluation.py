@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import bake, check_layout, find_charts, metrics, refine_uvs, write_image
+from .charting import rechart
 from . import evaluate as evaluate_light
 
 DEFAULT_MULTIPLIERS = (1.0, 1.5, 2.0, 3.0, 4.0)
@@ -36,6 +37,12 @@ class EvaluationOptions:
     denoise: bool = False
     bake_pass: str = None             # None: the scene's own pass (direct, or combined for the room)
     refine_options: dict = field(default_factory=dict)   # passed to refine_uvs (strength, passes, ...)
+    # Re-chart the scene's mesh (lmrefine.rechart with this angle in degrees)
+    # and use that layout instead of the scene's own UVs; None: the scene's.
+    rechart: float = None
+    # With rechart: the scene's own UV variants whose uniform bakes the
+    # re-charted maps are also compared with (a resolution sweep each).
+    compare_variants: tuple = ()
 
     def check(self):
         if self.resolution < 8:
@@ -48,6 +55,13 @@ class EvaluationOptions:
         if len(m) < 2 or m[0] != 1.0 or any(b <= a for a, b in zip(m, m[1:])):
             raise ValueError(f"multipliers must start at 1 and increase, e.g. 1,1.5,2,3,4; got {self.multipliers}")
         self.multipliers = m
+        if self.rechart is not None and not 0.0 < float(self.rechart) < 90.0:
+            raise ValueError(f"rechart must be an angle in (0, 90) degrees, got {self.rechart}")
+
+    @property
+    def layout_name(self):
+        """The layout's name in reports and folder names: the UV variant, or rechart<angle>."""
+        return self.variant if self.rechart is None else f"rechart{float(self.rechart):g}"
 
 
 class _Stages:
@@ -135,11 +149,18 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
     """Run the whole evaluation on one SampleScene; returns its report dict
     (and writes report.md, report.json and pictures into `out_dir` if given)."""
     options.check()
-    label = f"{sample.name}/{options.variant}"
+    label = f"{sample.name}/{options.layout_name}"
     stages = _Stages(label, progress)
     resolution = int(options.resolution)
     passes = _single_pass(sample, options)
     uvs, triangles = sample.layout(options.variant)
+    layout = {"source": "scene", "variant": options.variant}
+    if options.rechart is not None:
+        # The re-charted layout replaces the scene's UVs for every bake below.
+        recharted = stages.run("rechart", lambda p: rechart(sample.positions, sample.triangles, float(options.rechart),
+                                                            resolution, options.padding, progress=p))
+        uvs = recharted.uvs
+        layout = {"source": "rechart", **{k: v for k, v in recharted.report.items() if k != "chart_ids"}}
 
     baseline = stages.run("bake baseline", lambda p: _bake_map(sample, uvs, resolution, options, p))
     original_check = check_layout(uvs, triangles, resolution, options.padding)
@@ -193,6 +214,19 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
         image = stages.run("bake resolution sweep", lambda p: _bake_map(sample, uvs, size, options, p))
         sweep.append({"multiplier": multiplier, "resolution": size, "lookup": metrics.bilinear_lookup(image, uv_base)})
 
+    # The re-charted maps against uniform bakes of the scene's own layouts.
+    compared = []
+    for variant in (options.compare_variants if options.rechart is not None else ()):
+        other_uvs, _ = sample.layout(variant)
+        other_points = metrics.interpolate_corners(other_uvs, points.triangle, points.bary)
+        other_sweep = []
+        for multiplier in options.multipliers:
+            size = int(round(resolution * multiplier))
+            image = stages.run("bake comparison layouts", lambda p: _bake_map(sample, other_uvs, size, options, p))
+            other_sweep.append({"multiplier": multiplier, "resolution": size,
+                                "lookup": metrics.bilinear_lookup(image, other_points)})
+        compared.append((variant, other_sweep))
+
     start = time.perf_counter()
     charts = find_charts(uvs, triangles)
     texels = metrics.uv_areas(uvs, triangles) * resolution * resolution
@@ -222,11 +256,28 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
                                   "transition_rmse": et} for s, e, et in zip(sweep, sweep_rmse, sweep_t)],
         }
 
+    def against(other_sweep):
+        """Equal-error ratios of the plain and the refined map on this layout
+        against the uniform bakes of another layout."""
+        out = {"resolution_sweep": [{"resolution": s["resolution"]} for s in other_sweep]}
+        for where, prefix in ((np.ones(len(points), bool), ""), (transitions, "transition_")):
+            errors = [metrics.error_stats(s["lookup"], truth, where)["rmse"] for s in other_sweep]
+            for row, error in zip(out["resolution_sweep"], errors):
+                row[f"{prefix}rmse"] = error
+            for name, lookup in (("baseline", lookup_base), ("refined", lookup_refined)):
+                target = metrics.error_stats(lookup, truth, where)["rmse"]
+                ratio, status = metrics.equal_error_resolution(options.multipliers, errors, target)
+                out[f"{prefix}equal_error_resolution_ratio_{name}"] = ratio
+                out[f"{prefix}equal_error_status_{name}"] = status
+        return out
+
     everywhere = np.ones(len(points), bool)
-    result = {"scene": sample.name, "variant": options.variant, "resolution": resolution, "pass": passes,
+    result = {"scene": sample.name, "variant": options.layout_name, "resolution": resolution, "pass": passes,
               "description": sample.description, "bake_samples": options.samples,
               "truth_samples": options.truth_samples, "gradient_step_m": step, "texel_size_m": median_texel}
     result.update(figures(everywhere))
+    result["layout"] = layout
+    result["layout_comparison"] = [{"variant": variant, **against(other_sweep)} for variant, other_sweep in compared]
     result["transition_widening_linear"] = (math.sqrt(result["transition_widening"])
                                             if math.isfinite(result["transition_widening"]) else float("nan"))
     result["truth_mean"] = float(truth.mean())
@@ -298,8 +349,9 @@ def evaluate_samples(samples, options, out_dir, variants=None, progress=None):
     scenes = []
     for sample in samples:
         for variant in variants or (options.variant,):
-            scene_dir = os.path.join(out_dir, f"{sample.name}_{variant}")
-            scenes.append(evaluate_sample(sample, replace(options, variant=variant), scene_dir, progress))
+            scene_options = replace(options, variant=variant)
+            scene_dir = os.path.join(out_dir, f"{sample.name}_{scene_options.layout_name}")
+            scenes.append(evaluate_sample(sample, scene_options, scene_dir, progress))
     options.check()
     summary = {"resolution": int(options.resolution), "multipliers": list(options.multipliers),
                "bake_samples": options.samples, "truth_samples": options.truth_samples, "points": options.points,

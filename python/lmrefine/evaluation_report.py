@@ -166,6 +166,47 @@ def _backoff_text(refine):
     return f"backed off{where}, down to {kept * 100:.0f}% of the full deformation"
 
 
+def layout_text(r):
+    """Which layout the baseline and refined maps were baked on."""
+    layout = r.get("layout") or {}
+    if layout.get("source") != "rechart":
+        return f"Layout: the scene's own `{layout.get('variant', r['variant'])}` lightmap UVs."
+    check = layout.get("layout") or {}
+    return (f"Layout: **re-charted from the mesh** (`--rechart {layout['angle']:g}`, `lmrefine.rechart`), not the "
+            f"scene's own UVs: {layout['charts']} charts ({layout['split_charts']} split because their unwrap "
+            f"folded, {layout['degenerate_triangles']} degenerate triangles), texel density spread "
+            f"{_number(layout['density_spread'], 3)}x, mean angle error {_number(layout['angle_error_deg_mean'], 2)} "
+            f"degrees, {_number(layout['utilisation'] * 100, 3)}% of the texels covered, "
+            f"{'valid' if check.get('valid') else 'NOT valid'} at padding {layout['padding']:g}. "
+            "The baseline and the refined map both use it.")
+
+
+def _ratio_text(ratio, status):
+    if ratio is None or status in ("flat", "undefined"):
+        return "n/a" if status != "flat" else "noise-limited"
+    return {"above": ">=", "below": ""}.get(status, "") + f"{ratio:.2f}x"
+
+
+def comparison_lines(r):
+    """The re-charted maps against uniform bakes of the scene's own layouts."""
+    rows = r.get("layout_comparison") or []
+    if not rows:
+        return []
+    lines = ["", "## Against the scene's own layouts", "",
+             f"Equal-error resolution: the uniform bake on the scene's layout needs this times {r['resolution']} to "
+             "match the map on the re-charted layout (all points / transition points).", "",
+             f"| scene's layout | its RMSE at {r['resolution']} | re-charted, plain bake | re-charted + refined |",
+             "|---|---|---|---|"]
+    for c in rows:
+        lines.append(
+            f"| {c['variant']} | {_number(c['resolution_sweep'][0]['rmse'])} | "
+            f"{_ratio_text(c['equal_error_resolution_ratio_baseline'], c['equal_error_status_baseline'])} / "
+            f"{_ratio_text(c['transition_equal_error_resolution_ratio_baseline'], c['transition_equal_error_status_baseline'])} | "
+            f"{_ratio_text(c['equal_error_resolution_ratio_refined'], c['equal_error_status_refined'])} / "
+            f"{_ratio_text(c['transition_equal_error_resolution_ratio_refined'], c['transition_equal_error_status_refined'])} |")
+    return lines
+
+
 def scene_markdown(result):
     r = result
     lines = [
@@ -177,6 +218,8 @@ def scene_markdown(result):
         f"{r['truth_samples']} samples (twice) at {r['points']} surface points ({r['transition_points']} transition "
         f"points: top decile of the surface gradient, step {r['gradient_step_m'] * 1000:.1f} mm); the ground truth's "
         f"own noise is {_number(r['truth_noise_rmse'], 3)} RMS.",
+        "",
+        layout_text(r),
         "",
         "| | baseline | refined | change |",
         "|---|---|---|---|",
@@ -204,6 +247,7 @@ def scene_markdown(result):
     else:
         lines.append("**No gain on this scene.** Why:")
         lines += [f"- {note}" for note in r["notes"]]
+    lines += comparison_lines(r)
     lines += ["", "## Error against resolution (uniform baseline)", "",
               "| resolution | RMSE | transition RMSE |", "|---|---|---|"]
     for s in r["resolution_sweep"]:
@@ -262,6 +306,13 @@ def write_summary(out_dir, summary):
              f"{summary['bake_samples']} bake samples per texel, ground truth from {summary['truth_samples']} "
              f"samples at {summary['points']} surface points per scene. Definitions: docs/evaluation.md.", "",
              summary_table(summary), ""]
+    for r in summary["scenes"]:
+        for c in r.get("layout_comparison") or []:
+            lines.append(
+                f"- {r['scene']} ({r['variant']}) against the scene's `{c['variant']}` layout baked uniformly: "
+                f"equal-error ratio {_ratio_text(c['equal_error_resolution_ratio_baseline'], c['equal_error_status_baseline'])} "
+                f"plain, {_ratio_text(c['equal_error_resolution_ratio_refined'], c['equal_error_status_refined'])} "
+                "refined.")
     for r in summary["scenes"]:
         if not r["gain"]:
             lines.append(f"- **{r['scene']} ({r['variant']}) shows no gain**: " + "; ".join(r["notes"]) + ".")
