@@ -44,7 +44,7 @@ struct SurfaceFaces {
 SurfaceFaces surface_faces(const SurfaceMesh& mesh, const std::vector<int32_t>& welded);
 
 // Grows charts over `faces` (non-degenerate face ids): the largest face not
-// yet in a chart seeds one, which takes every face reachable through edge
+// yet in a chart (faces within about 1% of one size: the first index) seeds one, which takes every face reachable through edge
 // neighbours in `faces` whose normal is within `angle_radians` of the
 // seed's. Every chart is edge-connected, and for an angle below 90 degrees
 // no face of a chart turns its back to the seed's plane. Deterministic.
