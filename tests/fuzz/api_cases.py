@@ -20,7 +20,7 @@ import hostile
 COVERED = ("check_layout", "coverage_mask", "dwt", "dwt2", "find_charts", "gradient_map", "grid_cell_areas",
            "idwt", "idwt2", "read_image", "run_automaton", "warp_uvs", "write_image", "LayoutChecker", "Scene",
            "bake", "evaluate", "identity_grid", "refine_uvs", "CancelledError", "BakeResult", "RefineResult",
-           "pack_charts", "PackResult", "CHART_TOLERANCE")
+           "pack_charts", "PackResult", "CHART_TOLERANCE", "rechart", "RechartResult")
 
 VALID_FRACTION = 0.2  # cases left entirely valid: the ok path must hold its promises too
 WAVELETS = ("haar", "d4", "d12", "d20", "cdf53", "cdf97")
@@ -34,6 +34,7 @@ class Case:
     inputs: list = field(default_factory=list)  # everything the caller passed (checked for modification)
     layout: tuple = None  # (uvs, triangles, resolution, padding) when the result must be a valid layout
     packed: bool = False  # the layout promise is pack_charts's (passes check_layout), not refine_uvs's
+    recharted: bool = False  # the layout is new (rechart's, per corner): it must pass check_layout
     description: str = ""
 
 
@@ -299,6 +300,40 @@ def case_pack_charts(lm, rng):
                 packed=True, description=f"pack_charts hostile: {chosen}")
 
 
+def random_mesh(rng):
+    """A small mesh: a bent grid, a closed box, or random triangles (slivers and repeats included)."""
+    kind = rng.integers(3)
+    if kind == 0:
+        n = int(rng.integers(1, 6))
+        xs, ys = np.meshgrid(np.linspace(0, 1, n + 1), np.linspace(0, 1, n + 1))
+        positions = np.stack([xs.ravel(), ys.ravel(), rng.uniform(0, 0.5) * np.sin(4 * xs.ravel())], axis=1)
+        quads = [(i * (n + 1) + j, i * (n + 1) + j + 1, (i + 1) * (n + 1) + j + 1, (i + 1) * (n + 1) + j)
+                 for i in range(n) for j in range(n)]
+        triangles = [t for a, b, c, d in quads for t in ((a, b, c), (a, c, d))]
+    elif kind == 1:
+        positions = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], np.float64)
+        quads = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
+        triangles = [t for a, b, c, d in quads for t in ((a, b, c), (a, c, d))]
+    else:
+        count = int(rng.integers(1, 10))
+        positions = rng.uniform(-1, 1, (count + 2, 3))
+        triangles = rng.integers(0, count + 2, (count, 3))
+    return positions.astype(np.float32), np.asarray(triangles, np.int32)
+
+
+def case_rechart(lm, rng):
+    positions, triangles = random_mesh(rng)
+    r = int(rng.choice([16, 32, 64]))
+    kwargs = {"positions": positions, "triangles": triangles, "angle": float(rng.uniform(5, 85)), "resolution": r,
+              "padding": float(rng.choice([0, 1, 2])), "progress": None}
+    makers = {"positions": as_array, "triangles": as_array, "angle": as_number, "resolution": as_resolution,
+              "padding": as_number, "weld_tolerance": as_number, "rotations": as_number, "progress": as_progress}
+    kwargs, chosen = mutate(kwargs, rng, makers)
+    return Case("rechart", _call(lm.rechart, dict(kwargs)), list(kwargs.values()),
+                layout=(None, kwargs["triangles"], kwargs["resolution"], kwargs["padding"]), recharted=True,
+                description=f"rechart hostile: {chosen}")
+
+
 # ---------------------------------------------------------------- images
 
 PNG_HUGE_HEADER = (b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR" + (100000).to_bytes(4, "big") * 2
@@ -496,7 +531,7 @@ BUILDERS = (
     case_layout_function("find_charts"), case_layout_function("LayoutChecker"),
     case_grid_cell_areas, case_warp_uvs, case_identity_grid, case_run_automaton,
     case_refine_uvs, case_refine_uvs,  # the whole pipeline gets twice the share
-    case_pack_charts,
+    case_pack_charts, case_rechart,
     case_write_image, case_read_image, case_scene, case_bake, case_evaluate,
 )
 
