@@ -43,7 +43,7 @@ py::tuple rechart_mesh(const py::handle& positions_in, const py::handle& triangl
 }  // namespace
 
 void bind_rechart(py::module_& m) {
-    m.def("rechart_mesh", &rechart_mesh, py::arg("positions"), py::arg("triangles"), py::arg("angle") = 66.0,
+    m.def("rechart_mesh", &rechart_mesh, py::arg("positions"), py::arg("triangles"), py::arg("angle") = 10.0,
           py::arg("weld_tolerance") = py::none(), py::arg("progress") = py::none(),
           R"doc(Charts of a mesh, each unwrapped with a least-squares conformal map (not packed).
 

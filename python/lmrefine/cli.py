@@ -146,10 +146,12 @@ def add_evaluation_arguments(parser, resolution, points):
     parser.add_argument("--refine-passes", type=int, help="refine_uvs passes (default: refine_uvs' own)")
     parser.add_argument("--no-repack", action="store_true",
                         help="refine inside charts only (refine_uvs repack=False): no chart scaling or packing")
-    parser.add_argument("--rechart", type=float, nargs="?", const=66.0, metavar="ANGLE",
+    from .charting import DEFAULT_ANGLE
+
+    parser.add_argument("--rechart", type=float, nargs="?", const=DEFAULT_ANGLE, metavar="ANGLE",
                         help="re-chart the scene's mesh (lmrefine.rechart: charts of faces whose normals are within "
-                             "ANGLE degrees, default 66, conformal unwrap, uniform texel density, packed) and use that "
-                             "layout instead of the scene's own UVs")
+                             f"ANGLE degrees, default {DEFAULT_ANGLE:g}, conformal unwrap, uniform texel density, "
+                             "packed) and use that layout instead of the scene's own UVs; put scene names before it")
     parser.add_argument("--compare", action="store_true",
                         help="with --rechart: also bake the scene's own --variant layout(s) uniformly at every "
                              "multiplier and report the equal-error ratio of the re-charted maps against them")

@@ -20,7 +20,7 @@ class Progress;
 constexpr double kRelativeWeld = 1e-6;
 
 struct RechartOptions {
-    double angle_degrees = 66.0;  // largest angle between a chart's normals and its first face's, in (0, 90)
+    double angle_degrees = 10.0;  // largest angle between a chart's normals and its first face's, in (0, 90)
     // Positions closer than this are one vertex (world units); negative:
     // kRelativeWeld times the diagonal of the used positions' bounding box.
     double weld_tolerance = -1.0;
