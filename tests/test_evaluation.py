@@ -129,3 +129,35 @@ def test_evaluate_rejects_bad_arguments(tmp_path, capsys):
     assert "multipliers" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         cli.main(["evaluate", "--multipliers", "a,b"])
+
+
+@pytest.mark.slow
+def test_evaluate_rechart_replaces_the_layout_and_compares_with_the_scene_s_own(tmp_path):
+    scene = tiny_scene(12)
+    scene.save(tmp_path / "tiny.npz")
+    out = tmp_path / "out"
+    assert cli.main(["evaluate", str(tmp_path / "tiny.npz"), "--rechart", "30", "--compare", "--resolution", "48",
+                     "--points", "2000", "--samples", "4", "--truth-samples", "32", "--multipliers", "1,2",
+                     "--out", str(out)]) == 0
+    report = json.loads((out / "tiny_rechart30" / "report.json").read_text())
+    assert report["variant"] == "rechart30"
+    layout = report["layout"]
+    assert layout["source"] == "rechart" and layout["angle"] == 30 and layout["charts"] == 1
+    assert layout["layout"]["valid"]
+    # The maps were baked on the re-charted layout, not the scene's UVs.
+    saved = np.load(out / "tiny_rechart30" / "refined_layout.npz")
+    recharted = lmrefine.rechart(scene.positions, scene.triangles, 30.0, 48, 2.0).uvs
+    np.testing.assert_array_equal(saved["original_uvs"], recharted)
+    assert not np.array_equal(saved["original_uvs"], scene.uvs["smart"])
+    # Against the scene's own layout: one row, both maps, a sweep of two.
+    [compared] = report["layout_comparison"]
+    assert compared["variant"] == "smart" and len(compared["resolution_sweep"]) == 2
+    assert compared["equal_error_status_refined"] in ("within", "below", "above", "flat")
+    text = (out / "tiny_rechart30" / "report.md").read_text()
+    assert "re-charted from the mesh" in text and "Against the scene's own layouts" in text
+    assert "against the scene's `smart` layout" in (out / "report.md").read_text()
+
+
+def test_evaluate_rejects_a_bad_rechart_angle(tmp_path, capsys):
+    assert cli.main(["evaluate", "courtyard", "--rechart", "95", "--out", str(tmp_path)]) == 2
+    assert "rechart" in capsys.readouterr().err
