@@ -77,7 +77,9 @@ class SampleScene:
     @property
     def corner_triangles(self):
         """(T, 3) int32 indices into the per-corner UV arrays: 3t, 3t+1, 3t+2."""
-        return np.arange(3 * len(self.triangles), dtype=np.int32).reshape(-1, 3)
+        from .charting import corner_triangles
+
+        return corner_triangles(len(self.triangles))
 
     @property
     def corner_positions(self):
