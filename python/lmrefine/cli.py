@@ -114,13 +114,13 @@ def run_evaluate(args):
 def run_demo(args):
     """The full pipeline on one bundled scene, plus the gradient-map pictures
     of its baseline bake (stage 1 of the method)."""
-    from .sample_scenes import load_sample
-
     summary = run_evaluate(args)
     scene = summary["scenes"][0]
-    sample = load_sample(args.scenes[0])
-    uvs, triangles = sample.layout(scene["variant"])
-    baseline = _native.read_image(os.path.join(args.out, f"{scene['scene']}_{scene['variant']}", "baseline.exr"))
+    folder = os.path.join(args.out, f"{scene['scene']}_{scene['variant']}")
+    # The layout the baseline was baked on (the scene's own, or re-charted).
+    with np.load(os.path.join(folder, "refined_layout.npz")) as layout:
+        uvs, triangles = layout["original_uvs"], layout["triangles"]
+    baseline = _native.read_image(os.path.join(folder, "baseline.exr"))
     mask = _native.coverage_mask(uvs, triangles, baseline.shape[:2])
     write_gradient_report(np.ascontiguousarray(baseline[..., :3]), mask, os.path.join(args.out, "gradient"),
                           source=f"{scene['scene']} baseline bake", wavelet=args.wavelet)
