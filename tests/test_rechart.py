@@ -323,6 +323,18 @@ def test_degenerate_triangles_get_charts_of_their_own():
     assert report["layout"]["valid"]
 
 
+def test_a_pile_of_copies_welds_without_quadratic_cost():
+    # 60,000 copies of three positions (Lightmap Pack's split, taken to the
+    # extreme) weld into one triangle's worth of vertices.
+    positions = np.tile(np.array([[0, 0, 0], [1, 0, 0], [0, 1, -0.0]], np.float32), (20000, 1))
+    positions[3::3, 2] = 0.0  # -0 and 0 are one position
+    triangles = np.arange(60000, dtype=np.int32).reshape(-1, 3)
+    _, charts, report = _native.rechart_mesh(positions, triangles, 10.0)
+    assert report["welded_vertices"] == 59997
+    # Every edge is shared by all 20,000 faces: no neighbours, a chart each.
+    assert report["charts"] == 20000 and report["degenerate_triangles"] == 0
+
+
 def test_loose_vertices_are_ignored_even_when_not_finite():
     positions, triangles = cube()
     positions = np.concatenate([positions, [[np.nan, 0.0, np.inf]]])
@@ -354,6 +366,7 @@ def test_bad_mesh_raises_a_clear_error(change, error, words):
     ({"angle": True}, TypeError, "angle"),
     ({"angle": "66"}, TypeError, "angle"),
     ({"weld_tolerance": -1.0}, ValueError, "weld_tolerance"),
+    ({"weld_tolerance": 0.5}, ValueError, "weld_tolerance"),  # half the cube: would merge its corners
     ({"resolution": 0}, ValueError, "resolution"),
     ({"padding": -1.0}, ValueError, "padding"),
     ({"resolution": 4, "padding": 8.0}, ValueError, ""),

@@ -4,6 +4,7 @@
 #include <array>
 #include <cmath>
 #include <deque>
+#include <functional>
 #include <numeric>
 #include <string>
 #include <unordered_map>
@@ -56,38 +57,61 @@ void validate_surface(const SurfaceMesh& mesh) {
 std::vector<int32_t> weld_positions(const SurfaceMesh& mesh, double tolerance) {
     std::vector<int32_t> parent(size_t(mesh.vertex_count));
     std::iota(parent.begin(), parent.end(), 0);
+    const auto join = [&](int64_t a, int64_t b) {
+        a = find_root(parent, a), b = find_root(parent, b);
+        if (a != b) parent[size_t(std::max(a, b))] = int32_t(std::min(a, b));
+    };
     std::vector<uint8_t> used(size_t(mesh.vertex_count), 0);
     for (int64_t i = 0; i < 3 * mesh.triangle_count; ++i) used[size_t(mesh.triangles[i])] = 1;
-    // A hash grid of cells of the tolerance's size: each vertex meets the
-    // vertices of its 3 x 3 x 3 cells (with tolerance 0, equal positions
-    // share a cell). Visited in index order, roots are the smallest index.
-    const double cell = tolerance > 0.0 ? tolerance : 1.0;
-    const double tolerance2 = tolerance * tolerance;
-    std::unordered_map<uint64_t, std::vector<int32_t>> cells;
-    cells.reserve(size_t(mesh.vertex_count));
+    // Equal positions first (by value: -0 is 0), so only distinct positions
+    // meet in the grid below and a pile of copies costs nothing.
+    std::unordered_map<uint64_t, std::vector<int32_t>> exact;
+    exact.reserve(size_t(mesh.vertex_count));
+    std::vector<int32_t> distinct;
     for (int64_t v = 0; v < mesh.vertex_count; ++v) {
         if (!used[size_t(v)]) continue;
+        const float* p = mesh.positions + 3 * v;
+        uint64_t hash = 1469598103934665603ull;
+        for (int k = 0; k < 3; ++k) hash = (hash ^ std::hash<float>{}(p[k] + 0.0f)) * 1099511628211ull;
+        bool found = false;
+        for (int32_t w : exact[hash]) {
+            const float* q = mesh.positions + 3 * int64_t(w);
+            if (q[0] == p[0] && q[1] == p[1] && q[2] == p[2]) {
+                join(w, v);
+                found = true;
+                break;
+            }
+        }
+        if (!found) exact[hash].push_back(int32_t(v)), distinct.push_back(int32_t(v));
+    }
+    if (!(tolerance > 0.0)) {
+        for (int64_t v = 0; v < mesh.vertex_count; ++v) parent[size_t(v)] = int32_t(find_root(parent, v));
+        return parent;
+    }
+    // A hash grid of cells of the tolerance's size: each position meets the
+    // positions of its 3 x 3 x 3 cells. Visited in index order, roots are
+    // the smallest index.
+    const double tolerance2 = tolerance * tolerance;
+    std::unordered_map<uint64_t, std::vector<int32_t>> cells;
+    cells.reserve(distinct.size());
+    for (int32_t v : distinct) {
         const glm::dvec3 p = position(mesh, v);
         // Clamped so a huge coordinate cannot overflow the cast.
-        const auto index = [&](double x) { return int64_t(std::floor(std::clamp(x / cell, -1e15, 1e15))); };
+        const auto index = [&](double x) { return int64_t(std::floor(std::clamp(x / tolerance, -1e15, 1e15))); };
         const int64_t ci = index(p.x), cj = index(p.y), ck = index(p.z);
-        const int reach = tolerance > 0.0 ? 1 : 0;
-        for (int64_t di = -reach; di <= reach; ++di) {
-            for (int64_t dj = -reach; dj <= reach; ++dj) {
-                for (int64_t dk = -reach; dk <= reach; ++dk) {
+        for (int64_t di = -1; di <= 1; ++di) {
+            for (int64_t dj = -1; dj <= 1; ++dj) {
+                for (int64_t dk = -1; dk <= 1; ++dk) {
                     const auto found = cells.find(cell_key(ci + di, cj + dj, ck + dk));
                     if (found == cells.end()) continue;
                     for (int32_t w : found->second) {
                         const glm::dvec3 d = position(mesh, w) - p;
-                        if (glm::dot(d, d) <= tolerance2) {
-                            const int64_t a = find_root(parent, v), b = find_root(parent, w);
-                            if (a != b) parent[size_t(std::max(a, b))] = int32_t(std::min(a, b));
-                        }
+                        if (glm::dot(d, d) <= tolerance2) join(w, v);
                     }
                 }
             }
         }
-        cells[cell_key(ci, cj, ck)].push_back(int32_t(v));
+        cells[cell_key(ci, cj, ck)].push_back(v);
     }
     for (int64_t v = 0; v < mesh.vertex_count; ++v) parent[size_t(v)] = int32_t(find_root(parent, v));
     return parent;

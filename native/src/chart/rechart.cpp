@@ -23,6 +23,8 @@ constexpr double kMinSplitAngle = 0.5 * kPi / 180.0;
 // median face's side (it has no area to light, but the baker and
 // check_layout need a real triangle).
 constexpr double kDegenerateSide = 0.05;
+// The largest weld tolerance accepted, relative to the mesh's size.
+constexpr double kMaxRelativeWeld = 1e-2;
 
 struct Unwrapped {
     std::vector<int64_t> faces;
@@ -68,15 +70,20 @@ RechartResult rechart(const SurfaceMesh& mesh, const RechartOptions& options, Pr
     LMREFINE_REQUIRE(std::isfinite(options.weld_tolerance),
                      "weld_tolerance must be a finite distance (got " + std::to_string(options.weld_tolerance) + ")");
     validate_surface(mesh);
-    double tolerance = options.weld_tolerance;
-    if (tolerance < 0.0) {
-        glm::dvec3 lo(1e300), hi(-1e300);
-        for (int64_t i = 0; i < 3 * mesh.triangle_count; ++i) {
-            const float* p = mesh.positions + 3 * int64_t(mesh.triangles[i]);
-            lo = glm::min(lo, glm::dvec3(p[0], p[1], p[2])), hi = glm::max(hi, glm::dvec3(p[0], p[1], p[2]));
-        }
-        tolerance = kRelativeWeld * glm::length(hi - lo);
+    glm::dvec3 lo(1e300), hi(-1e300);
+    for (int64_t i = 0; i < 3 * mesh.triangle_count; ++i) {
+        const float* p = mesh.positions + 3 * int64_t(mesh.triangles[i]);
+        lo = glm::min(lo, glm::dvec3(p[0], p[1], p[2])), hi = glm::max(hi, glm::dvec3(p[0], p[1], p[2]));
     }
+    const double size = glm::length(hi - lo);
+    double tolerance = options.weld_tolerance;
+    if (tolerance < 0.0) tolerance = kRelativeWeld * size;
+    // A tolerance near the mesh's size would merge distinct vertices (and
+    // make the weld's grid one cell, quadratic in the vertices).
+    LMREFINE_REQUIRE(tolerance <= kMaxRelativeWeld * size,
+                     "weld_tolerance " + std::to_string(tolerance) + " is more than 1% of the mesh's size (" +
+                         std::to_string(size) + "): it would merge distinct vertices; give a distance far "
+                         "below the smallest modelled detail, or None");
     const std::vector<int32_t> welded = weld_positions(mesh, tolerance);
     const SurfaceFaces faces = surface_faces(mesh, welded);
 
