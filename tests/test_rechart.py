@@ -262,6 +262,23 @@ def test_a_chart_that_would_overlap_itself_is_split():
         assert overlapping_pairs(uvs, corner_triangles(len(triangles))[mine]) == [], c
 
 
+def test_a_folded_input_is_cut_around_the_fold_not_into_single_faces():
+    # A grid jittered so far that 4 of its 800 triangles turned over: the
+    # plane folds onto itself there. No angle separates the fold from the
+    # rest of its chart, so the chart is cut in halves until it unwraps.
+    positions, triangles = grid(20, jitter=0.45, seed=0)
+    corners = positions[triangles]
+    flipped = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])[:, 2] < 0
+    assert flipped.sum() == 4
+    uvs, charts, report = _native.rechart_mesh(positions, triangles, 10.0)
+    assert report["split_charts"] > 0 and report["charts"] < 50
+    for c in range(report["charts"]):
+        mine = np.flatnonzero(charts == c)
+        assert overlapping_pairs(uvs, corner_triangles(len(triangles))[mine]) == [], c
+    packed, packed_report = lmrefine.rechart(positions, triangles, 10.0, 128, 2.0)
+    assert packed_report["layout"]["valid"]
+
+
 # --- the packed layout --------------------------------------------------------
 
 def meshes():

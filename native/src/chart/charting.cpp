@@ -210,4 +210,31 @@ std::vector<std::vector<int64_t>> grow_charts(const SurfaceFaces& faces, const s
     return charts;
 }
 
+std::vector<std::vector<int64_t>> bisect_chart(const SurfaceMesh& mesh, const SurfaceFaces& faces,
+                                               const std::vector<int64_t>& chart) {
+    std::vector<glm::dvec3> centroid(chart.size());
+    glm::dvec3 lo(1e300), hi(-1e300);
+    for (size_t i = 0; i < chart.size(); ++i) {
+        const int32_t* tri = mesh.triangles + 3 * chart[i];
+        centroid[i] = (position(mesh, tri[0]) + position(mesh, tri[1]) + position(mesh, tri[2])) / 3.0;
+        lo = glm::min(lo, centroid[i]), hi = glm::max(hi, centroid[i]);
+    }
+    const glm::dvec3 extent = hi - lo;
+    const int axis = extent.x >= extent.y && extent.x >= extent.z ? 0 : (extent.y >= extent.z ? 1 : 2);
+    std::vector<size_t> order(chart.size());
+    std::iota(order.begin(), order.end(), size_t(0));
+    std::sort(order.begin(), order.end(), [&](size_t a, size_t b) {
+        return centroid[a][axis] < centroid[b][axis] || (centroid[a][axis] == centroid[b][axis] && chart[a] < chart[b]);
+    });
+    // Each half grown with no angle limit: its edge-connected parts.
+    std::vector<std::vector<int64_t>> parts;
+    for (int half = 0; half < 2; ++half) {
+        std::vector<int64_t> ids;
+        const size_t begin = half == 0 ? 0 : order.size() / 2, end = half == 0 ? order.size() / 2 : order.size();
+        for (size_t k = begin; k < end; ++k) ids.push_back(chart[order[k]]);
+        for (auto& part : grow_charts(faces, ids, 4.0)) parts.push_back(std::move(part));
+    }
+    return parts;
+}
+
 }  // namespace lmrefine

@@ -17,7 +17,8 @@ namespace lmrefine {
 namespace {
 
 constexpr double kPi = 3.14159265358979323846;
-// Below this angle a chart that still folds is cut into single faces.
+// Below this angle a chart that still folds is no longer grown again with
+// a smaller angle but cut in halves (bisect_chart).
 constexpr double kMinSplitAngle = 0.5 * kPi / 180.0;
 // A degenerate face's stand-in triangle: legs of this fraction of the
 // median face's side (it has no area to light, but the baker and
@@ -94,10 +95,10 @@ RechartResult rechart(const SurfaceMesh& mesh, const RechartOptions& options, Pr
     LMREFINE_REQUIRE(!good.empty(), "every one of the " + std::to_string(mesh.triangle_count) +
                                         " triangles is degenerate (zero area or two corners at one position): "
                                         "there is no surface to chart");
-    result.degenerate = int64_t(bad.size());
 
     // Charts to unwrap, each with the angle it was grown with; a chart
-    // whose unwrap folds goes back on the list, grown again with half the angle.
+    // whose unwrap folds goes back on the list, grown again with half the
+    // angle or cut in halves.
     const double angle = options.angle_degrees * kPi / 180.0;
     std::vector<std::pair<std::vector<int64_t>, double>> pending;
     for (auto& chart : grow_charts(faces, good, angle)) pending.emplace_back(std::move(chart), angle);
@@ -114,18 +115,19 @@ RechartResult rechart(const SurfaceMesh& mesh, const RechartOptions& options, Pr
             charts.push_back(std::move(unwrapped));
             continue;
         }
+        if (chart_faces.size() == 1) {  // no shape to keep (a face on the sliver limit): a stand-in triangle
+            bad.push_back(chart_faces[0]);
+            if (progress) progress->advance(1);
+            continue;
+        }
         ++result.split_charts;
+        // Curvature folds: a smaller angle. A chart that still folds within
+        // a small angle (a folded input): cut in halves until the fold is isolated.
         const double half = 0.5 * chart_angle;
-        if (half < kMinSplitAngle) {
-            for (int64_t f : chart_faces) pending.emplace_back(std::vector<int64_t>{f}, 0.0);
-            continue;
-        }
-        auto parts = grow_charts(faces, chart_faces, half);
-        if (parts.size() == 1) {  // flat, and still folding: cut it into faces
-            for (int64_t f : chart_faces) pending.emplace_back(std::vector<int64_t>{f}, 0.0);
-            continue;
-        }
-        for (auto& part : parts) pending.emplace_back(std::move(part), half);
+        auto parts = half >= kMinSplitAngle ? grow_charts(faces, chart_faces, half)
+                                            : std::vector<std::vector<int64_t>>{chart_faces};
+        if (parts.size() == 1) parts = bisect_chart(mesh, faces, chart_faces);
+        for (auto& part : parts) pending.emplace_back(std::move(part), std::min(half, chart_angle));
     }
     // Charts in order of their smallest face: ids do not depend on the order of splits.
     std::sort(charts.begin(), charts.end(), [](const Unwrapped& a, const Unwrapped& b) { return a.faces[0] < b.faces[0]; });
@@ -161,6 +163,7 @@ RechartResult rechart(const SurfaceMesh& mesh, const RechartOptions& options, Pr
             }
         }
     }
+    result.degenerate = int64_t(bad.size());
     if (!bad.empty()) {
         std::vector<double> areas;
         for (int64_t f : good) areas.push_back(faces.area[size_t(f)]);

@@ -51,4 +51,12 @@ SurfaceFaces surface_faces(const SurfaceMesh& mesh, const std::vector<int32_t>& 
 std::vector<std::vector<int64_t>> grow_charts(const SurfaceFaces& faces, const std::vector<int64_t>& face_ids,
                                               double angle_radians);
 
+// A chart (two or more face ids) cut in two halves at the median of its
+// face centroids along their widest axis, each half split into its
+// edge-connected parts: for a chart whose faces all lie within a small
+// angle and that still folds (a folded or self-intersecting input), so the
+// fold ends up in a small chart instead of the whole chart in single faces.
+std::vector<std::vector<int64_t>> bisect_chart(const SurfaceMesh& mesh, const SurfaceFaces& faces,
+                                               const std::vector<int64_t>& chart);
+
 }  // namespace lmrefine
