@@ -139,7 +139,7 @@ def _diagnose(result, context):
         notes.append(f"small charts: the charts under transitions cover {context['chart_texels_at_transitions']:.0f} "
                      "texels (median) and the gutters between charts keep their width, so texels can hardly move "
                      "towards an edge (Lightmap Pack makes one chart per face): use a layout with larger charts "
-                     "(Smart UV Project) or a higher resolution")
+                     "(Smart UV Project, or --rechart: lmrefine.rechart) or a higher resolution")
     if result["transition_points"] < 30:
         notes.append(f"only {result['transition_points']} transition points: too few to measure; raise --points")
     return notes
