@@ -89,7 +89,7 @@ def test_the_pipeline_reports_every_figure_with_sensible_values(tmp_path):
     # The ground truth is much less noisy than the errors it measures.
     assert 0 <= report["truth_noise_rmse"] < 0.2 * report["rmse_baseline"]
     assert set(report["timings"]) == {"bake baseline", "refine", "bake refined", "ground truth",
-                                      "bake resolution sweep", "metrics", "pictures", "total"}
+                                      "bake resolution sweep", "metrics", "pictures", "surface pictures", "total"}
     assert report["timings"]["total"] == pytest.approx(sum(v for k, v in report["timings"].items() if k != "total"))
     # Per object: both halves, each with the same figures.
     assert [o["object"] for o in report["objects"]] == ["West", "East"]
@@ -99,12 +99,22 @@ def test_the_pipeline_reports_every_figure_with_sensible_values(tmp_path):
     if not report["gain"]:
         assert report["notes"]
     for name in ("report.md", "lightmaps.png", "layout.png", "density.png", "error.png", "error_vs_resolution.png",
-                 "baseline.exr", "refined.exr", "refined_layout.npz"):
+                 "baseline.exr", "refined.exr", "refined_layout.npz", "surface.png", "surface_crops.png",
+                 "surface_density.png"):
         assert (out / "tiny_smart" / name).stat().st_size > 0, name
     layout = np.load(out / "tiny_smart" / "refined_layout.npz")
     assert lmrefine.check_layout(layout["uvs"], layout["triangles"], 48)["valid"]
     text = (out / "report.md").read_text()
     assert "tiny" in text and "equal-error" in text
+    # The lit surface: the default camera sees the floor, the refined map is
+    # closer to the ground truth there too, and both reports show the pictures.
+    surface = report["surface"]
+    assert surface["camera"] == "default" and surface["width"] == 480
+    assert surface["receiver_pixels"] > 0.2 * surface["width"] * surface["height"]
+    assert 0 < surface["rmse_refined"] < surface["rmse_plain"]
+    assert surface["crops"] and all(c["rmse_plain"] > 0 for c in surface["crops"])
+    assert "tiny_smart/surface.png" in text
+    assert "![surface](surface.png)" in (out / "tiny_smart" / "report.md").read_text()
 
 
 @pytest.mark.slow

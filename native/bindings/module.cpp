@@ -22,6 +22,7 @@ void bind_wavelet(py::module_& m);
 void bind_gradient_map(py::module_& m);
 void bind_scene(py::module_& m);
 void bind_baker(py::module_& m);
+void bind_primary_rays(py::module_& m);
 }  // namespace lmrefine::bindings
 
 PYBIND11_MODULE(_native, m) {
@@ -62,6 +63,7 @@ PYBIND11_MODULE(_native, m) {
     lmrefine::bindings::bind_gradient_map(m);
     lmrefine::bindings::bind_scene(m);
     lmrefine::bindings::bind_baker(m);
+    lmrefine::bindings::bind_primary_rays(m);
 
     // The memory rule of the native core, for the allocations the Python
     // half makes itself (MemoryError before allocating, with the same words).

@@ -39,7 +39,7 @@ from ._native import (  # noqa: F401  (re-exports)
     warp_uvs,
     write_image,
 )
-from .baker import BakeResult, bake, evaluate  # noqa: F401  (re-exports)
+from .baker import BakeResult, bake, evaluate, trace_rays  # noqa: F401  (re-exports)
 from .packer import CHART_TOLERANCE, PackResult, pack_charts  # noqa: F401
 from .refine import RefineResult, identity_grid, refine_uvs  # noqa: F401
 
@@ -69,6 +69,7 @@ __all__ = [
     "read_image",
     "refine_uvs",
     "run_automaton",
+    "trace_rays",
     "warp_uvs",
     "write_image",
 ]

@@ -71,7 +71,7 @@ def evaluation_options(args):
     return EvaluationOptions(resolution=args.resolution, samples=args.samples, truth_samples=args.truth_samples,
                              points=args.points, seed=args.seed, multipliers=args.multipliers,
                              padding=args.padding, denoise=args.denoise, bake_pass=args.bake_pass,
-                             refine_options=refine_options)
+                             refine_options=refine_options, view_width=args.view_width)
 
 
 def load_scenes(names):
@@ -141,6 +141,8 @@ def add_evaluation_arguments(parser, resolution, points):
     parser.add_argument("--no-repack", action="store_true",
                         help="refine inside charts only (refine_uvs repack=False): no chart scaling or packing")
     parser.add_argument("--denoise", action="store_true", help="denoise every bake (edge-aware)")
+    parser.add_argument("--view-width", type=int, default=480,
+                        help="width in pixels of the pictures of the lit surface (default: 480; 0: none)")
     parser.add_argument("--pass", dest="bake_pass", choices=("direct", "ao", "indirect", "combined"),
                         help="light to bake and compare (default: the scene's own: direct, combined for the room)")
 

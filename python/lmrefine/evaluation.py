@@ -36,12 +36,15 @@ class EvaluationOptions:
     denoise: bool = False
     bake_pass: str = None             # None: the scene's own pass (direct, or combined for the room)
     refine_options: dict = field(default_factory=dict)   # passed to refine_uvs (strength, passes, ...)
+    view_width: int = 480             # pixels across the pictures of the lit surface (0: none)
 
     def check(self):
         if self.resolution < 8:
             raise ValueError(f"resolution must be at least 8, got {self.resolution}")
         if self.points < 100:
             raise ValueError(f"points must be at least 100 (for a top decile of transitions), got {self.points}")
+        if self.view_width != 0 and not 16 <= self.view_width <= 4096:
+            raise ValueError(f"view width must be 0 (no surface pictures) or 16 to 4096 pixels, got {self.view_width}")
         if self.samples < 1 or self.truth_samples < 1:
             raise ValueError("samples and truth_samples must be at least 1")
         m = tuple(float(x) for x in self.multipliers)
@@ -278,12 +281,35 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
             "uv_points": uv_base, "error_baseline": np.abs(lookup_base - truth).mean(axis=1),
             "error_refined": np.abs(lookup_refined - truth).mean(axis=1), "transitions": transitions,
             "multipliers": options.multipliers}))
+        if options.view_width:
+            stages.run("surface pictures", lambda p: _surface_pictures(
+                out_dir, result, sample, scene, {"plain": (baseline, uvs), "refined": (refined_map, refined.uvs)},
+                {"plain": density_base, "refined": density_refined}, passes, options, p))
     result["timings"] = dict(stages.seconds)
     result["timings"]["total"] = sum(stages.seconds.values())
     result = _json_safe(result)
     if out_dir is not None:
         write_scene_report(out_dir, result)
     return result
+
+
+def _surface_pictures(out_dir, result, sample, scene, maps, density, passes, options, progress):
+    """The lit surface through the scene's camera (lmrefine.surface_view):
+    pictures, and their figures in result["surface"]."""
+    from .evaluation_report import write_surface_pictures
+    from .surface_view import render_views
+
+    views = render_views(sample, scene, maps, passes, options.truth_samples, options.view_width,
+                         seed=options.seed + 3, progress=progress)
+    write_surface_pictures(out_dir, result, views, density)
+    result["surface"] = {
+        "camera": views["camera"].name, "width": views["hits"].width, "height": views["hits"].height,
+        "receiver_pixels": int(views["hits"].receiver.sum()),
+        "rmse_plain": views["rmse"]["plain"], "rmse_refined": views["rmse"]["refined"],
+        "crops": [{"row": row, "column": column, "size": size, "rmse_plain": errors["plain"],
+                   "rmse_refined": errors["refined"]}
+                  for (row, column, size), errors in zip(views["crops"], views["crop_rmse"])],
+    }
 
 
 def evaluate_samples(samples, options, out_dir, variants=None, progress=None):

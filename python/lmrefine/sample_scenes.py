@@ -73,6 +73,7 @@ class SampleScene:
     occluder_positions: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.float32))
     occluder_triangles: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.int32))
     description: str = ""
+    camera: dict = None              # the scene's own camera (surface_view.Camera.to_dict), if it has one
 
     @property
     def corner_triangles(self):
@@ -119,6 +120,8 @@ class SampleScene:
         blend_samples/make_samples.py writes)."""
         meta = {"name": self.name, "description": self.description, "objects": list(self.objects),
                 "lights": list(self.lights), "world": [float(c) for c in self.world], "passes": list(self.passes)}
+        if self.camera:
+            meta["camera"] = self.camera
         np.savez_compressed(
             path, positions=self.positions, triangles=self.triangles, normals=self.normals,
             base_color=self.base_color, object_id=self.object_id, occluder_positions=self.occluder_positions,
@@ -169,6 +172,7 @@ def load_sample(name_or_path):
                 occluder_positions=data["occluder_positions"].astype(np.float32),
                 occluder_triangles=data["occluder_triangles"].astype(np.int32),
                 description=meta.get("description", ""),
+                camera=meta.get("camera"),
             )
         except KeyError as error:
             raise ValueError(f"'{path}' is not a scene .npz (missing {error}); make one with "

@@ -20,7 +20,7 @@ import hostile
 COVERED = ("check_layout", "coverage_mask", "dwt", "dwt2", "find_charts", "gradient_map", "grid_cell_areas",
            "idwt", "idwt2", "read_image", "run_automaton", "warp_uvs", "write_image", "LayoutChecker", "Scene",
            "bake", "evaluate", "identity_grid", "refine_uvs", "CancelledError", "BakeResult", "RefineResult",
-           "pack_charts", "PackResult", "CHART_TOLERANCE")
+           "pack_charts", "PackResult", "CHART_TOLERANCE", "trace_rays")
 
 VALID_FRACTION = 0.2  # cases left entirely valid: the ok path must hold its promises too
 WAVELETS = ("haar", "d4", "d12", "d20", "cdf53", "cdf97")
@@ -490,6 +490,20 @@ def case_evaluate(lm, rng):
     return case
 
 
+def case_trace_rays(lm, rng):
+    scene, notes = _scene_call(lm, rng)
+    count = int(rng.integers(0, 10))
+    origins = np.column_stack([rng.uniform(-1, 1, (count, 2)), np.full(count, 2.0)]).astype(np.float32)
+    directions = np.column_stack([rng.uniform(-0.3, 0.3, (count, 2)), -np.ones(count)]).astype(np.float32)
+    kwargs = {"scene": scene, "origins": origins, "directions": directions, "progress": None}
+    makers = {"origins": as_array, "directions": as_array, "progress": as_progress,
+              "scene": lambda v, r: hostile.scalar(r)}
+    case = _case("trace_rays", lm.trace_rays, kwargs, rng, makers)
+    case.description += f"; scene: {notes}"
+    case.inputs = [v for v in case.inputs if not isinstance(v, lm.Scene)]
+    return case
+
+
 BUILDERS = (
     case_gradient_map, case_dwt2, case_idwt2, case_dwt, case_idwt,
     case_layout_function("check_layout"), case_layout_function("coverage_mask"),
@@ -497,7 +511,7 @@ BUILDERS = (
     case_grid_cell_areas, case_warp_uvs, case_identity_grid, case_run_automaton,
     case_refine_uvs, case_refine_uvs,  # the whole pipeline gets twice the share
     case_pack_charts,
-    case_write_image, case_read_image, case_scene, case_bake, case_evaluate,
+    case_write_image, case_read_image, case_scene, case_bake, case_evaluate, case_trace_rays,
 )
 
 
