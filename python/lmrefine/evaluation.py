@@ -323,7 +323,8 @@ def evaluate_samples(samples, options, out_dir, variants=None, progress=None):
     os.makedirs(out_dir, exist_ok=True)
     scenes = []
     for sample in samples:
-        for variant in variants or (options.variant,):
+        # A scene exported from a .blend has one layout: its own lightmap UV map.
+        for variant in ("own",) if list(sample.uvs) == ["own"] else variants or (options.variant,):
             scene_dir = os.path.join(out_dir, f"{sample.name}_{variant}")
             scenes.append(evaluate_sample(sample, replace(options, variant=variant), scene_dir, progress))
     options.check()

@@ -22,7 +22,9 @@ TUNING_SCENES = ("courtyard", "game_level", "fence_and_tree")
 REPORTING_SCENES = ("room", "atrium")
 
 # UV variant name -> array name in the .npz.
-UV_VARIANTS = {"smart": "uv_smart", "lightmap": "uv_lightmap"}
+# "own": the lightmap UV map of a scene exported from a user's .blend
+# (python3 -m lmrefine export-scene), the only variant such a scene has.
+UV_VARIANTS = {"smart": "uv_smart", "lightmap": "uv_lightmap", "own": "uv_own"}
 
 # Light properties lmrefine.Scene.add_light understands, per kind (Blender's names).
 LIGHT_PROPERTIES = {
@@ -74,6 +76,7 @@ class SampleScene:
     occluder_triangles: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.int32))
     description: str = ""
     camera: dict = None              # the scene's own camera (surface_view.Camera.to_dict), if it has one
+    uv_maps: dict = None             # exported scenes: receiver name -> the Blender UV map of variant "own"
 
     @property
     def corner_triangles(self):
@@ -122,6 +125,8 @@ class SampleScene:
                 "lights": list(self.lights), "world": [float(c) for c in self.world], "passes": list(self.passes)}
         if self.camera:
             meta["camera"] = self.camera
+        if self.uv_maps:
+            meta["uv_maps"] = dict(self.uv_maps)
         np.savez_compressed(
             path, positions=self.positions, triangles=self.triangles, normals=self.normals,
             base_color=self.base_color, object_id=self.object_id, occluder_positions=self.occluder_positions,
@@ -173,6 +178,7 @@ def load_sample(name_or_path):
                 occluder_triangles=data["occluder_triangles"].astype(np.int32),
                 description=meta.get("description", ""),
                 camera=meta.get("camera"),
+                uv_maps=meta.get("uv_maps"),
             )
         except KeyError as error:
             raise ValueError(f"'{path}' is not a scene .npz (missing {error}); make one with "

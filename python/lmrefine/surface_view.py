@@ -27,6 +27,9 @@ DEFAULT_VIEW_DIRECTION = (-0.55, -0.72, 0.58)   # from the target towards the ca
 # A back face is stepped over this often at most (a ray through a closed
 # room's walls crosses two).
 MAX_BACK_FACES = 8
+# The exposure (the 99.5th percentile of the lit truth) is shown at this
+# linear level, so bright sunlit floors keep some shading instead of clipping.
+DISPLAY_WHITE = 0.8
 
 
 @dataclass
@@ -227,7 +230,7 @@ def truth_at(hits, scene, passes, samples, seed=0, progress=None):
 
 def lit_surface(hits, light, base_color, exposure):
     """(H, W, 3) display picture in [0, 1]: base colour x light on receivers,
-    scaled by `exposure`, sRGB-like gamma; occluders flat grey, background dark."""
+    `exposure` shown at DISPLAY_WHITE, sRGB-like gamma; occluders flat grey, background dark."""
     picture = np.empty((len(hits.receiver), 3))
     picture[:] = (0.10, 0.11, 0.13)
     if hits.occluder.any():
@@ -235,7 +238,7 @@ def lit_surface(hits, light, base_color, exposure):
     where = hits.receiver
     if where.any():
         colour = np.asarray(base_color, np.float64)[hits.triangle[where]] * light[where]
-        picture[where] = np.clip(colour / max(exposure, 1e-12), 0.0, 1.0) ** (1 / 2.2)
+        picture[where] = np.clip(DISPLAY_WHITE * colour / max(exposure, 1e-12), 0.0, 1.0) ** (1 / 2.2)
     return picture.reshape(hits.height, hits.width, 3)
 
 
@@ -267,8 +270,10 @@ def strongest_transitions(hits, truth_picture, count=3, size=None):
     table = np.pad(energy, ((1, 0), (1, 0))).cumsum(0).cumsum(1)
     sums = table[size:, size:] - table[:-size, size:] - table[size:, :-size] + table[:-size, :-size]
     windows = []
+    best = float(sums.max()) if sums.size else 0.0
     for _ in range(count):
-        if not np.isfinite(sums).any() or np.nanmax(sums) <= 0:
+        # A window with a tenth of the strongest one's change shows no edge worth a close-up.
+        if not np.isfinite(sums).any() or best <= 0 or np.nanmax(sums) < 0.1 * best:
             break
         row, column = np.unravel_index(int(np.nanargmax(sums)), sums.shape)
         windows.append((int(row), int(column), size))
