@@ -304,12 +304,12 @@ def scene_markdown(result):
     return "\n".join(lines)
 
 
-def surface_markdown(r, folder=""):
+def surface_markdown(r, folder="", heading="## The lit surface"):
     """The report's section on the pictures of the lit surface (none when they were not made)."""
     surface = r.get("surface")
     if not surface:
         return []
-    lines = ["", "## The lit surface", "",
+    lines = ["", heading, "",
              f"Camera '{surface['camera']}', {surface['width']}x{surface['height']} pixels: the surfaces lit by the "
              f"plain lightmap, by the refined lightmap at the same resolution ({r['resolution']}x{r['resolution']}) "
              f"and by the ground truth at every pixel. RMSE against the ground truth over the pixels: plain "
@@ -368,9 +368,10 @@ def write_summary(out_dir, summary):
             lines.append(f"- **{r['scene']} ({r['variant']}) shows no gain**: " + "; ".join(r["notes"]) + ".")
         elif r["notes"]:
             lines.append(f"- {r['scene']} ({r['variant']}): " + "; ".join(r["notes"]) + ".")
+    if any(r.get("surface") for r in summary["scenes"]):
+        lines += ["", "## The lit surface"]
     for r in summary["scenes"]:
-        if r.get("surface"):
-            lines += ["", f"### {r['scene']} ({r['variant']})"] + surface_markdown(r, f"{r['scene']}_{r['variant']}/")
+        lines += surface_markdown(r, f"{r['scene']}_{r['variant']}/", f"### {r['scene']} ({r['variant']})")
     lines += ["", "Per scene: " + ", ".join(f"[{r['scene']}_{r['variant']}]({r['scene']}_{r['variant']}/report.md)"
                                             for r in summary["scenes"]), ""]
     with open(os.path.join(out_dir, "report.md"), "w") as handle:
