@@ -25,11 +25,11 @@ def level(tmp_path_factory):
     """tests/blender/make_export_scene.py's level: a floor with a texture map
     and a lightmap UV map, a floating cube without UVs, a hidden plane, a sun
     and a camera."""
-    path = tmp_path_factory.mktemp("level") / "level.blend"
+    folder = tmp_path_factory.mktemp("level")
     subprocess.run([BLENDER, "-b", "--factory-startup", "--python-exit-code", "1", "--python",
-                    os.path.join(REPO, "tests", "blender", "make_export_scene.py"), "--", str(path)],
-                   check=True, capture_output=True)
-    return str(path)
+                    os.path.join(REPO, "tests", "blender", "make_export_scene.py"), "--", str(folder / "level.blend"),
+                    str(folder / "twin.blend")], check=True, capture_output=True)
+    return str(folder / "level.blend")
 
 
 @blender
@@ -79,6 +79,34 @@ def test_export_scene_says_what_to_do_with_a_scene_it_cannot_export(level, tmp_p
     error = capsys.readouterr().err
     assert error.startswith("lmrefine export-scene: error: cannot export") and words in error
     assert "Traceback" not in error and not (tmp_path / "s.npz").exists()
+
+
+@blender
+@needs_blender
+def test_objects_that_do_not_share_one_atlas_are_refused_with_the_fix(level, tmp_path, capsys):
+    twin = os.path.join(os.path.dirname(level), "twin.blend")
+    assert cli.main(["export-scene", twin, "-o", str(tmp_path / "s.npz")]) == 2
+    error = capsys.readouterr().err
+    assert "the lightmap UV maps of 'Floor' and 'Twin' cover the same part of the UV square" in error
+    assert "--objects NAME" in error and not (tmp_path / "s.npz").exists()
+    assert cli.main(["export-scene", twin, "-o", str(tmp_path / "s.npz"), "--objects", "Floor"]) == 0
+
+
+def test_shared_atlas_check_tells_side_by_side_from_overlapping_layouts():
+    from lmrefine.scene_export import shared_atlas_problem
+    from test_surface_view import plane_scene
+
+    scene = plane_scene()  # one floor in [0.1, 0.9]^2, two objects: its west and east halves
+    uvs = scene.uvs.pop("smart")
+    west = scene.positions[scene.triangles].mean(axis=1)[:, 0] < 0
+    scene.object_id = np.where(west, 0, 1).astype(np.int32)
+    scene.objects = ["West", "East"]
+    scene.uvs["own"] = uvs
+    assert shared_atlas_problem(scene) is None  # halves of one chart: neighbours, not overlapping
+    stacked = uvs.copy().reshape(-1, 3, 2)
+    stacked[~west] -= (stacked[~west].min(axis=(0, 1)) - stacked[west].min(axis=(0, 1)))  # east onto west
+    scene.uvs["own"] = stacked.reshape(-1, 2)
+    assert "'West' and 'East'" in shared_atlas_problem(scene)
 
 
 def test_export_scene_names_a_missing_or_wrong_file(tmp_path, capsys):

@@ -10,6 +10,8 @@ import json
 import os
 import subprocess
 
+import numpy as np
+
 from .batch.blender_command import addon_script_candidates, find_blender
 
 SCRIPT = "export_scene.py"
@@ -64,7 +66,51 @@ def export_blend(blend, out, objects="all", uv_map=None, blender=None, echo=prin
         tail = [line for line in (run.stderr + run.stdout).splitlines() if line.strip()][-6:]
         raise OSError(f"Blender could not export '{blend}' (exit status {run.returncode}); its last words:\n  "
                       + "\n  ".join(tail))
+    from .sample_scenes import load_sample
+
+    problem = shared_atlas_problem(load_sample(out))
+    if problem:
+        os.remove(out)
+        raise ExportError(f"cannot export '{blend}': {problem}")
     return out
+
+
+# Objects evaluated together bake into one atlas: their lightmap UV maps must
+# not cover the same texels (checked at this resolution, with this tolerance
+# for charts that merely touch).
+ATLAS_CHECK_RESOLUTION = 256
+ATLAS_OVERLAP_FRACTION = 0.02
+
+
+def shared_atlas_problem(scene):
+    """None when the receivers of an exported scene share one atlas, else a
+    message naming objects whose lightmap UV maps cover the same part of
+    [0, 1] (each object laid out on its own lightmap) and what to do."""
+    from . import _native
+
+    uvs, triangles = scene.layout("own")
+    if len(scene.objects) < 2:
+        return None
+    masks = []
+    for index in range(len(scene.objects)):
+        mine = triangles[scene.object_id == index]
+        masks.append(_native.coverage_mask(uvs, mine, ATLAS_CHECK_RESOLUTION) if len(mine) else None)
+    overlapping = []
+    for a in range(len(masks)):
+        for b in range(a + 1, len(masks)):
+            if masks[a] is None or masks[b] is None:
+                continue
+            shared = np.count_nonzero(masks[a] & masks[b])
+            if shared > ATLAS_OVERLAP_FRACTION * min(masks[a].sum(), masks[b].sum()):
+                overlapping.append((scene.objects[a], scene.objects[b]))
+    if not overlapping:
+        return None
+    a, b = overlapping[0]
+    more = f" (and {len(overlapping) - 1} more pairs)" if len(overlapping) > 1 else ""
+    return (f"the lightmap UV maps of '{a}' and '{b}'{more} cover the same part of the UV square: objects evaluated "
+            "together must share one atlas; pack their lightmap UV maps into one in Blender (select them, Edit Mode, "
+            "UV > Pack Islands), pick their lightmap map with --uv-map, or evaluate one object at a time with "
+            "--objects NAME")
 
 
 def _source_stamp(blend, objects, uv_map):
