@@ -196,15 +196,23 @@ def write_surface_pictures(out_dir, result, views, density):
     shown = np.concatenate([v[np.isfinite(v) & (v > 0)] for v in per_metre.values()])
     low, high = (np.percentile(shown, [1, 99]) if shown.size else (1.0, 2.0))
     norm = LogNorm(max(low, 1e-6), max(high, low * 1.01, 1e-6))
-    figure, axes = plt.subplots(1, 2, figsize=(12, 12 / 2 / aspect + 0.9))
+    figure, axes = plt.subplots(1, 2, figsize=(12, 12 / 2 / aspect + 1.0), constrained_layout=True)
+    colours = plt.get_cmap("viridis")
+    # Shaded by how squarely the camera sees the surface, so the shapes stay
+    # readable where the density is uniform.
+    shade = (0.55 + 0.45 * np.clip(hits.facing, 0.0, 1.0))[:, None]
     for axis, key, label in ((axes[0], "plain", "plain layout"), (axes[1], "refined", "refined layout")):
-        axis.set_facecolor("0.2")
-        image = per_metre[key].reshape(hits.height, hits.width)
-        shading = axis.imshow(np.ma.masked_invalid(image), cmap="viridis", norm=norm, interpolation="nearest")
+        values = per_metre[key]
+        image = np.full((len(values), 3), 0.2)
+        shown_here = np.isfinite(values) & (values > 0)
+        image[shown_here] = colours(norm(values[shown_here]))[:, :3] * shade[shown_here]
+        axis.imshow(image.reshape(hits.height, hits.width, 3), interpolation="nearest")
         axis.set_title(f"{label}, {resolution}x{resolution}", fontsize=10)
         axis.set_xticks([])
         axis.set_yticks([])
-    figure.colorbar(shading, ax=axes, fraction=0.025).set_label("texels per metre (log scale)")
+    from matplotlib.cm import ScalarMappable
+    shading = ScalarMappable(norm=norm, cmap=colours)
+    figure.colorbar(shading, ax=axes, fraction=0.025, shrink=0.9).set_label("texels per metre (log scale)")
     figure.suptitle(f"{title}: texel density on the surface")
     figure.savefig(os.path.join(out_dir, "surface_density.png"), dpi=110)
     plt.close(figure)
