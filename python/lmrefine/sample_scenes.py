@@ -118,11 +118,13 @@ class SampleScene:
             scene.set_world(tuple(self.world))
         return scene
 
-    def save(self, path):
-        """Write the scene as an .npz that load_sample reads (the format
-        blend_samples/make_samples.py writes)."""
+    def save(self, path, **extra_meta):
+        """Write the scene as an .npz that load_sample reads (as
+        blend_samples/make_samples.py and `export-scene` do); `extra_meta`
+        goes into meta for readers (load_sample ignores it)."""
         meta = {"name": self.name, "description": self.description, "objects": list(self.objects),
-                "lights": list(self.lights), "world": [float(c) for c in self.world], "passes": list(self.passes)}
+                "lights": list(self.lights), "world": [float(c) for c in self.world], "passes": list(self.passes),
+                **extra_meta}
         if self.camera:
             meta["camera"] = self.camera
         if self.uv_maps:
