@@ -109,6 +109,16 @@ def test_shared_atlas_check_tells_side_by_side_from_overlapping_layouts():
     assert "'West' and 'East'" in shared_atlas_problem(scene)
 
 
+def test_evaluate_names_a_file_that_is_no_scene(tmp_path, capsys):
+    (tmp_path / "level.fbx").write_bytes(b"Kaydara FBX Binary  \x00")
+    assert cli.main(["evaluate", str(tmp_path / "level.fbx"), "--out", str(tmp_path / "out")]) == 2
+    error = capsys.readouterr().err
+    assert "is not a scene .npz" in error and "export-scene" in error
+    np.save(tmp_path / "one.npy", np.zeros(3))
+    assert cli.main(["evaluate", str(tmp_path / "one.npy"), "--out", str(tmp_path / "out")]) == 2
+    assert "not a scene .npz" in capsys.readouterr().err
+
+
 def test_export_scene_names_a_missing_or_wrong_file(tmp_path, capsys):
     assert cli.main(["export-scene", str(tmp_path / "nowhere.blend")]) == 2
     assert "no such file: '" in capsys.readouterr().err

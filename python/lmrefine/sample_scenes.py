@@ -160,7 +160,15 @@ def load_sample(name_or_path):
     if not os.path.exists(path):
         raise ValueError(f"no sample scene '{name_or_path}': give a path to a scene .npz or one of "
                          f"{', '.join(sample_names()) or '(none found: run `make samples`)'}")
-    with np.load(path) as data:
+    try:
+        data = np.load(path)
+    except (OSError, ValueError) as error:  # a .fbx, a text file, a pickle: "Cannot load file containing pickled data"
+        raise ValueError(f"'{path}' is not a scene .npz ({error}): give a bundled sample's name, a .blend, or a "
+                         "scene .npz written by `python3 -m lmrefine export-scene`") from None
+    if not isinstance(data, np.lib.npyio.NpzFile):
+        raise ValueError(f"'{path}' holds one numpy array, not a scene .npz: write one with `python3 -m lmrefine "
+                         "export-scene`")
+    with data:
         try:
             meta = json.loads(str(data["meta"]))
             uvs = {variant: data[key].astype(np.float32) for variant, key in UV_VARIANTS.items() if key in data}
@@ -184,4 +192,4 @@ def load_sample(name_or_path):
             )
         except KeyError as error:
             raise ValueError(f"'{path}' is not a scene .npz (missing {error}); make one with "
-                             "blend_samples/make_samples.py") from None
+                             "`python3 -m lmrefine export-scene LEVEL.blend`") from None
