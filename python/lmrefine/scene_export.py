@@ -55,6 +55,7 @@ def export_blend(blend, out, objects="all", uv_map=None, blender=None, echo=prin
                "--python", find_export_script(), "--", "--out", os.path.abspath(out), "--objects", objects]
     if uv_map:
         command += ["--uv-map", uv_map]
+    echo(f"exporting {blend} with headless Blender ({command[0]})")
     run = subprocess.run(command, capture_output=True, text=True, errors="replace", stdin=subprocess.DEVNULL)
     for line in run.stdout.splitlines():
         if line.startswith(MESSAGE_PREFIXES):
