@@ -28,7 +28,7 @@ def level(tmp_path_factory):
     folder = tmp_path_factory.mktemp("level")
     subprocess.run([BLENDER, "-b", "--factory-startup", "--python-exit-code", "1", "--python",
                     os.path.join(REPO, "tests", "blender", "make_export_scene.py"), "--", str(folder / "level.blend"),
-                    str(folder / "twin.blend")], check=True, capture_output=True)
+                    str(folder / "twin.blend"), str(folder / "empty.blend")], check=True, capture_output=True)
     return str(folder / "level.blend")
 
 
@@ -90,6 +90,15 @@ def test_objects_that_do_not_share_one_atlas_are_refused_with_the_fix(level, tmp
     assert "the lightmap UV maps of 'Floor' and 'Twin' cover the same part of the UV square" in error
     assert "--objects NAME" in error and not (tmp_path / "s.npz").exists()
     assert cli.main(["export-scene", twin, "-o", str(tmp_path / "s.npz"), "--objects", "Floor"]) == 0
+
+
+@blender
+@needs_blender
+def test_a_level_without_meshes_is_named(level, tmp_path, capsys):
+    empty = os.path.join(os.path.dirname(level), "empty.blend")
+    assert cli.main(["export-scene", empty, "-o", str(tmp_path / "s.npz")]) == 2
+    assert "has no mesh object, so nothing to lightmap: check that this is the level's .blend" in \
+        capsys.readouterr().err
 
 
 def test_shared_atlas_check_tells_side_by_side_from_overlapping_layouts():

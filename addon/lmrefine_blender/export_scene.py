@@ -105,7 +105,9 @@ def export(out, objects_spec, uv_map):
     if spec == ["all"]:
         meshes = [obj for obj in scene.objects if obj.type == 'MESH']
         if not meshes:
-            raise UserError(f"{bpy.data.filepath} has no mesh object: nothing to light")
+            raise UserError(f"{bpy.data.filepath} has no mesh object, so nothing to lightmap: check that this is "
+                            "the level's .blend, or make its geometry real meshes in Blender (Object > Convert > "
+                            "Mesh)")
         if not any(len(obj.data.uv_layers) for obj in meshes):
             raise UserError(f"none of the {len(meshes)} mesh objects in {bpy.data.filepath} has a UV map: give the "
                             f"objects that get a lightmap a lightmap UV map in Blender ({UNWRAP_HINT})")

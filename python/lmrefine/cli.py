@@ -136,6 +136,11 @@ def run_evaluate(args):
             verdict = "gain, but" if scene["gain"] else "no gain"
             print(f"\n{scene['scene']} ({scene['variant']}): {verdict}: " + "; ".join(scene["notes"]))
     print(f"\nwrote {args.out}/report.md, report.json and one folder of pictures per scene")
+    for scene in summary["scenes"]:
+        if scene.get("surface"):
+            folder = os.path.join(args.out, f"{scene['scene']}_{scene['variant']}")
+            print(f"the lit surface ({scene['scene']}, plain / refined / ground truth): {folder}/surface.png, "
+                  "surface_crops.png, surface_density.png")
     return summary
 
 

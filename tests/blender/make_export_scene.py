@@ -1,6 +1,6 @@
 """A small level for the export-scene tests (tests/test_scene_export.py).
 
-    blender -b --factory-startup --python-exit-code 1 --python make_export_scene.py -- OUT.blend [TWIN.blend]
+    blender -b --factory-startup --python-exit-code 1 --python make_export_scene.py -- OUT.blend [TWIN.blend [EMPTY.blend]]
 
 A 4 x 4 m floor of 8 x 8 quads with two UV maps: "UVMap" (a texture map
 tiled 0..2, outside [0, 1]) and "Lightmap" (the floor mapped onto
@@ -70,3 +70,7 @@ if len(paths) > 1:
     bpy.ops.mesh.primitive_plane_add(size=1.0, location=(3.0, 0.0, 0.0))
     bpy.context.active_object.name = "Twin"
     bpy.ops.wm.save_as_mainfile(filepath=paths[1])
+if len(paths) > 2:
+    for obj in [obj for obj in bpy.data.objects if obj.type == "MESH"]:
+        bpy.data.objects.remove(obj)
+    bpy.ops.wm.save_as_mainfile(filepath=paths[2])
