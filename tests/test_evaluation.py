@@ -137,5 +137,7 @@ def test_evaluate_rejects_bad_arguments(tmp_path, capsys):
     assert "no sample scene" in capsys.readouterr().err
     assert cli.main(["evaluate", "courtyard", "--multipliers", "2,1", "--out", str(tmp_path)]) == 2
     assert "multipliers" in capsys.readouterr().err
+    assert cli.main(["evaluate", "courtyard", "--view-width", "5000", "--out", str(tmp_path)]) == 2
+    assert "view width must be 0 (no surface pictures) or 16 to 2048 pixels" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         cli.main(["evaluate", "--multipliers", "a,b"])

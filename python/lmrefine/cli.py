@@ -181,7 +181,7 @@ def add_evaluation_arguments(parser, resolution, points):
                         help="refine inside charts only (refine_uvs repack=False): no chart scaling or packing")
     parser.add_argument("--denoise", action="store_true", help="denoise every bake (edge-aware)")
     parser.add_argument("--view-width", type=int, default=480,
-                        help="width in pixels of the pictures of the lit surface (default: 480; 0: none)")
+                        help="width in pixels of the pictures of the lit surface, 16 to 2048 (default: 480; 0: none)")
     parser.add_argument("--pass", dest="bake_pass", choices=("direct", "ao", "indirect", "combined"),
                         help="light to bake and compare (default: the scene's own: direct, combined for the room)")
 

@@ -43,8 +43,8 @@ class EvaluationOptions:
             raise ValueError(f"resolution must be at least 8, got {self.resolution}")
         if self.points < 100:
             raise ValueError(f"points must be at least 100 (for a top decile of transitions), got {self.points}")
-        if self.view_width != 0 and not 16 <= self.view_width <= 4096:
-            raise ValueError(f"view width must be 0 (no surface pictures) or 16 to 4096 pixels, got {self.view_width}")
+        if self.view_width != 0 and not 16 <= self.view_width <= 2048:
+            raise ValueError(f"view width must be 0 (no surface pictures) or 16 to 2048 pixels, got {self.view_width}")
         if self.samples < 1 or self.truth_samples < 1:
             raise ValueError("samples and truth_samples must be at least 1")
         m = tuple(float(x) for x in self.multipliers)
