@@ -7,6 +7,7 @@
 
 #include "lmrefine/core/error.h"
 #include "lmrefine/core/memory.h"
+#include "lmrefine/core/parallel.h"
 
 namespace py = pybind11;
 
@@ -73,4 +74,8 @@ PYBIND11_MODULE(_native, m) {
             lmrefine::require_memory(what, uint64_t(std::max(0.0, std::min(bytes, 1.8e19))), advice);
         },
         py::arg("what"), py::arg("bytes"), py::arg("advice"));
+
+    // Registered by the package with os.register_at_fork(after_in_child=...).
+    m.def("_serial_after_fork", &lmrefine::serial_after_fork,
+          "Run every native loop serially from now on (called in a child made by fork()).");
 }
