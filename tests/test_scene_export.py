@@ -134,6 +134,10 @@ def test_export_scene_names_a_missing_or_wrong_file(tmp_path, capsys):
     (tmp_path / "scene.npz").write_bytes(b"")
     assert cli.main(["export-scene", str(tmp_path / "scene.npz")]) == 2
     assert "is not a .blend file" in capsys.readouterr().err
+    (tmp_path / "level.blend").write_bytes(b"BLENDER")
+    (tmp_path / "a_file").write_bytes(b"")
+    assert cli.main(["export-scene", str(tmp_path / "level.blend"), "-o", str(tmp_path / "a_file" / "s.npz")]) == 2
+    assert "cannot write '" in capsys.readouterr().err
 
 
 @blender

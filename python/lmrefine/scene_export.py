@@ -51,6 +51,14 @@ def export_blend(blend, out, objects="all", uv_map=None, blender=None, echo=prin
     that cannot be exported, OSError when the file or Blender is missing or
     Blender fails."""
     blend = check_blend(blend)
+    folder = os.path.dirname(os.path.abspath(out))
+    try:
+        os.makedirs(folder, exist_ok=True)
+    except OSError as error:
+        raise OSError(f"cannot write '{out}': {error.strerror or error}; give -o a path in a folder you can write")
+    if not os.access(folder, os.W_OK):
+        raise OSError(f"cannot write '{out}': folder '{folder}' is not writable; give -o a path in a folder you "
+                      "can write")
     command = [find_blender(blender), "-b", blend, "--factory-startup", "--python-exit-code", "1",
                "--python", find_export_script(), "--", "--out", os.path.abspath(out), "--objects", objects]
     if uv_map:
