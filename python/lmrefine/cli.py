@@ -71,7 +71,7 @@ def evaluation_options(args):
     return EvaluationOptions(resolution=args.resolution, samples=args.samples, truth_samples=args.truth_samples,
                              points=args.points, seed=args.seed, multipliers=args.multipliers,
                              padding=args.padding, denoise=args.denoise, bake_pass=args.bake_pass,
-                             refine_options=refine_options)
+                             refine_options=refine_options, tessellate=args.tessellate)
 
 
 def load_scenes(names):
@@ -141,6 +141,9 @@ def add_evaluation_arguments(parser, resolution, points):
     parser.add_argument("--no-repack", action="store_true",
                         help="refine inside charts only (refine_uvs repack=False): no chart scaling or packing")
     parser.add_argument("--denoise", action="store_true", help="denoise every bake (edge-aware)")
+    parser.add_argument("--tessellate", type=float, nargs="?", const=0.25, metavar="BUDGET",
+                        help="split the triangles strong transitions cross before refining, at most BUDGET more "
+                             "vertices as a fraction (default 0.25 = +25%%; docs/refiner.md, Tessellation)")
     parser.add_argument("--pass", dest="bake_pass", choices=("direct", "ao", "indirect", "combined"),
                         help="light to bake and compare (default: the scene's own: direct, combined for the room)")
 
