@@ -346,10 +346,37 @@ def atrium():
     return {"passes": ["direct"]}
 
 
+def plaza():
+    """A coarse plaza (holdout: never used to tune constants), modelled the
+    way low-poly levels often are: a floor of 2 m quads, low blocks and
+    benches of one face per side, a pergola whose beams throw sharp stripes
+    across the big floor triangles; a low sun."""
+    make_object("Floor", lambda bm: grid_faces(bm, (-6, -6, 0), (12, 0, 0), (0, 12, 0), 6, 6), (0.7, 0.68, 0.64),
+                closed=False)
+
+    def blocks(bm):
+        for center, size in (((-3.0, 2.5, 0.5), (1.6, 1.6, 1.0)), ((3.2, -2.8, 0.6), (2.2, 1.0, 1.2)),
+                             ((-2.5, -3.5, 0.25), (3.0, 0.5, 0.5)), ((2.8, 3.0, 0.25), (0.5, 3.0, 0.5))):
+            box_faces(bm, center, size, cell=9.0)
+    make_object("Blocks", blocks, (0.62, 0.6, 0.58))
+
+    def pergola(bm):
+        for k in range(9):
+            box_faces(bm, (-1.6 + 0.4 * k, 0.0, 2.6), (0.1, 5.0, 0.14), cell=9.0)
+        for x in (-1.8, 1.8):
+            for y in (-2.4, 2.4):
+                box_faces(bm, (x, y, 1.3), (0.14, 0.14, 2.6), cell=9.0)
+    make_object("Pergola", pergola, (0.45, 0.35, 0.28), receiver=False)
+    add_light("Sun", "SUN", (0, 0, 10), (math.radians(50), 0.0, math.radians(120)), energy=4.0,
+              angle=math.radians(0.5))
+    set_world((0.05, 0.07, 0.1))
+    return {"passes": ["direct"]}
+
+
 # Which scenes tune the refiner's constants and which only report is in
 # docs/evaluation.md ("Tuning scenes and holdout scenes").
 SCENES = {"courtyard": courtyard, "room": room, "fence_and_tree": fence_and_tree, "game_level": game_level,
-          "atrium": atrium}
+          "atrium": atrium, "plaza": plaza}
 
 
 # --------------------------------------------------------------------------- UVs and export

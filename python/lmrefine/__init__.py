@@ -44,6 +44,7 @@ from ._native import (  # noqa: F401  (re-exports)
 from .baker import BakeResult, bake, evaluate, trace_rays  # noqa: F401  (re-exports)
 from .packer import CHART_TOLERANCE, PackResult, pack_charts  # noqa: F401
 from .refine import RefineResult, identity_grid, refine_uvs  # noqa: F401
+from .tessellation import TessellationResult, tessellate, transition_strength_of  # noqa: F401
 
 __version__ = _native.__version__
 
@@ -60,6 +61,7 @@ __all__ = [
     "PackResult",
     "RefineResult",
     "Scene",
+    "TessellationResult",
     "bake",
     "check_layout",
     "coverage_mask",
@@ -77,6 +79,8 @@ __all__ = [
     "refine_uvs",
     "run_automaton",
     "trace_rays",
+    "tessellate",
+    "transition_strength_of",
     "warp_uvs",
     "write_image",
 ]

@@ -71,7 +71,8 @@ def evaluation_options(args):
     return EvaluationOptions(resolution=args.resolution, samples=args.samples, truth_samples=args.truth_samples,
                              points=args.points, seed=args.seed, multipliers=args.multipliers,
                              padding=args.padding, denoise=args.denoise, bake_pass=args.bake_pass,
-                             refine_options=refine_options, view_width=args.view_width)
+                             refine_options=refine_options, view_width=args.view_width,
+                             tessellate=args.tessellate)
 
 
 def load_scenes(names, args=None):
@@ -182,6 +183,9 @@ def add_evaluation_arguments(parser, resolution, points):
     parser.add_argument("--denoise", action="store_true", help="denoise every bake (edge-aware)")
     parser.add_argument("--view-width", type=int, default=480,
                         help="width in pixels of the pictures of the lit surface, 16 to 2048 (default: 480; 0: none)")
+    parser.add_argument("--tessellate", type=float, nargs="?", const=0.25, metavar="BUDGET",
+                        help="split the triangles strong transitions cross before refining, at most BUDGET more "
+                             "vertices as a fraction (default 0.25 = +25%%; docs/refiner.md, Tessellation)")
     parser.add_argument("--pass", dest="bake_pass", choices=("direct", "ao", "indirect", "combined"),
                         help="light to bake and compare (default: the scene's own: direct, combined for the room)")
 

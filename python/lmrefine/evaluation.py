@@ -37,6 +37,7 @@ class EvaluationOptions:
     bake_pass: str = None             # None: the scene's own pass (direct, or combined for the room)
     refine_options: dict = field(default_factory=dict)   # passed to refine_uvs (strength, passes, ...)
     view_width: int = 480             # pixels across the pictures of the lit surface (0: none)
+    tessellate: float = None          # vertex budget (fraction) of a tessellation along transitions; None: off
 
     def check(self):
         if self.resolution < 8:
@@ -51,6 +52,9 @@ class EvaluationOptions:
         if len(m) < 2 or m[0] != 1.0 or any(b <= a for a, b in zip(m, m[1:])):
             raise ValueError(f"multipliers must start at 1 and increase, e.g. 1,1.5,2,3,4; got {self.multipliers}")
         self.multipliers = m
+        if self.tessellate is not None and not (0.0 <= self.tessellate <= 16.0):
+            raise ValueError(f"the tessellation budget is a fraction of the vertex count in [0, 16] "
+                             f"(0.25 = at most 25% more vertices), got {self.tessellate}")
 
 
 class _Stages:
@@ -78,6 +82,30 @@ def _bake_map(sample, uvs, resolution, options, progress):
     result = bake(scene, resolution, passes=passes, samples=options.samples, seed=options.seed,
                   progress=progress, denoise=options.denoise)
     return np.ascontiguousarray(result[0][..., :3])
+
+
+def _tessellated(sample, variant, baseline, budget):
+    """The scene with its triangles split along the transitions of `baseline`
+    (baked on `variant`): the same surface, every UV variant keeping its
+    mapping (lmrefine.tessellation). Returns (scene, tessellation report)."""
+    from dataclasses import replace
+
+    from .tessellation import tessellate, transition_strength_of
+
+    uvs, corner_triangles = sample.layout(variant)
+    strength = transition_strength_of(baseline, uvs, corner_triangles)
+    others = {name: values for name, values in sample.uvs.items() if name != variant}
+    result = tessellate(sample.positions, sample.triangles, uvs, strength, budget=budget,
+                        corner_attributes={"normals": sample.normals, **{f"uv:{k}": v for k, v in others.items()}})
+    normals = result.corner_attributes["normals"].astype(np.float64)
+    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-30)
+    layouts = {variant: result.uvs}
+    layouts.update({name: result.corner_attributes[f"uv:{name}"].astype(np.float32) for name in others})
+    scene = replace(sample, positions=result.positions.astype(np.float32),
+                    triangles=result.triangles.astype(np.int32), normals=normals.astype(np.float32),
+                    uvs={name: layouts[name] for name in sample.uvs}, base_color=sample.base_color[result.parent],
+                    object_id=sample.object_id[result.parent])
+    return scene, result.report
 
 
 def _single_pass(sample, options):
@@ -145,6 +173,13 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
     uvs, triangles = sample.layout(options.variant)
 
     baseline = stages.run("bake baseline", lambda p: _bake_map(sample, uvs, resolution, options, p))
+    tessellation = None
+    if options.tessellate is not None:
+        # Same surface, same lightmap mapping: the baseline bake stays valid and
+        # every later bake and the ground truth use the split triangles.
+        sample, tessellation = stages.run("tessellate", lambda p: _tessellated(sample, options.variant, baseline,
+                                                                                options.tessellate))
+        uvs, triangles = sample.layout(options.variant)
     original_check = check_layout(uvs, triangles, resolution, options.padding)
     padding = min(float(options.padding), float(original_check["min_gutter_texels"]))
     refined = stages.run("refine", lambda p: refine_uvs(baseline, uvs, triangles, resolution, padding=padding,
@@ -250,6 +285,8 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
     }
     result.update({k: v for k, v in context.items() if k != "refine_report"})
     result["refine"] = {k: v for k, v in refined.report.items() if k != "triangle_density"}
+    if tessellation is not None:
+        result["tessellation"] = tessellation
     gain = (result["transition_rmse_refined"] <= (1 - GAIN_THRESHOLD) * result["transition_rmse_baseline"])
     result["gain"] = bool(gain)
     result["notes"] = [] if gain else _diagnose(result, context)

@@ -283,6 +283,12 @@ def scene_markdown(result):
         f"{', '.join(r['refine'].get('limited_by') or []) or 'nothing'}.",
         "",
     ]
+    if r.get("tessellation"):
+        t = r["tessellation"]
+        lines[-1:-1] = [f"- Tessellated along transitions before refining: {t['vertices_before']} -> "
+                        f"{t['vertices_after']} vertices (+{t['vertices_added']}, budget {t['vertex_budget']}), "
+                        f"{t['triangles_before']} -> {t['triangles_after']} triangles in {t['rounds']} rounds; "
+                        f"stopped: {t['stopped']}."]
     if r["gain"]:
         lines.append(f"**Gain**: transition-point RMSE {_change(r['transition_rmse_baseline'], r['transition_rmse_refined'])}.")
         lines += [f"- {note}" for note in r["notes"]]
