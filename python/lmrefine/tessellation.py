@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import _native
 from ._native import coverage_mask, gradient_map
 from .refine import transition_strength
 
@@ -32,6 +33,7 @@ DEFAULT_BUDGET = 0.25       # at most +25% vertices
 DEFAULT_MIN_TEXELS = 8.0    # triangles at or below this many texels are left alone
 DEFAULT_THRESHOLD = 0.5     # peak transition strength (0..1) that marks a triangle
 MAX_ROUNDS = 32
+_POINTS_PER_CHUNK = 1 << 20
 
 
 @dataclass
@@ -54,14 +56,17 @@ def peak_strength(corner_uvs, strength):
     steps = np.clip(np.ceil(edges.max(axis=1)), 1, 256).astype(np.int64)
     peak = np.zeros(len(corner_uvs))
     for n in np.unique(steps):
-        rows = np.nonzero(steps == n)[0]
+        every = np.nonzero(steps == n)[0]
         i, j = np.meshgrid(np.arange(n + 1), np.arange(n + 1), indexing="ij")
         keep = i + j <= n
         weights = np.stack([i[keep], j[keep], n - i[keep] - j[keep]], axis=1) / n  # (P, 3) barycentric
-        points = np.einsum("pk,tkd->tpd", weights, corner_uvs[rows])
-        cols = np.clip(np.floor(points[..., 0] * width), 0, width - 1).astype(np.int64)
-        lines = np.clip(np.floor((1.0 - points[..., 1]) * height), 0, height - 1).astype(np.int64)
-        peak[rows] = strength[lines, cols].max(axis=1)
+        per_chunk = max(1, _POINTS_PER_CHUNK // len(weights))  # bounded memory for many large triangles
+        for start in range(0, len(every), per_chunk):
+            rows = every[start:start + per_chunk]
+            points = np.einsum("pk,tkd->tpd", weights, corner_uvs[rows])
+            cols = np.clip(np.floor(points[..., 0] * width), 0, width - 1).astype(np.int64)
+            lines = np.clip(np.floor((1.0 - points[..., 1]) * height), 0, height - 1).astype(np.int64)
+            peak[rows] = strength[lines, cols].max(axis=1)
     return peak
 
 
@@ -71,9 +76,27 @@ def _texel_areas(corner_uvs, shape):
     return 0.5 * np.abs(cross) * shape[0] * shape[1]
 
 
+def _number(name, value):
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise TypeError(f"{name} must be a number, got {type(value).__name__}")
+    return float(value)
+
+
+def _array(name, value, dtype):
+    try:
+        raw = np.asarray(value)
+        if dtype is not None and raw.dtype != dtype:
+            # Checked before converting: a huge (broadcast) input fails at once, not after a long copy.
+            _native._require_memory(f"{name} as {np.dtype(dtype).name}", float(raw.size) * np.dtype(dtype).itemsize,
+                                    f"pass a smaller {name}")
+        return np.asarray(raw, dtype)
+    except (TypeError, ValueError) as error:
+        raise TypeError(f"{name} must be a numeric array: {error}") from None
+
+
 def _check_inputs(positions, triangles, uvs, strength, budget, min_texels, threshold, corner_attributes):
-    positions = np.asarray(positions, np.float64)
-    triangles = np.asarray(triangles)
+    positions = _array("positions", positions, np.float64)
+    triangles = _array("triangles", triangles, None)
     if positions.ndim != 2 or positions.shape[1] != 3:
         raise ValueError(f"positions must be a (V, 3) array, got shape {positions.shape}")
     if triangles.ndim != 2 or triangles.shape[1] != 3 or not np.issubdtype(triangles.dtype, np.integer):
@@ -83,14 +106,18 @@ def _check_inputs(positions, triangles, uvs, strength, budget, min_texels, thres
         raise ValueError(f"triangles index vertices outside 0..{len(positions) - 1}")
     if not np.isfinite(positions).all():
         raise ValueError("positions hold NaN or Inf values")
-    uvs = np.asarray(uvs, np.float64)
+    uvs = _array("uvs", uvs, np.float64)
     if uvs.shape != (3 * len(triangles), 2):
         raise ValueError(f"uvs must be per corner, shape ({3 * len(triangles)}, 2); got {uvs.shape}")
     if not np.isfinite(uvs).all():
         raise ValueError("uvs hold NaN or Inf values")
-    strength = np.asarray(strength, np.float64)
+    strength = _array("strength", strength, np.float64)
     if strength.ndim != 2 or min(strength.shape) < 1:
         raise ValueError(f"strength must be an (H, W) array, got shape {strength.shape}")
+    if not np.isfinite(strength).all():
+        raise ValueError("strength holds NaN or Inf values")
+    budget, min_texels, threshold = (_number(n, v) for n, v in (("budget", budget), ("min_texels", min_texels),
+                                                                  ("threshold", threshold)))
     if not (0.0 <= budget <= 16.0):
         raise ValueError(f"budget must be a fraction of the vertex count in [0, 16], got {budget}")
     if not (min_texels >= 0.0 and np.isfinite(min_texels)):
@@ -98,8 +125,13 @@ def _check_inputs(positions, triangles, uvs, strength, budget, min_texels, thres
     if not (0.0 <= threshold <= 1.0):
         raise ValueError(f"threshold must be in [0, 1], got {threshold}")
     attributes = {}
+    if corner_attributes is not None and not isinstance(corner_attributes, dict):
+        raise TypeError(f"corner_attributes must be a dict of name -> (3T, k) arrays, got "
+                        f"{type(corner_attributes).__name__}")
     for name, values in (corner_attributes or {}).items():
-        values = np.asarray(values)
+        values = _array(f"corner attribute '{name}'", values, None)
+        if not np.issubdtype(values.dtype, np.number):
+            raise TypeError(f"corner attribute '{name}' must be numeric, got {values.dtype}")
         if values.ndim != 2 or len(values) != 3 * len(triangles):
             raise ValueError(f"corner attribute '{name}' must be per corner, shape ({3 * len(triangles)}, k); "
                              f"got {values.shape}")
@@ -232,7 +264,10 @@ def transition_strength_of(lightmap, uvs, triangles, wavelet="d4"):
     """Transition strength in [0, 1] per texel of `lightmap` (H, W[, C])
     baked on the layout (uvs, triangles): its wavelet gradient map's energy
     (lmrefine.gradient_map), scaled as refine_uvs scales it."""
-    lightmap = np.ascontiguousarray(lightmap, np.float32)
-    mask = coverage_mask(np.asarray(uvs, np.float32), np.asarray(triangles, np.int32), lightmap.shape[:2])
+    raw = _array("lightmap", lightmap, None)
+    if raw.ndim not in (2, 3) or min(raw.shape[:2]) < 1:
+        raise ValueError(f"the lightmap must be an (H, W) or (H, W, C) array, got shape {raw.shape}")
+    mask = coverage_mask(uvs, triangles, raw.shape[:2])  # validates the layout and the size first
+    lightmap = np.ascontiguousarray(_array("lightmap", raw, np.float32))
     gradient = gradient_map(lightmap, mask, wavelet=wavelet)
     return transition_strength(np.where(mask, gradient.sum(axis=2), 0.0), mask)
