@@ -8,7 +8,7 @@ JOBS      ?= $(shell nproc)
 DEMO_OUT  ?= demo_out
 
 # Everything comes from Debian 12 packages.
-DEBIAN_PACKAGES := cmake g++ clang make pkg-config pybind11-dev libembree-dev \
+DEBIAN_PACKAGES := cmake g++ clang make pkg-config pybind11-dev libembree-dev libtbb-dev \
 	libopenimageio-dev libglm-dev libeigen3-dev python3-dev python3-numpy python3-pytest \
 	python3-pywt python3-matplotlib python3-distributed blender
 

@@ -190,6 +190,7 @@ def test_failing_level_is_reported_while_the_rest_finish(level_dir, tmp_path):
                               "--workers", "2", "--retries", "1", *FLAGS], capture_output=True, text=True,
                              timeout=300, env={**os.environ, "PYTHONPATH": PYTHON_DIR})
     assert process.returncode == 1, process.stderr
+    assert " - INFO - " not in process.stderr, "worker processes log at INFO (preload chatter)"
     check_done(out, "a")
     check_done(out, "c")
     record = load(out / "manifest.json")["levels"]["broken"]

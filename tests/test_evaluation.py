@@ -89,7 +89,7 @@ def test_the_pipeline_reports_every_figure_with_sensible_values(tmp_path):
     # The ground truth is much less noisy than the errors it measures.
     assert 0 <= report["truth_noise_rmse"] < 0.2 * report["rmse_baseline"]
     assert set(report["timings"]) == {"bake baseline", "refine", "bake refined", "ground truth",
-                                      "bake resolution sweep", "metrics", "pictures", "total"}
+                                      "bake resolution sweep", "metrics", "pictures", "surface pictures", "total"}
     assert report["timings"]["total"] == pytest.approx(sum(v for k, v in report["timings"].items() if k != "total"))
     # Per object: both halves, each with the same figures.
     assert [o["object"] for o in report["objects"]] == ["West", "East"]
@@ -99,12 +99,22 @@ def test_the_pipeline_reports_every_figure_with_sensible_values(tmp_path):
     if not report["gain"]:
         assert report["notes"]
     for name in ("report.md", "lightmaps.png", "layout.png", "density.png", "error.png", "error_vs_resolution.png",
-                 "baseline.exr", "refined.exr", "refined_layout.npz"):
+                 "baseline.exr", "refined.exr", "refined_layout.npz", "surface.png", "surface_crops.png",
+                 "surface_density.png"):
         assert (out / "tiny_smart" / name).stat().st_size > 0, name
     layout = np.load(out / "tiny_smart" / "refined_layout.npz")
     assert lmrefine.check_layout(layout["uvs"], layout["triangles"], 48)["valid"]
     text = (out / "report.md").read_text()
     assert "tiny" in text and "equal-error" in text
+    # The lit surface: the default camera sees the floor, the refined map is
+    # closer to the ground truth there too, and both reports show the pictures.
+    surface = report["surface"]
+    assert surface["camera"] == "default" and surface["width"] == 480
+    assert surface["receiver_pixels"] > 0.2 * surface["width"] * surface["height"]
+    assert 0 < surface["rmse_refined"] < surface["rmse_plain"]
+    assert surface["crops"] and all(c["rmse_plain"] > 0 for c in surface["crops"])
+    assert "tiny_smart/surface.png" in text
+    assert "![surface](surface.png)" in (out / "tiny_smart" / "report.md").read_text()
 
 
 @pytest.mark.slow
@@ -127,6 +137,8 @@ def test_evaluate_rejects_bad_arguments(tmp_path, capsys):
     assert "no sample scene" in capsys.readouterr().err
     assert cli.main(["evaluate", "courtyard", "--multipliers", "2,1", "--out", str(tmp_path)]) == 2
     assert "multipliers" in capsys.readouterr().err
+    assert cli.main(["evaluate", "courtyard", "--view-width", "5000", "--out", str(tmp_path)]) == 2
+    assert "view width must be 0 (no surface pictures) or 16 to 2048 pixels" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         cli.main(["evaluate", "--multipliers", "a,b"])
 
@@ -161,3 +173,26 @@ def test_evaluate_rechart_replaces_the_layout_and_compares_with_the_scene_s_own(
 def test_evaluate_rejects_a_bad_rechart_angle(tmp_path, capsys):
     assert cli.main(["evaluate", "courtyard", "--rechart", "95", "--out", str(tmp_path)]) == 2
     assert "rechart" in capsys.readouterr().err
+
+
+def test_tessellation_lets_a_coarse_floor_gather_texels_at_the_shadow_edge(tmp_path):
+    """3 x 3 quads: every triangle under the shadow edge covers ~100 texels at
+    48^2, so the plain refinement cannot move texels towards the edge; the
+    tessellated one can (docs/refiner.md, Tessellation)."""
+    from lmrefine.evaluation import EvaluationOptions, evaluate_sample
+
+    scene = tiny_scene(3)
+    common = dict(resolution=48, points=2000, samples=8, truth_samples=32, multipliers=(1.0, 2.0, 4.0))
+    plain = evaluate_sample(scene, EvaluationOptions(**common))
+    split = evaluate_sample(scene, EvaluationOptions(**common, tessellate=4.0), out_dir=str(tmp_path / "t"))
+    t = split["tessellation"]
+    assert t["vertices_before"] == 16 and 0 < t["vertices_added"] <= 64
+    assert t["triangles_after"] > t["triangles_before"] == 18
+    assert "tessellation" not in plain
+    assert split["texels_per_transition_triangle"] < 0.5 * plain["texels_per_transition_triangle"]
+    assert split["transition_widening"] > plain["transition_widening"] + 0.2
+    # Each run compares with its own uniform baseline at the same points: the ratio rose (1.42x -> 1.99x).
+    assert split["equal_error_resolution_ratio"] > plain["equal_error_resolution_ratio"] + 0.3
+    layout = np.load(tmp_path / "t" / "refined_layout.npz")
+    assert lmrefine.check_layout(layout["uvs"], layout["triangles"], 48)["valid"]
+    assert "Tessellated along transitions" in (tmp_path / "t" / "report.md").read_text()

@@ -7,6 +7,7 @@
 
 #include "lmrefine/core/error.h"
 #include "lmrefine/core/memory.h"
+#include "lmrefine/core/parallel.h"
 
 namespace py = pybind11;
 
@@ -23,6 +24,7 @@ void bind_wavelet(py::module_& m);
 void bind_gradient_map(py::module_& m);
 void bind_scene(py::module_& m);
 void bind_baker(py::module_& m);
+void bind_primary_rays(py::module_& m);
 }  // namespace lmrefine::bindings
 
 PYBIND11_MODULE(_native, m) {
@@ -64,6 +66,7 @@ PYBIND11_MODULE(_native, m) {
     lmrefine::bindings::bind_gradient_map(m);
     lmrefine::bindings::bind_scene(m);
     lmrefine::bindings::bind_baker(m);
+    lmrefine::bindings::bind_primary_rays(m);
 
     // The memory rule of the native core, for the allocations the Python
     // half makes itself (MemoryError before allocating, with the same words).
@@ -73,4 +76,8 @@ PYBIND11_MODULE(_native, m) {
             lmrefine::require_memory(what, uint64_t(std::max(0.0, std::min(bytes, 1.8e19))), advice);
         },
         py::arg("what"), py::arg("bytes"), py::arg("advice"));
+
+    // Registered by the package with os.register_at_fork(after_in_child=...).
+    m.def("_serial_after_fork", &lmrefine::serial_after_fork,
+          "Run every native loop serially from now on (called in a child made by fork()).");
 }

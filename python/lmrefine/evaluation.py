@@ -11,13 +11,13 @@ in :mod:`lmrefine.metrics` and docs/evaluation.md.
 import math
 import os
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from . import bake, check_layout, find_charts, metrics, refine_uvs, write_image
-from .charting import rechart
 from . import evaluate as evaluate_light
+from .charting import rechart
 
 DEFAULT_MULTIPLIERS = (1.0, 1.5, 2.0, 3.0, 4.0)
 # A transition-point RMSE at least this much lower counts as a gain.
@@ -43,12 +43,16 @@ class EvaluationOptions:
     # With rechart: the scene's own UV variants whose uniform bakes the
     # re-charted maps are also compared with (a resolution sweep each).
     compare_variants: tuple = ()
+    view_width: int = 480             # pixels across the pictures of the lit surface (0: none)
+    tessellate: float = None          # vertex budget (fraction) of a tessellation along transitions; None: off
 
     def check(self):
         if self.resolution < 8:
             raise ValueError(f"resolution must be at least 8, got {self.resolution}")
         if self.points < 100:
             raise ValueError(f"points must be at least 100 (for a top decile of transitions), got {self.points}")
+        if self.view_width != 0 and not 16 <= self.view_width <= 2048:
+            raise ValueError(f"view width must be 0 (no surface pictures) or 16 to 2048 pixels, got {self.view_width}")
         if self.samples < 1 or self.truth_samples < 1:
             raise ValueError("samples and truth_samples must be at least 1")
         m = tuple(float(x) for x in self.multipliers)
@@ -57,6 +61,9 @@ class EvaluationOptions:
         self.multipliers = m
         if self.rechart is not None and not 0.0 < float(self.rechart) < 90.0:
             raise ValueError(f"rechart must be an angle in (0, 90) degrees, got {self.rechart}")
+        if self.tessellate is not None and not (0.0 <= self.tessellate <= 16.0):
+            raise ValueError(f"the tessellation budget is a fraction of the vertex count in [0, 16] "
+                             f"(0.25 = at most 25% more vertices), got {self.tessellate}")
 
     @property
     def layout_name(self):
@@ -89,6 +96,28 @@ def _bake_map(sample, uvs, resolution, options, progress):
     result = bake(scene, resolution, passes=passes, samples=options.samples, seed=options.seed,
                   progress=progress, denoise=options.denoise)
     return np.ascontiguousarray(result[0][..., :3])
+
+
+def _tessellated(sample, variant, baseline, budget):
+    """The scene with its triangles split along the transitions of `baseline`
+    (baked on `variant`): the same surface, every UV variant keeping its
+    mapping (lmrefine.tessellation). Returns (scene, tessellation report)."""
+    from .tessellation import tessellate, transition_strength_of
+
+    uvs, corner_triangles = sample.layout(variant)
+    strength = transition_strength_of(baseline, uvs, corner_triangles)
+    others = {name: values for name, values in sample.uvs.items() if name != variant}
+    result = tessellate(sample.positions, sample.triangles, uvs, strength, budget=budget,
+                        corner_attributes={"normals": sample.normals, **{f"uv:{k}": v for k, v in others.items()}})
+    normals = result.corner_attributes["normals"].astype(np.float64)
+    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-30)
+    layouts = {variant: result.uvs}
+    layouts.update({name: result.corner_attributes[f"uv:{name}"].astype(np.float32) for name in others})
+    scene = replace(sample, positions=result.positions.astype(np.float32),
+                    triangles=result.triangles.astype(np.int32), normals=normals.astype(np.float32),
+                    uvs={name: layouts[name] for name in sample.uvs}, base_color=sample.base_color[result.parent],
+                    object_id=sample.object_id[result.parent])
+    return scene, result.report
 
 
 def _single_pass(sample, options):
@@ -153,16 +182,26 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
     stages = _Stages(label, progress)
     resolution = int(options.resolution)
     passes = _single_pass(sample, options)
-    uvs, triangles = sample.layout(options.variant)
-    layout = {"source": "scene", "variant": options.variant}
+    variant = options.variant
+    layout = {"source": "scene", "variant": variant}
     if options.rechart is not None:
-        # The re-charted layout replaces the scene's UVs for every bake below.
+        # The re-charted layout replaces the scene's UVs for every bake below
+        # (a UV variant of its own, so a tessellation carries it too).
         recharted = stages.run("rechart", lambda p: rechart(sample.positions, sample.triangles, float(options.rechart),
                                                             resolution, options.padding, progress=p))
-        uvs = recharted.uvs
+        variant = options.layout_name
+        sample = replace(sample, uvs={**sample.uvs, variant: recharted.uvs})
         layout = {"source": "rechart", **{k: v for k, v in recharted.report.items() if k != "chart_ids"}}
+    uvs, triangles = sample.layout(variant)
 
     baseline = stages.run("bake baseline", lambda p: _bake_map(sample, uvs, resolution, options, p))
+    tessellation = None
+    if options.tessellate is not None:
+        # Same surface, same lightmap mapping: the baseline bake stays valid and
+        # every later bake and the ground truth use the split triangles.
+        sample, tessellation = stages.run("tessellate", lambda p: _tessellated(sample, variant, baseline,
+                                                                                options.tessellate))
+        uvs, triangles = sample.layout(variant)
     original_check = check_layout(uvs, triangles, resolution, options.padding)
     padding = min(float(options.padding), float(original_check["min_gutter_texels"]))
     refined = stages.run("refine", lambda p: refine_uvs(baseline, uvs, triangles, resolution, padding=padding,
@@ -216,8 +255,11 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
 
     # The re-charted maps against uniform bakes of the scene's own layouts.
     compared = []
-    for variant in (options.compare_variants if options.rechart is not None else ()):
-        other_uvs, _ = sample.layout(variant)
+    others = [v for v in options.compare_variants if v in sample.uvs] if options.rechart is not None else []
+    if options.rechart is not None and options.compare_variants and not others:  # a .blend's one layout
+        others = [v for v in sample.uvs if v != variant]
+    for other in others:
+        other_uvs, _ = sample.layout(other)
         other_points = metrics.interpolate_corners(other_uvs, points.triangle, points.bary)
         other_sweep = []
         for multiplier in options.multipliers:
@@ -225,7 +267,7 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
             image = stages.run("bake comparison layouts", lambda p: _bake_map(sample, other_uvs, size, options, p))
             other_sweep.append({"multiplier": multiplier, "resolution": size,
                                 "lookup": metrics.bilinear_lookup(image, other_points)})
-        compared.append((variant, other_sweep))
+        compared.append((other, other_sweep))
 
     start = time.perf_counter()
     charts = find_charts(uvs, triangles)
@@ -298,6 +340,8 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
     }
     result.update({k: v for k, v in context.items() if k != "refine_report"})
     result["refine"] = {k: v for k, v in refined.report.items() if k != "triangle_density"}
+    if tessellation is not None:
+        result["tessellation"] = tessellation
     gain = (result["transition_rmse_refined"] <= (1 - GAIN_THRESHOLD) * result["transition_rmse_baseline"])
     result["gain"] = bool(gain)
     result["notes"] = [] if gain else _diagnose(result, context)
@@ -329,6 +373,10 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
             "uv_points": uv_base, "error_baseline": np.abs(lookup_base - truth).mean(axis=1),
             "error_refined": np.abs(lookup_refined - truth).mean(axis=1), "transitions": transitions,
             "multipliers": options.multipliers}))
+        if options.view_width:
+            stages.run("surface pictures", lambda p: _surface_pictures(
+                out_dir, result, sample, scene, {"plain": (baseline, uvs), "refined": (refined_map, refined.uvs)},
+                {"plain": density_base, "refined": density_refined}, passes, options, p))
     result["timings"] = dict(stages.seconds)
     result["timings"]["total"] = sum(stages.seconds.values())
     result = _json_safe(result)
@@ -337,18 +385,36 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
     return result
 
 
+def _surface_pictures(out_dir, result, sample, scene, maps, density, passes, options, progress):
+    """The lit surface through the scene's camera (lmrefine.surface_view):
+    pictures, and their figures in result["surface"]."""
+    from .evaluation_report import write_surface_pictures
+    from .surface_view import render_views
+
+    views = render_views(sample, scene, maps, passes, options.truth_samples, options.view_width,
+                         seed=options.seed + 3, progress=progress)
+    write_surface_pictures(out_dir, result, views, density)
+    result["surface"] = {
+        "camera": views["camera"].name, "width": views["hits"].width, "height": views["hits"].height,
+        "receiver_pixels": int(views["hits"].receiver.sum()),
+        "rmse_plain": views["rmse"]["plain"], "rmse_refined": views["rmse"]["refined"],
+        "crops": [{"row": row, "column": column, "size": size, "rmse_plain": errors["plain"],
+                   "rmse_refined": errors["refined"]}
+                  for (row, column, size), errors in zip(views["crops"], views["crop_rmse"])],
+    }
+
+
 def evaluate_samples(samples, options, out_dir, variants=None, progress=None):
     """Evaluate SampleScenes in UV `variants` (default: options.variant),
     one sub-folder <scene>_<variant> each, and write the summary report.md
     and report.json into `out_dir`. Returns the summary."""
-    from dataclasses import replace
-
     from .evaluation_report import write_summary
 
     os.makedirs(out_dir, exist_ok=True)
     scenes = []
     for sample in samples:
-        for variant in variants or (options.variant,):
+        # A scene exported from a .blend has one layout: its own lightmap UV map.
+        for variant in ("own",) if list(sample.uvs) == ["own"] else variants or (options.variant,):
             scene_options = replace(options, variant=variant)
             scene_dir = os.path.join(out_dir, f"{sample.name}_{scene_options.layout_name}")
             scenes.append(evaluate_sample(sample, scene_options, scene_dir, progress))

@@ -38,6 +38,10 @@ class Cluster:
             # A worker that dies with its task (a killed process): Dask reruns the task
             # elsewhere this many times before giving up on it.
             dask.config.set({"distributed.scheduler.allowed-failures": max(0, retries)})
+            # Worker processes set up their logging from the environment when they import
+            # distributed, before silence_logs reaches them: without this each one prints
+            # INFO lines about the preload. A user's own setting wins.
+            os.environ.setdefault("DASK_LOGGING__DISTRIBUTED", "warning")
             self.local = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
                                       dashboard_address=dashboard, silence_logs=logging.ERROR,
                                       host="127.0.0.1", preload=["lmrefine.batch.worker_setup"])
