@@ -196,3 +196,19 @@ def test_tessellation_lets_a_coarse_floor_gather_texels_at_the_shadow_edge(tmp_p
     layout = np.load(tmp_path / "t" / "refined_layout.npz")
     assert lmrefine.check_layout(layout["uvs"], layout["triangles"], 48)["valid"]
     assert "Tessellated along transitions" in (tmp_path / "t" / "report.md").read_text()
+
+
+def test_rechart_and_tessellation_combine(tmp_path):
+    """The re-charted layout is a UV variant of the scene: the tessellation
+    carries it, and the refined layout is valid on the split triangles."""
+    from lmrefine.evaluation import EvaluationOptions, evaluate_sample
+
+    scene = tiny_scene(3)
+    options = EvaluationOptions(resolution=48, points=1000, samples=4, truth_samples=16, multipliers=(1.0, 2.0),
+                                rechart=30.0, tessellate=1.0, view_width=0)
+    report = evaluate_sample(scene, options, out_dir=str(tmp_path / "r"))
+    assert report["variant"] == "rechart30" and report["layout"]["source"] == "rechart"
+    assert report["tessellation"]["triangles_after"] > report["tessellation"]["triangles_before"] == 18
+    layout = np.load(tmp_path / "r" / "refined_layout.npz")
+    assert len(layout["triangles"]) == report["tessellation"]["triangles_after"]
+    assert lmrefine.check_layout(layout["uvs"], layout["triangles"], 48)["valid"]
