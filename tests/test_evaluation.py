@@ -165,3 +165,27 @@ def test_tessellation_lets_a_coarse_floor_gather_texels_at_the_shadow_edge(tmp_p
     layout = np.load(tmp_path / "t" / "refined_layout.npz")
     assert lmrefine.check_layout(layout["uvs"], layout["triangles"], 48)["valid"]
     assert "Tessellated along transitions" in (tmp_path / "t" / "report.md").read_text()
+
+
+@pytest.mark.slow
+def test_multi_stage_refinement_reports_every_stage_and_stops_when_the_layout_settles():
+    from lmrefine.evaluation import EvaluationOptions, evaluate_sample
+
+    scene = tiny_scene(24)
+    common = dict(resolution=48, points=2000, samples=8, truth_samples=32, multipliers=(1.0, 2.0, 4.0))
+    one = evaluate_sample(scene, EvaluationOptions(**common))
+    many = evaluate_sample(scene, EvaluationOptions(**common, stages=4))
+    history = many["stages"]["stages"]
+    assert [e["stage"] for e in history] == [1, 2, 3, 4] and "stages" not in one
+    assert history[0]["rmse"] == pytest.approx(one["rmse_refined"])  # stage 1 is the plain refinement
+    # Stage 2, refined from stage 1's sharper bake, has a lower world-space error.
+    assert history[1]["rmse"] < 0.8 * history[0]["rmse"] and history[1]["layout_change"] > 0.05
+    kept = [e for e in history if e["kept"]]
+    assert many["rmse_refined"] == pytest.approx(kept[-1]["rmse"])  # the report is the last kept stage's
+    assert many["equal_error_resolution_ratio"] > one["equal_error_resolution_ratio"]
+    # A stage whose layout hardly changes ends the stages, and is not used (strength 0: nothing moves).
+    still = evaluate_sample(scene, EvaluationOptions(**common, stages=3, refine_options={"strength": 0.0}))
+    assert [(e["stage"], e["kept"]) for e in still["stages"]["stages"]] == [(1, True), (2, False)]
+    assert "stage 1 kept" in still["stages"]["stopped"]
+    with pytest.raises(ValueError, match="stages must be an integer from 1 to 16"):
+        evaluate_sample(scene, EvaluationOptions(**common, stages=0))

@@ -283,6 +283,12 @@ def scene_markdown(result):
         f"{', '.join(r['refine'].get('limited_by') or []) or 'nothing'}.",
         "",
     ]
+    if r.get("stages"):
+        rows = "; ".join(f"stage {e['stage']}: " + (f"RMSE {_number(e['rmse'])}, transitions "
+                                                     f"{_number(e['transition_rmse'])}" if e["kept"] else
+                                                     f"not kept (layout change {e['layout_change']:.1%})")
+                         for e in r["stages"]["stages"])
+        lines[-1:-1] = [f"- Multi-stage refinement: {rows}; stopped: {r['stages']['stopped']}."]
     if r.get("tessellation"):
         t = r["tessellation"]
         lines[-1:-1] = [f"- Tessellated along transitions before refining: {t['vertices_before']} -> "
