@@ -295,4 +295,22 @@ AutomatonResult run_automaton(const AutomatonInput& input, const AutomatonOption
     return result;
 }
 
+RuleStep automaton_rule_step(const AutomatonInput& input, const AutomatonOptions& options,
+                             const std::vector<glm::dvec2>& nodes) {
+    LMREFINE_REQUIRE(input.width > 0 && input.height > 0, "the energy map is empty");
+    LMREFINE_REQUIRE(input.channels == 1 || input.channels == 4, "the energy map needs 1 or 4 channels");
+    const bool ring = options.border == BorderMode::ExtraRing;
+    Level level = make_level(input, rigid_texels(input), options.edge_shrink, 1, nullptr, ring);
+    LMREFINE_REQUIRE(nodes.size() == level.grid.nodes.size(),
+                     "nodes must be the level's (rows + 1) x (cols + 1) nodes, ring included");
+    level.grid.nodes = nodes;
+    automaton_detail::prepare_level(level, options, ring);
+    automaton_detail::measure_cells(level);
+    RuleStep out;
+    out.difference = automaton_detail::apply_rule(level, options);
+    out.nodes = std::move(level.next_nodes);
+    out.energy = std::move(level.next_energy);
+    return out;
+}
+
 }  // namespace lmrefine

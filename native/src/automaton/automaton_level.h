@@ -82,6 +82,10 @@ struct StepStats {
 // One synchronous step (needs measure_cells' state, and keeps it current).
 StepStats step(Level& level, const AutomatonOptions& options);
 
+// The rule alone, the first half of step(): new energies into next_energy,
+// proposed nodes into next_nodes, no guard. Returns the step's `difference`.
+double apply_rule(Level& level, const AutomatonOptions& options);
+
 // Throws lmrefine::Error naming the first broken invariant (tests, debugging).
 void check_invariants(const Level& level, int step_index);
 

@@ -185,10 +185,10 @@ void measure_cells(Level& level) {
 
 namespace {
 
-// The step for one or four channels (constants let the compiler unroll the
+// The rule for one or four channels (constants let the compiler unroll the
 // per-channel loops of the inner kernels).
 template <int channels>
-StepStats step_of(Level& level, const AutomatonOptions& options) {
+double rule_of(Level& level, const AutomatonOptions& options) {
     const int rows = level.rows(), cols = level.cols();
     constexpr Facing face = facing(channels);
     constexpr int axes = channels == 4 ? 2 : 1;  // pressure: y (and x) axis
@@ -356,7 +356,15 @@ StepStats step_of(Level& level, const AutomatonOptions& options) {
             level.row_moved[size_t(i)] = largest_move;
         }
     });
-    const double difference = *std::max_element(level.row_difference.begin(), level.row_difference.end());
+    return *std::max_element(level.row_difference.begin(), level.row_difference.end());
+}
+
+// The step for one or four channels: the rule, then the guards.
+template <int channels>
+StepStats step_of(Level& level, const AutomatonOptions& options) {
+    const int rows = level.rows(), cols = level.cols();
+    const std::vector<glm::dvec2>& nodes = level.grid.nodes;
+    const double difference = rule_of<channels>(level, options);
 
     // 3. Shape bounds: a cell may not leave [min_area, max_area], get a corner
     // sharper or an edge shorter than kMinQuality allows (which includes
@@ -505,6 +513,10 @@ StepStats step_of(Level& level, const AutomatonOptions& options) {
 
 StepStats step(Level& level, const AutomatonOptions& options) {
     return level.channels == 4 ? step_of<4>(level, options) : step_of<1>(level, options);
+}
+
+double apply_rule(Level& level, const AutomatonOptions& options) {
+    return level.channels == 4 ? rule_of<4>(level, options) : rule_of<1>(level, options);
 }
 
 void check_invariants(const Level& level, int step_index) {

@@ -93,4 +93,18 @@ AutomatonResult run_automaton(const AutomatonInput& input, const AutomatonOption
 
 BorderMode parse_border_mode(const std::string& name);
 
+// Test hook, not part of the method: one synchronous step of the rule with
+// the guards off, for the plain reference in tests/automaton_reference.py.
+// One level of one-texel cells (with BorderMode::ExtraRing, plus its ring)
+// starts from `nodes`, the level's (rows + 1) x (cols + 1) node positions in
+// pixel space, ring included; the result is what the rule proposes, before
+// any guard puts a node back.
+struct RuleStep {
+    std::vector<glm::dvec2> nodes;  // proposed node positions, as `nodes`
+    std::vector<double> energy;     // new energies, level cells x channels
+    double difference = 0;          // largest neighbour density difference / reference density, before
+};
+RuleStep automaton_rule_step(const AutomatonInput& input, const AutomatonOptions& options,
+                             const std::vector<glm::dvec2>& nodes);
+
 }  // namespace lmrefine
