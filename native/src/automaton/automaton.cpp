@@ -58,6 +58,7 @@ Level make_level(const AutomatonInput& input, const std::vector<uint8_t>& rigid,
     const NodeGrid inner = identity_grid(input.width, input.height, block);
     const int pad = ring ? 1 : 0;
     Level level;
+    level.block = block;
     level.channels = input.channels;
     NodeGrid& grid = level.grid;
     grid.rows = inner.rows + 2 * pad;
@@ -186,12 +187,12 @@ void run_level(Level& level, const AutomatonOptions& options, bool ring, LevelSt
                Progress* progress) {
     automaton_detail::prepare_level(level, options, ring);
     // The finest level's grid: every bound holds from its start.
-    if (level.grid.xs[1] - level.grid.xs[0] == 1) stats.fit_rounds = automaton_detail::fit_to_bounds(level);
+    if (level.block == 1) stats.fit_rounds = automaton_detail::fit_to_bounds(level);
     automaton_detail::measure_cells(level);
     if (options.check_invariants) automaton_detail::check_invariants(level, total_steps);
     stats.steps = 0;
     stats.converged = false;
-    const int budget = level_step_budget(int(level.grid.xs[1] - level.grid.xs[0]), options);
+    const int budget = level_step_budget(level.block, options);
     for (int s = 0; s < budget; ++s) {
         if (progress) progress->check();
         const automaton_detail::StepStats step = automaton_detail::step(level, options);

@@ -26,6 +26,10 @@ constexpr double kMinQuality = 0.2;
 enum class NodeMode : uint8_t { Free, SlideX, SlideY, Fixed };
 
 struct Level {
+    // Texels per cell side: 1 at the finest level, 2^k at pyramid level k.
+    // Stored, not read off the grid: a map one texel wide has xs = {0, 1} at
+    // every level.
+    int block = 1;
     NodeGrid grid;                       // current node positions (and original xs, ys)
     std::vector<glm::dvec2> next_nodes;  // the second buffer
     int channels = 1;

@@ -51,7 +51,7 @@ void prepare_level(Level& level, const AutomatonOptions& options, bool ring) {
     std::array<double, 4> energy{}, covered_area{};
     // Coarse levels keep a margin inside the bounds: cells interpolated from
     // a coarse cell differ in size, and the finest level must start inside.
-    const bool coarse = level.grid.xs[1] - level.grid.xs[0] > 1;
+    const bool coarse = level.block > 1;
     const double lowest = coarse ? std::min(1.0, options.min_area * kCoarseShrinkMargin) : options.min_area;
     const double highest = coarse ? std::max(1.0, options.max_area * 0.8) : options.max_area;
     for (int i = 0; i < rows; ++i) {
@@ -531,8 +531,7 @@ double largest_move(Level& level, const std::vector<uint8_t>& reverted_rows) {
             level.row_moved[size_t(i)] = largest;
         }
     });
-    const double block = level.grid.xs[1] - level.grid.xs[0];
-    return std::sqrt(*std::max_element(level.row_moved.begin(), level.row_moved.end())) / block;
+    return std::sqrt(*std::max_element(level.row_moved.begin(), level.row_moved.end())) / level.block;
 }
 
 // The step for one or four channels: the rule proposes, the guards put back
