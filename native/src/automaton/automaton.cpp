@@ -189,7 +189,10 @@ void run_level(Level& level, const AutomatonOptions& options, bool ring, LevelSt
     // The finest level's grid: every bound holds from its start.
     if (level.block == 1) stats.fit_rounds = automaton_detail::fit_to_bounds(level);
     automaton_detail::measure_cells(level);
-    if (options.check_invariants) automaton_detail::check_invariants(level, total_steps);
+    if (options.check_invariants) {
+        level.start_nodes = level.grid.nodes;
+        automaton_detail::check_invariants(level, total_steps);
+    }
     stats.steps = 0;
     stats.converged = false;
     const int budget = level_step_budget(level.block, options);

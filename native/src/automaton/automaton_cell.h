@@ -124,4 +124,62 @@ inline glm::dvec2 thickness(const glm::dvec2 q[4], double area) {
             area / std::max(glm::length(q[1] - q[0]), glm::length(q[2] - q[3]))};
 }
 
+// What a cell must keep (docs/refiner.md "Invariants"): its area within
+// [min_area, max_area] and, a cell of rigid texels only, at least its width
+// and height at rest.
+struct CellBounds {
+    double min_area = 0;
+    double max_area = std::numeric_limits<double>::infinity();
+    bool rigid = false;
+    double width = 0, height = 0;  // at rest (rigid cells)
+};
+
+inline CellBounds bounds_of(const Level& level, int i, int j) {
+    const size_t c = level.cell(i, j);
+    return {level.min_area[c], level.max_area[c], !(level.rigid_area[c] < level.original_area[c]),
+            level.grid.xs[j + 1] - level.grid.xs[j], level.grid.ys[i + 1] - level.grid.ys[i]};
+}
+
+// The validity of a cell: the one definition the step guard, fit_to_bounds
+// and check_invariants use. A valid cell is well shaped (quality2 >=
+// kMinQuality^2: every corner's |sin| >= 0.2 and its shortest edge at least
+// 1/20 of its longest, so convex and not inverted), has its area within its
+// bounds and, if rigid, is at least as wide and as tall as at rest. Each
+// flag names one bound the cell breaks.
+struct Validity {
+    bool ill_shaped = false;
+    bool too_small = false, too_large = false;
+    bool too_narrow = false, too_short = false;  // rigid cells: thinner than at rest across x, across y
+    glm::dvec2 thickness{0.0};                   // computed for rigid cells only
+
+    bool valid() const { return !(ill_shaped || too_small || too_large || too_narrow || too_short); }
+};
+
+inline Validity validity(const glm::dvec2 q[4], const Shape& shape, const CellBounds& bounds) {
+    Validity v;
+    v.ill_shaped = shape.quality2 < kMinQuality * kMinQuality;
+    v.too_small = shape.area < bounds.min_area;
+    v.too_large = shape.area > bounds.max_area;
+    if (bounds.rigid) {
+        v.thickness = thickness(q, shape.area);
+        v.too_narrow = v.thickness.x < bounds.width;
+        v.too_short = v.thickness.y < bounds.height;
+    }
+    return v;
+}
+
+// The step guard's second rule, for a cell that is not valid: it may not
+// break a bound further than it did before (a cell interpolated from a
+// coarser level may start outside one). `now` and `v` are the cell's shape
+// and validity, `before` its earlier shape; thickness_before() gives its
+// earlier thickness (computed only when a thickness bound is broken).
+template <class ThicknessBefore>
+bool breaks_further(const Validity& v, const Shape& now, const Shape& before, const ThicknessBefore& thickness_before) {
+    if ((v.too_small && now.area < before.area) || (v.too_large && now.area > before.area)) return true;
+    if (v.ill_shaped && now.quality2 < before.quality2) return true;
+    if (!v.too_narrow && !v.too_short) return false;
+    const glm::dvec2 was = thickness_before();
+    return (v.too_narrow && v.thickness.x < was.x) || (v.too_short && v.thickness.y < was.y);
+}
+
 }  // namespace lmrefine::automaton_detail

@@ -54,6 +54,9 @@ struct Level {
     std::vector<uint8_t> breaking_cell;   // per cell: breaks a bound (dense revert rounds)
     std::vector<uint8_t> reverted_node;   // per node: put back in this dense round
     uint32_t revert_round = 0;
+    // The nodes at the level's start (after fit_to_bounds), kept for
+    // check_invariants only.
+    std::vector<glm::dvec2> start_nodes;
 
     int rows() const { return grid.rows; }
     int cols() const { return grid.cols; }
@@ -90,7 +93,10 @@ StepStats step(Level& level, const AutomatonOptions& options);
 // proposed nodes into next_nodes, no guard. Returns the step's `difference`.
 double apply_rule(Level& level, const AutomatonOptions& options);
 
-// Throws lmrefine::Error naming the first broken invariant (tests, debugging).
+// Throws lmrefine::Error naming the first broken invariant (tests,
+// debugging): a cell neither valid (automaton_cell.h) nor inside a bound it
+// broke at the level's start (start_nodes) as far as then, a node outside
+// the grid's rectangle, a negative energy, the total energy changed.
 void check_invariants(const Level& level, int step_index);
 
 }  // namespace lmrefine::automaton_detail

@@ -382,15 +382,14 @@ double rule_of(Level& level, const AutomatonOptions& options) {
     return *std::max_element(level.row_difference.begin(), level.row_difference.end());
 }
 
-// The guards. A cell breaks a bound when its proposed shape (corners from
-// next_nodes) leaves [min_area, max_area], gets a corner sharper or an edge
-// shorter than kMinQuality allows (which includes turning concave or inside
-// out), or (a cell of rigid texels only) gets thinner than its original
-// width or height; a cell already outside a bound (interpolated from a
-// coarser level) breaks it only by moving further out. Invariant: a cell
-// all of whose corners are put back is its previous, valid self, so putting
-// back the corners of every breaking cell, round after round until none
-// breaks, ends in a valid state. Rounds are whole sets (every cell judged on
+// The guards. Two rules: a moved cell must be valid (`validity`,
+// automaton_cell.h: well shaped, area within its bounds, a rigid cell as wide
+// and tall as at rest), or, where it already broke a bound before the step
+// (cells interpolated from a coarser level may), not break that bound
+// further. Invariant: a cell all of whose corners are put back is its
+// previous self, which passed these rules (an unchanged cell breaks
+// nothing), so putting back the corners of every breaking cell, round after
+// round until none breaks, ends in a state that passes them. Rounds are whole sets (every cell judged on
 // the same nodes), so the order within a round does not matter.
 //
 // Judging a cell also measures it for its proposed corners into next_area,
@@ -406,16 +405,10 @@ inline bool breaks_bound(Level& level, int i, int j) {
     const Shape now = unchanged ? Shape{level.area[c], level.safe_radius[c], level.quality[c]} : shape(q);
     write_shape(c, now, level.next_area.data(), level.next_safe_radius.data(), level.next_quality.data());
     if (unchanged) return false;
-    const double a = now.area, before = level.area[c];
-    if ((a < level.min_area[c] && a < before) || (a > level.max_area[c] && a > before)) return true;
-    if (now.quality2 < kMinQuality * kMinQuality && now.quality2 < level.quality[c]) return true;
-    if (level.rigid_area[c] < level.original_area[c]) return false;
-    const glm::dvec2 thin = thickness(q, a);
-    const double w0 = level.grid.xs[j + 1] - level.grid.xs[j];
-    const double h0 = level.grid.ys[i + 1] - level.grid.ys[i];
-    if (!(thin.x < w0) && !(thin.y < h0)) return false;  // as thick as at rest: the usual case
-    const glm::dvec2 was = thickness(old, before);
-    return (thin.x < w0 && thin.x < was.x) || (thin.y < h0 && thin.y < was.y);
+    const Validity v = validity(q, now, bounds_of(level, i, j));
+    if (v.valid()) return false;
+    const Shape before{level.area[c], level.safe_radius[c], level.quality[c]};
+    return breaks_further(v, now, before, [&] { return thickness(old, before.area); });
 }
 
 // Judges the cells of the whole grid in parallel (all of them, or only those
@@ -572,9 +565,23 @@ void check_invariants(const Level& level, int step_index) {
     const NodeGrid& grid = level.grid;
     for (int i = 0; i < level.rows(); ++i) {
         for (int j = 0; j < level.cols(); ++j) {
-            if (!(min_corner_cross(grid, i, j) > 0)) {
-                fail("cell (" + std::to_string(i) + ", " + std::to_string(j) + ") is inverted or degenerate");
+            glm::dvec2 q[4];
+            corners(level, grid.nodes, i, j, q);
+            const Shape s = shape(q);
+            const Validity v = validity(q, s, bounds_of(level, i, j));
+            if (v.valid()) continue;
+            // Valid, or no further outside a bound than at the level's start.
+            glm::dvec2 start[4];
+            corners(level, level.start_nodes, i, j, start);
+            const Shape was = shape(start);
+            if (!breaks_further(v, s, was, [&] { return thickness(start, was.area); })) continue;
+            const std::string cell = "cell (" + std::to_string(i) + ", " + std::to_string(j) + ") ";
+            if (!(s.quality2 > 0)) fail(cell + "is inverted, concave or degenerate");
+            if (v.ill_shaped) fail(cell + "is less well shaped than allowed and than at the level's start");
+            if (v.too_small || v.too_large) {
+                fail(cell + "has area " + std::to_string(s.area) + ", further outside its bounds than at the level's start");
             }
+            fail(cell + "is thinner than at rest and than at the level's start");
         }
     }
     for (const glm::dvec2& p : grid.nodes) {
