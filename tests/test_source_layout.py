@@ -49,7 +49,6 @@ def test_scan_sees_every_stage():
 # the listed ones are known and still to be replaced by standard C++17.
 NON_PORTABLE = re.compile(r"__attribute__|__builtin_|\bpthread|<unistd\.h>|<sys/|__restrict|#\s*pragma\s+(GCC|clang)")
 KNOWN_NON_PORTABLE = {
-    ("src/automaton/automaton_cell.h", "__attribute__"),  # the Pair vector type
     ("src/core/parallel.cpp", "pthread"),  # pthread_atfork: a new pool after fork
     ("src/core/memory.cpp", "<unistd.h>"),  # sysconf: physical memory
     ("src/gradient/gradient_map.cpp", "__restrict"),  # accepted by gcc, clang and MSVC alike

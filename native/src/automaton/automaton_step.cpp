@@ -144,8 +144,7 @@ void row_densities(const Level& level, int i, double* diffusion, double* pressur
         const double a = level.area[c];
         const double* e = &level.energy[c * channels];
         // Numerators: each channel's energy, then each axis' pressure
-        // energy; divided by the area in pairs.
-        static_assert((channels + axes) % 2 == 0, "the divisions go in pairs");
+        // energy; divided by the area in one loop the compiler may vectorise.
         double numerator[channels + axes];
         for (int k = 0; k < channels; ++k) numerator[k] = e[k];
         for (int axis = 0; axis < axes; ++axis) {
@@ -157,11 +156,7 @@ void row_densities(const Level& level, int i, double* diffusion, double* pressur
             numerator[channels + axis] = sum + reference * level.uncovered_area[c];
         }
         double quotient[channels + axes];
-        for (int k = 0; k < channels + axes; k += 2) {
-            const Pair q = Pair{numerator[k], numerator[k + 1]} / Pair{a, a};
-            quotient[k] = q[0];
-            quotient[k + 1] = q[1];
-        }
+        for (int k = 0; k < channels + axes; ++k) quotient[k] = numerator[k] / a;
         const bool material = level.kind[c] == CellKind::Material;
         for (int k = 0; k < channels; ++k) diffusion[j * channels + k] = material ? quotient[k] : 0.0;
         for (int axis = 0; axis < axes; ++axis) pressure[j * axes + axis] = quotient[channels + axis];
@@ -169,6 +164,14 @@ void row_densities(const Level& level, int i, double* diffusion, double* pressur
 }
 
 }  // namespace
+
+double exact_quality2(const double c2[4], const double l2[4], double shortest, double longest) {
+    const double sine_over[4] = {l2[3] * l2[0], l2[0] * l2[1], l2[1] * l2[2], l2[2] * l2[3]};
+    double sine2[4];
+    for (int k = 0; k < 4; ++k) sine2[k] = c2[k] / sine_over[k];
+    const double sin2 = std::min({1.0, sine2[0], sine2[1], sine2[2], sine2[3]});
+    return std::min(sin2, 16 * shortest / longest);
+}
 
 void measure_cells(Level& level) {
     parallel_for(level.rows(), kRowGrain, [&](int64_t begin, int64_t end) {
