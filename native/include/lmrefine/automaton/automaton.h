@@ -6,11 +6,13 @@
 //
 // Steps are synchronous (every cell reads the previous state, writes a second
 // buffer), so the result does not depend on visiting order or thread count.
-// Guards hold after every step: every cell a well-shaped convex
-// quadrilateral (no sharp corner, no collapsed edge), no negative energy,
-// total energy conserved, every node inside the grid's rectangle. To converge in a number of steps that does not
-// grow with the resolution, the automaton runs coarse-to-fine on a pyramid of
-// grids (cells of 2^k x 2^k texels), each level starting from the one above.
+// Guards hold after every step: every cell valid (well shaped, within its
+// area bounds, a rigid cell as thick as at rest; docs/refiner.md,
+// "Invariants") or no further outside a bound than at its level's start, no
+// negative energy, total energy conserved, every node inside the grid's
+// rectangle. To converge in a number of steps that does not grow with the
+// resolution, the automaton runs coarse-to-fine on a pyramid of grids (cells
+// of 2^k x 2^k texels), each level starting from the one above.
 #pragma once
 
 #include <cstdint>
