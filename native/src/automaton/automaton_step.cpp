@@ -143,6 +143,14 @@ void row_densities(const Level& level, int i, double* diffusion, double* pressur
         const size_t c = level.cell(i, j);
         const double a = level.area[c];
         const double* e = &level.energy[c * channels];
+        if (channels == 1 && level.uncovered_area[c] == 0) {
+            // One channel, no uncovered texel: the pressure's numerator is
+            // e + reference x 0 = e exactly, so one division gives both.
+            const double density = e[0] / a;
+            diffusion[j] = level.kind[c] == CellKind::Material ? density : 0.0;
+            pressure[j] = density;
+            continue;
+        }
         // Numerators: each channel's energy, then each axis' pressure
         // energy; divided by the area in one loop the compiler may vectorise.
         double numerator[channels + axes];
