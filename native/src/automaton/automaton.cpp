@@ -58,6 +58,7 @@ Level make_level(const AutomatonInput& input, const std::vector<uint8_t>& rigid,
     const NodeGrid inner = identity_grid(input.width, input.height, block);
     const int pad = ring ? 1 : 0;
     Level level;
+    level.block = block;
     level.channels = input.channels;
     NodeGrid& grid = level.grid;
     grid.rows = inner.rows + 2 * pad;
@@ -186,12 +187,15 @@ void run_level(Level& level, const AutomatonOptions& options, bool ring, LevelSt
                Progress* progress) {
     automaton_detail::prepare_level(level, options, ring);
     // The finest level's grid: every bound holds from its start.
-    if (level.grid.xs[1] - level.grid.xs[0] == 1) stats.fit_rounds = automaton_detail::fit_to_bounds(level);
+    if (level.block == 1) stats.fit_rounds = automaton_detail::fit_to_bounds(level);
     automaton_detail::measure_cells(level);
-    if (options.check_invariants) automaton_detail::check_invariants(level, total_steps);
+    if (options.check_invariants) {
+        level.start_nodes = level.grid.nodes;
+        automaton_detail::check_invariants(level, total_steps);
+    }
     stats.steps = 0;
     stats.converged = false;
-    const int budget = level_step_budget(int(level.grid.xs[1] - level.grid.xs[0]), options);
+    const int budget = level_step_budget(level.block, options);
     for (int s = 0; s < budget; ++s) {
         if (progress) progress->check();
         const automaton_detail::StepStats step = automaton_detail::step(level, options);
@@ -293,6 +297,24 @@ AutomatonResult run_automaton(const AutomatonInput& input, const AutomatonOption
         }
     }
     return result;
+}
+
+RuleStep automaton_rule_step(const AutomatonInput& input, const AutomatonOptions& options,
+                             const std::vector<glm::dvec2>& nodes) {
+    LMREFINE_REQUIRE(input.width > 0 && input.height > 0, "the energy map is empty");
+    LMREFINE_REQUIRE(input.channels == 1 || input.channels == 4, "the energy map needs 1 or 4 channels");
+    const bool ring = options.border == BorderMode::ExtraRing;
+    Level level = make_level(input, rigid_texels(input), options.edge_shrink, 1, nullptr, ring);
+    LMREFINE_REQUIRE(nodes.size() == level.grid.nodes.size(),
+                     "nodes must be the level's (rows + 1) x (cols + 1) nodes, ring included");
+    level.grid.nodes = nodes;
+    automaton_detail::prepare_level(level, options, ring);
+    automaton_detail::measure_cells(level);
+    RuleStep out;
+    out.difference = automaton_detail::apply_rule(level, options);
+    out.nodes = std::move(level.next_nodes);
+    out.energy = std::move(level.next_energy);
+    return out;
 }
 
 }  // namespace lmrefine

@@ -28,16 +28,15 @@ constexpr int kFitSmoothRounds = 20;
 int fit_to_bounds(Level& level) {
     const int rows = level.rows(), cols = level.cols();
     const NodeGrid& grid = level.grid;
+    // The bounds of `validity` (automaton_cell.h), except that a convex cell
+    // counts as well shaped enough here: requiring |sin| >= kMinQuality too
+    // changes results (docs/refiner.md, "Invariants").
     auto out_of_bounds = [&](int i, int j) {
-        const size_t c = level.cell(i, j);
         glm::dvec2 q[4];
         corners(level, grid.nodes, i, j, q);
         const Shape now = shape(q);
-        if (now.quality2 < 0) return true;  // not convex
-        if (now.area < level.min_area[c] || now.area > level.max_area[c]) return true;
-        if (level.rigid_area[c] < level.original_area[c]) return false;
-        const glm::dvec2 thin = thickness(q, now.area);
-        return thin.x < grid.xs[j + 1] - grid.xs[j] || thin.y < grid.ys[i + 1] - grid.ys[i];
+        const Validity v = validity(q, now, bounds_of(level, i, j));
+        return now.quality2 < 0 || v.too_small || v.too_large || v.too_narrow || v.too_short;
     };
     // Round 0 checks every cell; later rounds only the cells around the
     // nodes moved in the round before (a bad cell's own corners are among
