@@ -28,11 +28,8 @@ constexpr int kCoarsestCells = 8;
 constexpr double kSettledMove = 1e-3;
 // Levels with blocks of at least kManyStepsBlock texels get kCoarseStepFactor
 // x max_steps: they cost 1/64 of the finest level per step or less, and room
-// moves across the map there. Strength 24, Smart UV samples at 256^2,
-// equal-error ratio courtyard / game_level / fence_and_tree: 1.603 / 1.582 /
-// 1.294 with max_steps everywhere, 1.589 / 1.599 / 1.342 with this; blocks
-// >= 4 gave 1.602 / 1.611 / 1.345 but 15% more time at 1024^2, 8x steps made
-// the courtyard flip and back off half its nodes.
+// moves across the map there (how the values were chosen: docs/refiner.md,
+// "Constants and how they were chosen").
 constexpr int kManyStepsBlock = 8;
 constexpr int kCoarseStepFactor = 4;
 

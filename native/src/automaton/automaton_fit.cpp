@@ -17,10 +17,8 @@ constexpr double kFitSnap = 0.05;
 constexpr int kFitRounds = 40;
 constexpr double kFitFactor = 0.8;
 // fit_to_bounds first smooths the nodes around out-of-bounds cells for this
-// many rounds (strength 24 on the sample scenes: 126 rounds of blending to
-// rest and an equal-error ratio of 1.28 on the courtyard before, 1.60 with
-// 10 rounds). 20: with the coarse margin 1.5 (automaton_step.cpp), 10 rounds left
-// fence_and_tree cascading (94 rounds, ratio 1.13), 20 end in 16.
+// many rounds, so the fit moves a neighbourhood instead of cascading cell by
+// cell (docs/refiner.md, "Constants and how they were chosen").
 constexpr int kFitSmoothRounds = 20;
 
 }  // namespace

@@ -23,10 +23,7 @@ namespace {
 constexpr int64_t kDenseRevertFraction = 32;
 // Coarse levels keep cells above min_shrink x this: cells interpolated from
 // a coarse cell differ in size, and the finest level must start (nearly)
-// inside its bounds. 1.25 left fit_to_bounds cascading at strength >= 24;
-// 1.6 (with 10 smoothing rounds) cost 0.04 / 0.04 / 0.01 of equal-error
-// ratio on the sample scenes against 1.5; 1.4-1.55 all fit in <= 16 rounds
-// at strength 20-28, 1.3 cascades (docs/refiner.md).
+// inside its bounds (docs/refiner.md, "Constants and how they were chosen").
 constexpr double kCoarseShrinkMargin = 1.5;
 
 // The channel of a cell that faces each side (directional variant); with one
