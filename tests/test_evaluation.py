@@ -9,6 +9,7 @@ import pytest
 import lmrefine
 from lmrefine import cli
 from lmrefine.sample_scenes import SampleScene, load_sample
+from layouts import floor_grid
 
 FIGURES = ("resolution", "rmse_baseline", "rmse_refined", "transition_rmse_baseline", "transition_rmse_refined",
            "transition_widening", "equal_error_resolution_ratio", "timings")
@@ -18,15 +19,7 @@ def tiny_scene(cells=24):
     """A 3 x 3 m floor of cells x cells quads (two objects: west and east
     halves) under a sun, a floating slab casting a hard shadow across it; the
     floor is one chart filling [0.05, 0.95]^2 of the atlas."""
-    xs = np.linspace(-1.5, 1.5, cells + 1)
-    positions = np.array([(x, y, 0.0) for y in xs for x in xs], np.float32)
-    triangles = []
-    for j in range(cells):
-        for i in range(cells):
-            a, b = j * (cells + 1) + i, j * (cells + 1) + i + 1
-            c, d = (j + 1) * (cells + 1) + i + 1, (j + 1) * (cells + 1) + i
-            triangles += [(a, b, c), (a, c, d)]
-    triangles = np.array(triangles, np.int32)
+    positions, triangles = floor_grid(cells, 1.5)
     corners = positions[triangles.reshape(-1)]
     uvs = (0.05 + 0.9 * (corners[:, :2] + 1.5) / 3.0).astype(np.float32)
     east = (positions[triangles].mean(axis=1)[:, 0] > 0).astype(np.int32)
