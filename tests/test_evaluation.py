@@ -82,7 +82,15 @@ def test_the_pipeline_reports_every_figure_with_sensible_values(tmp_path):
     # The ground truth is much less noisy than the errors it measures.
     assert 0 <= report["truth_noise_rmse"] < 0.2 * report["rmse_baseline"]
     assert set(report["timings"]) == {"bake baseline", "refine", "bake refined", "ground truth",
-                                      "bake resolution sweep", "metrics", "pictures", "surface pictures", "total"}
+                                      "bake resolution sweep", "uniform repack", "metrics", "pictures",
+                                      "surface pictures", "total"}
+    # The second baseline: the same charts packed at one scale, no signal.
+    uniform = report["uniform_repack"]
+    assert uniform["utilisation_after"] > uniform["utilisation_before"] > 0.5
+    assert uniform["equal_error_resolution_ratio"] > 0 and uniform["rmse"] > 0
+    assert uniform["signal_gain"] == pytest.approx(report["equal_error_resolution_ratio"]
+                                                   / uniform["equal_error_resolution_ratio"])
+    assert "Second baseline" in (out / "tiny_smart" / "report.md").read_text()
     assert report["timings"]["total"] == pytest.approx(sum(v for k, v in report["timings"].items() if k != "total"))
     # Per object: both halves, each with the same figures.
     assert [o["object"] for o in report["objects"]] == ["West", "East"]

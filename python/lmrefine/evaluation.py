@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import bake, check_layout, find_charts, metrics, refine_uvs, write_image
+from . import bake, check_layout, find_charts, metrics, pack_charts, refine_uvs, write_image
 from . import evaluate as evaluate_light
 
 DEFAULT_MULTIPLIERS = (1.0, 1.5, 2.0, 3.0, 4.0)
@@ -161,6 +161,20 @@ def _further_stages(sample, triangles, resolution, padding, options, stages, poi
     return refined, refined_map, lookup, {"stages": history, "stopped": stopped}
 
 
+def _uniform_repack(sample, uvs, triangles, resolution, padding, options, points, progress):
+    """The input's charts repacked at one common scale (lmrefine.pack_charts,
+    scales None), baked at R and read at the points; None when the charts do
+    not pack (the report then has no second baseline)."""
+    try:
+        packed, report = pack_charts(uvs, triangles, None, None, resolution, padding, progress=progress)
+    except ValueError:
+        return None
+    image = _bake_map(sample, packed, resolution, options, None)
+    lookup = metrics.bilinear_lookup(image, metrics.interpolate_corners(packed, points.triangle, points.bary))
+    return {"lookup": lookup, "utilisation_before": float(report["utilisation_input"]),
+            "utilisation_after": float(report["utilisation"]), "global_scale": float(report["global_scale"])}
+
+
 def _single_pass(sample, options):
     if options.bake_pass:
         return options.bake_pass
@@ -291,6 +305,11 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
         image = stages.run("bake resolution sweep", lambda p: _bake_map(sample, uvs, size, options, p))
         sweep.append({"multiplier": multiplier, "resolution": size, "lookup": metrics.bilinear_lookup(image, uv_base)})
 
+    # The second baseline: the input's charts packed at one common scale, no
+    # signal. What it gains is packing; what the refined map gains beyond it, signal.
+    uniform = stages.run("uniform repack", lambda p: _uniform_repack(sample, uvs, triangles, resolution, padding,
+                                                                     options, points, p))
+
     start = time.perf_counter()
     charts = find_charts(uvs, triangles)
     texels = metrics.uv_areas(uvs, triangles) * resolution * resolution
@@ -321,6 +340,11 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
         }
 
     everywhere = np.ones(len(points), bool)
+    if uniform is not None:
+        sweep_all = [metrics.error_stats(s["lookup"], truth, everywhere)["rmse"] for s in sweep]
+        rmse = metrics.error_stats(uniform.pop("lookup"), truth, everywhere)["rmse"]
+        ratio, status = metrics.equal_error_resolution(options.multipliers, sweep_all, rmse)
+        uniform.update(rmse=rmse, equal_error_resolution_ratio=ratio, equal_error_status=status)
     result = {"scene": sample.name, "variant": options.variant, "resolution": resolution, "pass": passes,
               "description": sample.description, "bake_samples": options.samples,
               "truth_samples": options.truth_samples, "gradient_step_m": step, "texel_size_m": median_texel}
@@ -345,6 +369,10 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
     }
     result.update({k: v for k, v in context.items() if k != "refine_report"})
     result["refine"] = {k: v for k, v in refined.report.items() if k != "triangle_density"}
+    if uniform is not None:
+        ratio, refined_ratio = uniform["equal_error_resolution_ratio"], result["equal_error_resolution_ratio"]
+        uniform["signal_gain"] = (refined_ratio / ratio if ratio and refined_ratio and ratio > 0 else None)
+        result["uniform_repack"] = uniform
     if tessellation is not None:
         result["tessellation"] = tessellation
     if stage_history is not None:
