@@ -9,6 +9,7 @@ import pytest
 import lmrefine
 from lmrefine import cli
 from lmrefine.sample_scenes import SampleScene, load_sample
+from layouts import floor_grid
 
 FIGURES = ("resolution", "rmse_baseline", "rmse_refined", "transition_rmse_baseline", "transition_rmse_refined",
            "transition_widening", "equal_error_resolution_ratio", "timings")
@@ -18,15 +19,7 @@ def tiny_scene(cells=24):
     """A 3 x 3 m floor of cells x cells quads (two objects: west and east
     halves) under a sun, a floating slab casting a hard shadow across it; the
     floor is one chart filling [0.05, 0.95]^2 of the atlas."""
-    xs = np.linspace(-1.5, 1.5, cells + 1)
-    positions = np.array([(x, y, 0.0) for y in xs for x in xs], np.float32)
-    triangles = []
-    for j in range(cells):
-        for i in range(cells):
-            a, b = j * (cells + 1) + i, j * (cells + 1) + i + 1
-            c, d = (j + 1) * (cells + 1) + i + 1, (j + 1) * (cells + 1) + i
-            triangles += [(a, b, c), (a, c, d)]
-    triangles = np.array(triangles, np.int32)
+    positions, triangles = floor_grid(cells, 1.5)
     corners = positions[triangles.reshape(-1)]
     uvs = (0.05 + 0.9 * (corners[:, :2] + 1.5) / 3.0).astype(np.float32)
     east = (positions[triangles].mean(axis=1)[:, 0] > 0).astype(np.int32)
@@ -89,7 +82,15 @@ def test_the_pipeline_reports_every_figure_with_sensible_values(tmp_path):
     # The ground truth is much less noisy than the errors it measures.
     assert 0 <= report["truth_noise_rmse"] < 0.2 * report["rmse_baseline"]
     assert set(report["timings"]) == {"bake baseline", "refine", "bake refined", "ground truth",
-                                      "bake resolution sweep", "metrics", "pictures", "surface pictures", "total"}
+                                      "bake resolution sweep", "uniform repack", "metrics", "pictures",
+                                      "surface pictures", "total"}
+    # The second baseline: the same charts packed at one scale, no signal.
+    uniform = report["uniform_repack"]
+    assert uniform["utilisation_after"] > uniform["utilisation_before"] > 0.5
+    assert uniform["equal_error_resolution_ratio"] > 0 and uniform["rmse"] > 0
+    assert uniform["signal_gain"] == pytest.approx(report["equal_error_resolution_ratio"]
+                                                   / uniform["equal_error_resolution_ratio"])
+    assert "Second baseline" in (out / "tiny_smart" / "report.md").read_text()
     assert report["timings"]["total"] == pytest.approx(sum(v for k, v in report["timings"].items() if k != "total"))
     # Per object: both halves, each with the same figures.
     assert [o["object"] for o in report["objects"]] == ["West", "East"]
@@ -212,3 +213,25 @@ def test_rechart_and_tessellation_combine(tmp_path):
     layout = np.load(tmp_path / "r" / "refined_layout.npz")
     assert len(layout["triangles"]) == report["tessellation"]["triangles_after"]
     assert lmrefine.check_layout(layout["uvs"], layout["triangles"], 48)["valid"]
+@pytest.mark.slow
+def test_multi_stage_refinement_reports_every_stage_and_stops_when_the_layout_settles():
+    from lmrefine.evaluation import EvaluationOptions, evaluate_sample
+
+    scene = tiny_scene(24)
+    common = dict(resolution=48, points=2000, samples=8, truth_samples=32, multipliers=(1.0, 2.0, 4.0))
+    one = evaluate_sample(scene, EvaluationOptions(**common))
+    many = evaluate_sample(scene, EvaluationOptions(**common, stages=4))
+    history = many["stages"]["stages"]
+    assert [e["stage"] for e in history] == [1, 2, 3, 4] and "stages" not in one
+    assert history[0]["rmse"] == pytest.approx(one["rmse_refined"])  # stage 1 is the plain refinement
+    # Stage 2, refined from stage 1's sharper bake, has a lower world-space error.
+    assert history[1]["rmse"] < 0.8 * history[0]["rmse"] and history[1]["layout_change"] > 0.05
+    kept = [e for e in history if e["kept"]]
+    assert many["rmse_refined"] == pytest.approx(kept[-1]["rmse"])  # the report is the last kept stage's
+    assert many["equal_error_resolution_ratio"] > one["equal_error_resolution_ratio"]
+    # A stage whose layout hardly changes ends the stages, and is not used (strength 0: nothing moves).
+    still = evaluate_sample(scene, EvaluationOptions(**common, stages=3, refine_options={"strength": 0.0}))
+    assert [(e["stage"], e["kept"]) for e in still["stages"]["stages"]] == [(1, True), (2, False)]
+    assert "stage 1 kept" in still["stages"]["stopped"]
+    with pytest.raises(ValueError, match="stages must be an integer from 1 to 16"):
+        evaluate_sample(scene, EvaluationOptions(**common, stages=0))

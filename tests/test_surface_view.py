@@ -7,18 +7,12 @@ import pytest
 import lmrefine
 from lmrefine import metrics, surface_view
 from lmrefine.sample_scenes import SampleScene, load_sample
+from layouts import floor_grid
 
 
 def plane_scene(cells=4):
     """A 2 x 2 m floor at z = 0 whose UVs are its x, y mapped onto [0.1, 0.9]."""
-    xs = np.linspace(-1.0, 1.0, cells + 1)
-    positions = np.array([(x, y, 0.0) for y in xs for x in xs], np.float32)
-    triangles = []
-    for j in range(cells):
-        for i in range(cells):
-            a, b = j * (cells + 1) + i, j * (cells + 1) + i + 1
-            triangles += [(a, b, b + cells + 1), (a, b + cells + 1, a + cells + 1)]
-    triangles = np.array(triangles, np.int32)
+    positions, triangles = floor_grid(cells, 1.0)
     uvs = (0.1 + 0.8 * (positions[triangles.reshape(-1)][:, :2] + 1.0) / 2.0).astype(np.float32)
     return SampleScene(
         name="plane", positions=positions, triangles=triangles,

@@ -76,7 +76,8 @@ def evaluation_options(args):
                              points=args.points, seed=args.seed, multipliers=args.multipliers,
                              padding=args.padding, denoise=args.denoise, bake_pass=args.bake_pass,
                              refine_options=refine_options, view_width=args.view_width,
-                             tessellate=args.tessellate, rechart=rechart, compare_variants=compare)
+                             tessellate=args.tessellate, rechart=rechart, compare_variants=compare,
+                             stages=args.stages)
 
 
 def load_scenes(names, args=None):
@@ -198,6 +199,9 @@ def add_evaluation_arguments(parser, resolution, points):
     parser.add_argument("--denoise", action="store_true", help="denoise every bake (edge-aware)")
     parser.add_argument("--view-width", type=int, default=480,
                         help="width in pixels of the pictures of the lit surface, 16 to 2048 (default: 480; 0: none)")
+    parser.add_argument("--stages", type=int, default=1,
+                        help="bake-refine stages, each refining the previous stage's layout from its own bake "
+                             "(default: 1); stops early when a stage hardly changes the layout")
     parser.add_argument("--tessellate", type=float, nargs="?", const=0.25, metavar="BUDGET",
                         help="split the triangles strong transitions cross before refining, at most BUDGET more "
                              "vertices as a fraction (default 0.25 = +25%%; docs/refiner.md, Tessellation)")

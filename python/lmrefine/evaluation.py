@@ -15,7 +15,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from . import bake, check_layout, find_charts, metrics, refine_uvs, write_image
+from . import bake, check_layout, find_charts, metrics, pack_charts, refine_uvs, write_image
 from . import evaluate as evaluate_light
 from .charting import rechart
 
@@ -45,6 +45,7 @@ class EvaluationOptions:
     compare_variants: tuple = ()
     view_width: int = 480             # pixels across the pictures of the lit surface (0: none)
     tessellate: float = None          # vertex budget (fraction) of a tessellation along transitions; None: off
+    stages: int = 1                   # refine + bake stages, each refining from the previous stage's bake
 
     def check(self):
         if self.resolution < 8:
@@ -61,6 +62,8 @@ class EvaluationOptions:
         self.multipliers = m
         if self.rechart is not None and not 0.0 < float(self.rechart) < 90.0:
             raise ValueError(f"rechart must be an angle in (0, 90) degrees, got {self.rechart}")
+        if not (isinstance(self.stages, int) and 1 <= self.stages <= 16):
+            raise ValueError(f"stages must be an integer from 1 to 16, got {self.stages}")
         if self.tessellate is not None and not (0.0 <= self.tessellate <= 16.0):
             raise ValueError(f"the tessellation budget is a fraction of the vertex count in [0, 16] "
                              f"(0.25 = at most 25% more vertices), got {self.tessellate}")
@@ -118,6 +121,70 @@ def _tessellated(sample, variant, baseline, budget):
                     uvs={name: layouts[name] for name in sample.uvs}, base_color=sample.base_color[result.parent],
                     object_id=sample.object_id[result.parent])
     return scene, result.report
+
+
+# A further stage is kept only if its layout moves texels by at least this
+# much (median relative change of triangle texel density against the
+# previous stage): the rule needs no ground truth, as in the add-on.
+STAGE_MIN_CHANGE = 0.05
+
+
+def _further_stages(sample, triangles, resolution, padding, options, stages, points, truth, transitions, refined,
+                    refined_map, lookup):
+    """Stages 2..options.stages: refine the previous stage's layout from its
+    own bake, bake again. Stops when a stage's layout hardly differs from the
+    previous one (STAGE_MIN_CHANGE); the world-space error of every stage is
+    measured at the evaluation's points for the report, never used to choose.
+    Returns the last kept stage's (refine result, map, lookup) and the history."""
+    areas = sample.triangle_areas()
+    everywhere = np.ones(len(truth), bool)
+
+    def errors(stage, result, lookup, change=None):
+        entry = {"stage": stage, "rmse": metrics.error_stats(lookup, truth, everywhere)["rmse"],
+                 "transition_rmse": metrics.error_stats(lookup, truth, transitions)["rmse"],
+                 "moved": bool(result.report["moved"])}
+        if change is not None:
+            entry["layout_change"] = change
+        return entry
+
+    history = [errors(1, refined, lookup)]
+    stopped = f"{options.stages} stages done"
+    for stage in range(2, options.stages + 1):
+        previous, previous_map = refined, refined_map
+        candidate = stages.run("refine", lambda p: refine_uvs(previous_map, previous.uvs, triangles, resolution,
+                                                              padding=padding, progress=p, **options.refine_options))
+        before = metrics.texel_density(previous.uvs, triangles, areas, resolution)
+        after = metrics.texel_density(candidate.uvs, triangles, areas, resolution)
+        ratio = after / np.maximum(before, 1e-30)
+        change = float(np.median(np.abs(ratio[before > 0] - 1))) if (before > 0).any() else 0.0
+        if not candidate.report["moved"] or change < STAGE_MIN_CHANGE:
+            history.append({"stage": stage, "moved": bool(candidate.report["moved"]), "layout_change": change,
+                            "kept": False})
+            stopped = (f"stage {stage} changed the layout by {change:.1%} (median texel density), under "
+                       f"{STAGE_MIN_CHANGE:.0%}: stage {stage - 1} kept")
+            break
+        candidate_map = stages.run("bake refined", lambda p: _bake_map(sample, candidate.uvs, resolution, options, p))
+        uv = metrics.interpolate_corners(candidate.uvs, points.triangle, points.bary)
+        lookup = metrics.bilinear_lookup(candidate_map, uv)
+        refined, refined_map = candidate, candidate_map
+        history.append(errors(stage, candidate, lookup, change))
+    for entry in history:
+        entry.setdefault("kept", True)
+    return refined, refined_map, lookup, {"stages": history, "stopped": stopped}
+
+
+def _uniform_repack(sample, uvs, triangles, resolution, padding, options, points, progress):
+    """The input's charts repacked at one common scale (lmrefine.pack_charts,
+    scales None), baked at R and read at the points; None when the charts do
+    not pack (the report then has no second baseline)."""
+    try:
+        packed, report = pack_charts(uvs, triangles, None, None, resolution, padding, progress=progress)
+    except ValueError:
+        return None
+    image = _bake_map(sample, packed, resolution, options, None)
+    lookup = metrics.bilinear_lookup(image, metrics.interpolate_corners(packed, points.triangle, points.bary))
+    return {"lookup": lookup, "utilisation_before": float(report["utilisation_input"]),
+            "utilisation_after": float(report["utilisation"]), "global_scale": float(report["global_scale"])}
 
 
 def _single_pass(sample, options):
@@ -245,6 +312,13 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
     uv_refined = metrics.interpolate_corners(refined.uvs, points.triangle, points.bary)
     lookup_base = metrics.bilinear_lookup(baseline, uv_base)
     lookup_refined = metrics.bilinear_lookup(refined_map, uv_refined)
+    stage_history = None
+    if options.stages > 1:
+        refined, refined_map, lookup_refined, stage_history = _further_stages(
+            sample, triangles, resolution, padding, options, stages, points, truth, transitions, refined,
+            refined_map, lookup_refined)
+        uv_refined = metrics.interpolate_corners(refined.uvs, points.triangle, points.bary)
+        density_refined = metrics.texel_density(refined.uvs, triangles, areas, resolution)
 
     # The uniform baseline at higher resolutions, for the equal-error resolution.
     sweep = [{"multiplier": 1.0, "resolution": resolution, "lookup": lookup_base}]
@@ -268,6 +342,10 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
             other_sweep.append({"multiplier": multiplier, "resolution": size,
                                 "lookup": metrics.bilinear_lookup(image, other_points)})
         compared.append((other, other_sweep))
+    # The second baseline: the input's charts packed at one common scale, no
+    # signal. What it gains is packing; what the refined map gains beyond it, signal.
+    uniform = stages.run("uniform repack", lambda p: _uniform_repack(sample, uvs, triangles, resolution, padding,
+                                                                     options, points, p))
 
     start = time.perf_counter()
     charts = find_charts(uvs, triangles)
@@ -314,6 +392,11 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
         return out
 
     everywhere = np.ones(len(points), bool)
+    if uniform is not None:
+        sweep_all = [metrics.error_stats(s["lookup"], truth, everywhere)["rmse"] for s in sweep]
+        rmse = metrics.error_stats(uniform.pop("lookup"), truth, everywhere)["rmse"]
+        ratio, status = metrics.equal_error_resolution(options.multipliers, sweep_all, rmse)
+        uniform.update(rmse=rmse, equal_error_resolution_ratio=ratio, equal_error_status=status)
     result = {"scene": sample.name, "variant": options.layout_name, "resolution": resolution, "pass": passes,
               "description": sample.description, "bake_samples": options.samples,
               "truth_samples": options.truth_samples, "gradient_step_m": step, "texel_size_m": median_texel}
@@ -340,8 +423,14 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
     }
     result.update({k: v for k, v in context.items() if k != "refine_report"})
     result["refine"] = {k: v for k, v in refined.report.items() if k != "triangle_density"}
+    if uniform is not None:
+        ratio, refined_ratio = uniform["equal_error_resolution_ratio"], result["equal_error_resolution_ratio"]
+        uniform["signal_gain"] = (refined_ratio / ratio if ratio and refined_ratio and ratio > 0 else None)
+        result["uniform_repack"] = uniform
     if tessellation is not None:
         result["tessellation"] = tessellation
+    if stage_history is not None:
+        result["stages"] = stage_history
     gain = (result["transition_rmse_refined"] <= (1 - GAIN_THRESHOLD) * result["transition_rmse_baseline"])
     result["gain"] = bool(gain)
     result["notes"] = [] if gain else _diagnose(result, context)

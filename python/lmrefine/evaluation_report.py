@@ -326,6 +326,19 @@ def scene_markdown(result):
         f"{', '.join(r['refine'].get('limited_by') or []) or 'nothing'}.",
         "",
     ]
+    if r.get("uniform_repack"):
+        u = r["uniform_repack"]
+        gain = f"{u['signal_gain']:.2f}x" if u.get("signal_gain") else "n/a"
+        lines[-1:-1] = [f"- Second baseline, the input's charts repacked at one scale (no signal; texels covered "
+                        f"{u['utilisation_before']:.0%} -> {u['utilisation_after']:.0%}): equal-error "
+                        f"{equal_error_text(u['equal_error_resolution_ratio'], u['equal_error_status'])} from "
+                        f"packing alone; the refined map's ratio over it (signal gain): {gain}."]
+    if r.get("stages"):
+        rows = "; ".join(f"stage {e['stage']}: " + (f"RMSE {_number(e['rmse'])}, transitions "
+                                                     f"{_number(e['transition_rmse'])}" if e["kept"] else
+                                                     f"not kept (layout change {e['layout_change']:.1%})")
+                         for e in r["stages"]["stages"])
+        lines[-1:-1] = [f"- Multi-stage refinement: {rows}; stopped: {r['stages']['stopped']}."]
     if r.get("tessellation"):
         t = r["tessellation"]
         lines[-1:-1] = [f"- Tessellated along transitions before refining: {t['vertices_before']} -> "
@@ -392,10 +405,20 @@ def write_scene_report(out_dir, result):
         handle.write(scene_markdown(result))
 
 
+def _uniform_text(r):
+    """The uniform repack's equal-error ratio (the second baseline), or why there is none."""
+    u = r.get("uniform_repack")
+    if not u or u["equal_error_resolution_ratio"] is None:
+        return "n/a"
+    if u["equal_error_status"] == "flat":
+        return "noise-limited"
+    return {"above": ">="}.get(u["equal_error_status"], "") + f"{u['equal_error_resolution_ratio']:.2f}x"
+
+
 def summary_table(summary):
     """The Markdown table of every evaluated scene (also printed by the CLI)."""
     lines = ["| scene | UVs | R | RMSE base -> refined | transition RMSE base -> refined | widening | "
-             "equal-error ratio | gain | seconds |", "|---|---|---|---|---|---|---|---|---|"]
+             "equal-error ratio | packing alone | gain | seconds |", "|---|---|---|---|---|---|---|---|---|---|"]
     for r in summary["scenes"]:
         ratio = r["equal_error_resolution_ratio"]
         ratio_text = "n/a" if ratio is None else {"above": ">=", "below": ""}.get(r["equal_error_status"], "") + \
@@ -407,7 +430,8 @@ def summary_table(summary):
             f"{_number(r['rmse_refined'])} ({_change(r['rmse_baseline'], r['rmse_refined'])}) | "
             f"{_number(r['transition_rmse_baseline'])} -> {_number(r['transition_rmse_refined'])} "
             f"({_change(r['transition_rmse_baseline'], r['transition_rmse_refined'])}) | "
-            f"{_number(r['transition_widening'], 3)}x | {ratio_text} | {'yes' if r['gain'] else 'NO'} | "
+            f"{_number(r['transition_widening'], 3)}x | {ratio_text} | {_uniform_text(r)} | "
+            f"{'yes' if r['gain'] else 'NO'} | "
             f"{r['timings']['total']:.1f} |")
     return "\n".join(lines)
 
