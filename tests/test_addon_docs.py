@@ -27,6 +27,6 @@ def test_numeric_defaults_in_the_docs_are_the_code_defaults():
             table[match.group(1)] = float(match.group(2))
     defaults = property_defaults()
     checked = sorted(set(table) & set(defaults))
-    assert {"Strength", "Max Magnification", "Min Shrink", "Resolution"} <= set(checked)
+    assert {"Strength", "Max Growth", "Min Shrink", "Resolution"} <= set(checked)
     for name in checked:
         assert table[name] == defaults[name], f"docs/blender.md says {name} = {table[name]}, the code {defaults[name]}"

@@ -137,8 +137,10 @@ def check_done(out, name):
     report = load(out / name / "report.json")
     assert report["ok"] is True
     assert report["blend"] == str(out / name / f"{name}.blend") and os.path.isfile(report["blend"])
-    images = [path for obj in report["objects"].values() for path in obj["images"].values()]
-    assert len(images) == 2 and all(os.path.isfile(path) and path.startswith(str(out / name)) for path in images)
+    images = {(obj, kind): path for obj, info in report["objects"].items() for kind, path in info["images"].items()}
+    # One baked pass per object, plus the first lightmap the preview shows as "before".
+    assert sorted(kind for _, kind in images) == ["before", "before", "direct", "direct"]
+    assert all(os.path.isfile(path) and path.startswith(str(out / name)) for path in images.values())
     assert os.path.isfile(out / name / "blender.log")
 
 

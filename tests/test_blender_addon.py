@@ -25,6 +25,38 @@ REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 BLENDER = shutil.which("blender")
 BATCH = os.path.join(REPO, "addon", "lmrefine_blender", "batch.py")
 
+def exr_header(path):
+    """Channel pixel types and compression of an OpenEXR file, from its header (OpenEXR file layout)."""
+    data = path.read_bytes() if hasattr(path, "read_bytes") else open(path, "rb").read()
+    assert data[:4] == b"\x76\x2f\x31\x01", "not an OpenEXR file"
+    position, header = 8, {}
+    while data[position] != 0:
+        name_end = data.index(b"\0", position)
+        type_end = data.index(b"\0", name_end + 1)
+        name, kind = data[position:name_end].decode(), data[name_end + 1:type_end].decode()
+        size = int.from_bytes(data[type_end + 1:type_end + 5], "little")
+        value = data[type_end + 5:type_end + 5 + size]
+        position = type_end + 5 + size
+        if kind == "chlist":
+            channels, at = {}, 0
+            while value[at] != 0:
+                end = value.index(b"\0", at)
+                pixel_type = int.from_bytes(value[end + 1:end + 5], "little")
+                channels[value[at:end].decode()] = ("UINT", "HALF", "FLOAT")[pixel_type]
+                at = end + 1 + 16
+            header["channels"] = channels
+        elif kind == "compression":
+            header["compression"] = ("NONE", "RLE", "ZIPS", "ZIP", "PIZ", "PXR24", "B44", "B44A", "DWAA",
+                                     "DWAB")[value[0]]
+    return header
+
+
+def lmrefine_read(path):
+    sys.path.insert(0, os.path.join(REPO, "python"))
+    import lmrefine
+    return lmrefine.read_image(str(path))
+
+
 if BLENDER is None:
     pytest.skip("Blender is not installed", allow_module_level=True)
 
@@ -62,7 +94,6 @@ def test_register_and_unregister(facts):
     assert registered["category"] == "Lightmap" and registered["space"] == "VIEW_3D"
     assert registered["operators"] == [True, True] and registered["label"] == "Refine Lightmap UVs"
     assert registered["scene_property"]
-    assert len(registered["icons_used"]) >= 4 and registered["icons_missing"] == []
     assert unregistered == {"panels": [], "scene_property": False, "operator": False}
 
 
@@ -228,8 +259,9 @@ def test_operator_end_to_end(facts, name):
     value = fact(facts, name)
     assert value["outcome"] == "FINISHED", value.get("message")
     assert value["layers"] == ["UVMap", "Lightmap", "Lightmap_refined"]
-    # The user's active and render UV maps keep their roles; source and mesh are bit-identical.
-    assert value["active_layer"] == "UVMap" and value["render_layer"] == "UVMap"
+    # The render UV map keeps its role (the preview makes the refined map the active one, for Solid
+    # shading's Texture colour, until it is removed); source and mesh are bit-identical.
+    assert value["active_layer"] == "Lightmap_refined" and value["render_layer"] == "UVMap"
     assert value["source_identical"] and value["texture_uvs_identical"] and value["geometry_identical"]
     assert value["check_layout"]["valid"] is True
     assert value["check_layout"]["min_gutter_texels"] >= 2
@@ -297,6 +329,85 @@ def test_remove_preview_restores_materials(facts):
     assert value["outcome"] == "FINISHED", value["message"]
     assert value["changed_by_run"] and value["restored"]
     assert value["removed"] == ["FINISHED"] and value["again"] == ["CANCELLED"]
+
+
+def test_preview_is_wired_through_the_refined_map_in_every_viewport_mode(facts):
+    value = fact(facts, "preview_wiring_toggle_and_removal")
+    assert value["outcome"] == "FINISHED", value["message"]
+    # Before the run the user's EEVEE output is what Material Preview draws.
+    assert value["before"]["eevee"] == "UserEevee" and value["before"]["cycles"] == "Material Output"
+    after = value["after"]
+    for name in ("floor", "box"):
+        wiring = after[name]
+        assert wiring["roles"] == ["preview_emission", "preview_image", "preview_output", "preview_uv"]
+        # Material Preview (EEVEE) and Rendered (Cycles) draw our output: emission <- image <- UV Map node.
+        assert wiring["eevee_is_ours"] and wiring["cycles_is_ours"] and wiring["chain"] == [True, True, True]
+        assert wiring["uv_map"] == "Lightmap_refined" and wiring["active_node_is_image"]
+    assert after["floor"]["image"] == "Floor_lightmap_direct" and after["box"]["image"] == "Blocker_lightmap_direct"
+    outputs = after["floor_outputs"]
+    assert outputs["active_output"] == "lmrefine Output" and outputs["active_node"] == "lmrefine Lightmap"
+    assert outputs["targets"]["UserEevee"] == "ALL"  # else it would win over any 'All' output in EEVEE
+    # Solid shading (Texture colour) draws the active image node through the active UV map.
+    assert after["floor_active_uv"] == "Lightmap_refined" and after["box_active_uv"] == "Lightmap_refined"
+    assert after["floor_render_uv"] == "UVMap"
+    assert after["box_material"] == "lmrefine preview"  # an object without material gets one
+    assert "Floor_lightmap_before" in after["images"] and "Blocker_lightmap_before" in after["images"]
+
+
+def test_before_after_toggle_swaps_image_and_uv_map(facts):
+    value = fact(facts, "preview_wiring_toggle_and_removal")
+    assert value["show_before"] == ["FINISHED"] and value["show_after"] == ["FINISHED"]
+    shown = value["before_shown"]
+    assert shown["floor"]["image"] == "Floor_lightmap_before" and shown["floor"]["uv_map"] == "Lightmap"
+    assert shown["box"]["image"] == "Blocker_lightmap_before" and shown["box"]["uv_map"] == "Lightmap"
+    assert shown["floor_active_uv"] == "Lightmap" and shown["box_active_uv"] == "Lightmap"
+    assert shown["floor"]["eevee_is_ours"] and shown["floor"]["chain"] == [True, True, True]
+    again = value["after_again"]
+    assert again["floor"]["image"] == "Floor_lightmap_direct" and again["floor"]["uv_map"] == "Lightmap_refined"
+    assert again["floor_active_uv"] == "Lightmap_refined"
+
+
+def test_removing_the_preview_restores_outputs_nodes_and_uv_maps(facts):
+    value = fact(facts, "preview_wiring_toggle_and_removal")
+    assert value["removed"] == ["FINISHED"] and value["show_without_preview"] == ["CANCELLED"]
+    restored = value["restored"]
+    assert restored["outputs"] == value["before"]  # active output, targets, active node, what each engine draws
+    assert restored["floor_active_uv"] == "UVMap" and restored["box_active_uv"] == "UVMap"
+    # The box had no material slot: the preview added one with its own material and took both out again.
+    assert value["box_slots"] == 0 and restored["box_slots"] == 0 and restored["materials"] == 0
+    # The refined maps and images stay; every material is bit for bit as before.
+    assert restored["changed"] == ["images", "mesh:Cube", "mesh:FloorMesh", "result"]
+
+
+def test_preview_in_a_material_shared_by_two_objects(facts):
+    value = fact(facts, "preview_in_a_shared_material")
+    assert value["outcome"] == "FINISHED", value["message"]
+    assert value["shown_after_run"]
+    # Removing the box's preview shows the floor's, still wired.
+    remaining = value["after_one_removed"]
+    assert remaining["eevee_is_ours"] and remaining["chain"] == [True, True, True]
+    assert remaining["image"] == "Floor_lightmap_direct" and remaining["active_node_is_image"]
+    assert "material:FloorMaterial" not in value["changed"]
+
+
+def test_menu_entries_and_stable_panels(facts):
+    value = fact(facts, "menus_and_panel_rows")
+    assert value["outcome"] == "FINISHED", value["message"]
+    # F3 search finds operators through menus: 3D View > Object and UV Editor > UV.
+    assert value["menus"] == {"VIEW3D_MT_object": ["object.lmrefine_refine_uvs"],
+                              "IMAGE_MT_uvs": ["object.lmrefine_refine_uvs"]}
+    assert value["menus_after_unregister"] == {"VIEW3D_MT_object": False, "IMAGE_MT_uvs": False}
+    assert value["show_operator"]
+    # Every panel draws as many rows before a run, after it and when nothing moved.
+    rows = value["rows"]
+    for panel, count in rows["after_run"].items():
+        assert rows["nothing"][panel] == count, (panel, rows)
+    assert rows["nothing_moved"]["LMREFINE_PT_refine_result"] == rows["after_run"]["LMREFINE_PT_refine_result"]
+    labels = value["labels"]
+    assert labels["nothing"][0] == "No run yet" and labels["nothing_moved"][1] == "Nothing moved"
+    assert labels["after_run"][1] == "Moved: 1 object(s)" and labels["after_run"][2].startswith("Edges: ")
+    assert value["operators_after_run"] == ["object.lmrefine_show_preview"] * 2 + ["object.lmrefine_remove_preview"]
+    assert len(value["icons_used"]) >= 8 and value["icons_missing"] == []
 
 
 def test_failed_rerun_restores_the_previous_result(facts):
@@ -430,8 +541,14 @@ def test_batch_refines_bakes_and_reports(facts, work_dir):
         path = floor["images"][pass_name]
         assert os.path.dirname(path) == str(out) and os.path.getsize(path) > 0
     assert os.path.isfile(report["blend"]) and os.path.dirname(report["blend"]) == str(out)
-    assert sorted(os.listdir(out)) == ["Floor_lightmap_ao.exr", "Floor_lightmap_direct.exr", "report.json",
-                                       os.path.basename(blend)]
+    # The first lightmap is kept as the preview's "before" image.
+    assert sorted(os.listdir(out)) == ["Floor_lightmap_ao.exr", "Floor_lightmap_before.exr",
+                                       "Floor_lightmap_direct.exr", "report.json", os.path.basename(blend)]
+    # Half float, ZIP-compressed by default; --float32 asks for 32-bit floats.
+    for name in ("ao", "before", "direct"):
+        header = exr_header(out / f"Floor_lightmap_{name}.exr")
+        assert header["compression"] == "ZIP" and set(header["channels"].values()) == {"HALF"}, header
+    assert lmrefine_read(out / "Floor_lightmap_direct.exr").max() > 0.1
     # The saved copy opens with the refined map and finds its lightmaps through relative paths.
     probe = (
         "import bpy, json\n"
@@ -446,7 +563,19 @@ def test_batch_refines_bakes_and_reports(facts, work_dir):
     assert saved["images"] == {
         "Floor_lightmap_direct": ["//Floor_lightmap_direct.exr", 64, True],
         "Floor_lightmap_ao": ["//Floor_lightmap_ao.exr", 64, True],
+        "Floor_lightmap_before": ["//Floor_lightmap_before.exr", 64, True],
     }
+
+
+def test_batch_float32_writes_32_bit_exrs(facts, work_dir):
+    blend = fact(facts, "save_scene_for_batch")["path"]
+    out = work_dir / "batch_float32"
+    process = run_batch(blend, "--objects", "Floor", "--resolution", "64", "--samples", "4",
+                        "--bake-passes", "direct", "--no-preview", "--float32", "--out", str(out))
+    assert process.returncode == 0, process.stderr[-3000:]
+    header = exr_header(out / "Floor_lightmap_direct.exr")
+    assert header["compression"] == "ZIP" and set(header["channels"].values()) == {"FLOAT"}, header
+    assert not (out / "Floor_lightmap_before.exr").exists()  # no preview, no "before" image
 
 
 # -------------------------------------------------------------- packaging

@@ -79,6 +79,8 @@ def build_parser():
     parser.add_argument("--backend", choices=("embree", "cycles"), help="baker of the final lightmaps")
     parser.add_argument("--bake-passes", type=_passes, help=f"comma-separated, of: {', '.join(PASSES)}")
     parser.add_argument("--samples", type=int, help="samples per texel")
+    parser.add_argument("--float32", action=argparse.BooleanOptionalAction, default=None,
+                        help="write 32-bit float EXRs (default: half float; both ZIP-compressed)")
     parser.add_argument("--preview", action=argparse.BooleanOptionalAction, default=None,
                         help="hook the lightmap into the materials of the saved .blend")
     parser.add_argument("--report", help="JSON report path (default: OUT/report.json)")
@@ -91,7 +93,7 @@ def apply_flags(settings, args):
         "source_layer": args.source_layer, "resolution": args.resolution, "padding": args.padding,
         "strength": args.strength, "max_magnification": args.max_magnification, "min_shrink": args.min_shrink,
         "delta": args.delta, "passes": args.passes, "directional": args.directional, "samples": args.samples,
-        "preview": args.preview,
+        "preview": args.preview, "exr_float32": args.float32,
     }
     upper = {"first_lightmap": args.first_lightmap, "driving_pass": args.driving_pass, "border": args.border,
              "wavelet": args.wavelet, "backend": args.backend}

@@ -56,6 +56,12 @@ def image_problem(image):
     return None
 
 
+def _pop_only_material(mesh):
+    """Remove the mesh's only material. materials.pop() would leave the objects one empty slot
+    (their slot count is not updated); clear() updates it."""
+    mesh.materials.clear()
+
+
 # --------------------------------------------------------------- bake target
 
 class BakeTarget:
@@ -106,7 +112,7 @@ class BakeTarget:
             obj = self.obj
             if obj.material_slots and obj.material_slots[0].material == self.temporary_material:
                 if len(obj.data.materials) == 1 and obj.data.materials[0] == self.temporary_material:
-                    obj.data.materials.pop(index=0)
+                    _pop_only_material(obj.data)
                 else:
                     obj.material_slots[0].material = None
             bpy.data.materials.remove(self.temporary_material)
@@ -114,94 +120,215 @@ class BakeTarget:
 
 
 # ------------------------------------------------------------------ preview
+#
+# The preview shows a lightmap on the object in every viewport mode and puts
+# back exactly what it changed when it is removed:
+#
+# * in each node material it adds a UV Map node (naming the map the image was
+#   baked with), an Image Texture node, an Emission shader and its own Material
+#   Output, made the tree's active output. Material Preview (EEVEE) and
+#   Rendered (Cycles) draw the output Blender picks for their engine: an
+#   output set to that engine beats an 'All' one even when inactive, so the
+#   user's engine-specific outputs are set to 'All' while the preview is on.
+#   The user's nodes and links are not otherwise touched; which output and
+#   node were active and the outputs' targets are recorded and put back;
+# * the image node becomes the material's active node and the shown UV map the
+#   mesh's active UV map: Solid shading with Texture colour (and Texture Paint)
+#   draws the active image node through the active UV map;
+# * an object without any material gets a material the preview owns.
+#
+# A material shared by several objects holds one set of preview nodes per
+# object; the last one added is shown, and removing one shows the next.
+# The before/after toggle only swaps the image and the UV map of the
+# preview's own nodes (and the active UV map).
 
-def add_preview(obj, image, uv_name, journal):
-    """Show `image` through a UV Map node set to `uv_name` in every material of `obj`.
+PREVIEW = "lmrefine_preview"  # on the object: what the preview shows and what it replaced
+PREVIOUS_OUTPUTS = "lmrefine_previous_outputs"  # on a preview image node: the output that was active
+PREVIOUS_TARGETS = "lmrefine_previous_targets"  # on a preview image node: {output name: target} changed to 'All'
+OWNED_MATERIAL = "lmrefine preview"
+NODE_NAMES = {  # explicit names: a preview put back by a rollback gets the same ones
+    "preview_uv": "lmrefine UV", "preview_image": "lmrefine Lightmap", "preview_emission": "lmrefine Emission",
+    "preview_output": "lmrefine Output",
+}
 
-    The image node becomes the material's active node, which is what Solid
-    shading (Texture colour) and Texture Paint display. The material's shading
-    itself is not rewired. Earlier preview nodes of this object are replaced.
+
+def has_preview(obj):
+    return obj.get(PREVIEW) is not None
+
+
+def preview_shown(obj):
+    """'AFTER' (refined map), 'BEFORE' (source map), or None without a preview."""
+    state = obj.get(PREVIEW)
+    return None if state is None else state.get("shown", "AFTER")
+
+
+def add_preview(obj, after_image, after_uv, before_image, before_uv, journal, shown='AFTER'):
+    """Show the lightmap on `obj` in every viewport mode; see the section comment.
+
+    `after_image` is the lightmap baked with UV map `after_uv` (the refined
+    map), `before_image` the first lightmap, baked with the source map
+    `before_uv` (None: no before/after toggle). An earlier preview of this
+    object is replaced; the journal puts it back on rollback.
     """
     remove_preview(obj, journal)
+    _apply_preview(obj, after_image.name, after_uv, before_image.name if before_image else "", before_uv or "",
+                   shown)
+    journal.on_rollback(lambda: remove_preview(obj))
+
+
+def _preview_params(obj):
+    state = obj.get(PREVIEW)
+    if state is None:
+        return None
+    return {key: state.get(key, "") for key in ("after_image", "after_uv", "before_image", "before_uv", "shown")}
+
+
+def _apply_preview(obj, after_image, after_uv, before_image, before_uv, shown):
+    mesh = obj.data
+    state = {"after_image": after_image, "after_uv": after_uv, "before_image": before_image,
+             "before_uv": before_uv, "shown": shown, "previous_uv": mesh.uv_layers.active.name
+             if mesh.uv_layers.active is not None else "", "owned_material": 0}
+    if not any(slot.material is not None for slot in obj.material_slots):
+        material = bpy.data.materials.new(OWNED_MATERIAL)
+        material.use_nodes = True
+        material[ROLE], material[OWNER] = "preview_material", obj.name
+        if len(obj.material_slots) == 0:
+            mesh.materials.append(material)
+            state["owned_material"] = 1  # appended: removal pops it
+        else:
+            obj.material_slots[0].material = material
+            state["owned_material"] = 2  # filled the empty first slot: removal empties it
+    obj[PREVIEW] = state
     for material in _node_trees(obj):
-        nodes = material.node_tree.nodes
-        previous = nodes.active
-        uv_node = nodes.new("ShaderNodeUVMap")
-        uv_node[ROLE], uv_node[OWNER] = "preview_uv", obj.name
-        uv_node.uv_map = uv_name
-        uv_node.label = "lmrefine UV"
-        image_node = nodes.new("ShaderNodeTexImage")
-        image_node[ROLE], image_node[OWNER] = "preview_image", obj.name
-        image_node[PREVIOUS_ACTIVE] = previous.name if previous is not None else ""
-        image_node.image = image
-        image_node.label = "lmrefine lightmap"
-        left = min((node.location.x for node in nodes if node not in (uv_node, image_node)), default=0.0)
-        image_node.location = (left - 320.0, 300.0)
-        uv_node.location = (left - 520.0, 300.0)
-        material.node_tree.links.new(uv_node.outputs["UV"], image_node.inputs["Vector"])
-        nodes.active = image_node
-        journal.on_rollback(lambda tree=material.node_tree, a=uv_node.name, b=image_node.name, p=previous:
-                            _remove_nodes(tree, (a, b), p))
+        _add_preview_nodes(material.node_tree, obj.name)
+    _show(obj, shown)
+
+
+def _add_preview_nodes(tree, owner):
+    nodes = tree.nodes
+    others = [node for node in nodes if node.get(ROLE) == "preview_image" and node.get(OWNER) != owner]
+    if others:  # a shared material: what the first preview replaced is what this one replaces
+        previous_active = others[0].get(PREVIOUS_ACTIVE, "")
+        previous_output = others[0].get(PREVIOUS_OUTPUTS, "")
+        previous_targets = _plain_dict(others[0].get(PREVIOUS_TARGETS))
+    else:
+        previous_active = nodes.active.name if nodes.active is not None else ""
+        outputs = [node for node in nodes if node.type == 'OUTPUT_MATERIAL']
+        previous_output = next((node.name for node in outputs if node.is_active_output), "")
+        previous_targets = {node.name: node.target for node in outputs if node.target != 'ALL'}
+        for node in outputs:
+            node.target = 'ALL'
+    left = min((node.location.x for node in nodes), default=0.0)
+    top = max((node.location.y for node in nodes), default=0.0) + 360.0
+
+    def new(kind, role, x):
+        node = nodes.new(kind)
+        node[ROLE], node[OWNER] = role, owner
+        node.name = NODE_NAMES[role]
+        node.label = node.name
+        node.location = (left + x, top)
+        return node
+
+    uv_node = new("ShaderNodeUVMap", "preview_uv", -600.0)
+    image_node = new("ShaderNodeTexImage", "preview_image", -400.0)
+    image_node[PREVIOUS_ACTIVE] = previous_active
+    image_node[PREVIOUS_OUTPUTS] = previous_output
+    image_node[PREVIOUS_TARGETS] = previous_targets
+    emission = new("ShaderNodeEmission", "preview_emission", -100.0)
+    output = new("ShaderNodeOutputMaterial", "preview_output", 100.0)
+    tree.links.new(uv_node.outputs["UV"], image_node.inputs["Vector"])
+    tree.links.new(image_node.outputs["Color"], emission.inputs["Color"])
+    tree.links.new(emission.outputs["Emission"], output.inputs["Surface"])
+    output.is_active_output = True  # Blender keeps one active output per tree: this clears the user's
+    nodes.active = image_node
+
+
+def show_preview(obj, shown):
+    """Switch the preview of `obj` to 'AFTER' (refined map) or 'BEFORE' (source map); False if it has none."""
+    state = obj.get(PREVIEW)
+    if state is None or (shown == 'BEFORE' and not state.get("before_image")):
+        return False
+    state["shown"] = shown
+    _show(obj, shown)
+    return True
+
+
+def _show(obj, shown):
+    state = obj[PREVIEW]
+    key = "before" if shown == 'BEFORE' else "after"
+    image = bpy.data.images.get(state[f"{key}_image"])
+    uv_name = state[f"{key}_uv"]
+    for material in _node_trees(obj):
+        for node in _preview_nodes(material.node_tree, obj.name):
+            if node[ROLE] == "preview_image":
+                node.image = image
+            elif node[ROLE] == "preview_uv":
+                node.uv_map = uv_name
+    layers = obj.data.uv_layers
+    if uv_name in layers:
+        layers.active = layers[uv_name]
+
+
+def _plain_dict(group):
+    return {} if group is None else {str(key): str(value) for key, value in group.items()}
+
+
+def _preview_nodes(tree, owner):
+    return [node for node in tree.nodes if node.get(ROLE, "").startswith("preview") and node.get(OWNER) == owner]
 
 
 def remove_preview(obj, journal=None):
-    """Remove this object's preview nodes; returns how many were removed."""
+    """Remove the preview of `obj` and put back what it replaced; returns how many nodes were removed.
+
+    With a journal, a rollback puts the preview back."""
     removed = 0
+    earlier = _preview_params(obj)
     for material in _node_trees(obj):
         tree = material.node_tree
-        ours = [node for node in tree.nodes if node.get(ROLE, "").startswith("preview") and node.get(OWNER) == obj.name]
+        ours = _preview_nodes(tree, obj.name)
         if not ours:
             continue
-        if journal is not None:
-            journal.on_rollback(_recreate_preview_nodes(tree, ours))
-        previous = next((node.get(PREVIOUS_ACTIVE) for node in ours if node.get(PREVIOUS_ACTIVE)), None)
+        image_node = next((node for node in ours if node[ROLE] == "preview_image"), None)
+        # Plain copies: the node's properties die with the node.
+        record = {PREVIOUS_ACTIVE: image_node.get(PREVIOUS_ACTIVE, ""),
+                  PREVIOUS_OUTPUTS: image_node.get(PREVIOUS_OUTPUTS, ""),
+                  PREVIOUS_TARGETS: _plain_dict(image_node.get(PREVIOUS_TARGETS))} if image_node is not None else {}
         for node in ours:
             tree.nodes.remove(node)
             removed += 1
-        if previous and previous in tree.nodes:
-            tree.nodes.active = tree.nodes[previous]
+        remaining = [node for node in tree.nodes if node.get(ROLE, "").startswith("preview")]
+        if remaining:  # another object's preview in this shared material: show it
+            for node in remaining:
+                if node[ROLE] == "preview_output":
+                    node.is_active_output = True
+                elif node[ROLE] == "preview_image":
+                    tree.nodes.active = node
+            continue
+        for name, target in record.get(PREVIOUS_TARGETS, {}).items():
+            if name in tree.nodes:
+                tree.nodes[name].target = target
+        output = tree.nodes.get(record.get(PREVIOUS_OUTPUTS, ""))
+        if output is not None:
+            output.is_active_output = True
+        previous = record.get(PREVIOUS_ACTIVE, "")
+        tree.nodes.active = tree.nodes.get(previous) if previous else None
+    state = obj.get(PREVIEW)
+    if state is not None:
+        mesh = obj.data
+        previous_uv = state.get("previous_uv", "")
+        if previous_uv in mesh.uv_layers:
+            mesh.uv_layers.active = mesh.uv_layers[previous_uv]
+        owned = state.get("owned_material", 0)
+        if owned:
+            material = obj.material_slots[0].material if obj.material_slots else None
+            if material is not None and material.get(ROLE) == "preview_material":
+                if owned == 1:
+                    _pop_only_material(mesh)
+                else:
+                    obj.material_slots[0].material = None
+                removed += len(material.node_tree.nodes)
+                bpy.data.materials.remove(material)
+        del obj[PREVIEW]
+    if journal is not None and earlier is not None:
+        journal.on_rollback(lambda: _apply_preview(obj, **earlier))
     return removed
-
-
-def _remove_nodes(tree, names, previous_active):
-    for name in names:
-        node = tree.nodes.get(name)
-        if node is not None:
-            tree.nodes.remove(node)
-    if previous_active is not None:
-        try:
-            tree.nodes.active = previous_active
-        except ReferenceError:
-            pass
-
-
-def _recreate_preview_nodes(tree, nodes):
-    """A rollback action that puts removed preview nodes back as they were."""
-    saved = []
-    for node in nodes:
-        saved.append({
-            "bl_idname": node.bl_idname, "name": node.name, "label": node.label,
-            "location": tuple(node.location), "role": node[ROLE], "owner": node[OWNER],
-            "previous_active": node.get(PREVIOUS_ACTIVE), "active": tree.nodes.active == node,
-            "image": getattr(node, "image", None), "uv_map": getattr(node, "uv_map", None),
-        })
-
-    def recreate():
-        created = {}
-        for item in saved:
-            node = tree.nodes.new(item["bl_idname"])
-            node.name, node.label, node.location = item["name"], item["label"], item["location"]
-            node[ROLE], node[OWNER] = item["role"], item["owner"]
-            if item["previous_active"] is not None:
-                node[PREVIOUS_ACTIVE] = item["previous_active"]
-            if item["image"] is not None:
-                node.image = item["image"]
-            if item["uv_map"] is not None:
-                node.uv_map = item["uv_map"]
-            created[item["role"]] = node
-            if item["active"]:
-                tree.nodes.active = node
-        if "preview_uv" in created and "preview_image" in created:
-            tree.links.new(created["preview_uv"].outputs["UV"], created["preview_image"].inputs["Vector"])
-
-    return recreate

@@ -174,7 +174,7 @@ class LMREFINE_OT_refine_uvs(bpy.types.Operator):
 
 
 class LMREFINE_OT_remove_preview(bpy.types.Operator):
-    """Remove the lightmap preview nodes this add-on put in the selected objects' materials"""
+    """Remove the lightmap preview from the selected objects and put back their materials and active UV map"""
 
     bl_idname = "object.lmrefine_remove_preview"
     bl_label = "Remove Lightmap Preview"
@@ -195,6 +195,51 @@ class LMREFINE_OT_remove_preview(bpy.types.Operator):
         return {'FINISHED'}
 
 
-CLASSES = (LMREFINE_OT_refine_uvs, LMREFINE_OT_remove_preview)
+class LMREFINE_OT_show_preview(bpy.types.Operator):
+    """Show the lightmaps before or after refinement on every object of the scene that has a preview"""
 
-register, unregister = bpy.utils.register_classes_factory(CLASSES)
+    bl_idname = "object.lmrefine_show_preview"
+    bl_label = "Show Lightmap"
+    bl_options = {'REGISTER', 'UNDO'}
+
+    shown: bpy.props.EnumProperty(
+        name="Show",
+        items=(('BEFORE', "Before", "The first lightmap, through the source UV map"),
+               ('AFTER', "After", "The lightmap baked with the refined UV map, through the refined map")),
+        default='AFTER',
+    )
+
+    def execute(self, context):
+        from . import materials
+
+        switched = [obj.name for obj in context.scene.objects
+                    if obj.type == 'MESH' and obj.library is None and materials.show_preview(obj, self.shown)]
+        if not switched:
+            self.report({'INFO'}, "No lightmap preview to switch: run Refine Lightmap UVs with Preview on")
+            return {'CANCELLED'}
+        return {'FINISHED'}
+
+
+def draw_menu_entry(self, context):
+    """Menu entry (3D View > Object, UV Editor > UV): menus are what F3 search finds."""
+    self.layout.separator()
+    self.layout.operator(LMREFINE_OT_refine_uvs.bl_idname, icon='UV')
+
+
+MENUS = ("VIEW3D_MT_object", "IMAGE_MT_uvs")
+
+CLASSES = (LMREFINE_OT_refine_uvs, LMREFINE_OT_remove_preview, LMREFINE_OT_show_preview)
+
+_register_classes, _unregister_classes = bpy.utils.register_classes_factory(CLASSES)
+
+
+def register():
+    _register_classes()
+    for menu in MENUS:
+        getattr(bpy.types, menu).append(draw_menu_entry)
+
+
+def unregister():
+    for menu in MENUS:
+        getattr(bpy.types, menu).remove(draw_menu_entry)
+    _unregister_classes()

@@ -1,8 +1,13 @@
-"""The "Lightmap" tab of the 3D View sidebar: settings, the button, the last result."""
+"""The "Lightmap" tab of the 3D View sidebar: settings, the button, the last result.
+
+Labels are short enough for the sidebar's default width (tooltips carry the
+detail), and every panel draws the same rows whatever the state, greying out
+what does not apply, so the layout never jumps under the mouse.
+"""
 
 import bpy
 
-from . import bridge
+from . import bridge, materials
 
 
 class _LightmapTab:
@@ -19,6 +24,19 @@ class _LightmapTab:
         return layout
 
 
+def source_line(settings, obj):
+    """The row under the source field: which map a run refines, or why none (always one row)."""
+    if obj is None or obj.type != 'MESH':
+        return "Select a mesh", 'INFO', False
+    mesh = obj.data
+    source = settings.source_layer.strip() or bridge.default_source_layer(mesh)
+    if source is None:
+        return "No UV map", 'ERROR', True
+    if source not in mesh.uv_layers:
+        return f"No map '{source}'", 'ERROR', True
+    return f"{source} > {source}_refined", 'UV', settings.source_layer.strip() == ""
+
+
 class LMREFINE_PT_refine(_LightmapTab, bpy.types.Panel):
     bl_idname = "LMREFINE_PT_refine"
     bl_label = "Refine Lightmap UVs"
@@ -30,13 +48,13 @@ class LMREFINE_PT_refine(_LightmapTab, bpy.types.Panel):
 
         column = layout.column()
         if obj is not None and obj.type == 'MESH':
-            column.prop_search(settings, "source_layer", obj.data, "uv_layers", text="Source UV Map")
-            if not settings.source_layer:
-                default = bridge.default_source_layer(obj.data)
-                column.label(text=f"Using: {default}" if default else "No UV map on the active object",
-                             icon='INFO' if default else 'ERROR')
+            column.prop_search(settings, "source_layer", obj.data, "uv_layers")
         else:
-            column.prop(settings, "source_layer", text="Source UV Map")
+            column.prop(settings, "source_layer")
+        text, icon, enabled = source_line(settings, obj)
+        row = column.row()
+        row.enabled = enabled
+        row.label(text=text, icon=icon)
         column.prop(settings, "resolution")
         column.prop(settings, "padding")
 
@@ -73,8 +91,18 @@ class LMREFINE_PT_refine_bake(_LightmapTab, bpy.types.Panel):
         layout.prop(settings, "backend")
         layout.column(heading="Passes").prop(settings, "bake_passes")
         layout.prop(settings, "samples")
+        layout.prop(settings, "exr_float32")
         layout.prop(settings, "preview")
-        layout.operator("object.lmrefine_remove_preview", icon='X')
+        # Before/after and removal: always drawn, greyed out when the active object has no preview.
+        obj = context.active_object
+        shown = materials.preview_shown(obj) if obj is not None else None
+        row = layout.row(heading="Show", align=True)
+        row.enabled = shown is not None
+        for value, text in (('BEFORE', "Before"), ('AFTER', "After")):
+            row.operator("object.lmrefine_show_preview", text=text, depress=shown == value).shown = value
+        row = layout.row()
+        row.enabled = shown is not None
+        row.operator("object.lmrefine_remove_preview", text="Remove Preview", icon='X')
 
 
 class LMREFINE_PT_refine_result(_LightmapTab, bpy.types.Panel):
@@ -82,26 +110,33 @@ class LMREFINE_PT_refine_result(_LightmapTab, bpy.types.Panel):
     bl_parent_id = "LMREFINE_PT_refine"
 
     def draw(self, context):
-        layout = self.layout
+        """Eight rows in every state (placeholders greyed out), so the panel keeps its size."""
         result = context.scene.lmrefine.result
+        column = self.layout.column(align=True)
+        rows = []
         if not result.valid:
-            layout.label(text="No run yet")
-            return
-        column = layout.column(align=True)
-        column.label(text=f"Objects: {result.objects}")
-        if result.moved == 0:  # every figure below would be 1x: say what happened instead
-            column.label(text="Nothing moved", icon='ERROR')
-            column.label(text="Refined map = source map")
-            column.label(text="The Info log says why")
+            rows = [("No run yet", 'INFO', False)] + [("", 'BLANK1', False)] * 3
+        elif result.moved == 0:  # every figure would be 1x: say what happened instead
+            rows = [(f"Objects: {result.objects}", 'OBJECT_DATA', True),
+                    ("Nothing moved", 'ERROR', True),
+                    ("Refined map = source map", 'BLANK1', True),
+                    ("The Info log says why", 'BLANK1', True)]
         else:
-            column.label(text=f"Moved: {result.moved} object(s)")
-            column.label(text=f"Edges: {result.transition_widening:.2f}x texels")
-            column.label(text=f"Density: {result.density_min:.2f}x to {result.density_max:.2f}x")
-        if result.limited_by:
-            column.label(text=f"Limited by: {result.limited_by}", icon='INFO')
-        for entry in result.timings.split("  "):
-            if entry:
-                column.label(text=entry, icon='TIME')
+            rows = [(f"Objects: {result.objects}", 'OBJECT_DATA', True),
+                    (f"Moved: {result.moved} object(s)", 'CHECKMARK', True),
+                    (f"Edges: {result.transition_widening:.2f}x texels", 'SHARPCURVE', True),
+                    (f"Density: {result.density_min:.2f}x to {result.density_max:.2f}x", 'MOD_UVPROJECT', True)]
+        rows.append((f"Limited by: {result.limited_by}" if result.limited_by else "Limited by: nothing", 'INFO',
+                     bool(result.limited_by)))
+        timings = dict(entry.rsplit(" ", 1) for entry in result.timings.split("  ") if entry)
+        for stage in ("first bake", "refine", "second bake"):
+            seconds = timings.get(stage)
+            rows.append((f"{stage.capitalize()}: {seconds}" if seconds else f"{stage.capitalize()}: -", 'TIME',
+                         seconds is not None))
+        for text, icon, enabled in rows:
+            row = column.row()
+            row.enabled = enabled
+            row.label(text=text, icon=icon)
 
 
 CLASSES = (LMREFINE_PT_refine, LMREFINE_PT_refine_options, LMREFINE_PT_refine_bake, LMREFINE_PT_refine_result)

@@ -12,6 +12,7 @@ with lmrefine.check_layout; lightmaps come from lmrefine.bake or Cycles.
 """
 
 import os
+import tempfile
 import threading
 import time
 from dataclasses import dataclass, field
@@ -107,6 +108,7 @@ def settings_snapshot(settings):
                         if name in settings.bake_passes],
         "samples": settings.samples,
         "preview": settings.preview,
+        "exr_float32": settings.exr_float32,
     }
 
 
@@ -177,11 +179,11 @@ def _validate_object(obj, options, owners, resolution, depsgraph):
                         "then UV > Lightmap Pack)")
     source = options["source_layer"] or bridge.default_source_layer(mesh)
     if source is None:
-        raise UserError(f"'{obj.name}' has only refined UV maps: set Source UV Map to the one to refine")
+        raise UserError(f"'{obj.name}' has only refined UV maps: set Source (the panel's source UV map) to the one to refine")
     if source not in mesh.uv_layers:
         available = ", ".join(layer.name for layer in mesh.uv_layers)
         raise UserError(f"'{obj.name}' has no UV map '{source}' (it has: {available}): pick the lightmap "
-                        "UV map (Source UV Map in the panel, --source-layer in a batch)")
+                        "UV map (Source in the panel, --source-layer in a batch)")
     refined = source + REFINED_SUFFIX
     if refined not in mesh.uv_layers and len(mesh.uv_layers) >= 8:
         raise UserError(f"'{obj.name}' already has 8 UV maps, Blender's limit: remove one to make room "
@@ -221,11 +223,11 @@ def _first_image(obj, source, options):
     image = options["lightmap_image"] or materials.find_lightmap_image(obj, source)
     if image is None:
         raise UserError(f"No lightmap image found for '{obj.name}': give its material an Image Texture node "
-                        f"fed by a UV Map node set to '{source}', pick the image in the panel, or set First "
-                        "Lightmap to a bake")
-    if image.get("lmrefine_object") is not None:
+                        f"fed by a UV Map node set to '{source}', pick the image in the panel, or set First Map "
+                        "to Embree or Cycles")
+    if image.get("lmrefine_object") is not None and image.get("lmrefine_pass") != "before":
         raise UserError(f"'{image.name}' was baked with a refined UV map, not with '{source}': pick a lightmap "
-                        "baked with the source map, or set First Lightmap to a bake")
+                        "baked with the source map, or set First Map to Embree or Cycles")
     problem = materials.image_problem(image)
     if problem:
         raise UserError(problem)
@@ -354,14 +356,22 @@ def run(context, targets, options, journal, image_dir=None):
 
     # 4. Preview in the materials, then write the images (the one step a rollback cannot undo, so last).
     if options["preview"]:
-        first_pass = options["bake_passes"][0]
+        # Before and after show the same light: the driving pass when it was baked again, else the first pass.
+        shown_pass = options["driving_pass"] if options["driving_pass"] in passes else passes[0]
         for target in targets:
-            image = bpy.data.images[outcome.images[target.obj.name][first_pass]]
-            materials.add_preview(target.obj, image, target.refined, journal)
+            name = target.obj.name
+            image = bpy.data.images[outcome.images[name][shown_pass]]
+            if target.image is not None:  # the user's own first lightmap is the "before"
+                before = target.image
+            else:
+                before = _store_image(target.obj, "before", lightmaps[name], journal)
+                outcome.images[name]["before"] = before.name
+            materials.add_preview(target.obj, image, target.refined, before, target.source, journal)
     for names in outcome.images.values():
         for image_name in names.values():
             image = bpy.data.images[image_name]
-            outcome.image_files[image_name] = _save_image(image, image_dir)
+            outcome.image_files[image_name] = _save_image(lmrefine, image, image_dir,
+                                                          "float" if options["exr_float32"] else "half")
     return outcome
 
 
@@ -481,12 +491,16 @@ def _store_image(obj, pass_name, pixels, journal):
     return image
 
 
-def _save_image(image, image_dir):
-    """Write `image` as EXR (into image_dir, or next to the .blend); pack it if there is nowhere to write.
+def _save_image(lmrefine, image, image_dir, precision):
+    """Write `image` as an EXR (ZIP-compressed, `precision` "half" or "float") into image_dir or next to
+    the .blend, and point the image at the file; pack it when the .blend was never saved.
 
-    Runs last: a file on disk is the one change a rollback cannot take back.
+    The file is written by lmrefine (OpenImageIO), so its format is exactly the
+    one asked for, and the image is reloaded from it: what Blender shows is what
+    was written. Runs last: a file on disk is the one change a rollback cannot take back.
     """
     filename = bpy.path.clean_name(image.name) + ".exr"
+    pixels = bridge.image_to_array(image)
     if image_dir is not None:
         path = os.path.join(os.path.abspath(image_dir), filename)
         stored = path
@@ -494,12 +508,25 @@ def _save_image(image, image_dir):
         path = os.path.join(os.path.dirname(bpy.data.filepath), filename)
         stored = "//" + filename
     else:
-        image.pack()
+        with tempfile.TemporaryDirectory(prefix="lmrefine") as folder:
+            temporary = os.path.join(folder, filename)
+            lmrefine.write_image(temporary, pixels, format=precision)
+            _load_from(image, temporary)
+            image.pack()
+        image.filepath_raw = "//" + filename
         return ""
-    image.filepath_raw = stored
-    image.file_format = 'OPEN_EXR'
-    image.save()
+    try:
+        lmrefine.write_image(path, pixels, format=precision)
+    except OSError as error:
+        raise RuntimeError(f"could not write lightmap '{path}': {error}") from error
+    _load_from(image, stored)
     return path
+
+
+def _load_from(image, filepath):
+    image.filepath_raw = filepath
+    image.source = 'FILE'
+    image.reload()
 
 
 # ------------------------------------------------------------------ drivers

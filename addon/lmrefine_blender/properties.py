@@ -16,11 +16,11 @@ from bpy.props import (
 )
 
 FIRST_LIGHTMAP_ITEMS = (
-    ('IMAGE', "Existing Image",
+    ('IMAGE', "Image",
      "Use the lightmap already baked into the object's material (an Image Texture node fed by a UV Map "
      "node set to the source layer, or one named like 'lightmap'), or the image picked below"),
-    ('EMBREE', "Bake with Embree", "Bake the first lightmap now with lmrefine's Embree baker (fast)"),
-    ('CYCLES', "Bake with Cycles", "Bake the first lightmap now with Blender's Cycles bake"),
+    ('EMBREE', "Embree", "Bake the first lightmap now with lmrefine's Embree baker (fast)"),
+    ('CYCLES', "Cycles", "Bake the first lightmap now with Blender's Cycles bake"),
 )
 
 BACKEND_ITEMS = (
@@ -44,10 +44,10 @@ BORDER_ITEMS = (
 )
 
 WAVELET_ITEMS = (
-    ('D4', "Daubechies D4", "The thesis' choice: copes with noisy bakes"),
+    ('D4', "D4 (Daubechies)", "The thesis' choice: copes with noisy bakes"),
     ('HAAR', "Haar", "Shortest filter: sharpest response, most sensitive to noise"),
-    ('D12', "Daubechies D12", "Longer filter: about the same result as D4, slower"),
-    ('D20', "Daubechies D20", "Longest Daubechies filter"),
+    ('D12', "D12 (Daubechies)", "Longer filter: about the same result as D4, slower"),
+    ('D20', "D20 (Daubechies)", "Longest Daubechies filter"),
     ('CDF53', "CDF 5/3", "Cohen-Daubechies-Feauveau 5/3"),
     ('CDF97', "CDF 9/7", "Cohen-Daubechies-Feauveau 9/7"),
 )
@@ -71,7 +71,7 @@ class LMREFINE_PG_result(bpy.types.PropertyGroup):
 
 class LMREFINE_PG_settings(bpy.types.PropertyGroup):
     source_layer: StringProperty(
-        name="Source UV Map",
+        name="Source",
         description="Lightmap UV map to refine (left untouched; the result goes to '<name>_refined'). "
                     "Empty: a map named like 'Lightmap' or 'UVMap.001', else the second UV map",
     )
@@ -84,7 +84,9 @@ class LMREFINE_PG_settings(bpy.types.PropertyGroup):
         default=2, min=0, max=64,
     )
     first_lightmap: EnumProperty(
-        name="First Lightmap", description="Where the lightmap that drives the refinement comes from",
+        name="First Map",
+        description="The first lightmap, which decides where texels go: bake it now (Embree or Cycles) with the "
+                    "source UV map, or use an existing image baked with it",
         items=FIRST_LIGHTMAP_ITEMS, default='EMBREE',
     )
     lightmap_image: PointerProperty(
@@ -92,7 +94,7 @@ class LMREFINE_PG_settings(bpy.types.PropertyGroup):
         description="Lightmap to use for every selected object (optional; default: found in each material)",
     )
     driving_pass: EnumProperty(
-        name="Driving Pass", description="Which light the first bake measures to decide where texels go",
+        name="Pass", description="Which light the first bake measures to decide where texels go",
         items=PASS_ITEMS, default='DIRECT',
     )
 
@@ -104,7 +106,7 @@ class LMREFINE_PG_settings(bpy.types.PropertyGroup):
         default=24.0, min=0.0, soft_max=40.0,
     )
     max_magnification: FloatProperty(
-        name="Max Magnification", description="Largest growth of a texel's area (texel-density ratio)",
+        name="Max Growth", description="Max magnification: largest growth of a texel's area (texel-density ratio)",
         default=8.0, min=1.0, max=64.0,
     )
     min_shrink: FloatProperty(
@@ -117,8 +119,8 @@ class LMREFINE_PG_settings(bpy.types.PropertyGroup):
         default=0.02, min=1e-5, max=0.5, precision=4,
     )
     passes: IntProperty(
-        name="Refinement Passes",
-        description="Automaton passes: each extra pass reruns the finest level with fresh energies, "
+        name="Passes",
+        description="Refinement passes of the automaton: each extra pass reruns the finest level with fresh energies, "
                     "deforming further",
         default=1, min=1, max=8,
     )
@@ -132,7 +134,7 @@ class LMREFINE_PG_settings(bpy.types.PropertyGroup):
                           default='D4')
 
     # Second bake.
-    backend: EnumProperty(name="Bake With", description="Baker of the final lightmap", items=BACKEND_ITEMS,
+    backend: EnumProperty(name="Baker", description="Baker of the final lightmaps (the second bake)", items=BACKEND_ITEMS,
                           default='EMBREE')
     bake_passes: EnumProperty(
         name="Bake Passes", description="Lightmaps to bake with the refined layout (one image each)",
@@ -140,10 +142,17 @@ class LMREFINE_PG_settings(bpy.types.PropertyGroup):
     )
     samples: IntProperty(name="Samples", description="Samples per texel for both bakes", default=16, min=1,
                          max=4096)
+    exr_float32: BoolProperty(
+        name="Float32 EXR",
+        description="Write the lightmaps as 32-bit float EXR. Off: half float (16-bit), which holds lighting "
+                    "values with about 3 significant digits at half the size; both use lossless ZIP compression",
+        default=False,
+    )
     preview: BoolProperty(
-        name="Preview in Material",
-        description="Add the baked lightmap to each material through a UV Map node set to the refined map "
-                    "(remove with 'Remove Lightmap Preview')",
+        name="Preview",
+        description="Show the baked lightmap on the objects in every viewport mode, through the refined UV map "
+                    "(Solid with Texture colour, Material Preview, Rendered), with a before/after switch. The "
+                    "user's nodes are not rewired; 'Remove Preview' puts back the active output, node and UV map",
         default=True,
     )
 

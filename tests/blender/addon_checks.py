@@ -803,6 +803,206 @@ def threaded_driver_runs_and_cancels():
     return facts
 
 
+# ---------------------------------------------------------------- preview
+
+def _output_state(tree):
+    outputs = [node for node in tree.nodes if node.type == 'OUTPUT_MATERIAL']
+    return {"active_output": next((node.name for node in outputs if node.is_active_output), None),
+            "targets": {node.name: node.target for node in outputs},
+            "active_node": tree.nodes.active.name if tree.nodes.active is not None else None,
+            "eevee": tree.get_output_node('EEVEE').name, "cycles": tree.get_output_node('CYCLES').name}
+
+
+def _wiring(tree, owner):
+    """What the preview of `owner` shows in this tree: the image and UV map that reach each engine's output."""
+    ours = {node["lmrefine_role"]: node for node in tree.nodes
+            if node.get("lmrefine_role", "").startswith("preview") and node.get("lmrefine_object") == owner}
+    if not ours:
+        return None
+
+    def source(node, socket):
+        links = node.inputs[socket].links
+        return links[0].from_node if links else None
+
+    emission = source(tree.get_output_node('EEVEE'), "Surface")
+    image_node = source(emission, "Color") if emission is not None and emission.type == 'EMISSION' else None
+    uv_node = source(image_node, "Vector") if image_node is not None else None
+    return {
+        "roles": sorted(ours),
+        "eevee_is_ours": tree.get_output_node('EEVEE') == ours["preview_output"],
+        "cycles_is_ours": tree.get_output_node('CYCLES') == ours["preview_output"],
+        "chain": [emission == ours["preview_emission"], image_node == ours["preview_image"],
+                  uv_node == ours["preview_uv"]] if emission is not None else None,
+        "image": ours["preview_image"].image.name if ours["preview_image"].image else None,
+        "uv_map": ours["preview_uv"].uv_map,
+        "active_node_is_image": tree.nodes.active == ours["preview_image"],
+    }
+
+
+@check("refine", "bake")
+def preview_wiring_toggle_and_removal():
+    """The preview after a run: one material with a user output set to EEVEE (which would win over any
+    'All' output), one object without a material. Then before/after, then removal."""
+    fresh_shadow_scene(first_lightmap='EMBREE', backend='EMBREE', bake_passes={'AO', 'DIRECT'})
+    floor, box = bpy.data.objects["Floor"], bpy.data.objects["Blocker"]
+    tree = bpy.data.materials["FloorMaterial"].node_tree
+    eevee = tree.nodes.new("ShaderNodeOutputMaterial")
+    eevee.name, eevee.target = "UserEevee", 'EEVEE'
+    tree.nodes["Material Output"].is_active_output = True
+    tree.nodes.active = tree.nodes["Principled BSDF"]
+    box.data.materials.clear()
+    floor.data.uv_layers.active = floor.data.uv_layers["UVMap"]
+    box.data.uv_layers.active = box.data.uv_layers["UVMap"]
+    scenes.select_only(floor, box)
+    before = fingerprint()
+    before_outputs = _output_state(tree)
+    materials_before = len(bpy.data.materials)
+    box_slots = [slot.material for slot in box.material_slots]
+    outcome, message = refine()
+    facts = {"outcome": outcome, "message": message, "before": before_outputs, "box_slots": len(box_slots),
+             "box_materials": [m is not None for m in box_slots]}
+    box_material = box.material_slots[0].material if box.material_slots else None
+    facts["after"] = {
+        "floor": _wiring(tree, "Floor"), "floor_outputs": _output_state(tree),
+        "floor_active_uv": floor.data.uv_layers.active.name,
+        "floor_render_uv": next(layer.name for layer in floor.data.uv_layers if layer.active_render),
+        "box_material": box_material.name if box_material else None,
+        "box": _wiring(box_material.node_tree, "Blocker") if box_material else None,
+        "box_active_uv": box.data.uv_layers.active.name,
+        "images": sorted(image.name for image in bpy.data.images if image.get("lmrefine_object")),
+    }
+    window = bpy.context.window_manager.windows[0]
+    with bpy.context.temp_override(window=window):
+        facts["show_before"] = sorted(bpy.ops.object.lmrefine_show_preview(shown='BEFORE'))
+        facts["before_shown"] = {"floor": _wiring(tree, "Floor"), "floor_active_uv": floor.data.uv_layers.active.name,
+                                 "box": _wiring(box_material.node_tree, "Blocker"),
+                                 "box_active_uv": box.data.uv_layers.active.name}
+        facts["show_after"] = sorted(bpy.ops.object.lmrefine_show_preview(shown='AFTER'))
+        facts["after_again"] = {"floor": _wiring(tree, "Floor"), "floor_active_uv": floor.data.uv_layers.active.name}
+        facts["removed"] = sorted(bpy.ops.object.lmrefine_remove_preview())
+        facts["show_without_preview"] = sorted(bpy.ops.object.lmrefine_show_preview(shown='BEFORE'))
+    facts["restored"] = {
+        "outputs": _output_state(tree), "floor_active_uv": floor.data.uv_layers.active.name,
+        "box_active_uv": box.data.uv_layers.active.name, "box_slots": len(box.material_slots),
+        "box_materials": [slot.material is not None for slot in box.material_slots],
+        "materials": len(bpy.data.materials) - materials_before,
+        # Only the refined maps and the lightmap images stay: every material is as it was.
+        "changed": changed(before, fingerprint()),
+    }
+    return facts
+
+
+@check("refine", "bake")
+def preview_in_a_shared_material():
+    """Two objects with one material: each gets its preview nodes; removing one shows the other,
+    removing both restores the material exactly."""
+    fresh_shadow_scene(first_lightmap='EMBREE', backend='EMBREE', bake_passes={'DIRECT'})
+    floor, box = bpy.data.objects["Floor"], bpy.data.objects["Blocker"]
+    material = bpy.data.materials["FloorMaterial"]
+    box.data.materials[0] = material
+    scenes.select_only(floor, box)
+    before = fingerprint()
+    outcome, message = refine()
+    tree = material.node_tree
+    facts = {"outcome": outcome, "message": message,
+             "shown_after_run": _wiring(tree, "Blocker")["eevee_is_ours"] or _wiring(tree, "Floor")["eevee_is_ours"]}
+    with bpy.context.temp_override(window=bpy.context.window_manager.windows[0]):
+        scenes.select_only(box)
+        bpy.ops.object.lmrefine_remove_preview()
+        facts["after_one_removed"] = _wiring(tree, "Floor")
+        scenes.select_only(floor)
+        bpy.ops.object.lmrefine_remove_preview()
+    facts["changed"] = changed(before, fingerprint())
+    return facts
+
+
+@check()
+def menus_and_panel_rows():
+    """The operator's menu entries (what F3 search finds) and panels that draw the same rows in every state."""
+    register()
+    from types import SimpleNamespace
+
+    from lmrefine_blender import operators, panels
+
+    class Layout:
+        """A stand-in UILayout that records what a panel draws (panels draw only with a window)."""
+
+        def __init__(self, log):
+            self.log = log
+
+        def __getattr__(self, name):  # use_property_split, enabled, ...: accepted and ignored
+            return None
+
+        def __setattr__(self, name, value):
+            object.__setattr__(self, name, value)
+
+        def _sub(self, *args, **kwargs):
+            return Layout(self.log)
+
+        column = row = box = split = _sub
+
+        def label(self, text="", icon='NONE'):
+            self.log.append(("label", text, icon))
+
+        def prop(self, data, name, text=None, icon='NONE', **kwargs):
+            self.log.append(("prop", name, icon))
+
+        def prop_search(self, data, name, *args, **kwargs):
+            self.log.append(("prop", name, 'NONE'))
+
+        def template_ID(self, data, name, **kwargs):
+            self.log.append(("prop", name, 'NONE'))
+
+        def operator(self, idname, text=None, icon='NONE', depress=False, **kwargs):
+            self.log.append(("operator", idname, icon))
+            return SimpleNamespace()
+
+        def separator(self):
+            self.log.append(("separator",))
+
+    def draw(panel):
+        log = []
+        panel.draw(SimpleNamespace(layout=Layout(log), split_layout=lambda: Layout(log)), bpy.context)
+        return log
+
+    fresh_shadow_scene(first_lightmap='EMBREE', backend='EMBREE', bake_passes={'DIRECT'})
+    icons = set(bpy.types.UILayout.bl_rna.functions["prop"].parameters["icon"].enum_items.keys())
+    states = {}
+    scenes.select_only()
+    states["nothing"] = {name: draw(getattr(panels, name)) for name in
+                         ("LMREFINE_PT_refine", "LMREFINE_PT_refine_bake", "LMREFINE_PT_refine_result")}
+    scenes.select_only(bpy.data.objects["Floor"])
+    outcome, message = refine()
+    states["after_run"] = {name: draw(getattr(panels, name)) for name in
+                           ("LMREFINE_PT_refine", "LMREFINE_PT_refine_bake", "LMREFINE_PT_refine_result")}
+    bpy.context.scene.lmrefine.result.moved = 0
+    states["nothing_moved"] = {"LMREFINE_PT_refine_result": draw(panels.LMREFINE_PT_refine_result)}
+    used = {entry[2] for state in states.values() for log in state.values() for entry in log if len(entry) > 2}
+    menus = {}
+    for menu in operators.MENUS:
+        functions = getattr(getattr(bpy.types, menu).draw, "_draw_funcs", [])
+        log = []
+        if operators.draw_menu_entry in functions:
+            operators.draw_menu_entry(SimpleNamespace(layout=Layout(log)), bpy.context)
+        menus[menu] = [entry[1] for entry in log if entry[0] == "operator"]
+    lmrefine_blender.unregister()
+    menus_after_unregister = {menu: any(getattr(f, "__module__", "").startswith("lmrefine_blender")
+                                        for f in getattr(getattr(bpy.types, menu).draw, "_draw_funcs", []))
+                              for menu in operators.MENUS}
+    lmrefine_blender.register()
+    return {
+        "outcome": outcome, "message": message,
+        "rows": {state: {panel: len(log) for panel, log in logs.items()} for state, logs in states.items()},
+        "labels": {state: [entry[1] for entry in logs["LMREFINE_PT_refine_result"] if entry[0] == "label"]
+                   for state, logs in states.items()},
+        "operators_after_run": [entry[1] for entry in states["after_run"]["LMREFINE_PT_refine_bake"]
+                                if entry[0] == "operator"],
+        "icons_used": sorted(used - {'NONE'}), "icons_missing": sorted(used - icons - {'NONE'}),
+        "menus": menus, "menus_after_unregister": menus_after_unregister,
+        "show_operator": hasattr(bpy.ops.object, "lmrefine_show_preview"),
+    }
+
+
 @check()
 def save_scene_for_batch():
     fresh_shadow_scene()

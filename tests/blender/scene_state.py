@@ -32,7 +32,8 @@ def fingerprint():
             [m.name if m else None for m in mesh.materials])
     for material in bpy.data.materials:
         tree = material.node_tree
-        nodes = [(n.name, n.bl_idname, getattr(n, "image", None) and n.image.name) for n in tree.nodes] if tree else []
+        nodes = [(n.name, n.bl_idname, getattr(n, "image", None) and n.image.name, getattr(n, "uv_map", None),
+                  getattr(n, "target", None), getattr(n, "is_active_output", None)) for n in tree.nodes] if tree else []
         links = [(l.from_node.name, l.to_node.name) for l in tree.links] if tree else []
         active = tree.nodes.active.name if tree and tree.nodes.active else None
         parts[f"material:{material.name}"] = _digest(nodes, links, active)
