@@ -24,6 +24,11 @@ class _LightmapTab:
         return layout
 
 
+# refine_uvs' limit names, short enough for the sidebar (the Info report has the full text).
+LIMIT_NAMES = {"max_magnification": "max growth", "min_shrink": "min shrink", "step_cap": "steps",
+               "original_gutter": "gutter"}
+
+
 def source_line(settings, obj):
     """The row under the source field: which map a run refines, or why none (always one row)."""
     if obj is None or obj.type != 'MESH':
@@ -34,7 +39,9 @@ def source_line(settings, obj):
         return "No UV map", 'ERROR', True
     if source not in mesh.uv_layers:
         return f"No map '{source}'", 'ERROR', True
-    return f"{source} > {source}_refined", 'UV', settings.source_layer.strip() == ""
+    if settings.source_layer.strip() == "":
+        return f"Auto: {source}", 'UV', True  # the map the empty field stands for
+    return f"Into: {source}_refined", 'UV', False
 
 
 class LMREFINE_PT_refine(_LightmapTab, bpy.types.Panel):
@@ -126,8 +133,8 @@ class LMREFINE_PT_refine_result(_LightmapTab, bpy.types.Panel):
                     (f"Moved: {result.moved} object(s)", 'CHECKMARK', True),
                     (f"Edges: {result.transition_widening:.2f}x texels", 'SHARPCURVE', True),
                     (f"Density: {result.density_min:.2f}x to {result.density_max:.2f}x", 'MOD_UVPROJECT', True)]
-        rows.append((f"Limited by: {result.limited_by}" if result.limited_by else "Limited by: nothing", 'INFO',
-                     bool(result.limited_by)))
+        limits = ", ".join(LIMIT_NAMES.get(name, name) for name in result.limited_by.split(", ") if name)
+        rows.append((f"Limit: {limits}" if limits else "Limit: none", 'INFO', bool(limits)))
         timings = dict(entry.rsplit(" ", 1) for entry in result.timings.split("  ") if entry)
         for stage in ("first bake", "refine", "second bake"):
             seconds = timings.get(stage)

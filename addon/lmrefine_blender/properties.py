@@ -44,10 +44,10 @@ BORDER_ITEMS = (
 )
 
 WAVELET_ITEMS = (
-    ('D4', "D4 (Daubechies)", "The thesis' choice: copes with noisy bakes"),
+    ('D4', "D4", "Daubechies D4, the thesis' choice: copes with noisy bakes"),
     ('HAAR', "Haar", "Shortest filter: sharpest response, most sensitive to noise"),
-    ('D12', "D12 (Daubechies)", "Longer filter: about the same result as D4, slower"),
-    ('D20', "D20 (Daubechies)", "Longest Daubechies filter"),
+    ('D12', "D12", "Daubechies D12, a longer filter: about the same result as D4, slower"),
+    ('D20', "D20", "Daubechies D20: the longest Daubechies filter"),
     ('CDF53', "CDF 5/3", "Cohen-Daubechies-Feauveau 5/3"),
     ('CDF97', "CDF 9/7", "Cohen-Daubechies-Feauveau 9/7"),
 )

@@ -1,0 +1,116 @@
+"""Screenshots of the add-on as a user sees it (docs/images/blender_*.png); not a test.
+
+    blender -b --factory-startup --python tests/blender/screenshots.py -- OUT          # writes OUT/shadow.blend
+    xvfb-run -a -s "-screen 0 1600x900x24" blender --factory-startup OUT/shadow.blend \\
+        --python tests/blender/screenshots.py -- OUT                                   # OUT/*.png, then quits
+
+The second run opens a real window (Xvfb), switches the sidebar to the
+Lightmap tab with xdotool (Blender 3.4 has no API for the tab), runs Refine
+Lightmap UVs on the shadow scene of the tests and takes a screenshot per
+viewport mode and before/after. The docs' pictures are crops of these:
+    convert 5_panel.png -crop 220x820+1380+80 blender_panel.png
+    convert 2_material_before.png 1_material_after.png -crop 500x330+500+330 +append -resize 80% ...
+"""
+
+import os
+import subprocess
+import sys
+
+OUT = os.path.abspath(sys.argv[sys.argv.index("--") + 1])
+REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+sys.path[:0] = [os.path.join(REPO, "python"), os.path.join(REPO, "addon"), os.path.dirname(__file__)]
+
+import bpy  # noqa: E402
+
+if bpy.app.background:
+    import scenes
+    os.makedirs(OUT, exist_ok=True)
+    scenes.shadow_scene()
+    bpy.ops.wm.save_as_mainfile(filepath=os.path.join(OUT, "shadow.blend"))
+    raise SystemExit(0)
+
+
+def view3d():
+    window = bpy.context.window_manager.windows[0]
+    return window, max((a for a in window.screen.areas if a.type == 'VIEW_3D'), key=lambda a: a.width * a.height)
+
+
+def shot(name):
+    window, area = view3d()
+    with bpy.context.temp_override(window=window, area=area):
+        bpy.ops.screen.screenshot(filepath=os.path.join(OUT, name + ".png"))
+
+
+def click(x, y):
+    subprocess.run(["xdotool", "mousemove", str(x), str(y), "click", "1"], check=True)
+
+
+def park_mouse():  # a tick after the click: Blender must see the click where it was made
+    subprocess.run(["xdotool", "mousemove", "800", "880"], check=True)
+
+
+def full_screen():
+    import lmrefine_blender
+    lmrefine_blender.register()
+    settings = bpy.context.scene.lmrefine
+    settings.resolution, settings.samples = 128, 8
+    window, area = view3d()
+    area.spaces.active.show_region_ui = True  # the sidebar, before the area is made full screen
+    with bpy.context.temp_override(window=window, area=area):
+        bpy.ops.screen.screen_full_area()
+
+
+def frame():
+    from mathutils import Euler
+    window, area = view3d()
+    space = area.spaces.active
+    space.show_region_ui = True
+    space.overlay.show_floor = space.overlay.show_axis_x = space.overlay.show_axis_y = False
+    view = space.region_3d
+    view.view_perspective = 'PERSP'
+    view.view_rotation = Euler((0.9, 0.0, 0.5)).to_quaternion()
+    view.view_distance, view.view_location = 7.0, (0.2, 0.3, 0.0)
+
+
+def refine():
+    window, area = view3d()
+    with bpy.context.temp_override(window=window, area=area):
+        bpy.ops.object.lmrefine_refine_uvs('EXEC_DEFAULT')
+
+
+def shading(kind, color=None):
+    space = view3d()[1].spaces.active
+    space.shading.type = kind
+    if color:
+        space.shading.color_type = color
+
+
+def show(which):
+    window, area = view3d()
+    with bpy.context.temp_override(window=window, area=area):
+        bpy.ops.object.lmrefine_show_preview(shown=which)
+
+
+PLAN = [
+    full_screen, frame, lambda: click(1586, 253), park_mouse,  # the Lightmap tab
+    lambda: shot("0_panel_before_run"), refine,
+    lambda: shading('MATERIAL'), lambda: None, lambda: None,  # EEVEE compiles its shaders
+    lambda: shot("1_material_after"), lambda: show('BEFORE'), lambda: shot("2_material_before"),
+    lambda: show('AFTER'), lambda: shading('SOLID', 'TEXTURE'), lambda: shot("3_solid_texture_after"),
+    lambda: shading('RENDERED'), lambda: shot("4_rendered_after"),
+    lambda: shading('SOLID', 'MATERIAL'), lambda: click(1440, 305), park_mouse,  # open Refinement
+    lambda: shot("5_panel"), lambda: os._exit(0),
+]
+
+
+def tick():
+    step = PLAN.pop(0)
+    try:
+        step()
+    except Exception:  # noqa: BLE001  (a picture tool: say what failed, keep going)
+        import traceback
+        traceback.print_exc()
+    return 6.0 if PLAN else None
+
+
+bpy.app.timers.register(tick, first_interval=2.0)
