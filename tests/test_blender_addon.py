@@ -331,6 +331,28 @@ def test_remove_preview_restores_materials(facts):
     assert value["removed"] == ["FINISHED"] and value["again"] == ["CANCELLED"]
 
 
+def test_progress_moves_per_map_and_per_stage(facts):
+    value = fact(facts, "progress_moves_per_map_and_stage")
+    assert value["value"] == "done"
+    fractions = value["fractions"]
+    assert all(b >= a - 1e-9 for a, b in zip(fractions, fractions[1:])), "progress went back"
+    assert fractions[0] == 0.0 and fractions[-1] == pytest.approx(1.0)
+    # Each map of a bake ends at its share of the bake's span: not at the span's end after map 1.
+    for m in range(1, 6):
+        assert value["ends"][f"First bake {m}"] == pytest.approx(0.4 * m / 5)
+        assert value["ends"][f"Second bake {m}"] == pytest.approx(0.6 + 0.4 * m / 5)
+    # The refinement's three stages (gradient map, automaton, pack) fill its span one after another.
+    assert max(f for f in fractions if 0.4 <= f <= 0.6) == pytest.approx(0.6)
+    real = value["real_fractions"]
+    assert all(b >= a - 1e-9 for a, b in zip(real, real[1:])) and real[-1] == pytest.approx(1.0)
+    # Two objects, two passes: the second bake's maps are the last third, map 1 ends half way through it.
+    at = value["real_at"]
+    first_map_end = max(high for label, (low, high) in at.items()
+                        if label.startswith("Second bake") and "map 1/2" in label)
+    assert first_map_end == pytest.approx(2 / 3 + 1 / 6, abs=1e-6)
+    assert any("map 2/2" in label for label in value["real_labels"] if label.startswith("First bake"))
+
+
 def test_preview_is_wired_through_the_refined_map_in_every_viewport_mode(facts):
     value = fact(facts, "preview_wiring_toggle_and_removal")
     assert value["outcome"] == "FINISHED", value["message"]

@@ -24,6 +24,10 @@ from . import bridge, cycles_bake, materials
 from .errors import Cancelled, UserError  # noqa: F401  (re-exported for the drivers)
 
 REFINED_SUFFIX = "_refined"
+# The stages refine_uvs reports, each from 0 to 1: gradient map, automaton, pack.
+REFINE_STAGES = 3
+# The light transports the baker runs per map for each pass, each a stage of its progress.
+TRANSPORTS = {"direct": {"direct"}, "indirect": {"indirect"}, "combined": {"direct", "indirect"}, "ao": {"ao"}}
 # Texels both bakers fill into the gutter around each chart (Blender's default
 # bake margin): bilinear and mipmapped lookups near a chart border stay on it.
 BAKE_MARGIN = 16
@@ -41,6 +45,7 @@ class NativeWork:
     call: object
     start: float  # overall progress at the start of this work, in [0, 1]
     span: float  # share of the overall progress it covers
+    parts: int = 1  # stages the call reports one after another, each from 0 to 1 (the baker: one per map and transport)
 
 
 @dataclass
@@ -261,8 +266,9 @@ def run(context, targets, options, journal, image_dir=None):
     resolution = options["resolution"]
     padding = options["padding"]
     backend_first = options["first_lightmap"]
-    stages = (0 if backend_first == 'IMAGE' else 1) + len(targets) + 1
-    span = 1.0 / stages
+    # Progress in units of one map's work: each bake one unit per map, each refinement one.
+    maps = len(targets)
+    span = 1.0 / ((0 if backend_first == 'IMAGE' else maps) + maps + maps)
     done = 0
 
     # 1. The first lightmap, on the source layout.
@@ -274,12 +280,12 @@ def run(context, targets, options, journal, image_dir=None):
         passes = (options["driving_pass"],)
         if backend_first == 'EMBREE':
             baked = yield from _bake_embree(context, lmrefine, targets, source_of, passes, options, "First bake",
-                                            done * span, span, outcome.warnings)
+                                            done * span, maps * span, outcome.warnings)
         else:
             baked = yield from _bake_cycles(context, targets, source_of, passes, options, "First bake",
-                                            done * span, span)
+                                            done * span, maps * span)
         lightmaps = baked[options["driving_pass"]]
-        done += 1
+        done += maps
         outcome.timings["first bake"] = time.perf_counter() - clock
 
     for name, lightmap in lightmaps.items():
@@ -299,7 +305,7 @@ def run(context, targets, options, journal, image_dir=None):
                 lambda progress, lightmap=lightmaps[name], layout=layout: lmrefine.refine_uvs(
                     lightmap, layout.uvs, layout.triangles, resolution, padding=padding, progress=progress,
                     **options["refine_options"]),
-                done * span, span)
+                done * span, span, parts=REFINE_STAGES)
         except (ValueError, TypeError, MemoryError) as error:
             # The core refused this object's input: skip it, refine the others
             # (nothing of it was written yet).
@@ -344,10 +350,10 @@ def run(context, targets, options, journal, image_dir=None):
     passes = tuple(options["bake_passes"])
     if options["backend"] == 'EMBREE':
         baked = yield from _bake_embree(context, lmrefine, targets, refined_of, passes, options, "Second bake",
-                                        done * span, span, outcome.warnings)
+                                        done * span, 1.0 - done * span, outcome.warnings)
     else:
         baked = yield from _bake_cycles(context, targets, refined_of, passes, options, "Second bake",
-                                        done * span, span)
+                                        done * span, 1.0 - done * span)
     for pass_name in passes:
         for target in targets:
             image = _store_image(target.obj, pass_name, baked[pass_name][target.obj.name], journal)
@@ -415,7 +421,7 @@ def _bake_embree(context, lmrefine, targets, uv_name_of, passes, options, label,
         label,
         lambda progress: lmrefine.bake(scene, options["resolution"], passes=passes, samples=options["samples"],
                                        seed=0, progress=progress, dilation=BAKE_MARGIN),
-        start, span)
+        start, span, parts=len(ids) * len(set().union(*(TRANSPORTS[name] for name in passes))))
     by_pass = {passes[0]: baked} if len(passes) == 1 else baked
     return {name: {obj: np.asarray(by_pass[name][mesh_id], dtype=np.float32) for obj, mesh_id in ids.items()}
             for name in passes}
@@ -563,15 +569,22 @@ def run_blocking(job, progress=None, should_stop=None):
 def _progress_callback(work, report, should_stop):
     """The callable lmrefine's native calls take: progress(fraction, stage) -> False cancels.
 
-    A native call may restart its fraction per sub-stage (the baker per pass);
-    the overall progress only moves forward.
+    A native call restarts its fraction at every stage (the baker per map and
+    transport, refine_uvs per step): each new stage name counts as the next
+    of the work's `parts`, so the fraction moves across all of them. It only
+    moves forward, and a call with more stages than expected stops at the end
+    of its span rather than running past it.
     """
-    furthest = [0.0]
+    state = {"stage": None, "done": 0, "furthest": 0.0}
 
     def callback(fraction, stage=""):
-        furthest[0] = max(furthest[0], min(max(float(fraction), 0.0), 1.0))
+        if state["stage"] is not None and stage != state["stage"]:
+            state["done"] += 1
+        state["stage"] = stage
+        within = (state["done"] + min(max(float(fraction), 0.0), 1.0)) / max(work.parts, 1)
+        state["furthest"] = max(state["furthest"], min(within, 1.0))
         if report is not None:
-            report(work.start + work.span * furthest[0], f"{work.label} ({stage})" if stage else work.label)
+            report(work.start + work.span * state["furthest"], f"{work.label} ({stage})" if stage else work.label)
         return not should_stop()
 
     return callback

@@ -803,6 +803,49 @@ def threaded_driver_runs_and_cancels():
     return facts
 
 
+# --------------------------------------------------------------- progress
+
+@check()
+def progress_moves_per_map_and_stage():
+    """The fractions run_blocking reports: a fake job with a baker-like call (stages restart at 0 per map,
+    as lmrefine.bake's do) and a refine-like call (three stages); then a real run on two objects."""
+    def staged(stages, steps=4):
+        def call(progress):
+            for stage in stages:
+                for step in range(steps + 1):
+                    progress(step / steps, stage)
+            return "value"
+        return call
+
+    bake_stages = [f"baking {t} (map {m}/5)" for m in range(1, 6) for t in ("direct", "ao")]
+
+    def job():
+        yield pipeline.NativeWork("First bake", staged(bake_stages), 0.0, 0.4, parts=10)
+        yield pipeline.NativeWork("Refining A", staged(["gradient map", "automaton", "pack"]), 0.4, 0.2,
+                                  parts=pipeline.REFINE_STAGES)
+        yield pipeline.NativeWork("Second bake", staged(bake_stages), 0.6, 0.4, parts=10)
+        return "done"
+
+    seen = []
+    value = pipeline.run_blocking(job(), progress=lambda fraction, label: seen.append((fraction, label)))
+    # The fraction when each map's last stage ends, per bake.
+    ends = {f"{bake} {m}": max(f for f, label in seen if label.startswith(bake) and f"map {m}/5" in label)
+            for bake in ("First bake", "Second bake") for m in range(1, 6)}
+
+    fresh_shadow_scene(first_lightmap='EMBREE', backend='EMBREE', bake_passes={'DIRECT', 'AO'})
+    objects = [bpy.data.objects["Floor"], bpy.data.objects["Blocker"]]
+    options = pipeline.settings_snapshot(bpy.context.scene.lmrefine)
+    targets = pipeline.validate(bpy.context, objects, options)
+    real = []
+    pipeline.run_blocking(pipeline.run(bpy.context, targets, options, Journal()),
+                          progress=lambda fraction, label: real.append((fraction, label)))
+    return {"value": value, "fractions": [f for f, _ in seen], "ends": ends,
+            "real_fractions": [f for f, _ in real],
+            "real_labels": sorted({label for _, label in real}),
+            "real_at": {label: [min(f for f, l in real if l == label), max(f for f, l in real if l == label)]
+                        for label in {label for _, label in real}}}
+
+
 # ---------------------------------------------------------------- preview
 
 def _output_state(tree):
