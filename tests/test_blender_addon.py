@@ -331,6 +331,15 @@ def test_remove_preview_restores_materials(facts):
     assert value["removed"] == ["FINISHED"] and value["again"] == ["CANCELLED"]
 
 
+def test_a_texture_map_as_source_is_named_with_the_fix(facts):
+    value = fact(facts, "texture_map_as_source_warns")
+    assert value["outcome"] == "FINISHED", value["message"]
+    texture = [w for w in value["warnings"] if "looks like a texture map" in w]
+    assert len(texture) == 1 and "'Blocker': UV map 'Tex'" in texture[0]
+    assert "overlapping" in texture[0] and "UV > Lightmap Pack) and pick it as Source" in texture[0]
+    assert value["panel_warnings"] == len(value["warnings"]) >= 1
+
+
 def test_progress_moves_per_map_and_per_stage(facts):
     value = fact(facts, "progress_moves_per_map_and_stage")
     assert value["value"] == "done"

@@ -26,6 +26,7 @@ def _report_outcome(operator, context, outcome, seconds):
     result.density_min = summary["density_min"]
     result.density_max = summary["density_max"]
     result.limited_by = summary["limited_by"]
+    result.warnings = len(outcome.warnings)
     result.timings = "  ".join(f"{stage} {value:.2f}s" for stage, value in outcome.timings.items())
     if summary["moved"] == 0:
         result.message = (f"Nothing moved: the refined UV maps of {len(outcome.objects)} object(s) equal their "

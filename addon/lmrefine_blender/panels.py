@@ -117,7 +117,7 @@ class LMREFINE_PT_refine_result(_LightmapTab, bpy.types.Panel):
     bl_parent_id = "LMREFINE_PT_refine"
 
     def draw(self, context):
-        """Eight rows in every state (placeholders greyed out), so the panel keeps its size."""
+        """Nine rows in every state (placeholders greyed out), so the panel keeps its size."""
         result = context.scene.lmrefine.result
         column = self.layout.column(align=True)
         rows = []
@@ -135,6 +135,9 @@ class LMREFINE_PT_refine_result(_LightmapTab, bpy.types.Panel):
                     (f"Density: {result.density_min:.2f}x to {result.density_max:.2f}x", 'MOD_UVPROJECT', True)]
         limits = ", ".join(LIMIT_NAMES.get(name, name) for name in result.limited_by.split(", ") if name)
         rows.append((f"Limit: {limits}" if limits else "Limit: none", 'INFO', bool(limits)))
+        warnings = result.warnings if result.valid else 0
+        rows.append((f"Warnings: {warnings} (Info log)" if warnings else "Warnings: none", 'ERROR' if warnings
+                     else 'INFO', bool(warnings)))
         timings = dict(entry.rsplit(" ", 1) for entry in result.timings.split("  ") if entry)
         for stage in ("first bake", "refine", "second bake"):
             seconds = timings.get(stage)

@@ -324,7 +324,14 @@ def run(context, targets, options, journal, image_dir=None):
             raise RuntimeError(f"refine_uvs returned a layout for '{name}' that is worse than the source "
                                f"({', '.join(worse)}: {dict(check)}); this is a bug in lmrefine, please report "
                                "it with the .blend")
-        if not source_check["valid"]:
+        if not source_check["valid"] and (source_check["overlapping"] or source_check["min_gutter_texels"] <= 0.0):
+            # Charts that overlap or touch share texels: the layout of a texture, not of a lightmap.
+            outcome.warnings.append(
+                f"'{name}': UV map '{target.source}' looks like a texture map, not a lightmap layout "
+                f"({describe_problems(source_check, padding)}): faces share texels, so light bleeds between "
+                "them whatever the refinement does; add a UV map for the lightmap (Object Data > UV Maps > +, "
+                "then UV > Lightmap Pack) and pick it as Source")
+        elif not source_check["valid"]:
             outcome.warnings.append(
                 f"'{name}': UV map '{target.source}' was already invalid at {resolution} texels "
                 f"({describe_problems(source_check, padding)}); the refined map is no worse, but lightmap "

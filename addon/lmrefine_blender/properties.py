@@ -65,6 +65,7 @@ class LMREFINE_PG_result(bpy.types.PropertyGroup):
     density_min: FloatProperty(name="Min Density", description="Smallest texel-density ratio (new / old area)")
     density_max: FloatProperty(name="Max Density", description="Largest texel-density ratio (new / old area)")
     limited_by: StringProperty(name="Limited By", description="What kept the refinement from going further")
+    warnings: IntProperty(name="Warnings", description="Warnings of the last run (in the Info log)")
     timings: StringProperty(name="Timings", description="Seconds per stage of the last run")
     message: StringProperty(name="Message", description="Summary of the last run")
 

@@ -846,6 +846,24 @@ def progress_moves_per_map_and_stage():
                         for label in {label for _, label in real}}}
 
 
+@check("refine", "bake")
+def texture_map_as_source_warns():
+    """A source map with every face of the box on the same square (a texture map's layout): the run
+    succeeds and says the map looks like a texture map, with the fix; the panel counts the warning."""
+    fresh_shadow_scene(first_lightmap='EMBREE', backend='EMBREE', bake_passes={'DIRECT'}, source_layer="Tex")
+    box = bpy.data.objects["Blocker"]
+    layer = box.data.uv_layers.new(name="Tex")
+    square = np.array([(0.1, 0.1), (0.9, 0.1), (0.9, 0.9), (0.1, 0.9)], np.float32)
+    layer.data.foreach_set("uv", np.tile(square, (len(box.data.polygons), 1)).ravel())
+    scenes.select_only(box)
+    outcome, message = refine()
+    result = bpy.context.scene.lmrefine.result
+    options = pipeline.settings_snapshot(bpy.context.scene.lmrefine)
+    targets = pipeline.validate(bpy.context, [box], options)
+    run = pipeline.run_blocking(pipeline.run(bpy.context, targets, options, Journal()))
+    return {"outcome": outcome, "message": message, "warnings": run.warnings, "panel_warnings": result.warnings}
+
+
 # ---------------------------------------------------------------- preview
 
 def _output_state(tree):
