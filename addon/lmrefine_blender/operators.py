@@ -27,6 +27,11 @@ def _report_outcome(operator, context, outcome, seconds):
     result.density_max = summary["density_max"]
     result.limited_by = summary["limited_by"]
     result.timings = "  ".join(f"{stage} {value:.2f}s" for stage, value in outcome.timings.items())
+    result.tessellated = bool(outcome.tessellation)
+    result.vertices_added = summary["vertices_added"]
+    result.stages = outcome.stages_asked
+    result.stages_kept = summary["stages_kept"]
+    result.stages_stopped = "; ".join(f"{name}: {entry['stopped']}" for name, entry in outcome.stages.items())
     if summary["moved"] == 0:
         result.message = (f"Nothing moved: the refined UV maps of {len(outcome.objects)} object(s) equal their "
                           f"source maps ({seconds:.1f}s; the warnings say why)")
@@ -36,6 +41,10 @@ def _report_outcome(operator, context, outcome, seconds):
                           f"{summary['transition_widening']:.2f}x their area, texel density "
                           f"{summary['density_min']:.2f}x to {summary['density_max']:.2f}x"
                           + (f"; {still} did not move (see warnings)" if still else ""))
+    if outcome.tessellation:
+        result.message += f"; tessellation added {summary['vertices_added']} vertices"
+    if outcome.stages:
+        result.message += f"; stages kept: {summary['stages_kept']} of {result.stages} ({result.stages_stopped})"
     for warning in outcome.warnings:
         operator.report({'WARNING'}, warning)
     operator.report({'INFO'}, result.message)

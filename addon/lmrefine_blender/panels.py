@@ -63,6 +63,21 @@ class LMREFINE_PT_refine_options(_LightmapTab, bpy.types.Panel):
             column.prop(settings, name)
 
 
+class LMREFINE_PT_refine_stages(_LightmapTab, bpy.types.Panel):
+    bl_label = "Stages and Tessellation"
+    bl_parent_id = "LMREFINE_PT_refine"
+    bl_options = {'DEFAULT_CLOSED'}
+
+    def draw(self, context):
+        settings = context.scene.lmrefine
+        column = self.split_layout().column()
+        column.prop(settings, "stages")
+        column.prop(settings, "tessellate")
+        row = column.row()
+        row.active = settings.tessellate
+        row.prop(settings, "tessellate_budget")
+
+
 class LMREFINE_PT_refine_bake(_LightmapTab, bpy.types.Panel):
     bl_label = "Second Bake"
     bl_parent_id = "LMREFINE_PT_refine"
@@ -99,11 +114,16 @@ class LMREFINE_PT_refine_result(_LightmapTab, bpy.types.Panel):
             column.label(text=f"Density: {result.density_min:.2f}x to {result.density_max:.2f}x")
         if result.limited_by:
             column.label(text=f"Limited by: {result.limited_by}", icon='INFO')
+        if result.tessellated:
+            column.label(text=f"Tessellation: +{result.vertices_added} vertices", icon='MOD_TRIANGULATE')
+        if result.stages > 1:
+            column.label(text=f"Stages kept: {result.stages_kept} of {result.stages}", icon='SORTTIME')
         for entry in result.timings.split("  "):
             if entry:
                 column.label(text=entry, icon='TIME')
 
 
-CLASSES = (LMREFINE_PT_refine, LMREFINE_PT_refine_options, LMREFINE_PT_refine_bake, LMREFINE_PT_refine_result)
+CLASSES = (LMREFINE_PT_refine, LMREFINE_PT_refine_options, LMREFINE_PT_refine_stages, LMREFINE_PT_refine_bake,
+           LMREFINE_PT_refine_result)
 
 register, unregister = bpy.utils.register_classes_factory(CLASSES)

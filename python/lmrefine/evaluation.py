@@ -123,10 +123,8 @@ def _tessellated(sample, variant, baseline, budget):
     return scene, result.report
 
 
-# A further stage is kept only if its layout moves texels by at least this
-# much (median relative change of triangle texel density against the
-# previous stage): the rule needs no ground truth, as in the add-on.
-STAGE_MIN_CHANGE = 0.05
+# The stop rule of further stages is shared with the add-on (lmrefine.metrics).
+STAGE_MIN_CHANGE = metrics.STAGE_MIN_CHANGE
 
 
 def _further_stages(sample, triangles, resolution, padding, options, stages, points, truth, transitions, refined,
@@ -136,7 +134,6 @@ def _further_stages(sample, triangles, resolution, padding, options, stages, poi
     previous one (STAGE_MIN_CHANGE); the world-space error of every stage is
     measured at the evaluation's points for the report, never used to choose.
     Returns the last kept stage's (refine result, map, lookup) and the history."""
-    areas = sample.triangle_areas()
     everywhere = np.ones(len(truth), bool)
 
     def errors(stage, result, lookup, change=None):
@@ -153,15 +150,12 @@ def _further_stages(sample, triangles, resolution, padding, options, stages, poi
         previous, previous_map = refined, refined_map
         candidate = stages.run("refine", lambda p: refine_uvs(previous_map, previous.uvs, triangles, resolution,
                                                               padding=padding, progress=p, **options.refine_options))
-        before = metrics.texel_density(previous.uvs, triangles, areas, resolution)
-        after = metrics.texel_density(candidate.uvs, triangles, areas, resolution)
-        ratio = after / np.maximum(before, 1e-30)
-        change = float(np.median(np.abs(ratio[before > 0] - 1))) if (before > 0).any() else 0.0
-        if not candidate.report["moved"] or change < STAGE_MIN_CHANGE:
+        change = metrics.layout_change(previous.uvs, candidate.uvs, triangles)
+        reason = metrics.stage_stop_reason(stage, bool(candidate.report["moved"]), change)
+        if reason is not None:
             history.append({"stage": stage, "moved": bool(candidate.report["moved"]), "layout_change": change,
                             "kept": False})
-            stopped = (f"stage {stage} changed the layout by {change:.1%} (median texel density), under "
-                       f"{STAGE_MIN_CHANGE:.0%}: stage {stage - 1} kept")
+            stopped = reason
             break
         candidate_map = stages.run("bake refined", lambda p: _bake_map(sample, candidate.uvs, resolution, options, p))
         uv = metrics.interpolate_corners(candidate.uvs, points.triangle, points.bary)
