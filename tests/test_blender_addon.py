@@ -330,6 +330,57 @@ def test_threaded_driver_runs_and_cancels(facts):
     assert cancel["changed"] == [] and not cancel["has_layer"]
 
 
+# --------------------------------------------------- tessellation and stages
+
+def test_tessellation_adds_vertices_within_the_budget_and_keeps_every_attribute(facts):
+    value = fact(facts, "tessellation_writes_the_split_into_the_mesh")
+    assert value["outcome"] == "FINISHED", value["message"]
+    # 25 vertices, budget 0.25: at most 6 more; the shadow edge crosses enough large triangles to use them all.
+    assert value["vertices_before"] == 25 and value["vertices_after"] == 31
+    assert value["panel_tessellated"] and value["panel_vertices_added"] == 6
+    assert "tessellation added 6 vertices" in value["result_message"]
+    assert value["triangles_after"] > 0  # split quads became triangles
+    assert value["largest_height"] == 0.0  # every new vertex lies on the floor
+    # Linear attributes stay linear: UVMap and the colour over the floor, Lightmap per original quad (seams).
+    assert value["uvmap_residual"] < 1e-6 and value["lightmap_residual"] < 1e-6
+    assert value["tint_residual"] < 1e-6
+    assert value["refined_triangles"] > 32  # the refinement ran on the tessellated layout (32 before)
+    assert value["leftover_meshes"] == ["Cube", "FloorMesh"]  # the rollback copy is gone after success
+    # Ctrl+Z: one step back restores the original mesh exactly.
+    assert value["undo_vertices"] == 25 and value["undo_coordinates_equal"]
+    assert value["undo_layers"] == ["UVMap", "Lightmap"] and value["can_undo_further"] is False
+
+
+def test_tessellation_rolls_back_exactly(facts):
+    value = fact(facts, "tessellation_rolls_back_exactly")
+    assert value["raised"] == "CancelledError"
+    assert value["vertices_when_stopped"] == 50  # budget 1.0: tessellated when the run was cancelled
+    assert value["vertices"] == value["vertices_before"] == 25 and value["coordinates_equal"]
+    assert value["mesh_name"] == "FloorMesh" and value["meshes"] == value["meshes_before"]
+    assert value["changed"] == []
+
+
+@pytest.mark.parametrize("case, advice", [
+    ("shared", "shares mesh 'FloorMesh' with 1 other object(s)"),
+    ("modifier", "has modifiers (Bevel)"),
+])
+def test_tessellation_is_refused_where_it_would_change_more(facts, case, advice):
+    value = fact(facts, "tessellation_refused_where_it_would_change_more")[case]
+    assert value["outcome"] == "CANCELLED" and advice in value["message"]
+    assert "or turn off Tessellate" in value["message"] and value["changed"] == []
+
+
+def test_stages_refine_again_and_report_the_stages_kept(facts):
+    value = fact(facts, "stages_refine_the_layout_again")
+    one, two = value["1"], value["2"]
+    assert one["outcome"] == two["outcome"] == "FINISHED"
+    assert one["stages"] == 1 and one["stages_kept"] == 1 and "stages kept" not in one["result_message"]
+    assert two["stages"] == 2 and two["stages_kept"] == 2
+    assert "stages kept: 2 of 2" in two["result_message"] and two["stopped"] == "Floor: 2 stages done"
+    assert value["layout_change"] >= value["stage_min_change"]  # stage 2 moved the layout again
+    assert one["valid"] and two["valid"]
+
+
 # ------------------------------------------------------------------ batch
 
 def run_batch(blend, *flags):
@@ -447,6 +498,29 @@ def test_batch_refines_bakes_and_reports(facts, work_dir):
         "Floor_lightmap_direct": ["//Floor_lightmap_direct.exr", 64, True],
         "Floor_lightmap_ao": ["//Floor_lightmap_ao.exr", 64, True],
     }
+
+
+def test_batch_stages_and_tessellate(facts, work_dir):
+    blend = fact(facts, "save_coarse_scene_for_batch")["path"]
+    out = work_dir / "batch_tessellate"
+    process = run_batch(blend, "--objects", "Floor", "--resolution", "64", "--samples", "4", "--stages", "3",
+                        "--tessellate", "0.5", "--out", str(out))
+    assert process.returncode == 0, process.stderr[-3000:]
+    report = json.loads((out / "report.json").read_text())
+    floor = report["objects"]["Floor"]
+    assert floor["tessellation"]["vertices_before"] == 25
+    assert floor["tessellation"]["vertices_added"] == report["summary"]["vertices_added"] == 12  # floor(0.5 x 25)
+    stages = floor["report"]["stages"]
+    assert [entry["stage"] for entry in stages["stages"]][0] == 1 and len(stages["stages"]) >= 2
+    kept = sum(entry["kept"] for entry in stages["stages"])
+    assert report["summary"]["stages_kept"] == kept and stages["stopped"]
+    assert report["settings"]["stages"] == 3 and report["settings"]["tessellate"] == 0.5
+    probe = "import bpy; print('PROBE', len(bpy.data.objects['Floor'].data.vertices))"
+    process = run_blender(report["blend"], "--python-expr", probe)
+    saved = next(line for line in process.stdout.splitlines() if line.startswith("PROBE"))
+    assert saved == "PROBE 37"  # the saved copy holds the tessellated mesh
+    process = run_batch(blend, "--objects", "Floor", "--tessellate", "--no-tessellate", "--out", str(out))
+    assert process.returncode == 1 and "contradict" in process.stderr
 
 
 # -------------------------------------------------------------- packaging
