@@ -354,3 +354,23 @@ def test_repack_accepts_a_chart_that_already_overlapped_itself():
     before = lmrefine.check_layout(uvs, tris, 64, 2, failing_charts=True)
     assert set(check["failing_charts"].tolist()) <= set(before["failing_charts"].tolist())
     assert check["flipped"] == 0 and check["out_of_bounds"] == 0 and check["min_gutter_texels"] >= 2
+
+
+def test_layout_figures_of_one_refinement_are_its_report_and_compose_over_two():
+    """lmrefine.refine.layout_figures measures a layout made by any number of refinements against the
+    first one's input at the first lightmap's edges (what the add-on's Stages report); for one
+    refinement it is refine_uvs' own report."""
+    uvs, tris = plane(16)
+    lightmap = shadow_edge_lightmap(64, angle=0.3)
+    first = lmrefine.refine_uvs(lightmap, uvs, tris, 64, repack=False)
+    figures = lmrefine.refine.layout_figures(lightmap, uvs, first.uvs, tris)
+    for key in ("transition_widening", "density_min", "density_max"):
+        assert figures[key] == first.report[key], key
+    np.testing.assert_array_equal(figures["triangle_density"], first.report["triangle_density"])
+    second = lmrefine.refine_uvs(lightmap, first.uvs, tris, 64, repack=False)
+    both = lmrefine.refine.layout_figures(lightmap, uvs, second.uvs, tris)
+    # UV area ratios multiply along the stages.
+    np.testing.assert_allclose(both["triangle_density"],
+                               first.report["triangle_density"] * second.report["triangle_density"], rtol=1e-4)
+    with pytest.raises(ValueError, match="new_uvs must have the shape"):
+        lmrefine.refine.layout_figures(lightmap, uvs, first.uvs[:-1], tris)
