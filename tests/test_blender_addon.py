@@ -58,7 +58,7 @@ def fact(facts, name):
 def test_register_and_unregister(facts):
     value = fact(facts, "registration")
     registered, unregistered = value["registered"], value["unregistered"]
-    assert len(registered["panels"]) == 4
+    assert len(registered["panels"]) == 5
     assert registered["category"] == "Lightmap" and registered["space"] == "VIEW_3D"
     assert registered["operators"] == [True, True] and registered["label"] == "Refine Lightmap UVs"
     assert registered["scene_property"]

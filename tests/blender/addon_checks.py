@@ -92,8 +92,8 @@ def fresh_shadow_scene(**values):
 def registration():
     """register() adds the operators, the panels and Scene.lmrefine; unregister() removes all of them."""
     register()
-    names = ("LMREFINE_PT_refine", "LMREFINE_PT_refine_options", "LMREFINE_PT_refine_bake",
-             "LMREFINE_PT_refine_result")
+    names = ("LMREFINE_PT_refine", "LMREFINE_PT_refine_options", "LMREFINE_PT_refine_stages",
+             "LMREFINE_PT_refine_bake", "LMREFINE_PT_refine_result")
     registered = {
         "panels": [name for name in names if hasattr(bpy.types, name)],
         "category": bpy.types.LMREFINE_PT_refine.bl_category,
