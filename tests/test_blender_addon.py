@@ -376,9 +376,14 @@ def test_stages_refine_again_and_report_the_stages_kept(facts):
     assert one["outcome"] == two["outcome"] == "FINISHED"
     assert one["stages"] == 1 and one["stages_kept"] == 1 and "stages kept" not in one["result_message"]
     assert two["stages"] == 2 and two["stages_kept"] == 2
-    assert "stages kept: 2 of 2" in two["result_message"] and two["stopped"] == "Floor: 2 stages done"
+    assert "stages kept: 2 of 2 (Floor: 2 stages done)" in two["result_message"] and two["stopped"] == ""
     assert value["layout_change"] >= value["stage_min_change"]  # stage 2 moved the layout again
     assert one["valid"] and two["valid"]
+    still = value["still"]
+    assert still["outcome"] == "FINISHED" and still["stages_kept"] == 1
+    assert still["stopped"] == "Floor: stage 2 did not move"  # the panel's line
+    assert "stage 2 changed the layout by 0.0% (median texel density), under 5%: stage 1 kept" in \
+        still["result_message"]
 
 
 # ------------------------------------------------------------------ batch

@@ -31,7 +31,8 @@ def _report_outcome(operator, context, outcome, seconds):
     result.vertices_added = summary["vertices_added"]
     result.stages = outcome.stages_asked
     result.stages_kept = summary["stages_kept"]
-    result.stages_stopped = "; ".join(f"{name}: {entry['stopped']}" for name, entry in outcome.stages.items())
+    result.stages_stopped = "; ".join(_stage_stop(name, entry) for name, entry in outcome.stages.items()
+                                      if not entry["stages"][-1]["kept"])
     if summary["moved"] == 0:
         result.message = (f"Nothing moved: the refined UV maps of {len(outcome.objects)} object(s) equal their "
                           f"source maps ({seconds:.1f}s; the warnings say why)")
@@ -44,10 +45,18 @@ def _report_outcome(operator, context, outcome, seconds):
     if outcome.tessellation:
         result.message += f"; tessellation added {summary['vertices_added']} vertices"
     if outcome.stages:
-        result.message += f"; stages kept: {summary['stages_kept']} of {result.stages} ({result.stages_stopped})"
+        why = "; ".join(f"{name}: {entry['stopped']}" for name, entry in outcome.stages.items())
+        result.message += f"; stages kept: {summary['stages_kept']} of {result.stages} ({why})"
     for warning in outcome.warnings:
         operator.report({'WARNING'}, warning)
     operator.report({'INFO'}, result.message)
+
+
+def _stage_stop(name, entry):
+    """Short, for the panel: which stage an object stopped at and why (the report has the sentence)."""
+    last = entry["stages"][-1]
+    moved = f"moved {last['layout_change']:.1%}" if last["moved"] else "did not move"
+    return f"{name}: stage {last['stage']} {moved}"
 
 
 def _rollback(operator, journal):

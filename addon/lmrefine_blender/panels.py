@@ -118,6 +118,9 @@ class LMREFINE_PT_refine_result(_LightmapTab, bpy.types.Panel):
             column.label(text=f"Tessellation: +{result.vertices_added} vertices", icon='MOD_TRIANGULATE')
         if result.stages > 1:
             column.label(text=f"Stages kept: {result.stages_kept} of {result.stages}", icon='SORTTIME')
+            for entry in result.stages_stopped.split("; "):
+                if entry:  # an object whose next stage moved its texels too little (under 5%)
+                    column.label(text=entry)
         for entry in result.timings.split("  "):
             if entry:
                 column.label(text=entry, icon='TIME')

@@ -73,7 +73,8 @@ class LMREFINE_PG_result(bpy.types.PropertyGroup):
     stages: IntProperty(name="Stages", description="Refinement stages asked for in the last run", default=1)
     stages_kept: IntProperty(name="Stages Kept", description="Refinement stages the last run kept (the most of "
                              "any object)", default=1)
-    stages_stopped: StringProperty(name="Stages Stopped", description="Why the last run's stages stopped")
+    stages_stopped: StringProperty(name="Stages Stopped",
+                                   description="Objects whose stages stopped early: the stage that moved too little")
 
 
 class LMREFINE_PG_settings(bpy.types.PropertyGroup):

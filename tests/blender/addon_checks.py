@@ -955,6 +955,11 @@ def stages_refine_the_layout_again():
                                                              padding=2)["valid"])}
     facts["layout_change"] = metrics.layout_change(layers[1], layers[2], triangles)
     facts["stage_min_change"] = metrics.STAGE_MIN_CHANGE
+    settings(stages=3, strength=0.0)  # nothing moves: stage 2 stops the stages, stage 1 is kept
+    facts["still"] = dict(zip(("outcome", "message"), refine()))
+    result = bpy.context.scene.lmrefine.result
+    facts["still"].update(stages_kept=result.stages_kept, stopped=result.stages_stopped,
+                          result_message=result.message)
     return facts
 
 
