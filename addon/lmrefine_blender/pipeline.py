@@ -480,13 +480,10 @@ def _further_stages(context, lmrefine, targets, refined_uvs, options, journal, o
             refined_uvs[name] = result.uvs
             _write_refined_layer(target, result.uvs, journal)
     # Objects that stopped early left their share of the progress undone: catch up.
-    return done + _skipped_steps(options["stages"], targets, outcome)
-
-
-def _skipped_steps(stages, targets, outcome):
-    done = sum(len(outcome.stages[t.obj.name]["stages"]) - 1 for t in targets)  # refinements run
-    bakes = max((len(outcome.stages[t.obj.name]["stages"]) - 1 for t in targets), default=0)
-    return (stages - 1) * (1 + len(targets)) - done - bakes
+    refinements = [len(outcome.stages[t.obj.name]["stages"]) - 1 for t in targets]  # stages 2.. run, each
+    bakes = max(refinements, default=0)  # a stage's bake runs while any object is still refining
+    planned = (options["stages"] - 1) * (1 + len(targets))
+    return done + planned - sum(refinements) - bakes
 
 
 def _plain(value):
