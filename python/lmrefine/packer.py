@@ -31,7 +31,7 @@ class PackResult(NamedTuple):
 
 
 def pack_charts(uvs, triangles, charts, scales, resolution, padding=2.0, rotations=True, progress=None, *,
-                tolerance=CHART_TOLERANCE, subdivision=2):
+                tolerance=CHART_TOLERANCE, subdivision=2, boxes=True):
     """Pack a layout's charts into one atlas, [0, 1]^2, as large as it allows.
 
     Every chart moves as a whole: chart c is scaled by
@@ -111,7 +111,7 @@ def pack_charts(uvs, triangles, charts, scales, resolution, padding=2.0, rotatio
     """
     new_uvs, report = _native.pack_charts(uvs, triangles, resolution, padding, charts=charts, scales=scales,
                                           rotate=rotations, progress=progress, tolerance=tolerance,
-                                          subdivision=subdivision)
+                                          subdivision=subdivision, boxes=boxes)
     report["offsets"] = report["transforms"][:, :, 2]
     if _flat_count(new_uvs, triangles) > _flat_count(uvs, triangles):
         # The scale search can end at a scale so small (absurd scales, a
