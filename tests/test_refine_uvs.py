@@ -379,7 +379,7 @@ def test_a_lightmap_pack_layout_of_tiny_charts_gains_through_the_repack():
     assert repack["charts"] == 24 * 24 and repack["placement"] == "boxes"
     assert repack["padding"] == pytest.approx(original)  # the input's gutter, not 2
     assert repack["predicted_error"] < 0.95
-    assert repack["padded_utilisation_after"] >= 0.9 * repack["padded_utilisation_before"]
+    assert repack["padded_utilisation_after"] >= 0.95 * repack["padded_utilisation_before"]
     # Valid with the padding rule the input is checked with (its own gutter).
     check = lmrefine.check_layout(result.uvs, tris, resolution, original - 1e-4)
     assert check["valid"], check

@@ -26,7 +26,7 @@ ENERGY_FLOOR = 0.05
 # the input, charts grown by half the padding (padded_utilisation;
 # docs/refiner.md, "Chart scaling").
 REQUIRED_GAIN = 0.95
-MIN_UTILISATION_KEPT = 0.9
+MIN_UTILISATION_KEPT = 0.95
 
 
 def triangle_texels(uvs, triangles, shape):

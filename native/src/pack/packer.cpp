@@ -18,6 +18,7 @@
 #include "lmrefine/core/progress.h"
 #include "lmrefine/layout/chart.h"
 #include "occupancy.h"
+#include "shelves.h"
 #include "skyline.h"
 #include "weld.h"
 
@@ -152,6 +153,41 @@ Trial run_box_trial(const Problem& problem, double global_scale, Progress* progr
         skyline.place(best.x, best.y, best.turns ? box.y : box.x, best.turns ? box.x : box.y);
         trial.texels += int64_t(std::ceil(box.x * box.y));
         trial.placements[size_t(c)] = best;
+    }
+    trial.fits = true;
+    return trial;
+}
+
+// Places every chart's bounding box on shelves at one global scale, turned
+// wide side down, tallest first; or stops at the first that does not fit.
+Trial run_shelf_trial(const Problem& problem, double global_scale, Progress* progress) {
+    const size_t count = problem.pieces.size();
+    const bool rotate = problem.options.rotate;
+    auto laid = [&](size_t c) {  // the box as laid: wide side down when turns are allowed
+        const glm::dvec2 box = box_size(problem, c, global_scale);
+        const bool turn = rotate && box.y > box.x;
+        return std::make_pair(turn ? glm::dvec2(box.y, box.x) : box, int(turn));
+    };
+    const std::vector<int32_t> order = placement_order(count, [&](int32_t c) {
+        const glm::dvec2 box = laid(size_t(c)).first;
+        return std::make_pair(box.y, box.x);
+    });
+    Trial trial;
+    trial.placements.resize(count);
+    for (size_t c = 0; c < count; ++c) {
+        const glm::dvec2 box = box_size(problem, c, global_scale);
+        trial.total_texels += int64_t(std::ceil(box.x * box.y));
+    }
+    pack::Shelves shelves(problem.options.width, problem.options.height, problem.options.padding);
+    for (size_t n = 0; n < count; ++n) {
+        if ((n & 63) == 0 && progress && progress->cancelled()) return trial;
+        const int32_t c = order[n];
+        if (problem.pieces[size_t(c)].corners.empty()) continue;
+        const auto [box, turns] = laid(size_t(c));
+        double x, y;
+        if (!shelves.place(box.x, box.y, x, y)) return trial;
+        trial.texels += int64_t(std::ceil(box.x * box.y));
+        trial.placements[size_t(c)] = {x, y, turns};
     }
     trial.fits = true;
     return trial;
@@ -338,8 +374,15 @@ PackResult pack_charts(const UvLayout& layout, const std::vector<int32_t>& trian
     bool boxes = false;
     if (options.boxes) {
         try {
-            Search box_search = search_scale([&](double scale) { return run_box_trial(problem, scale, progress); },
-                                             bound, options, chart_count, progress);
+            // Shelves first (rows of near-equal boxes), the skyline where they fail.
+            Search box_search = search_scale(
+                [&](double scale) {
+                    Trial shelf = run_shelf_trial(problem, scale, progress);
+                    if (shelf.fits) return shelf;
+                    Trial sky = run_box_trial(problem, scale, progress);
+                    return sky.fits || sky.texels > shelf.texels ? sky : shelf;
+                },
+                bound, options, chart_count, progress);
             search.trials += box_search.trials;
             if (box_search.scale > search.scale) {
                 box_search.trials = search.trials;
