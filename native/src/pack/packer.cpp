@@ -372,7 +372,10 @@ PackResult pack_charts(const UvLayout& layout, const std::vector<int32_t>& trian
     // Bounding boxes at continuous positions win where charts are
     // rectangles small against the grid (docs/packer.md).
     bool boxes = false;
-    if (options.boxes) {
+    // Boxes cannot beat the footprints where the boxes' total area alone
+    // would not fit at a larger scale (charts far from rectangles): skipped.
+    const double box_scale_bound = box_area > 0 ? std::min(bound, std::sqrt(atlas / box_area)) : bound;
+    if (options.boxes && box_scale_bound > search.scale) {
         try {
             // Shelves first (rows of near-equal boxes), the skyline where they fail.
             Search box_search = search_scale(
@@ -382,7 +385,7 @@ PackResult pack_charts(const UvLayout& layout, const std::vector<int32_t>& trian
                     Trial sky = run_box_trial(problem, scale, progress);
                     return sky.fits || sky.texels > shelf.texels ? sky : shelf;
                 },
-                bound, options, chart_count, progress);
+                box_scale_bound, options, chart_count, progress);
             search.trials += box_search.trials;
             if (box_search.scale > search.scale) {
                 box_search.trials = search.trials;

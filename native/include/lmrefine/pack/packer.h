@@ -3,8 +3,9 @@
 // resolution, with at least `padding` texels between charts as check_layout
 // measures it, as large as the atlas allows. Charts are fitted by their
 // conservative footprint on a grid of (by default) half texels (the cells
-// they overlap, rasterized as coverage_mask does), not by their bounding
-// boxes. Details and measurements: docs/packer.md.
+// they overlap, rasterized as coverage_mask does), and also as bounding boxes
+// at continuous positions (shelves, then a skyline); the placement reaching
+// the larger scale is kept. Details and measurements: docs/packer.md.
 #pragma once
 
 #include <cstdint>
