@@ -114,14 +114,13 @@ glm::dvec2 box_size(const Problem& problem, size_t c, double global_scale) {
     return problem.extents[c] * (global_scale * problem.scales[c]) + glm::dvec2(2.0 * pack::kInset);
 }
 
-// Places every chart's bounding box on the skyline at one global scale, or
-// stops at the first that does not fit. Placements are the boxes' corners.
-Trial run_box_trial(const Problem& problem, double global_scale, Progress* progress) {
+// Places every chart's box, in `order`, at one global scale: place(box, p)
+// fills the placement p (the box's corner, its turn) or returns false,
+// and the trial stops at the first box that does not fit.
+template <class Place>
+Trial run_boxes(const Problem& problem, double global_scale, const std::vector<int32_t>& order, Progress* progress,
+                Place place) {
     const size_t count = problem.pieces.size();
-    const std::vector<int32_t> order = placement_order(count, [&](int32_t c) {
-        const glm::dvec2 box = box_size(problem, size_t(c), global_scale);
-        return std::make_pair(std::max(box.x, box.y), box.x * box.y);
-    });
     Trial trial;
     trial.placements.resize(count);
     // Box areas stand in for footprint cells (the next guess after a failure).
@@ -129,14 +128,27 @@ Trial run_box_trial(const Problem& problem, double global_scale, Progress* progr
         const glm::dvec2 box = box_size(problem, c, global_scale);
         trial.total_texels += int64_t(std::ceil(box.x * box.y));
     }
-    pack::Skyline skyline(problem.options.width, problem.options.height, problem.options.padding);
     for (size_t n = 0; n < count; ++n) {
         if ((n & 63) == 0 && progress && progress->cancelled()) return trial;
         const int32_t c = order[n];
         if (problem.pieces[size_t(c)].corners.empty()) continue;
         const glm::dvec2 box = box_size(problem, size_t(c), global_scale);
+        if (!place(box, trial.placements[size_t(c)])) return trial;
+        trial.texels += int64_t(std::ceil(box.x * box.y));
+    }
+    trial.fits = true;
+    return trial;
+}
+
+// The skyline: longest side first; each box at the turn whose bottom is highest.
+Trial run_skyline_trial(const Problem& problem, double global_scale, Progress* progress) {
+    const std::vector<int32_t> order = placement_order(problem.pieces.size(), [&](int32_t c) {
+        const glm::dvec2 box = box_size(problem, size_t(c), global_scale);
+        return std::make_pair(std::max(box.x, box.y), box.x * box.y);
+    });
+    pack::Skyline skyline(problem.options.width, problem.options.height, problem.options.padding);
+    return run_boxes(problem, global_scale, order, progress, [&](const glm::dvec2& box, Placement& best) {
         bool found = false;
-        Placement best;
         double best_bottom = INFINITY;
         for (int turns = 0; turns < (problem.options.rotate ? 2 : 1); ++turns) {
             const double w = turns ? box.y : box.x, h = turns ? box.x : box.y;
@@ -149,48 +161,26 @@ Trial run_box_trial(const Problem& problem, double global_scale, Progress* progr
             }
             found = true;
         }
-        if (!found) return trial;
-        skyline.place(best.x, best.y, best.turns ? box.y : box.x, best.turns ? box.x : box.y);
-        trial.texels += int64_t(std::ceil(box.x * box.y));
-        trial.placements[size_t(c)] = best;
-    }
-    trial.fits = true;
-    return trial;
+        if (found) skyline.place(best.x, best.y, best.turns ? box.y : box.x, best.turns ? box.x : box.y);
+        return found;
+    });
 }
 
-// Places every chart's bounding box on shelves at one global scale, turned
-// wide side down, tallest first; or stops at the first that does not fit.
+// The shelves: boxes laid wide side down (when turns are allowed), tallest first.
 Trial run_shelf_trial(const Problem& problem, double global_scale, Progress* progress) {
-    const size_t count = problem.pieces.size();
     const bool rotate = problem.options.rotate;
-    auto laid = [&](size_t c) {  // the box as laid: wide side down when turns are allowed
-        const glm::dvec2 box = box_size(problem, c, global_scale);
-        const bool turn = rotate && box.y > box.x;
-        return std::make_pair(turn ? glm::dvec2(box.y, box.x) : box, int(turn));
-    };
-    const std::vector<int32_t> order = placement_order(count, [&](int32_t c) {
-        const glm::dvec2 box = laid(size_t(c)).first;
-        return std::make_pair(box.y, box.x);
+    auto turned = [&](const glm::dvec2& box) { return rotate && box.y > box.x; };
+    const std::vector<int32_t> order = placement_order(problem.pieces.size(), [&](int32_t c) {
+        const glm::dvec2 box = box_size(problem, size_t(c), global_scale);
+        return turned(box) ? std::make_pair(box.x, box.y) : std::make_pair(box.y, box.x);
     });
-    Trial trial;
-    trial.placements.resize(count);
-    for (size_t c = 0; c < count; ++c) {
-        const glm::dvec2 box = box_size(problem, c, global_scale);
-        trial.total_texels += int64_t(std::ceil(box.x * box.y));
-    }
     pack::Shelves shelves(problem.options.width, problem.options.height, problem.options.padding);
-    for (size_t n = 0; n < count; ++n) {
-        if ((n & 63) == 0 && progress && progress->cancelled()) return trial;
-        const int32_t c = order[n];
-        if (problem.pieces[size_t(c)].corners.empty()) continue;
-        const auto [box, turns] = laid(size_t(c));
-        double x, y;
-        if (!shelves.place(box.x, box.y, x, y)) return trial;
-        trial.texels += int64_t(std::ceil(box.x * box.y));
-        trial.placements[size_t(c)] = {x, y, turns};
-    }
-    trial.fits = true;
-    return trial;
+    return run_boxes(problem, global_scale, order, progress, [&](const glm::dvec2& box, Placement& at) {
+        const int turns = int(turned(box));
+        const glm::dvec2 laid = turns ? glm::dvec2(box.y, box.x) : box;
+        at.turns = turns;
+        return shelves.place(laid.x, laid.y, at.x, at.y);
+    });
 }
 
 struct Search {
@@ -382,7 +372,7 @@ PackResult pack_charts(const UvLayout& layout, const std::vector<int32_t>& trian
                 [&](double scale) {
                     Trial shelf = run_shelf_trial(problem, scale, progress);
                     if (shelf.fits) return shelf;
-                    Trial sky = run_box_trial(problem, scale, progress);
+                    Trial sky = run_skyline_trial(problem, scale, progress);
                     return sky.fits || sky.texels > shelf.texels ? sky : shelf;
                 },
                 box_scale_bound, options, chart_count, progress);
