@@ -183,6 +183,9 @@ Trial run_shelf_trial(const Problem& problem, double global_scale, Progress* pro
     });
 }
 
+// The box placement is kept only when its scale beats the footprints' by this factor.
+constexpr double kBoxMargin = 1.01;
+
 struct Search {
     double scale = 0;  // the largest global scale that fitted
     Trial best;
@@ -365,7 +368,7 @@ PackResult pack_charts(const UvLayout& layout, const std::vector<int32_t>& trian
     // Boxes cannot beat the footprints where the boxes' total area alone
     // would not fit at a larger scale (charts far from rectangles): skipped.
     const double box_scale_bound = box_area > 0 ? std::min(bound, std::sqrt(atlas / box_area)) : bound;
-    if (options.boxes && box_scale_bound > search.scale) {
+    if (options.boxes && box_scale_bound > kBoxMargin * search.scale) {
         try {
             // Shelves first (rows of near-equal boxes), the skyline where they fail.
             Search box_search = search_scale(
@@ -377,7 +380,9 @@ PackResult pack_charts(const UvLayout& layout, const std::vector<int32_t>& trian
                 },
                 box_scale_bound, options, chart_count, progress);
             search.trials += box_search.trials;
-            if (box_search.scale > search.scale) {
+            // Each search ends within 0.4% of its largest scale: boxes must
+            // beat the footprints by more than that (footprints are texel-exact).
+            if (box_search.scale > kBoxMargin * search.scale) {
                 box_search.trials = search.trials;
                 search = std::move(box_search);
                 boxes = true;

@@ -4,8 +4,8 @@
 // measures it, as large as the atlas allows. Charts are fitted by their
 // conservative footprint on a grid of (by default) half texels (the cells
 // they overlap, rasterized as coverage_mask does), and also as bounding boxes
-// at continuous positions (shelves, then a skyline); the placement reaching
-// the larger scale is kept. Details and measurements: docs/packer.md.
+// at continuous positions (shelves, then a skyline), kept when they reach a
+// 1% larger scale. Details and measurements: docs/packer.md.
 #pragma once
 
 #include <cstdint>
@@ -26,8 +26,8 @@ struct PackOptions {
     // texels: charts land on sub-texel positions, so a small chart wastes
     // less than a texel to the grid (docs/packer.md has it measured).
     int subdivision = 2;
-    // Also try bounding boxes at continuous positions (a skyline) and keep
-    // the placement that reaches the larger scale: exact for rectangular
+    // Also try bounding boxes at continuous positions (shelves, a skyline)
+    // and keep them when they reach a 1% larger scale: exact for rectangular
     // charts, which the footprint grid wastes up to a cell per side of.
     bool boxes = true;
 };
