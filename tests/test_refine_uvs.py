@@ -408,3 +408,14 @@ def test_the_repack_falls_back_when_the_model_sees_no_gain():
     assert any("repack not used" in note for note in result.report["notes"])
     unpacked = lmrefine.refine_uvs(None, uvs, tris, resolution, padding=2, gradient=gradient, repack=False)
     np.testing.assert_array_equal(result.uvs, unpacked.uvs)
+
+
+def test_padded_utilisation_counts_each_chart_grown_by_half_the_gutter():
+    # Two squares of 8 x 8 texels (two triangles each, the diagonal inside) at 64^2.
+    uvs, tris = merge(grid_chart(1, (0.0, 0.0), (0.125, 0.125)), grid_chart(1, (0.5, 0.5), (0.625, 0.625)))
+    charts = lmrefine.find_charts(uvs, tris)
+    area, perimeter = allocation.chart_outlines(uvs, tris, charts, (64, 64))
+    np.testing.assert_allclose(area, [64.0, 64.0])
+    np.testing.assert_allclose(perimeter, [32.0, 32.0])  # the shared diagonal is not outline
+    grown = 64.0 + 32.0 * 1.0 + np.pi * 4.0 / 4.0  # padding 2: area + perimeter * 1 + pi * 2^2 / 4
+    assert allocation.padded_utilisation(area, perimeter, 2.0, (64, 64)) == pytest.approx(2 * grown / 64 ** 2)
