@@ -8,8 +8,8 @@ JOBS      ?= $(shell nproc)
 DEMO_OUT  ?= demo_out
 
 # Everything comes from Debian 12 packages.
-DEBIAN_PACKAGES := cmake g++ clang make pkg-config pybind11-dev libembree-dev \
-	libopenimageio-dev libglm-dev python3-dev python3-numpy python3-pytest \
+DEBIAN_PACKAGES := cmake g++ clang make pkg-config pybind11-dev libembree-dev libtbb-dev \
+	libopenimageio-dev libglm-dev libeigen3-dev python3-dev python3-numpy python3-pytest \
 	python3-pywt python3-matplotlib python3-distributed blender
 
 .PHONY: all deps build install test test-asan check-compilers fuzz bench demo evaluate samples sample-lightmap addon-zip clean
@@ -45,7 +45,7 @@ test: build check-compilers
 # and gcc as portable C++17: -Wpedantic -Werror, so a warning or a language
 # extension either compiler reports fails the build. The release build is gcc.
 CHECK_CXXFLAGS := -fsyntax-only -std=c++17 -Wall -Wextra -Wno-unused-parameter -Wpedantic -Werror -fvisibility=hidden \
-	-Inative/include -Inative/src -DLMREFINE_VERSION='"check"'
+	-Inative/include -Inative/src -isystem /usr/include/eigen3 -DLMREFINE_VERSION='"check"'
 check-compilers: deps
 	@for compiler in clang++ g++; do \
 		echo "$$compiler: $$($$compiler --version | head -1)"; \

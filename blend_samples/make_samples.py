@@ -41,6 +41,16 @@ import bpy
 import numpy as np
 from mathutils import Vector
 
+# The scene file's format (lmrefine.sample_scenes) and the add-on's reading of
+# lights (lmrefine_blender.bridge) are shared with `export-scene`.
+_REPO = os.path.normpath(os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
+for _path in (os.path.join(_REPO, "python"), os.path.join(_REPO, "addon")):
+    if _path not in sys.path:
+        sys.path.insert(0, _path)
+
+from lmrefine.sample_scenes import SampleScene  # noqa: E402
+from lmrefine_blender.bridge import light_params, world_color  # noqa: E402
+
 # Target edge length of receiver cells, metres.
 CELL = 0.3
 # Gutters between charts. Lightmap Pack makes one chart per face, thousands
@@ -336,10 +346,37 @@ def atrium():
     return {"passes": ["direct"]}
 
 
+def plaza():
+    """A coarse plaza (holdout: never used to tune constants), modelled the
+    way low-poly levels often are: a floor of 2 m quads, low blocks and
+    benches of one face per side, a pergola whose beams throw sharp stripes
+    across the big floor triangles; a low sun."""
+    make_object("Floor", lambda bm: grid_faces(bm, (-6, -6, 0), (12, 0, 0), (0, 12, 0), 6, 6), (0.7, 0.68, 0.64),
+                closed=False)
+
+    def blocks(bm):
+        for center, size in (((-3.0, 2.5, 0.5), (1.6, 1.6, 1.0)), ((3.2, -2.8, 0.6), (2.2, 1.0, 1.2)),
+                             ((-2.5, -3.5, 0.25), (3.0, 0.5, 0.5)), ((2.8, 3.0, 0.25), (0.5, 3.0, 0.5))):
+            box_faces(bm, center, size, cell=9.0)
+    make_object("Blocks", blocks, (0.62, 0.6, 0.58))
+
+    def pergola(bm):
+        for k in range(9):
+            box_faces(bm, (-1.6 + 0.4 * k, 0.0, 2.6), (0.1, 5.0, 0.14), cell=9.0)
+        for x in (-1.8, 1.8):
+            for y in (-2.4, 2.4):
+                box_faces(bm, (x, y, 1.3), (0.14, 0.14, 2.6), cell=9.0)
+    make_object("Pergola", pergola, (0.45, 0.35, 0.28), receiver=False)
+    add_light("Sun", "SUN", (0, 0, 10), (math.radians(50), 0.0, math.radians(120)), energy=4.0,
+              angle=math.radians(0.5))
+    set_world((0.05, 0.07, 0.1))
+    return {"passes": ["direct"]}
+
+
 # Which scenes tune the refiner's constants and which only report is in
 # docs/evaluation.md ("Tuning scenes and holdout scenes").
 SCENES = {"courtyard": courtyard, "room": room, "fence_and_tree": fence_and_tree, "game_level": game_level,
-          "atrium": atrium}
+          "atrium": atrium, "plaza": plaza}
 
 
 # --------------------------------------------------------------------------- UVs and export
@@ -423,28 +460,12 @@ def concatenate(parts, keys):
 
 
 def light_description(obj):
-    data = obj.data
+    """The add-on's light (Blender's properties and matrix_world, which places
+    it for the baker), plus its world position and direction for readers."""
+    kind, params = light_params(obj)
     rotation = obj.matrix_world.to_3x3().normalized()
-    light = {
-        "name": obj.name,
-        "kind": data.type.lower(),
-        "energy": float(data.energy),
-        "color": list(data.color),
-        "position": list(obj.matrix_world.translation),
-        "direction": list((rotation @ Vector((0, 0, -1))).normalized()),
-        # What the baker reads (as Cycles does): spin and scale included.
-        "matrix": [list(row) for row in obj.matrix_world],
-    }
-    if data.type in ("POINT", "SPOT"):
-        light["shadow_soft_size"] = float(data.shadow_soft_size)
-    if data.type == "SPOT":
-        light["spot_size"] = float(data.spot_size)
-        light["spot_blend"] = float(data.spot_blend)
-    if data.type == "SUN":
-        light["angle"] = float(data.angle)
-    if data.type == "AREA":
-        light.update(shape=data.shape, size=float(data.size), size_y=float(data.size_y))
-    return light
+    return {"name": obj.name, "kind": kind, **params, "position": list(obj.matrix_world.translation),
+            "direction": list((rotation @ Vector((0, 0, -1))).normalized())}
 
 
 def export(path, info):
@@ -459,24 +480,19 @@ def export(path, info):
         object_ids.append(np.full(len(part["triangles"]), index, np.int32))
     arrays = concatenate(parts, ("positions", "triangles", "normals", "uv_lightmap", "uv_smart"))
     blockers = concatenate([mesh_arrays(o, with_uvs=False) for o in occluders], ("positions", "triangles"))
-    world = bpy.context.scene.world.node_tree.nodes["Background"].inputs["Color"].default_value[:3]
-    meta = {
-        "name": os.path.splitext(os.path.basename(path))[0],
-        "description": " ".join(SCENES[os.path.splitext(os.path.basename(path))[0]].__doc__.split()),
-        "objects": [obj.name for obj in objects],
-        "occluders": [obj.name for obj in occluders],
-        "lights": [light_description(o) for o in bpy.context.scene.objects if o.type == "LIGHT"],
-        "world": [float(c) for c in world],
-        "passes": info["passes"],
-        "uv_variants": {"lightmap": "Lightmap (Lightmap Pack)", "smart": "LightmapSmart (Smart UV Project)"},
-        "min_resolution": MIN_RESOLUTION,
-    }
-    np.savez_compressed(
-        path, positions=arrays["positions"], triangles=arrays["triangles"].astype(np.int32),
-        normals=arrays["normals"], uv_lightmap=arrays["uv_lightmap"], uv_smart=arrays["uv_smart"],
-        base_color=np.concatenate(colors), object_id=np.concatenate(object_ids),
+    name = os.path.splitext(os.path.basename(path))[0]
+    SampleScene(
+        name=name, description=" ".join(SCENES[name].__doc__.split()),
+        positions=arrays["positions"], triangles=arrays["triangles"].astype(np.int32), normals=arrays["normals"],
+        uvs={"lightmap": arrays["uv_lightmap"], "smart": arrays["uv_smart"]},
+        base_color=np.concatenate(colors), object_id=np.concatenate(object_ids), objects=[obj.name for obj in objects],
+        lights=[light_description(o) for o in bpy.context.scene.objects if o.type == "LIGHT"],
+        world=world_color(bpy.context.scene), passes=tuple(info["passes"]),
         occluder_positions=blockers["positions"].astype(np.float32),
-        occluder_triangles=blockers["triangles"].astype(np.int32), meta=np.array(json.dumps(meta)))
+        occluder_triangles=blockers["triangles"].astype(np.int32),
+    ).save(path, occluders=[obj.name for obj in occluders],
+           uv_variants={"lightmap": "Lightmap (Lightmap Pack)", "smart": "LightmapSmart (Smart UV Project)"},
+           min_resolution=MIN_RESOLUTION)
     return len(arrays["triangles"]), len(blockers["triangles"])
 
 

@@ -27,6 +27,20 @@ def merge(*layouts):
     return np.concatenate(uvs), np.concatenate(triangles)
 
 
+def floor_grid(cells, half):
+    """A floor of cells x cells quads over [-half, half]^2 at z = 0, facing +z:
+    positions (V, 3) float32 and triangles (T, 3) int32, two per quad."""
+    xs = np.linspace(-half, half, cells + 1)
+    positions = np.array([(x, y, 0.0) for y in xs for x in xs], np.float32)
+    triangles = []
+    for j in range(cells):
+        for i in range(cells):
+            a, b = j * (cells + 1) + i, j * (cells + 1) + i + 1
+            c, d = (j + 1) * (cells + 1) + i + 1, (j + 1) * (cells + 1) + i
+            triangles += [(a, b, c), (a, c, d)]
+    return positions, np.array(triangles, np.int32)
+
+
 def plane(n=64, margin=0.05):
     """One finely tessellated chart: a plane of n x n quads with a margin."""
     return grid_chart(n, (margin, margin), (1 - margin, 1 - margin))

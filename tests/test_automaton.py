@@ -156,6 +156,28 @@ def test_high_energy_cells_grow_and_bounds_hold():
     assert area.max() <= 4.0 + 1e-4
 
 
+@pytest.mark.parametrize("width", (1, 3))
+def test_a_map_one_texel_wide_runs_like_its_transpose(width):
+    """A level knows its block size: a map one texel wide has cell columns
+    xs = {0, 1} at every level, which once made every coarse level look like
+    the finest (the finest level's step budget, no coarse margin inside the
+    bounds, moves measured in texels); a map 3 texels wide got the step
+    budget of 3-texel blocks. Scalar energy has no preferred axis, so the map
+    turned on its side (whose xs do show the block) must give the same
+    levels and, transposed, the same cells. (Border 'same': with
+    'border_rule' a one-cell-wide grid has only fixed nodes.)"""
+    y = np.arange(64)
+    column = np.repeat(np.where(y < 29, 0.05, 1.0).astype(np.float32)[:, None], width, axis=1)
+    wide = lmrefine.run_automaton(column, max_steps=2, delta=1e-9, check_invariants=True)
+    tall = lmrefine.run_automaton(np.ascontiguousarray(column.T), max_steps=2, delta=1e-9, check_invariants=True)
+    assert [level["block"] for level in wide["levels"]] == [8, 4, 2, 1]
+    # Levels of 8-texel blocks and coarser take 4 x max_steps.
+    assert [level["steps"] for level in wide["levels"]] == [level["steps"] for level in tall["levels"]]
+    assert wide["levels"][0]["steps"] > 2
+    np.testing.assert_allclose(wide["cell_area"], tall["cell_area"].T, atol=1e-5)
+    assert np.abs(wide["cell_area"] - 1).max() > 0.1  # and something happened
+
+
 def test_coarse_to_fine_gets_further_than_one_level_in_fewer_steps():
     # A high-energy band must take room from the whole grid; one level moves
     # that room one cell per step, the pyramid moves it at every scale.

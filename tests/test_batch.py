@@ -190,6 +190,7 @@ def test_failing_level_is_reported_while_the_rest_finish(level_dir, tmp_path):
                               "--workers", "2", "--retries", "1", *FLAGS], capture_output=True, text=True,
                              timeout=300, env={**os.environ, "PYTHONPATH": PYTHON_DIR})
     assert process.returncode == 1, process.stderr
+    assert " - INFO - " not in process.stderr, "worker processes log at INFO (preload chatter)"
     check_done(out, "a")
     check_done(out, "c")
     record = load(out / "manifest.json")["levels"]["broken"]
@@ -321,3 +322,28 @@ def test_existing_cluster_from_the_command_line(level_dir, tmp_path):
             except subprocess.TimeoutExpired:
                 os.killpg(process.pid, signal.SIGKILL)
                 process.wait()
+
+
+@blender
+@needs_blender
+def test_evaluate_puts_the_equal_error_figure_in_the_summary(level_dir, tmp_path):
+    levels = copy_levels(level_dir, tmp_path / "levels", ["a"])
+    out = tmp_path / "out"
+    stream = io.StringIO()
+    summary = run_batch([str(levels)], str(out), BatchOptions(flags=FLAGS, workers=1, evaluate=True), stream=stream)
+    assert summary["ok"], stream.getvalue()
+    row = summary["levels"][0]
+    # Floor and Cube have a lightmap each (not one atlas): each is measured alone, the level gets the lower.
+    reports = {name: load(out / "a" / "evaluation" / name / "report.json")["scenes"][0] for name in ("Floor", "Cube")}
+    ratios = {name: r["equal_error_resolution_ratio"] for name, r in reports.items()}
+    assert row["equal_error"] == min(ratios.values()) and row["equal_error"] > 0, (row, ratios)
+    assert all(r["resolution"] == int(FLAGS[FLAGS.index("--resolution") + 1]) for r in reports.values())
+    table = stream.getvalue()
+    assert re.search(r"^level +status +seconds +objects +attempts +equal-error$", table, re.M)
+    assert re.search(rf"^a +done +[\d.]+ +2 +1 +{row['equal_error']:.2f}x$", table, re.M)
+    manifest = load(out / "manifest.json")["levels"]["a"]
+    assert manifest["equal_error"] == row["equal_error"] and manifest["options"][-1] == "--evaluate"
+    # Done without the evaluation before: a run that asks for it redoes the level; the same run again skips it.
+    again = run_batch([str(levels)], str(out), BatchOptions(flags=FLAGS, workers=1, evaluate=True),
+                      stream=io.StringIO())
+    assert again["counts"] == {"skipped": 1}

@@ -376,6 +376,16 @@ def test_batch_rejects_bad_flags(facts, work_dir):
     assert "unknown pass" in process.stderr
 
 
+def test_batch_refuses_numbers_out_of_range_instead_of_clamping(facts, work_dir):
+    blend = fact(facts, "save_scene_for_batch")["path"]
+    out = work_dir / "range"
+    process = run_batch(blend, "--objects", "Floor", "--out", str(out), "--resolution", "8")
+    assert process.returncode == 1
+    assert "--resolution 8 is outside 16 to 16384" in process.stderr
+    process = run_batch(blend, "--objects", "Floor", "--out", str(out), "--source-layer", "Nope")
+    assert process.returncode == 1 and "--source-layer in a batch" in process.stderr
+
+
 def test_batch_objects_all_selected_and_collection():
     """--objects all | selected | collection:NAME on a bundled sample, judged in one Blender process."""
     probe = (

@@ -9,6 +9,7 @@ import pytest
 import lmrefine
 from lmrefine import cli
 from lmrefine.sample_scenes import SampleScene, load_sample
+from layouts import floor_grid
 
 FIGURES = ("resolution", "rmse_baseline", "rmse_refined", "transition_rmse_baseline", "transition_rmse_refined",
            "transition_widening", "equal_error_resolution_ratio", "timings")
@@ -18,15 +19,7 @@ def tiny_scene(cells=24):
     """A 3 x 3 m floor of cells x cells quads (two objects: west and east
     halves) under a sun, a floating slab casting a hard shadow across it; the
     floor is one chart filling [0.05, 0.95]^2 of the atlas."""
-    xs = np.linspace(-1.5, 1.5, cells + 1)
-    positions = np.array([(x, y, 0.0) for y in xs for x in xs], np.float32)
-    triangles = []
-    for j in range(cells):
-        for i in range(cells):
-            a, b = j * (cells + 1) + i, j * (cells + 1) + i + 1
-            c, d = (j + 1) * (cells + 1) + i + 1, (j + 1) * (cells + 1) + i
-            triangles += [(a, b, c), (a, c, d)]
-    triangles = np.array(triangles, np.int32)
+    positions, triangles = floor_grid(cells, 1.5)
     corners = positions[triangles.reshape(-1)]
     uvs = (0.05 + 0.9 * (corners[:, :2] + 1.5) / 3.0).astype(np.float32)
     east = (positions[triangles].mean(axis=1)[:, 0] > 0).astype(np.int32)
@@ -89,7 +82,15 @@ def test_the_pipeline_reports_every_figure_with_sensible_values(tmp_path):
     # The ground truth is much less noisy than the errors it measures.
     assert 0 <= report["truth_noise_rmse"] < 0.2 * report["rmse_baseline"]
     assert set(report["timings"]) == {"bake baseline", "refine", "bake refined", "ground truth",
-                                      "bake resolution sweep", "metrics", "pictures", "total"}
+                                      "bake resolution sweep", "uniform repack", "metrics", "pictures",
+                                      "surface pictures", "total"}
+    # The second baseline: the same charts packed at one scale, no signal.
+    uniform = report["uniform_repack"]
+    assert uniform["utilisation_after"] > uniform["utilisation_before"] > 0.5
+    assert uniform["equal_error_resolution_ratio"] > 0 and uniform["rmse"] > 0
+    assert uniform["signal_gain"] == pytest.approx(report["equal_error_resolution_ratio"]
+                                                   / uniform["equal_error_resolution_ratio"])
+    assert "Second baseline" in (out / "tiny_smart" / "report.md").read_text()
     assert report["timings"]["total"] == pytest.approx(sum(v for k, v in report["timings"].items() if k != "total"))
     # Per object: both halves, each with the same figures.
     assert [o["object"] for o in report["objects"]] == ["West", "East"]
@@ -99,12 +100,22 @@ def test_the_pipeline_reports_every_figure_with_sensible_values(tmp_path):
     if not report["gain"]:
         assert report["notes"]
     for name in ("report.md", "lightmaps.png", "layout.png", "density.png", "error.png", "error_vs_resolution.png",
-                 "baseline.exr", "refined.exr", "refined_layout.npz"):
+                 "baseline.exr", "refined.exr", "refined_layout.npz", "surface.png", "surface_crops.png",
+                 "surface_density.png"):
         assert (out / "tiny_smart" / name).stat().st_size > 0, name
     layout = np.load(out / "tiny_smart" / "refined_layout.npz")
     assert lmrefine.check_layout(layout["uvs"], layout["triangles"], 48)["valid"]
     text = (out / "report.md").read_text()
     assert "tiny" in text and "equal-error" in text
+    # The lit surface: the default camera sees the floor, the refined map is
+    # closer to the ground truth there too, and both reports show the pictures.
+    surface = report["surface"]
+    assert surface["camera"] == "default" and surface["width"] == 480
+    assert surface["receiver_pixels"] > 0.2 * surface["width"] * surface["height"]
+    assert 0 < surface["rmse_refined"] < surface["rmse_plain"]
+    assert surface["crops"] and all(c["rmse_plain"] > 0 for c in surface["crops"])
+    assert "tiny_smart/surface.png" in text
+    assert "![surface](surface.png)" in (out / "tiny_smart" / "report.md").read_text()
 
 
 @pytest.mark.slow
@@ -127,5 +138,100 @@ def test_evaluate_rejects_bad_arguments(tmp_path, capsys):
     assert "no sample scene" in capsys.readouterr().err
     assert cli.main(["evaluate", "courtyard", "--multipliers", "2,1", "--out", str(tmp_path)]) == 2
     assert "multipliers" in capsys.readouterr().err
+    assert cli.main(["evaluate", "courtyard", "--view-width", "5000", "--out", str(tmp_path)]) == 2
+    assert "view width must be 0 (no surface pictures) or 16 to 2048 pixels" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         cli.main(["evaluate", "--multipliers", "a,b"])
+
+
+@pytest.mark.slow
+def test_evaluate_rechart_replaces_the_layout_and_compares_with_the_scene_s_own(tmp_path):
+    scene = tiny_scene(12)
+    scene.save(tmp_path / "tiny.npz")
+    out = tmp_path / "out"
+    assert cli.main(["evaluate", str(tmp_path / "tiny.npz"), "--rechart", "30", "--compare", "--resolution", "48",
+                     "--points", "2000", "--samples", "4", "--truth-samples", "32", "--multipliers", "1,2",
+                     "--out", str(out)]) == 0
+    report = json.loads((out / "tiny_rechart30" / "report.json").read_text())
+    assert report["variant"] == "rechart30"
+    layout = report["layout"]
+    assert layout["source"] == "rechart" and layout["angle"] == 30 and layout["charts"] == 1
+    assert layout["layout"]["valid"]
+    # The maps were baked on the re-charted layout, not the scene's UVs.
+    saved = np.load(out / "tiny_rechart30" / "refined_layout.npz")
+    recharted = lmrefine.rechart(scene.positions, scene.triangles, 30.0, 48, 2.0).uvs
+    np.testing.assert_array_equal(saved["original_uvs"], recharted)
+    assert not np.array_equal(saved["original_uvs"], scene.uvs["smart"])
+    # Against the scene's own layout: one row, both maps, a sweep of two.
+    [compared] = report["layout_comparison"]
+    assert compared["variant"] == "smart" and len(compared["resolution_sweep"]) == 2
+    assert compared["equal_error_status_refined"] in ("within", "below", "above", "flat")
+    text = (out / "tiny_rechart30" / "report.md").read_text()
+    assert "re-charted from the mesh" in text and "Against the scene's own layouts" in text
+    assert "against the scene's `smart` layout" in (out / "report.md").read_text()
+
+
+def test_evaluate_rejects_a_bad_rechart_angle(tmp_path, capsys):
+    assert cli.main(["evaluate", "courtyard", "--rechart", "95", "--out", str(tmp_path)]) == 2
+    assert "rechart" in capsys.readouterr().err
+
+
+def test_tessellation_lets_a_coarse_floor_gather_texels_at_the_shadow_edge(tmp_path):
+    """3 x 3 quads: every triangle under the shadow edge covers ~100 texels at
+    48^2, so the plain refinement cannot move texels towards the edge; the
+    tessellated one can (docs/refiner.md, Tessellation)."""
+    from lmrefine.evaluation import EvaluationOptions, evaluate_sample
+
+    scene = tiny_scene(3)
+    common = dict(resolution=48, points=2000, samples=8, truth_samples=32, multipliers=(1.0, 2.0, 4.0))
+    plain = evaluate_sample(scene, EvaluationOptions(**common))
+    split = evaluate_sample(scene, EvaluationOptions(**common, tessellate=4.0), out_dir=str(tmp_path / "t"))
+    t = split["tessellation"]
+    assert t["vertices_before"] == 16 and 0 < t["vertices_added"] <= 64
+    assert t["triangles_after"] > t["triangles_before"] == 18
+    assert "tessellation" not in plain
+    assert split["texels_per_transition_triangle"] < 0.5 * plain["texels_per_transition_triangle"]
+    assert split["transition_widening"] > plain["transition_widening"] + 0.2
+    # Each run compares with its own uniform baseline at the same points: the ratio rose (1.42x -> 1.99x).
+    assert split["equal_error_resolution_ratio"] > plain["equal_error_resolution_ratio"] + 0.3
+    layout = np.load(tmp_path / "t" / "refined_layout.npz")
+    assert lmrefine.check_layout(layout["uvs"], layout["triangles"], 48)["valid"]
+    assert "Tessellated along transitions" in (tmp_path / "t" / "report.md").read_text()
+
+
+def test_rechart_and_tessellation_combine(tmp_path):
+    """The re-charted layout is a UV variant of the scene: the tessellation
+    carries it, and the refined layout is valid on the split triangles."""
+    from lmrefine.evaluation import EvaluationOptions, evaluate_sample
+
+    scene = tiny_scene(3)
+    options = EvaluationOptions(resolution=48, points=1000, samples=4, truth_samples=16, multipliers=(1.0, 2.0),
+                                rechart=30.0, tessellate=1.0, view_width=0)
+    report = evaluate_sample(scene, options, out_dir=str(tmp_path / "r"))
+    assert report["variant"] == "rechart30" and report["layout"]["source"] == "rechart"
+    assert report["tessellation"]["triangles_after"] > report["tessellation"]["triangles_before"] == 18
+    layout = np.load(tmp_path / "r" / "refined_layout.npz")
+    assert len(layout["triangles"]) == report["tessellation"]["triangles_after"]
+    assert lmrefine.check_layout(layout["uvs"], layout["triangles"], 48)["valid"]
+@pytest.mark.slow
+def test_multi_stage_refinement_reports_every_stage_and_stops_when_the_layout_settles():
+    from lmrefine.evaluation import EvaluationOptions, evaluate_sample
+
+    scene = tiny_scene(24)
+    common = dict(resolution=48, points=2000, samples=8, truth_samples=32, multipliers=(1.0, 2.0, 4.0))
+    one = evaluate_sample(scene, EvaluationOptions(**common))
+    many = evaluate_sample(scene, EvaluationOptions(**common, stages=4))
+    history = many["stages"]["stages"]
+    assert [e["stage"] for e in history] == [1, 2, 3, 4] and "stages" not in one
+    assert history[0]["rmse"] == pytest.approx(one["rmse_refined"])  # stage 1 is the plain refinement
+    # Stage 2, refined from stage 1's sharper bake, has a lower world-space error.
+    assert history[1]["rmse"] < 0.8 * history[0]["rmse"] and history[1]["layout_change"] > 0.05
+    kept = [e for e in history if e["kept"]]
+    assert many["rmse_refined"] == pytest.approx(kept[-1]["rmse"])  # the report is the last kept stage's
+    assert many["equal_error_resolution_ratio"] > one["equal_error_resolution_ratio"]
+    # A stage whose layout hardly changes ends the stages, and is not used (strength 0: nothing moves).
+    still = evaluate_sample(scene, EvaluationOptions(**common, stages=3, refine_options={"strength": 0.0}))
+    assert [(e["stage"], e["kept"]) for e in still["stages"]["stages"]] == [(1, True), (2, False)]
+    assert "stage 1 kept" in still["stages"]["stopped"]
+    with pytest.raises(ValueError, match="stages must be an integer from 1 to 16"):
+        evaluate_sample(scene, EvaluationOptions(**common, stages=0))

@@ -60,7 +60,9 @@ def test_a_crash_and_a_hang_are_caught_and_counted(monkeypatch):
 
     def fake_run_case(lm, seed, index):
         if index == 0:
-            _os.kill(_os.getpid(), signal.SIGSEGV)
+            # SIGKILL, not SIGSEGV: under ASan a SEGV runs the sanitizer's report in a
+            # child forked from this threaded process, which can stall past the timeout.
+            _os.kill(_os.getpid(), signal.SIGKILL)
         if index == 1:
             time.sleep(60)
         if index == 2:
@@ -71,5 +73,4 @@ def test_a_crash_and_a_hang_are_caught_and_counted(monkeypatch):
     counts, examples = runner.run(0, 4, jobs=2, timeout=2.0, fresh=False)
     assert counts == {"crash": 1, "hang": 1, "other exception KeyError": 1, "ok": 1}
     assert runner.failures(counts) == {"crash": 1, "hang": 1, "other exception KeyError": 1}
-    crash = examples["crash"][0][1]  # killed by the signal, or (under ASan) its report and exit status 1
-    assert "signal 11" in crash or "AddressSanitizer: SEGV" in crash
+    assert "signal 9" in examples["crash"][0][1]

@@ -1,6 +1,7 @@
-"""The native worker pool (native/src/core/parallel.cpp): loops from several
-Python threads at once, after a fork, and with changing thread counts give
-the results of a lone serial run."""
+"""The native parallel loop (native/src/core/parallel.cpp, on oneTBB): loops
+from several Python threads at once, in a child made by fork() (which runs
+them serially) and with changing thread counts give the results of a lone
+serial run."""
 
 import os
 import signal
@@ -56,9 +57,9 @@ def test_growing_and_shrinking_thread_counts(monkeypatch):
 def test_a_forked_child_runs_parallel_loops(monkeypatch):
     energy, mask = _inputs(6)
     monkeypatch.setenv("LMREFINE_THREADS", "2")
-    want = lmrefine.run_automaton(energy, mask)["grid"]  # the parent's pool now has workers
+    want = lmrefine.run_automaton(energy, mask)["grid"]  # oneTBB's workers now run in the parent
     pid = os.fork()
-    if pid == 0:  # the child: none of the parent's workers exist here
+    if pid == 0:  # the child: none of the parent's workers exist here, its loops run serially
         code = 1
         try:
             signal.alarm(60)  # a hang (waiting for the parent's workers) fails instead of blocking

@@ -105,10 +105,23 @@ def apply_flags(settings, args):
         mapping["lightmap_image"] = image
     for key, value in mapping.items():
         if value is not None:
+            _check_range(settings, key, value)
             try:
                 setattr(settings, key, value)
             except (TypeError, ValueError) as error:
                 raise pipeline.UserError(f"--{key.replace('_', '-')}: {error}") from error
+
+
+def _check_range(settings, key, value):
+    """Blender clamps a number set outside a property's hard range without a
+    word; a command line must refuse it instead."""
+    prop = settings.bl_rna.properties[key]
+    if prop.type not in ('INT', 'FLOAT') or getattr(prop, "array_length", 0) or isinstance(value, bool):
+        return
+    low, high = prop.hard_min, prop.hard_max
+    if not low <= value <= high:
+        raise pipeline.UserError(f"--{key.replace('_', '-')} {value:g} is outside {low:g} to {high:g}: "
+                                 f"pass a value in that range")
 
 
 def _progress(fraction, label, state={"shown": None}):
@@ -214,7 +227,10 @@ def main(argv):
         report = run(args)
         code = 0
     except Exception as error:
-        message = str(error) if isinstance(error, pipeline.UserError) else f"{type(error).__name__}: {error}"
+        from lmrefine.messages import user_message
+        message = str(error) if isinstance(error, pipeline.UserError) else user_message(error)
+        if message != str(error):  # the full text (native source location) stays in the log
+            print(f"lmrefine: details: {type(error).__name__}: {error}", file=sys.stderr, flush=True)
         print(f"lmrefine: error: {message}", file=sys.stderr, flush=True)
         report = {"ok": False, "error": message}
         code = 1

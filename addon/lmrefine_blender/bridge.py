@@ -306,10 +306,11 @@ def light_params(obj):
     return kind.lower(), params
 
 
-def scene_lights(context):
-    """Every visible, render-enabled light with non-zero energy."""
-    return [light_params(obj) for obj in context.scene.objects
-            if obj.type == 'LIGHT' and renders(obj) and obj.data.energy > 0.0]
+def scene_lights(context, named=False):
+    """Every visible, render-enabled light with non-zero energy, as (kind,
+    params), or (object, (kind, params)) when `named`."""
+    lights = [obj for obj in context.scene.objects if obj.type == 'LIGHT' and renders(obj) and obj.data.energy > 0.0]
+    return [(obj, light_params(obj)) if named else light_params(obj) for obj in lights]
 
 
 def world_color(scene):

@@ -181,7 +181,7 @@ def _validate_object(obj, options, owners, resolution, depsgraph):
     if source not in mesh.uv_layers:
         available = ", ".join(layer.name for layer in mesh.uv_layers)
         raise UserError(f"'{obj.name}' has no UV map '{source}' (it has: {available}): pick the lightmap "
-                        "UV map in the panel")
+                        "UV map (Source UV Map in the panel, --source-layer in a batch)")
     refined = source + REFINED_SUFFIX
     if refined not in mesh.uv_layers and len(mesh.uv_layers) >= 8:
         raise UserError(f"'{obj.name}' already has 8 UV maps, Blender's limit: remove one to make room "

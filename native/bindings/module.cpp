@@ -7,6 +7,7 @@
 
 #include "lmrefine/core/error.h"
 #include "lmrefine/core/memory.h"
+#include "lmrefine/core/parallel.h"
 
 namespace py = pybind11;
 
@@ -14,6 +15,7 @@ namespace lmrefine::bindings {
 void bind_image_io(py::module_& m);
 void bind_coverage(py::module_& m);
 void bind_chart(py::module_& m);
+void bind_rechart(py::module_& m);
 void bind_packer(py::module_& m);
 void bind_automaton(py::module_& m);
 void bind_warp(py::module_& m);
@@ -22,6 +24,7 @@ void bind_wavelet(py::module_& m);
 void bind_gradient_map(py::module_& m);
 void bind_scene(py::module_& m);
 void bind_baker(py::module_& m);
+void bind_primary_rays(py::module_& m);
 }  // namespace lmrefine::bindings
 
 PYBIND11_MODULE(_native, m) {
@@ -54,6 +57,7 @@ PYBIND11_MODULE(_native, m) {
     lmrefine::bindings::bind_image_io(m);
     lmrefine::bindings::bind_coverage(m);
     lmrefine::bindings::bind_chart(m);
+    lmrefine::bindings::bind_rechart(m);
     lmrefine::bindings::bind_packer(m);
     lmrefine::bindings::bind_automaton(m);
     lmrefine::bindings::bind_warp(m);
@@ -62,6 +66,7 @@ PYBIND11_MODULE(_native, m) {
     lmrefine::bindings::bind_gradient_map(m);
     lmrefine::bindings::bind_scene(m);
     lmrefine::bindings::bind_baker(m);
+    lmrefine::bindings::bind_primary_rays(m);
 
     // The memory rule of the native core, for the allocations the Python
     // half makes itself (MemoryError before allocating, with the same words).
@@ -71,4 +76,8 @@ PYBIND11_MODULE(_native, m) {
             lmrefine::require_memory(what, uint64_t(std::max(0.0, std::min(bytes, 1.8e19))), advice);
         },
         py::arg("what"), py::arg("bytes"), py::arg("advice"));
+
+    // Registered by the package with os.register_at_fork(after_in_child=...).
+    m.def("_serial_after_fork", &lmrefine::serial_after_fork,
+          "Run every native loop serially from now on (called in a child made by fork()).");
 }

@@ -13,6 +13,32 @@ namespace py = pybind11;
 namespace lmrefine::bindings {
 namespace {
 
+using ByteMap = py::array_t<uint8_t, py::array::c_style | py::array::forcecast>;
+
+// The energy map (float32 (H, W) or (H, W, 4)) as AutomatonInput; `energy`
+// keeps the viewed memory alive.
+AutomatonInput energy_input(const py::handle& energy_in, py_util::FloatArray& energy) {
+    energy = py_util::require_float32(energy_in, "energy", {2, 3});
+    AutomatonInput input;
+    input.height = int(energy.shape(0));
+    input.width = int(energy.shape(1));
+    input.channels = energy.ndim() == 3 ? int(energy.shape(2)) : 1;
+    input.energy = energy.data();
+    return input;
+}
+
+// An optional (H, W) boolean map matching the energy map (mask, rigid), or
+// null; `map` keeps the viewed memory alive.
+const uint8_t* matching_map(const py::handle& in, const char* name, const AutomatonInput& input, ByteMap& map) {
+    if (in.is_none()) return nullptr;
+    map = py_util::contiguous<uint8_t>(in, name);
+    if (map.ndim() != 2 || map.shape(0) != input.height || map.shape(1) != input.width) {
+        throw py::value_error(std::string(name) + " must be a (H, W) boolean array matching energy's " +
+                              std::to_string(input.height) + "x" + std::to_string(input.width));
+    }
+    return map.data();
+}
+
 // Numbers and names arrive as Python objects and go through py_util's
 // readers, so a wrong type is a TypeError naming the argument.
 py::dict run(const py::handle& energy_in, const py::handle& mask_in, const py::handle& rigid_in,
@@ -21,30 +47,11 @@ py::dict run(const py::handle& energy_in, const py::handle& mask_in, const py::h
              const py::handle& border, const py::handle& coarse_to_fine, const py::handle& passes,
              const py::handle& check_invariants,
              py::object progress_callback) {
-    auto energy = py_util::require_float32(energy_in, "energy", {2, 3});
-    AutomatonInput input;
-    input.height = int(energy.shape(0));
-    input.width = int(energy.shape(1));
-    input.channels = energy.ndim() == 3 ? int(energy.shape(2)) : 1;
-    input.energy = energy.data();
-    py::array_t<uint8_t, py::array::c_style | py::array::forcecast> mask;
-    if (!mask_in.is_none()) {
-        mask = py_util::contiguous<uint8_t>(mask_in, "mask");
-        if (mask.ndim() != 2 || mask.shape(0) != input.height || mask.shape(1) != input.width) {
-            throw py::value_error("mask must be a (H, W) boolean array matching energy's " +
-                                  std::to_string(input.height) + "x" + std::to_string(input.width));
-        }
-        input.mask = mask.data();
-    }
-    py::array_t<uint8_t, py::array::c_style | py::array::forcecast> rigid;
-    if (!rigid_in.is_none()) {
-        rigid = py_util::contiguous<uint8_t>(rigid_in, "rigid");
-        if (rigid.ndim() != 2 || rigid.shape(0) != input.height || rigid.shape(1) != input.width) {
-            throw py::value_error("rigid must be a (H, W) boolean array matching energy's " +
-                                  std::to_string(input.height) + "x" + std::to_string(input.width));
-        }
-        input.rigid = rigid.data();
-    }
+    py_util::FloatArray energy;
+    AutomatonInput input = energy_input(energy_in, energy);
+    ByteMap mask, rigid;
+    input.mask = matching_map(mask_in, "mask", input, mask);
+    input.rigid = matching_map(rigid_in, "rigid", input, rigid);
     AutomatonOptions options;
     options.diffusion = py_util::real_param(diffusion, "diffusion");
     options.rate = py_util::real_param(rate, "rate");
@@ -87,9 +94,49 @@ py::dict run(const py::handle& energy_in, const py::handle& mask_in, const py::h
     return out;
 }
 
+// Test hook (tests/test_automaton_reference.py): one step of the rule with
+// the guards off, from given nodes; not part of the public API.
+py::dict rule_step(const py::handle& energy_in, const py::handle& mask_in, const py::handle& nodes_in,
+                   const py::handle& diffusion, const py::handle& rate, const py::handle& border) {
+    py_util::FloatArray energy;
+    AutomatonInput input = energy_input(energy_in, energy);
+    ByteMap mask;
+    input.mask = matching_map(mask_in, "mask", input, mask);
+    AutomatonOptions options;
+    options.diffusion = py_util::real_param(diffusion, "diffusion");
+    options.rate = py_util::real_param(rate, "rate");
+    options.border = parse_border_mode(py_util::string_param(border, "border"));
+    const auto nodes_array = py_util::contiguous<double>(nodes_in, "nodes");
+    if (nodes_array.ndim() != 3 || nodes_array.shape(2) != 2) {
+        throw py::value_error("nodes must be a (rows + 1, cols + 1, 2) float64 array");
+    }
+    std::vector<glm::dvec2> nodes(size_t(nodes_array.shape(0) * nodes_array.shape(1)));
+    for (size_t n = 0; n < nodes.size(); ++n) nodes[n] = {nodes_array.data()[2 * n], nodes_array.data()[2 * n + 1]};
+    const RuleStep result = automaton_rule_step(input, options, nodes);
+    std::vector<double> flat(2 * result.nodes.size());
+    for (size_t n = 0; n < result.nodes.size(); ++n) {
+        flat[2 * n] = result.nodes[n].x;
+        flat[2 * n + 1] = result.nodes[n].y;
+    }
+    const py::ssize_t rows = nodes_array.shape(0) - 1, cols = nodes_array.shape(1) - 1;
+    std::vector<double> energy_out = result.energy;
+    std::vector<py::ssize_t> energy_shape{rows, cols};
+    if (input.channels > 1) energy_shape.push_back(input.channels);
+    py::dict out;
+    out["nodes"] = py_util::to_numpy(std::move(flat), {rows + 1, cols + 1, 2});
+    out["energy"] = py_util::to_numpy(std::move(energy_out), energy_shape);
+    out["difference"] = result.difference;
+    return out;
+}
+
 }  // namespace
 
 void bind_automaton(py::module_& m) {
+    m.def("_automaton_rule_step", &rule_step, py::arg("energy"), py::arg("mask"), py::arg("nodes"), py::kw_only(),
+          py::arg("diffusion"), py::arg("rate"), py::arg("border"),
+          "Test hook, not public API: one step of the automaton's rule with the guards off, from `nodes` "
+          "(float64 (rows + 1, cols + 1, 2), pixel space, ring included with border='extra_ring'). Returns "
+          "dict(nodes, energy, difference) as the rule proposes them (tests/test_automaton_reference.py).");
     const AutomatonOptions d;
     m.def("run_automaton", &run, py::arg("energy"), py::arg("mask") = py::none(), py::kw_only(),
           py::arg("rigid") = py::none(),

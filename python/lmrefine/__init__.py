@@ -13,6 +13,8 @@ Array conventions (shared by every function):
 * UV layouts are per-corner UVs (N, 2) and triangles (T, 3) of indices.
 """
 
+import os as _os
+
 try:
     from . import _native
 except ImportError as error:  # pragma: no cover - depends on the build state
@@ -39,11 +41,18 @@ from ._native import (  # noqa: F401  (re-exports)
     warp_uvs,
     write_image,
 )
-from .baker import BakeResult, bake, evaluate  # noqa: F401  (re-exports)
+from .baker import BakeResult, bake, evaluate, trace_rays  # noqa: F401  (re-exports)
+from .charting import RechartResult, rechart  # noqa: F401
 from .packer import CHART_TOLERANCE, PackResult, pack_charts  # noqa: F401
 from .refine import RefineResult, identity_grid, refine_uvs  # noqa: F401
+from .tessellation import TessellationResult, tessellate, transition_strength_of  # noqa: F401
 
 __version__ = _native.__version__
+
+# oneTBB, which runs the native loops, does not survive a fork taken while its
+# workers run: a child made by fork() runs them serially (same results).
+if hasattr(_os, "register_at_fork"):
+    _os.register_at_fork(after_in_child=_native._serial_after_fork)
 
 __all__ = [
     "CHART_TOLERANCE",
@@ -51,8 +60,10 @@ __all__ = [
     "CancelledError",
     "LayoutChecker",
     "PackResult",
+    "RechartResult",
     "RefineResult",
     "Scene",
+    "TessellationResult",
     "bake",
     "check_layout",
     "coverage_mask",
@@ -67,8 +78,12 @@ __all__ = [
     "idwt2",
     "pack_charts",
     "read_image",
+    "rechart",
     "refine_uvs",
     "run_automaton",
+    "trace_rays",
+    "tessellate",
+    "transition_strength_of",
     "warp_uvs",
     "write_image",
 ]

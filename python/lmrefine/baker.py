@@ -1,4 +1,4 @@
-"""The lightmap baker's Python API: lmrefine.bake and lmrefine.evaluate.
+"""The lightmap baker's Python API: lmrefine.bake, lmrefine.evaluate and lmrefine.trace_rays.
 
 The work is native (Embree 3, all cores, GIL released); this module only
 normalizes arguments and shapes the results. Units, passes and how they match
@@ -113,3 +113,27 @@ def evaluate(scene, points, normals, passes=("direct",), samples=64, seed=0, pro
     values, _stats = _native._evaluate(scene, points, normals, list(names), samples, seed, progress,
                                        bounces, ao_distance)
     return values[0] if len(names) == 1 else dict(zip(names, values))
+
+
+def trace_rays(scene, origins, directions, progress=None):
+    """The closest hit of every ray in ``scene`` (receivers and occluders
+    alike): primary rays for pictures of the lit surface (lmrefine.surface_view).
+
+    Args:
+        origins (numpy.ndarray): (N, 3) ray origins, inside +-1e9.
+        directions (numpy.ndarray): (N, 3) ray directions, any non-zero length.
+        progress (callable | None): as for bake.
+
+    Returns:
+        (mesh, triangle, barycentric, distance): int32 (N,) mesh id (-1: no
+        hit), int32 (N,) triangle of that mesh (-1: no hit), float32 (N, 2)
+        weights of the triangle's corners 1 and 2 (corner 0 gets 1 minus
+        their sum), float32 (N,) distance in units of the direction's length
+        (inf: no hit).
+
+    Raises:
+        ValueError: NaN/Inf or out-of-scene origins, zero or NaN directions,
+            mismatched shapes.
+    """
+    _check_scene(scene)
+    return _native._trace_rays(scene, origins, directions, progress)

@@ -68,19 +68,59 @@ def evaluation_options(args):
         refine_options["passes"] = args.refine_passes
     if args.no_repack:
         refine_options["repack"] = False
+    rechart = getattr(args, "rechart", None)
+    compare = ()
+    if rechart is not None and getattr(args, "compare", False):
+        compare = ("smart", "lightmap") if args.variant == "both" else (args.variant,)
     return EvaluationOptions(resolution=args.resolution, samples=args.samples, truth_samples=args.truth_samples,
                              points=args.points, seed=args.seed, multipliers=args.multipliers,
                              padding=args.padding, denoise=args.denoise, bake_pass=args.bake_pass,
-                             refine_options=refine_options)
+                             refine_options=refine_options, view_width=args.view_width,
+                             tessellate=args.tessellate, rechart=rechart, compare_variants=compare,
+                             stages=args.stages)
 
 
-def load_scenes(names):
+def load_scenes(names, args=None):
+    """Bundled samples by name, scene .npz files, and .blend files (exported
+    through headless Blender into OUT/scenes/, again only when they changed)."""
     from .sample_scenes import load_sample, sample_names
 
     names = names or sample_names()
     if not names:
         raise CliError("no sample scenes found in blend_samples/ (run `make samples`), and none given")
-    return [load_sample(name) for name in names]
+    scenes = []
+    for name in names:
+        if name.lower().endswith(".blend"):
+            from .scene_export import cached_export
+
+            name = cached_export(name, os.path.join(args.out, "scenes"), objects=args.objects, uv_map=args.uv_map,
+                                 blender=args.blender)
+        scenes.append(load_sample(name))
+    return scenes
+
+
+def run_export_scene(args):
+    from .sample_scenes import load_sample
+    from .scene_export import export_blend
+
+    out = args.out or os.path.splitext(os.path.basename(args.blend))[0] + ".npz"
+    export_blend(args.blend, out, objects=args.objects, uv_map=args.uv_map, blender=args.blender)
+    scene = load_sample(out)
+    uvs = scene.uvs["own"]
+    print(f"{out}: {len(scene.objects)} receivers, {len(scene.triangles)} triangles, UVs in "
+          f"[{uvs.min():.3g}, {uvs.max():.3g}], {len(scene.occluder_triangles)} occluder triangles, "
+          f"{len(scene.lights)} lights; evaluate it with: python3 -m lmrefine evaluate {out}")
+    return out
+
+
+def add_blend_arguments(parser):
+    parser.add_argument("--objects", default="all",
+                        help="the objects that get a lightmap (receivers): 'all' (every visible mesh object with a UV "
+                             "map, default), 'selected', 'collection:NAME' or comma-separated names; every other "
+                             "visible object casts shadows")
+    parser.add_argument("--uv-map", help="the receivers' lightmap UV map (default: as the add-on picks it: a map "
+                                         "named like 'Lightmap', else the second UV map, else the only one)")
+    parser.add_argument("--blender", help="Blender executable (default: $BLENDER or `blender` on PATH)")
 
 
 def run_evaluate(args):
@@ -89,8 +129,10 @@ def run_evaluate(args):
 
     options = evaluation_options(args)
     options.check()
-    scenes = load_scenes(args.scenes)
+    scenes = load_scenes(args.scenes, args)
     variants = ("smart", "lightmap") if args.variant == "both" else (args.variant,)
+    if options.rechart is not None:
+        variants = variants[:1]  # the re-charted layout replaces the scene's UVs: one run per scene
     bar = ProgressBar()
     try:
         summary = evaluate_samples(scenes, options, args.out, variants=variants, progress=bar)
@@ -102,19 +144,24 @@ def run_evaluate(args):
             verdict = "gain, but" if scene["gain"] else "no gain"
             print(f"\n{scene['scene']} ({scene['variant']}): {verdict}: " + "; ".join(scene["notes"]))
     print(f"\nwrote {args.out}/report.md, report.json and one folder of pictures per scene")
+    for scene in summary["scenes"]:
+        if scene.get("surface"):
+            folder = os.path.join(args.out, f"{scene['scene']}_{scene['variant']}")
+            print(f"the lit surface ({scene['scene']}, plain / refined / ground truth): {folder}/surface.png, "
+                  "surface_crops.png, surface_density.png")
     return summary
 
 
 def run_demo(args):
     """The full pipeline on one bundled scene, plus the gradient-map pictures
     of its baseline bake (stage 1 of the method)."""
-    from .sample_scenes import load_sample
-
     summary = run_evaluate(args)
     scene = summary["scenes"][0]
-    sample = load_sample(args.scenes[0])
-    uvs, triangles = sample.layout(scene["variant"])
-    baseline = _native.read_image(os.path.join(args.out, f"{scene['scene']}_{scene['variant']}", "baseline.exr"))
+    folder = os.path.join(args.out, f"{scene['scene']}_{scene['variant']}")
+    # The layout the baseline was baked on (the scene's own, or re-charted).
+    with np.load(os.path.join(folder, "refined_layout.npz")) as layout:
+        uvs, triangles = layout["original_uvs"], layout["triangles"]
+    baseline = _native.read_image(os.path.join(folder, "baseline.exr"))
     mask = _native.coverage_mask(uvs, triangles, baseline.shape[:2])
     write_gradient_report(np.ascontiguousarray(baseline[..., :3]), mask, os.path.join(args.out, "gradient"),
                           source=f"{scene['scene']} baseline bake", wavelet=args.wavelet)
@@ -140,12 +187,32 @@ def add_evaluation_arguments(parser, resolution, points):
     parser.add_argument("--refine-passes", type=int, help="refine_uvs passes (default: refine_uvs' own)")
     parser.add_argument("--no-repack", action="store_true",
                         help="refine inside charts only (refine_uvs repack=False): no chart scaling or packing")
+    from .charting import DEFAULT_ANGLE
+
+    parser.add_argument("--rechart", type=float, nargs="?", const=DEFAULT_ANGLE, metavar="ANGLE",
+                        help="re-chart the scene's mesh (lmrefine.rechart: charts of faces whose normals are within "
+                             f"ANGLE degrees, default {DEFAULT_ANGLE:g}, conformal unwrap, uniform texel density, "
+                             "packed) and use that layout instead of the scene's own UVs; put scene names before it")
+    parser.add_argument("--compare", action="store_true",
+                        help="with --rechart: also bake the scene's own --variant layout(s) uniformly at every "
+                             "multiplier and report the equal-error ratio of the re-charted maps against them")
     parser.add_argument("--denoise", action="store_true", help="denoise every bake (edge-aware)")
+    parser.add_argument("--view-width", type=int, default=480,
+                        help="width in pixels of the pictures of the lit surface, 16 to 2048 (default: 480; 0: none)")
+    parser.add_argument("--stages", type=int, default=1,
+                        help="bake-refine stages, each refining the previous stage's layout from its own bake "
+                             "(default: 1); stops early when a stage hardly changes the layout")
+    parser.add_argument("--tessellate", type=float, nargs="?", const=0.25, metavar="BUDGET",
+                        help="split the triangles strong transitions cross before refining, at most BUDGET more "
+                             "vertices as a fraction (default 0.25 = +25%%; docs/refiner.md, Tessellation)")
     parser.add_argument("--pass", dest="bake_pass", choices=("direct", "ao", "indirect", "combined"),
                         help="light to bake and compare (default: the scene's own: direct, combined for the room)")
 
 
 def _demo_scenes(args):
+    if args.scene.lower().endswith(".blend"):
+        raise CliError(f"demo runs on a bundled sample or a scene .npz; for '{args.scene}' run "
+                       f"`python3 -m lmrefine evaluate {args.scene}`")
     args.scenes = [args.scene]
     return args
 
@@ -175,10 +242,13 @@ def build_parser():
                     "error, transition widening, equal-error resolution). Writes report.md, report.json and "
                     "pictures per scene. Metrics: docs/evaluation.md.")
     evaluate.add_argument("scenes", nargs="*",
-                          help="bundled sample names (courtyard, room, fence_and_tree, game_level, atrium) or scene .npz "
-                               "files (default: every bundled sample)")
+                          help="bundled sample names (courtyard, room, fence_and_tree, game_level, atrium), scene .npz "
+                               "files or .blend files (exported with headless Blender into OUT/scenes/, as "
+                               "export-scene does) (default: every bundled sample)")
     evaluate.add_argument("--variant", choices=("smart", "lightmap", "both"), default="smart",
-                          help="lightmap UVs: Smart UV Project, Lightmap Pack, or both (default: smart)")
+                          help="bundled samples' lightmap UVs: Smart UV Project, Lightmap Pack, or both (default: "
+                               "smart); a scene from a .blend has one, its lightmap UV map")
+    add_blend_arguments(evaluate.add_argument_group(".blend files"))
     add_evaluation_arguments(evaluate, resolution=256, points=20000)
     evaluate.add_argument("--out", default="evaluate_out", help="output folder (default: evaluate_out)")
     evaluate.set_defaults(run=run_evaluate)
@@ -194,6 +264,17 @@ def build_parser():
     demo.add_argument("--wavelet", choices=WAVELETS, default="d4", help="wavelet of the gradient-map pictures")
     demo.add_argument("--out", default="demo_out", help="output folder (default: demo_out)")
     demo.set_defaults(run=lambda args: run_demo(_demo_scenes(args)))
+
+    export = commands.add_parser(
+        "export-scene", help="export a .blend's scene (receivers, occluders, lights, camera) for evaluate",
+        description="Export the scene of a .blend with headless Blender into the scene .npz that `evaluate` reads: "
+                    "the receivers with their lightmap UV map, read as the add-on's bake reads them (modifiers "
+                    "applied), every other visible object as an occluder, the lights, the world colour and the "
+                    "active camera. Needs Blender (3.4 or later).")
+    export.add_argument("blend", help="the .blend file")
+    export.add_argument("-o", "--out", help="the scene .npz to write (default: <name of the .blend>.npz here)")
+    add_blend_arguments(export)
+    export.set_defaults(run=run_export_scene)
 
     from .batch.cli import add_batch_parser
 

@@ -11,12 +11,13 @@ in :mod:`lmrefine.metrics` and docs/evaluation.md.
 import math
 import os
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from . import bake, check_layout, find_charts, metrics, refine_uvs, write_image
+from . import bake, check_layout, find_charts, metrics, pack_charts, refine_uvs, write_image
 from . import evaluate as evaluate_light
+from .charting import rechart
 
 DEFAULT_MULTIPLIERS = (1.0, 1.5, 2.0, 3.0, 4.0)
 # A transition-point RMSE at least this much lower counts as a gain.
@@ -36,18 +37,41 @@ class EvaluationOptions:
     denoise: bool = False
     bake_pass: str = None             # None: the scene's own pass (direct, or combined for the room)
     refine_options: dict = field(default_factory=dict)   # passed to refine_uvs (strength, passes, ...)
+    # Re-chart the scene's mesh (lmrefine.rechart with this angle in degrees)
+    # and use that layout instead of the scene's own UVs; None: the scene's.
+    rechart: float = None
+    # With rechart: the scene's own UV variants whose uniform bakes the
+    # re-charted maps are also compared with (a resolution sweep each).
+    compare_variants: tuple = ()
+    view_width: int = 480             # pixels across the pictures of the lit surface (0: none)
+    tessellate: float = None          # vertex budget (fraction) of a tessellation along transitions; None: off
+    stages: int = 1                   # refine + bake stages, each refining from the previous stage's bake
 
     def check(self):
         if self.resolution < 8:
             raise ValueError(f"resolution must be at least 8, got {self.resolution}")
         if self.points < 100:
             raise ValueError(f"points must be at least 100 (for a top decile of transitions), got {self.points}")
+        if self.view_width != 0 and not 16 <= self.view_width <= 2048:
+            raise ValueError(f"view width must be 0 (no surface pictures) or 16 to 2048 pixels, got {self.view_width}")
         if self.samples < 1 or self.truth_samples < 1:
             raise ValueError("samples and truth_samples must be at least 1")
         m = tuple(float(x) for x in self.multipliers)
         if len(m) < 2 or m[0] != 1.0 or any(b <= a for a, b in zip(m, m[1:])):
             raise ValueError(f"multipliers must start at 1 and increase, e.g. 1,1.5,2,3,4; got {self.multipliers}")
         self.multipliers = m
+        if self.rechart is not None and not 0.0 < float(self.rechart) < 90.0:
+            raise ValueError(f"rechart must be an angle in (0, 90) degrees, got {self.rechart}")
+        if not (isinstance(self.stages, int) and 1 <= self.stages <= 16):
+            raise ValueError(f"stages must be an integer from 1 to 16, got {self.stages}")
+        if self.tessellate is not None and not (0.0 <= self.tessellate <= 16.0):
+            raise ValueError(f"the tessellation budget is a fraction of the vertex count in [0, 16] "
+                             f"(0.25 = at most 25% more vertices), got {self.tessellate}")
+
+    @property
+    def layout_name(self):
+        """The layout's name in reports and folder names: the UV variant, or rechart<angle>."""
+        return self.variant if self.rechart is None else f"rechart{float(self.rechart):g}"
 
 
 class _Stages:
@@ -75,6 +99,92 @@ def _bake_map(sample, uvs, resolution, options, progress):
     result = bake(scene, resolution, passes=passes, samples=options.samples, seed=options.seed,
                   progress=progress, denoise=options.denoise)
     return np.ascontiguousarray(result[0][..., :3])
+
+
+def _tessellated(sample, variant, baseline, budget):
+    """The scene with its triangles split along the transitions of `baseline`
+    (baked on `variant`): the same surface, every UV variant keeping its
+    mapping (lmrefine.tessellation). Returns (scene, tessellation report)."""
+    from .tessellation import tessellate, transition_strength_of
+
+    uvs, corner_triangles = sample.layout(variant)
+    strength = transition_strength_of(baseline, uvs, corner_triangles)
+    others = {name: values for name, values in sample.uvs.items() if name != variant}
+    result = tessellate(sample.positions, sample.triangles, uvs, strength, budget=budget,
+                        corner_attributes={"normals": sample.normals, **{f"uv:{k}": v for k, v in others.items()}})
+    normals = result.corner_attributes["normals"].astype(np.float64)
+    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-30)
+    layouts = {variant: result.uvs}
+    layouts.update({name: result.corner_attributes[f"uv:{name}"].astype(np.float32) for name in others})
+    scene = replace(sample, positions=result.positions.astype(np.float32),
+                    triangles=result.triangles.astype(np.int32), normals=normals.astype(np.float32),
+                    uvs={name: layouts[name] for name in sample.uvs}, base_color=sample.base_color[result.parent],
+                    object_id=sample.object_id[result.parent])
+    return scene, result.report
+
+
+# A further stage is kept only if its layout moves texels by at least this
+# much (median relative change of triangle texel density against the
+# previous stage): the rule needs no ground truth, as in the add-on.
+STAGE_MIN_CHANGE = 0.05
+
+
+def _further_stages(sample, triangles, resolution, padding, options, stages, points, truth, transitions, refined,
+                    refined_map, lookup):
+    """Stages 2..options.stages: refine the previous stage's layout from its
+    own bake, bake again. Stops when a stage's layout hardly differs from the
+    previous one (STAGE_MIN_CHANGE); the world-space error of every stage is
+    measured at the evaluation's points for the report, never used to choose.
+    Returns the last kept stage's (refine result, map, lookup) and the history."""
+    areas = sample.triangle_areas()
+    everywhere = np.ones(len(truth), bool)
+
+    def errors(stage, result, lookup, change=None):
+        entry = {"stage": stage, "rmse": metrics.error_stats(lookup, truth, everywhere)["rmse"],
+                 "transition_rmse": metrics.error_stats(lookup, truth, transitions)["rmse"],
+                 "moved": bool(result.report["moved"])}
+        if change is not None:
+            entry["layout_change"] = change
+        return entry
+
+    history = [errors(1, refined, lookup)]
+    stopped = f"{options.stages} stages done"
+    for stage in range(2, options.stages + 1):
+        previous, previous_map = refined, refined_map
+        candidate = stages.run("refine", lambda p: refine_uvs(previous_map, previous.uvs, triangles, resolution,
+                                                              padding=padding, progress=p, **options.refine_options))
+        before = metrics.texel_density(previous.uvs, triangles, areas, resolution)
+        after = metrics.texel_density(candidate.uvs, triangles, areas, resolution)
+        ratio = after / np.maximum(before, 1e-30)
+        change = float(np.median(np.abs(ratio[before > 0] - 1))) if (before > 0).any() else 0.0
+        if not candidate.report["moved"] or change < STAGE_MIN_CHANGE:
+            history.append({"stage": stage, "moved": bool(candidate.report["moved"]), "layout_change": change,
+                            "kept": False})
+            stopped = (f"stage {stage} changed the layout by {change:.1%} (median texel density), under "
+                       f"{STAGE_MIN_CHANGE:.0%}: stage {stage - 1} kept")
+            break
+        candidate_map = stages.run("bake refined", lambda p: _bake_map(sample, candidate.uvs, resolution, options, p))
+        uv = metrics.interpolate_corners(candidate.uvs, points.triangle, points.bary)
+        lookup = metrics.bilinear_lookup(candidate_map, uv)
+        refined, refined_map = candidate, candidate_map
+        history.append(errors(stage, candidate, lookup, change))
+    for entry in history:
+        entry.setdefault("kept", True)
+    return refined, refined_map, lookup, {"stages": history, "stopped": stopped}
+
+
+def _uniform_repack(sample, uvs, triangles, resolution, padding, options, points, progress):
+    """The input's charts repacked at one common scale (lmrefine.pack_charts,
+    scales None), baked at R and read at the points; None when the charts do
+    not pack (the report then has no second baseline)."""
+    try:
+        packed, report = pack_charts(uvs, triangles, None, None, resolution, padding, progress=progress)
+    except ValueError:
+        return None
+    image = _bake_map(sample, packed, resolution, options, None)
+    lookup = metrics.bilinear_lookup(image, metrics.interpolate_corners(packed, points.triangle, points.bary))
+    return {"lookup": lookup, "utilisation_before": float(report["utilisation_input"]),
+            "utilisation_after": float(report["utilisation"]), "global_scale": float(report["global_scale"])}
 
 
 def _single_pass(sample, options):
@@ -125,7 +235,7 @@ def _diagnose(result, context):
         notes.append(f"small charts: the charts under transitions cover {context['chart_texels_at_transitions']:.0f} "
                      "texels (median) and the gutters between charts keep their width, so texels can hardly move "
                      "towards an edge (Lightmap Pack makes one chart per face): use a layout with larger charts "
-                     "(Smart UV Project) or a higher resolution")
+                     "(Smart UV Project, or --rechart: lmrefine.rechart) or a higher resolution")
     if result["transition_points"] < 30:
         notes.append(f"only {result['transition_points']} transition points: too few to measure; raise --points")
     return notes
@@ -135,13 +245,30 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
     """Run the whole evaluation on one SampleScene; returns its report dict
     (and writes report.md, report.json and pictures into `out_dir` if given)."""
     options.check()
-    label = f"{sample.name}/{options.variant}"
+    label = f"{sample.name}/{options.layout_name}"
     stages = _Stages(label, progress)
     resolution = int(options.resolution)
     passes = _single_pass(sample, options)
-    uvs, triangles = sample.layout(options.variant)
+    variant = options.variant
+    layout = {"source": "scene", "variant": variant}
+    if options.rechart is not None:
+        # The re-charted layout replaces the scene's UVs for every bake below
+        # (a UV variant of its own, so a tessellation carries it too).
+        recharted = stages.run("rechart", lambda p: rechart(sample.positions, sample.triangles, float(options.rechart),
+                                                            resolution, options.padding, progress=p))
+        variant = options.layout_name
+        sample = replace(sample, uvs={**sample.uvs, variant: recharted.uvs})
+        layout = {"source": "rechart", **{k: v for k, v in recharted.report.items() if k != "chart_ids"}}
+    uvs, triangles = sample.layout(variant)
 
     baseline = stages.run("bake baseline", lambda p: _bake_map(sample, uvs, resolution, options, p))
+    tessellation = None
+    if options.tessellate is not None:
+        # Same surface, same lightmap mapping: the baseline bake stays valid and
+        # every later bake and the ground truth use the split triangles.
+        sample, tessellation = stages.run("tessellate", lambda p: _tessellated(sample, variant, baseline,
+                                                                                options.tessellate))
+        uvs, triangles = sample.layout(variant)
     original_check = check_layout(uvs, triangles, resolution, options.padding)
     padding = min(float(options.padding), float(original_check["min_gutter_texels"]))
     refined = stages.run("refine", lambda p: refine_uvs(baseline, uvs, triangles, resolution, padding=padding,
@@ -185,6 +312,13 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
     uv_refined = metrics.interpolate_corners(refined.uvs, points.triangle, points.bary)
     lookup_base = metrics.bilinear_lookup(baseline, uv_base)
     lookup_refined = metrics.bilinear_lookup(refined_map, uv_refined)
+    stage_history = None
+    if options.stages > 1:
+        refined, refined_map, lookup_refined, stage_history = _further_stages(
+            sample, triangles, resolution, padding, options, stages, points, truth, transitions, refined,
+            refined_map, lookup_refined)
+        uv_refined = metrics.interpolate_corners(refined.uvs, points.triangle, points.bary)
+        density_refined = metrics.texel_density(refined.uvs, triangles, areas, resolution)
 
     # The uniform baseline at higher resolutions, for the equal-error resolution.
     sweep = [{"multiplier": 1.0, "resolution": resolution, "lookup": lookup_base}]
@@ -192,6 +326,26 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
         size = int(round(resolution * multiplier))
         image = stages.run("bake resolution sweep", lambda p: _bake_map(sample, uvs, size, options, p))
         sweep.append({"multiplier": multiplier, "resolution": size, "lookup": metrics.bilinear_lookup(image, uv_base)})
+
+    # The re-charted maps against uniform bakes of the scene's own layouts.
+    compared = []
+    others = [v for v in options.compare_variants if v in sample.uvs] if options.rechart is not None else []
+    if options.rechart is not None and options.compare_variants and not others:  # a .blend's one layout
+        others = [v for v in sample.uvs if v != variant]
+    for other in others:
+        other_uvs, _ = sample.layout(other)
+        other_points = metrics.interpolate_corners(other_uvs, points.triangle, points.bary)
+        other_sweep = []
+        for multiplier in options.multipliers:
+            size = int(round(resolution * multiplier))
+            image = stages.run("bake comparison layouts", lambda p: _bake_map(sample, other_uvs, size, options, p))
+            other_sweep.append({"multiplier": multiplier, "resolution": size,
+                                "lookup": metrics.bilinear_lookup(image, other_points)})
+        compared.append((other, other_sweep))
+    # The second baseline: the input's charts packed at one common scale, no
+    # signal. What it gains is packing; what the refined map gains beyond it, signal.
+    uniform = stages.run("uniform repack", lambda p: _uniform_repack(sample, uvs, triangles, resolution, padding,
+                                                                     options, points, p))
 
     start = time.perf_counter()
     charts = find_charts(uvs, triangles)
@@ -222,11 +376,33 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
                                   "transition_rmse": et} for s, e, et in zip(sweep, sweep_rmse, sweep_t)],
         }
 
+    def against(other_sweep):
+        """Equal-error ratios of the plain and the refined map on this layout
+        against the uniform bakes of another layout."""
+        out = {"resolution_sweep": [{"resolution": s["resolution"]} for s in other_sweep]}
+        for where, prefix in ((np.ones(len(points), bool), ""), (transitions, "transition_")):
+            errors = [metrics.error_stats(s["lookup"], truth, where)["rmse"] for s in other_sweep]
+            for row, error in zip(out["resolution_sweep"], errors):
+                row[f"{prefix}rmse"] = error
+            for name, lookup in (("baseline", lookup_base), ("refined", lookup_refined)):
+                target = metrics.error_stats(lookup, truth, where)["rmse"]
+                ratio, status = metrics.equal_error_resolution(options.multipliers, errors, target)
+                out[f"{prefix}equal_error_resolution_ratio_{name}"] = ratio
+                out[f"{prefix}equal_error_status_{name}"] = status
+        return out
+
     everywhere = np.ones(len(points), bool)
-    result = {"scene": sample.name, "variant": options.variant, "resolution": resolution, "pass": passes,
+    if uniform is not None:
+        sweep_all = [metrics.error_stats(s["lookup"], truth, everywhere)["rmse"] for s in sweep]
+        rmse = metrics.error_stats(uniform.pop("lookup"), truth, everywhere)["rmse"]
+        ratio, status = metrics.equal_error_resolution(options.multipliers, sweep_all, rmse)
+        uniform.update(rmse=rmse, equal_error_resolution_ratio=ratio, equal_error_status=status)
+    result = {"scene": sample.name, "variant": options.layout_name, "resolution": resolution, "pass": passes,
               "description": sample.description, "bake_samples": options.samples,
               "truth_samples": options.truth_samples, "gradient_step_m": step, "texel_size_m": median_texel}
     result.update(figures(everywhere))
+    result["layout"] = layout
+    result["layout_comparison"] = [{"variant": variant, **against(other_sweep)} for variant, other_sweep in compared]
     result["transition_widening_linear"] = (math.sqrt(result["transition_widening"])
                                             if math.isfinite(result["transition_widening"]) else float("nan"))
     result["truth_mean"] = float(truth.mean())
@@ -247,6 +423,14 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
     }
     result.update({k: v for k, v in context.items() if k != "refine_report"})
     result["refine"] = {k: v for k, v in refined.report.items() if k != "triangle_density"}
+    if uniform is not None:
+        ratio, refined_ratio = uniform["equal_error_resolution_ratio"], result["equal_error_resolution_ratio"]
+        uniform["signal_gain"] = (refined_ratio / ratio if ratio and refined_ratio and ratio > 0 else None)
+        result["uniform_repack"] = uniform
+    if tessellation is not None:
+        result["tessellation"] = tessellation
+    if stage_history is not None:
+        result["stages"] = stage_history
     gain = (result["transition_rmse_refined"] <= (1 - GAIN_THRESHOLD) * result["transition_rmse_baseline"])
     result["gain"] = bool(gain)
     result["notes"] = [] if gain else _diagnose(result, context)
@@ -278,6 +462,10 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
             "uv_points": uv_base, "error_baseline": np.abs(lookup_base - truth).mean(axis=1),
             "error_refined": np.abs(lookup_refined - truth).mean(axis=1), "transitions": transitions,
             "multipliers": options.multipliers}))
+        if options.view_width:
+            stages.run("surface pictures", lambda p: _surface_pictures(
+                out_dir, result, sample, scene, {"plain": (baseline, uvs), "refined": (refined_map, refined.uvs)},
+                {"plain": density_base, "refined": density_refined}, passes, options, p))
     result["timings"] = dict(stages.seconds)
     result["timings"]["total"] = sum(stages.seconds.values())
     result = _json_safe(result)
@@ -286,20 +474,39 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
     return result
 
 
+def _surface_pictures(out_dir, result, sample, scene, maps, density, passes, options, progress):
+    """The lit surface through the scene's camera (lmrefine.surface_view):
+    pictures, and their figures in result["surface"]."""
+    from .evaluation_report import write_surface_pictures
+    from .surface_view import render_views
+
+    views = render_views(sample, scene, maps, passes, options.truth_samples, options.view_width,
+                         seed=options.seed + 3, progress=progress)
+    write_surface_pictures(out_dir, result, views, density)
+    result["surface"] = {
+        "camera": views["camera"].name, "width": views["hits"].width, "height": views["hits"].height,
+        "receiver_pixels": int(views["hits"].receiver.sum()),
+        "rmse_plain": views["rmse"]["plain"], "rmse_refined": views["rmse"]["refined"],
+        "crops": [{"row": row, "column": column, "size": size, "rmse_plain": errors["plain"],
+                   "rmse_refined": errors["refined"]}
+                  for (row, column, size), errors in zip(views["crops"], views["crop_rmse"])],
+    }
+
+
 def evaluate_samples(samples, options, out_dir, variants=None, progress=None):
     """Evaluate SampleScenes in UV `variants` (default: options.variant),
     one sub-folder <scene>_<variant> each, and write the summary report.md
     and report.json into `out_dir`. Returns the summary."""
-    from dataclasses import replace
-
     from .evaluation_report import write_summary
 
     os.makedirs(out_dir, exist_ok=True)
     scenes = []
     for sample in samples:
-        for variant in variants or (options.variant,):
-            scene_dir = os.path.join(out_dir, f"{sample.name}_{variant}")
-            scenes.append(evaluate_sample(sample, replace(options, variant=variant), scene_dir, progress))
+        # A scene exported from a .blend has one layout: its own lightmap UV map.
+        for variant in ("own",) if list(sample.uvs) == ["own"] else variants or (options.variant,):
+            scene_options = replace(options, variant=variant)
+            scene_dir = os.path.join(out_dir, f"{sample.name}_{scene_options.layout_name}")
+            scenes.append(evaluate_sample(sample, scene_options, scene_dir, progress))
     options.check()
     summary = {"resolution": int(options.resolution), "multipliers": list(options.multipliers),
                "bake_samples": options.samples, "truth_samples": options.truth_samples, "points": options.points,

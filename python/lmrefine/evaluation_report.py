@@ -7,6 +7,10 @@ Pictures (matplotlib, Agg backend, one PNG each):
     density.png              texel density, refined over baseline, per triangle (log2 scale)
     error.png                absolute error at the surface points, baseline and refined
     error_vs_resolution.png  baseline error against resolution, the refined map's at R
+    surface.png              the lit surface seen by a camera: plain lightmap, refined lightmap
+                             (same resolution), ground truth; the crops' places marked
+    surface_crops.png        close-ups where the ground truth changes most (shadow edges)
+    surface_density.png      texels per metre on the surface, plain layout and refined layout
 """
 
 import json
@@ -16,6 +20,10 @@ import os
 import numpy as np
 
 PICTURES = ("lightmaps.png", "layout.png", "density.png", "error.png", "error_vs_resolution.png")
+SURFACE_PICTURES = ("surface.png", "surface_crops.png", "surface_density.png")
+# The three lit-surface pictures, left to right.
+SURFACE_PANELS = (("plain", "plain lightmap"), ("refined", "refined lightmap, same resolution"),
+                  ("truth", "ground truth"))
 
 
 def _pyplot():
@@ -133,6 +141,83 @@ def write_pictures(out_dir, result, data):
     plt.close(figure)
 
 
+def write_surface_pictures(out_dir, result, views, density):
+    """surface.png, surface_crops.png and surface_density.png from
+    surface_view.render_views; `density` = {"plain": (T,), "refined": (T,)}
+    texels per square metre of every receiver triangle."""
+    plt = _pyplot()
+    from matplotlib.colors import LogNorm
+    from matplotlib.patches import Rectangle
+
+    hits, pictures, crops = views["hits"], views["pictures"], views["crops"]
+    resolution = result["resolution"]
+    title = f"{result['scene']} ({result['variant']}), camera '{views['camera'].name}'"
+    aspect = hits.width / hits.height
+    figure, axes = plt.subplots(1, 3, figsize=(15, 15 / 3 / aspect + 0.9))
+    for axis, (key, label) in zip(axes, SURFACE_PANELS):
+        axis.imshow(pictures[key], interpolation="nearest")
+        if key == "truth":
+            label = f"{label} ({result['truth_samples']} samples per pixel)"
+        else:
+            label = f"{label}, {resolution}x{resolution}: RMSE {_number(views['rmse'][key], 3)}"
+        axis.set_title(label, fontsize=10)
+        for index, (row, column, size) in enumerate(crops):
+            axis.add_patch(Rectangle((column - 0.5, row - 0.5), size, size, fill=False, edgecolor="tab:orange",
+                                     linewidth=1.2))
+            axis.annotate(str(index + 1), (column, row), color="tab:orange", fontsize=9, xytext=(2, 9),
+                          textcoords="offset points")
+        axis.set_xticks([])
+        axis.set_yticks([])
+    figure.suptitle(f"{title}: the lit surface (RMSE against the ground truth over the pixels)")
+    figure.tight_layout()
+    figure.savefig(os.path.join(out_dir, "surface.png"), dpi=110)
+    plt.close(figure)
+
+    rows = max(1, len(crops))
+    figure, axes = plt.subplots(rows, 3, figsize=(10.5, 3.6 * rows), squeeze=False)
+    for index, (row, column, size) in enumerate(crops):
+        for axis, (key, label) in zip(axes[index], SURFACE_PANELS):
+            axis.imshow(pictures[key][row:row + size, column:column + size], interpolation="nearest")
+            if key != "truth":
+                label = f"{label}: RMSE {_number(views['crop_rmse'][index][key], 3)}"
+            axis.set_title(f"{index + 1}: {label}", fontsize=9)
+            axis.set_xticks([])
+            axis.set_yticks([])
+    if not crops:
+        for axis in axes[0]:
+            axis.set_axis_off()
+        axes[0][1].text(0.5, 0.5, "no light transition in view", ha="center", va="center")
+    figure.suptitle(f"{title}: where the light changes most")
+    figure.tight_layout()
+    figure.savefig(os.path.join(out_dir, "surface_crops.png"), dpi=110)
+    plt.close(figure)
+
+    per_metre = {key: hits.per_triangle(np.sqrt(np.maximum(values, 0.0))) for key, values in density.items()}
+    shown = np.concatenate([v[np.isfinite(v) & (v > 0)] for v in per_metre.values()])
+    low, high = (np.percentile(shown, [1, 99]) if shown.size else (1.0, 2.0))
+    norm = LogNorm(max(low, 1e-6), max(high, low * 1.01, 1e-6))
+    figure, axes = plt.subplots(1, 2, figsize=(12, 12 / 2 / aspect + 1.0), constrained_layout=True)
+    colours = plt.get_cmap("viridis")
+    # Shaded by how squarely the camera sees the surface, so the shapes stay
+    # readable where the density is uniform.
+    shade = (0.55 + 0.45 * np.clip(hits.facing, 0.0, 1.0))[:, None]
+    for axis, key, label in ((axes[0], "plain", "plain layout"), (axes[1], "refined", "refined layout")):
+        values = per_metre[key]
+        image = np.full((len(values), 3), 0.2)
+        shown_here = np.isfinite(values) & (values > 0)
+        image[shown_here] = colours(norm(values[shown_here]))[:, :3] * shade[shown_here]
+        axis.imshow(image.reshape(hits.height, hits.width, 3), interpolation="nearest")
+        axis.set_title(f"{label}, {resolution}x{resolution}", fontsize=10)
+        axis.set_xticks([])
+        axis.set_yticks([])
+    from matplotlib.cm import ScalarMappable
+    shading = ScalarMappable(norm=norm, cmap=colours)
+    figure.colorbar(shading, ax=axes, fraction=0.025, shrink=0.9).set_label("texels per metre (log scale)")
+    figure.suptitle(f"{title}: texel density on the surface")
+    figure.savefig(os.path.join(out_dir, "surface_density.png"), dpi=110)
+    plt.close(figure)
+
+
 def _number(value, digits=4):
     if value is None or (isinstance(value, float) and not math.isfinite(value)):
         return "n/a"
@@ -166,6 +251,47 @@ def _backoff_text(refine):
     return f"backed off{where}, down to {kept * 100:.0f}% of the full deformation"
 
 
+def layout_text(r):
+    """Which layout the baseline and refined maps were baked on."""
+    layout = r.get("layout") or {}
+    if layout.get("source") != "rechart":
+        return f"Layout: the scene's own `{layout.get('variant', r['variant'])}` lightmap UVs."
+    check = layout.get("layout") or {}
+    return (f"Layout: **re-charted from the mesh** (`--rechart {layout['angle']:g}`, `lmrefine.rechart`), not the "
+            f"scene's own UVs: {layout['charts']} charts ({layout['split_charts']} split because their unwrap "
+            f"folded, {layout['degenerate_triangles']} degenerate triangles), texel density spread "
+            f"{_number(layout['density_spread'], 3)}x, mean angle error {_number(layout['angle_error_deg_mean'], 2)} "
+            f"degrees, {_number(layout['utilisation'] * 100, 3)}% of the texels covered, "
+            f"{'valid' if check.get('valid') else 'NOT valid'} at padding {layout['padding']:g}. "
+            "The baseline and the refined map both use it.")
+
+
+def _ratio_text(ratio, status):
+    if ratio is None or status in ("flat", "undefined"):
+        return "n/a" if status != "flat" else "noise-limited"
+    return {"above": ">=", "below": ""}.get(status, "") + f"{ratio:.2f}x"
+
+
+def comparison_lines(r):
+    """The re-charted maps against uniform bakes of the scene's own layouts."""
+    rows = r.get("layout_comparison") or []
+    if not rows:
+        return []
+    lines = ["", "## Against the scene's own layouts", "",
+             f"Equal-error resolution: the uniform bake on the scene's layout needs this times {r['resolution']} to "
+             "match the map on the re-charted layout (all points / transition points).", "",
+             f"| scene's layout | its RMSE at {r['resolution']} | re-charted, plain bake | re-charted + refined |",
+             "|---|---|---|---|"]
+    for c in rows:
+        lines.append(
+            f"| {c['variant']} | {_number(c['resolution_sweep'][0]['rmse'])} | "
+            f"{_ratio_text(c['equal_error_resolution_ratio_baseline'], c['equal_error_status_baseline'])} / "
+            f"{_ratio_text(c['transition_equal_error_resolution_ratio_baseline'], c['transition_equal_error_status_baseline'])} | "
+            f"{_ratio_text(c['equal_error_resolution_ratio_refined'], c['equal_error_status_refined'])} / "
+            f"{_ratio_text(c['transition_equal_error_resolution_ratio_refined'], c['transition_equal_error_status_refined'])} |")
+    return lines
+
+
 def scene_markdown(result):
     r = result
     lines = [
@@ -177,6 +303,8 @@ def scene_markdown(result):
         f"{r['truth_samples']} samples (twice) at {r['points']} surface points ({r['transition_points']} transition "
         f"points: top decile of the surface gradient, step {r['gradient_step_m'] * 1000:.1f} mm); the ground truth's "
         f"own noise is {_number(r['truth_noise_rmse'], 3)} RMS.",
+        "",
+        layout_text(r),
         "",
         "| | baseline | refined | change |",
         "|---|---|---|---|",
@@ -198,12 +326,32 @@ def scene_markdown(result):
         f"{', '.join(r['refine'].get('limited_by') or []) or 'nothing'}.",
         "",
     ]
+    if r.get("uniform_repack"):
+        u = r["uniform_repack"]
+        gain = f"{u['signal_gain']:.2f}x" if u.get("signal_gain") else "n/a"
+        lines[-1:-1] = [f"- Second baseline, the input's charts repacked at one scale (no signal; texels covered "
+                        f"{u['utilisation_before']:.0%} -> {u['utilisation_after']:.0%}): equal-error "
+                        f"{equal_error_text(u['equal_error_resolution_ratio'], u['equal_error_status'])} from "
+                        f"packing alone; the refined map's ratio over it (signal gain): {gain}."]
+    if r.get("stages"):
+        rows = "; ".join(f"stage {e['stage']}: " + (f"RMSE {_number(e['rmse'])}, transitions "
+                                                     f"{_number(e['transition_rmse'])}" if e["kept"] else
+                                                     f"not kept (layout change {e['layout_change']:.1%})")
+                         for e in r["stages"]["stages"])
+        lines[-1:-1] = [f"- Multi-stage refinement: {rows}; stopped: {r['stages']['stopped']}."]
+    if r.get("tessellation"):
+        t = r["tessellation"]
+        lines[-1:-1] = [f"- Tessellated along transitions before refining: {t['vertices_before']} -> "
+                        f"{t['vertices_after']} vertices (+{t['vertices_added']}, budget {t['vertex_budget']}), "
+                        f"{t['triangles_before']} -> {t['triangles_after']} triangles in {t['rounds']} rounds; "
+                        f"stopped: {t['stopped']}."]
     if r["gain"]:
         lines.append(f"**Gain**: transition-point RMSE {_change(r['transition_rmse_baseline'], r['transition_rmse_refined'])}.")
         lines += [f"- {note}" for note in r["notes"]]
     else:
         lines.append("**No gain on this scene.** Why:")
         lines += [f"- {note}" for note in r["notes"]]
+    lines += comparison_lines(r)
     lines += ["", "## Error against resolution (uniform baseline)", "",
               "| resolution | RMSE | transition RMSE |", "|---|---|---|"]
     for s in r["resolution_sweep"]:
@@ -220,10 +368,34 @@ def scene_markdown(result):
             f"{'n/a' if ratio is None else ('>=' if o['equal_error_status'] == 'above' else '') + f'{ratio:.2f}'} |")
     lines += ["", "## Time per stage (seconds)", "", "| stage | seconds |", "|---|---|"]
     lines += [f"| {stage} | {seconds:.2f} |" for stage, seconds in r["timings"].items()]
+    lines += surface_markdown(r)
     lines += ["", "## Pictures", ""]
     lines += [f"![{name}]({name})" for name in PICTURES]
     lines.append("")
     return "\n".join(lines)
+
+
+def surface_markdown(r, folder="", heading="## The lit surface"):
+    """The report's section on the pictures of the lit surface (none when they were not made)."""
+    surface = r.get("surface")
+    if not surface:
+        return []
+    lines = ["", heading, "",
+             f"Camera '{surface['camera']}', {surface['width']}x{surface['height']} pixels: the surfaces lit by the "
+             f"plain lightmap, by the refined lightmap at the same resolution ({r['resolution']}x{r['resolution']}) "
+             f"and by the ground truth at every pixel. RMSE against the ground truth over the pixels: plain "
+             f"{_number(surface['rmse_plain'], 3)}, refined {_number(surface['rmse_refined'], 3)} "
+             f"({_change(surface['rmse_plain'], surface['rmse_refined'])}).", "",
+             f"![surface]({folder}surface.png)", ""]
+    if surface["crops"]:
+        lines += ["Where the light changes most (crops marked in the picture above):", "",
+                  "| crop | RMSE plain | RMSE refined | change |", "|---|---|---|---|"]
+        lines += [f"| {i + 1} | {_number(c['rmse_plain'], 3)} | {_number(c['rmse_refined'], 3)} | "
+                  f"{_change(c['rmse_plain'], c['rmse_refined'])} |" for i, c in enumerate(surface["crops"])]
+        lines += ["", f"![crops]({folder}surface_crops.png)", ""]
+    lines += ["Texels per metre on the surface, plain and refined layout:", "",
+              f"![texel density]({folder}surface_density.png)"]
+    return lines
 
 
 def write_scene_report(out_dir, result):
@@ -233,10 +405,20 @@ def write_scene_report(out_dir, result):
         handle.write(scene_markdown(result))
 
 
+def _uniform_text(r):
+    """The uniform repack's equal-error ratio (the second baseline), or why there is none."""
+    u = r.get("uniform_repack")
+    if not u or u["equal_error_resolution_ratio"] is None:
+        return "n/a"
+    if u["equal_error_status"] == "flat":
+        return "noise-limited"
+    return {"above": ">="}.get(u["equal_error_status"], "") + f"{u['equal_error_resolution_ratio']:.2f}x"
+
+
 def summary_table(summary):
     """The Markdown table of every evaluated scene (also printed by the CLI)."""
     lines = ["| scene | UVs | R | RMSE base -> refined | transition RMSE base -> refined | widening | "
-             "equal-error ratio | gain | seconds |", "|---|---|---|---|---|---|---|---|---|"]
+             "equal-error ratio | packing alone | gain | seconds |", "|---|---|---|---|---|---|---|---|---|---|"]
     for r in summary["scenes"]:
         ratio = r["equal_error_resolution_ratio"]
         ratio_text = "n/a" if ratio is None else {"above": ">=", "below": ""}.get(r["equal_error_status"], "") + \
@@ -248,7 +430,8 @@ def summary_table(summary):
             f"{_number(r['rmse_refined'])} ({_change(r['rmse_baseline'], r['rmse_refined'])}) | "
             f"{_number(r['transition_rmse_baseline'])} -> {_number(r['transition_rmse_refined'])} "
             f"({_change(r['transition_rmse_baseline'], r['transition_rmse_refined'])}) | "
-            f"{_number(r['transition_widening'], 3)}x | {ratio_text} | {'yes' if r['gain'] else 'NO'} | "
+            f"{_number(r['transition_widening'], 3)}x | {ratio_text} | {_uniform_text(r)} | "
+            f"{'yes' if r['gain'] else 'NO'} | "
             f"{r['timings']['total']:.1f} |")
     return "\n".join(lines)
 
@@ -263,10 +446,21 @@ def write_summary(out_dir, summary):
              f"samples at {summary['points']} surface points per scene. Definitions: docs/evaluation.md.", "",
              summary_table(summary), ""]
     for r in summary["scenes"]:
+        for c in r.get("layout_comparison") or []:
+            lines.append(
+                f"- {r['scene']} ({r['variant']}) against the scene's `{c['variant']}` layout baked uniformly: "
+                f"equal-error ratio {_ratio_text(c['equal_error_resolution_ratio_baseline'], c['equal_error_status_baseline'])} "
+                f"plain, {_ratio_text(c['equal_error_resolution_ratio_refined'], c['equal_error_status_refined'])} "
+                "refined.")
+    for r in summary["scenes"]:
         if not r["gain"]:
             lines.append(f"- **{r['scene']} ({r['variant']}) shows no gain**: " + "; ".join(r["notes"]) + ".")
         elif r["notes"]:
             lines.append(f"- {r['scene']} ({r['variant']}): " + "; ".join(r["notes"]) + ".")
+    if any(r.get("surface") for r in summary["scenes"]):
+        lines += ["", "## The lit surface"]
+    for r in summary["scenes"]:
+        lines += surface_markdown(r, f"{r['scene']}_{r['variant']}/", f"### {r['scene']} ({r['variant']})")
     lines += ["", "Per scene: " + ", ".join(f"[{r['scene']}_{r['variant']}]({r['scene']}_{r['variant']}/report.md)"
                                             for r in summary["scenes"]), ""]
     with open(os.path.join(out_dir, "report.md"), "w") as handle:

@@ -118,17 +118,23 @@ def _gradient(lightmap, gradient, mask, shape, wavelet, progress):
     return _native.gradient_map(lightmap, mask, wavelet=wavelet, progress=progress)
 
 
-def _energy(gradient, mask, strength, directional):
-    """Energy in [1 / (1 + strength), 1]: 1 where light changes fastest.
-    Returns (energy, the gradient energy per texel: the channel sum)."""
-    total = gradient.sum(axis=2)
-    raw = gradient if directional else total
+def transition_strength(raw, mask):
+    """Gradient energy `raw` (H, W) or (H, W, C) scaled to [0, 1]: 1 at the
+    strongest light changes of the covered texels (the 99th percentile, or a
+    quarter of the largest value if that is higher), 0 where light is flat."""
     covered = raw[mask]
     scale = 0.0
     if covered.size:
         scale = max(float(np.percentile(covered, _SCALE_PERCENTILE)),
                     _SCALE_MIN_FRACTION_OF_MAX * float(covered.max()))
-    normalized = np.clip(raw / scale, 0, 1) if scale > 0 else np.zeros_like(raw)
+    return np.clip(raw / scale, 0, 1) if scale > 0 else np.zeros_like(raw)
+
+
+def _energy(gradient, mask, strength, directional):
+    """Energy in [1 / (1 + strength), 1]: 1 where light changes fastest.
+    Returns (energy, the gradient energy per texel: the channel sum)."""
+    total = gradient.sum(axis=2)
+    normalized = transition_strength(gradient if directional else total, mask)
     return ((1 + strength * normalized) / (1 + strength)).astype(np.float32), total
 
 

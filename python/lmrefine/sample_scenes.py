@@ -19,10 +19,12 @@ SAMPLES_DIR = os.path.normpath(os.path.join(os.path.dirname(__file__), "..", "..
 # Constants of the refiner are chosen on the tuning scenes only; the others
 # report (docs/evaluation.md, "Tuning scenes and holdout scenes").
 TUNING_SCENES = ("courtyard", "game_level", "fence_and_tree")
-REPORTING_SCENES = ("room", "atrium")
+REPORTING_SCENES = ("room", "atrium", "plaza")
 
 # UV variant name -> array name in the .npz.
-UV_VARIANTS = {"smart": "uv_smart", "lightmap": "uv_lightmap"}
+# "own": the lightmap UV map of a scene exported from a user's .blend
+# (python3 -m lmrefine export-scene), the only variant such a scene has.
+UV_VARIANTS = {"smart": "uv_smart", "lightmap": "uv_lightmap", "own": "uv_own"}
 
 # Light properties lmrefine.Scene.add_light understands, per kind (Blender's names).
 LIGHT_PROPERTIES = {
@@ -73,11 +75,15 @@ class SampleScene:
     occluder_positions: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.float32))
     occluder_triangles: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.int32))
     description: str = ""
+    camera: dict = None              # the scene's own camera (surface_view.Camera.to_dict), if it has one
+    uv_maps: dict = None             # exported scenes: receiver name -> the Blender UV map of variant "own"
 
     @property
     def corner_triangles(self):
         """(T, 3) int32 indices into the per-corner UV arrays: 3t, 3t+1, 3t+2."""
-        return np.arange(3 * len(self.triangles), dtype=np.int32).reshape(-1, 3)
+        from .charting import corner_triangles
+
+        return corner_triangles(len(self.triangles))
 
     @property
     def corner_positions(self):
@@ -114,11 +120,17 @@ class SampleScene:
             scene.set_world(tuple(self.world))
         return scene
 
-    def save(self, path):
-        """Write the scene as an .npz that load_sample reads (the format
-        blend_samples/make_samples.py writes)."""
+    def save(self, path, **extra_meta):
+        """Write the scene as an .npz that load_sample reads (as
+        blend_samples/make_samples.py and `export-scene` do); `extra_meta`
+        goes into meta for readers (load_sample ignores it)."""
         meta = {"name": self.name, "description": self.description, "objects": list(self.objects),
-                "lights": list(self.lights), "world": [float(c) for c in self.world], "passes": list(self.passes)}
+                "lights": list(self.lights), "world": [float(c) for c in self.world], "passes": list(self.passes),
+                **extra_meta}
+        if self.camera:
+            meta["camera"] = self.camera
+        if self.uv_maps:
+            meta["uv_maps"] = dict(self.uv_maps)
         np.savez_compressed(
             path, positions=self.positions, triangles=self.triangles, normals=self.normals,
             base_color=self.base_color, object_id=self.object_id, occluder_positions=self.occluder_positions,
@@ -150,7 +162,15 @@ def load_sample(name_or_path):
     if not os.path.exists(path):
         raise ValueError(f"no sample scene '{name_or_path}': give a path to a scene .npz or one of "
                          f"{', '.join(sample_names()) or '(none found: run `make samples`)'}")
-    with np.load(path) as data:
+    try:
+        data = np.load(path)
+    except (OSError, ValueError) as error:  # a .fbx, a text file, a pickle: "Cannot load file containing pickled data"
+        raise ValueError(f"'{path}' is not a scene .npz ({error}): give a bundled sample's name, a .blend, or a "
+                         "scene .npz written by `python3 -m lmrefine export-scene`") from None
+    if not isinstance(data, np.lib.npyio.NpzFile):
+        raise ValueError(f"'{path}' holds one numpy array, not a scene .npz: write one with `python3 -m lmrefine "
+                         "export-scene`")
+    with data:
         try:
             meta = json.loads(str(data["meta"]))
             uvs = {variant: data[key].astype(np.float32) for variant, key in UV_VARIANTS.items() if key in data}
@@ -169,7 +189,9 @@ def load_sample(name_or_path):
                 occluder_positions=data["occluder_positions"].astype(np.float32),
                 occluder_triangles=data["occluder_triangles"].astype(np.int32),
                 description=meta.get("description", ""),
+                camera=meta.get("camera"),
+                uv_maps=meta.get("uv_maps"),
             )
         except KeyError as error:
             raise ValueError(f"'{path}' is not a scene .npz (missing {error}); make one with "
-                             "blend_samples/make_samples.py") from None
+                             "`python3 -m lmrefine export-scene LEVEL.blend`") from None

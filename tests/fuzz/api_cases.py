@@ -20,7 +20,8 @@ import hostile
 COVERED = ("check_layout", "coverage_mask", "dwt", "dwt2", "find_charts", "gradient_map", "grid_cell_areas",
            "idwt", "idwt2", "read_image", "run_automaton", "warp_uvs", "write_image", "LayoutChecker", "Scene",
            "bake", "evaluate", "identity_grid", "refine_uvs", "CancelledError", "BakeResult", "RefineResult",
-           "pack_charts", "PackResult", "CHART_TOLERANCE")
+           "pack_charts", "PackResult", "CHART_TOLERANCE", "trace_rays", "tessellate", "TessellationResult",
+           "transition_strength_of", "rechart", "RechartResult")
 
 VALID_FRACTION = 0.2  # cases left entirely valid: the ok path must hold its promises too
 WAVELETS = ("haar", "d4", "d12", "d20", "cdf53", "cdf97")
@@ -34,6 +35,7 @@ class Case:
     inputs: list = field(default_factory=list)  # everything the caller passed (checked for modification)
     layout: tuple = None  # (uvs, triangles, resolution, padding) when the result must be a valid layout
     packed: bool = False  # the layout promise is pack_charts's (passes check_layout), not refine_uvs's
+    recharted: bool = False  # the layout is new (rechart's, per corner): it must pass check_layout
     description: str = ""
 
 
@@ -299,6 +301,40 @@ def case_pack_charts(lm, rng):
                 packed=True, description=f"pack_charts hostile: {chosen}")
 
 
+def random_mesh(rng):
+    """A small mesh: a bent grid, a closed box, or random triangles (slivers and repeats included)."""
+    kind = rng.integers(3)
+    if kind == 0:
+        n = int(rng.integers(1, 6))
+        xs, ys = np.meshgrid(np.linspace(0, 1, n + 1), np.linspace(0, 1, n + 1))
+        positions = np.stack([xs.ravel(), ys.ravel(), rng.uniform(0, 0.5) * np.sin(4 * xs.ravel())], axis=1)
+        quads = [(i * (n + 1) + j, i * (n + 1) + j + 1, (i + 1) * (n + 1) + j + 1, (i + 1) * (n + 1) + j)
+                 for i in range(n) for j in range(n)]
+        triangles = [t for a, b, c, d in quads for t in ((a, b, c), (a, c, d))]
+    elif kind == 1:
+        positions = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], np.float64)
+        quads = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
+        triangles = [t for a, b, c, d in quads for t in ((a, b, c), (a, c, d))]
+    else:
+        count = int(rng.integers(1, 10))
+        positions = rng.uniform(-1, 1, (count + 2, 3))
+        triangles = rng.integers(0, count + 2, (count, 3))
+    return positions.astype(np.float32), np.asarray(triangles, np.int32)
+
+
+def case_rechart(lm, rng):
+    positions, triangles = random_mesh(rng)
+    r = int(rng.choice([16, 32, 64]))
+    kwargs = {"positions": positions, "triangles": triangles, "angle": float(rng.uniform(5, 85)), "resolution": r,
+              "padding": float(rng.choice([0, 1, 2])), "progress": None}
+    makers = {"positions": as_array, "triangles": as_array, "angle": as_number, "resolution": as_resolution,
+              "padding": as_number, "weld_tolerance": as_number, "rotations": as_number, "progress": as_progress}
+    kwargs, chosen = mutate(kwargs, rng, makers)
+    return Case("rechart", _call(lm.rechart, dict(kwargs)), list(kwargs.values()),
+                layout=(None, kwargs["triangles"], kwargs["resolution"], kwargs["padding"]), recharted=True,
+                description=f"rechart hostile: {chosen}")
+
+
 # ---------------------------------------------------------------- images
 
 PNG_HUGE_HEADER = (b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR" + (100000).to_bytes(4, "big") * 2
@@ -490,14 +526,57 @@ def case_evaluate(lm, rng):
     return case
 
 
+def case_trace_rays(lm, rng):
+    scene, notes = _scene_call(lm, rng)
+    count = int(rng.integers(0, 10))
+    origins = np.column_stack([rng.uniform(-1, 1, (count, 2)), np.full(count, 2.0)]).astype(np.float32)
+    directions = np.column_stack([rng.uniform(-0.3, 0.3, (count, 2)), -np.ones(count)]).astype(np.float32)
+    kwargs = {"scene": scene, "origins": origins, "directions": directions, "progress": None}
+    makers = {"origins": as_array, "directions": as_array, "progress": as_progress,
+              "scene": lambda v, r: hostile.scalar(r)}
+    case = _case("trace_rays", lm.trace_rays, kwargs, rng, makers)
+    case.description += f"; scene: {notes}"
+    case.inputs = [v for v in case.inputs if not isinstance(v, lm.Scene)]
+    return case
+
+
+def case_tessellate(lm, rng):
+    r = int(rng.choice([8, 16, 32]))
+    uvs, triangles = random_layout(rng, r)
+    corners = len(uvs)
+    positions = rng.uniform(-1, 1, (corners, 3))
+    # Corner k of triangle t is vertex 3t + k, except where two triangles are made to share an edge.
+    vertex_triangles = np.arange(corners).reshape(-1, 3)
+    if len(vertex_triangles) > 1:
+        vertex_triangles[1, :2] = vertex_triangles[0, 1::-1]
+    kwargs = {"positions": positions, "triangles": vertex_triangles, "uvs": uvs,
+              "strength": rng.uniform(0, 1, (r, r)), "budget": float(rng.choice([0.0, 0.25, 4.0])),
+              "corner_attributes": {"other": rng.random((corners, 2))} if rng.random() < 0.5 else None}
+    makers = {"positions": as_array, "triangles": as_array, "uvs": as_array, "strength": as_array,
+              "budget": as_number, "min_texels": as_number, "threshold": as_number,
+              "corner_attributes": lambda v, r: {"x": hostile.array_like(np.zeros((3, 2)), r)}
+              if r.random() < 0.5 else hostile.scalar(r)}
+    return _case("tessellate", lm.tessellate, kwargs, rng, makers)
+
+
+def case_transition_strength_of(lm, rng):
+    r = int(rng.choice([8, 16, 32]))
+    uvs, triangles = random_layout(rng, r)
+    kwargs = {"lightmap": lightmap(rng, r), "uvs": uvs, "triangles": triangles,
+              "wavelet": str(rng.choice(WAVELETS))}
+    makers = {"lightmap": as_array, "uvs": as_array, "triangles": as_array, "wavelet": as_string}
+    return _case("transition_strength_of", lm.transition_strength_of, kwargs, rng, makers)
+
+
 BUILDERS = (
     case_gradient_map, case_dwt2, case_idwt2, case_dwt, case_idwt,
     case_layout_function("check_layout"), case_layout_function("coverage_mask"),
     case_layout_function("find_charts"), case_layout_function("LayoutChecker"),
     case_grid_cell_areas, case_warp_uvs, case_identity_grid, case_run_automaton,
     case_refine_uvs, case_refine_uvs,  # the whole pipeline gets twice the share
-    case_pack_charts,
-    case_write_image, case_read_image, case_scene, case_bake, case_evaluate,
+    case_pack_charts, case_rechart,
+    case_write_image, case_read_image, case_scene, case_bake, case_evaluate, case_trace_rays,
+    case_tessellate, case_transition_strength_of,
 )
 
 

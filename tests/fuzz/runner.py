@@ -65,6 +65,14 @@ def _judge_layout(lm, case, result):
     from lmrefine.backoff import failures
 
     uvs, triangles, resolution, padding = case.layout
+    if case.recharted:  # a new per-corner layout: valid with the padding
+        out = np.asarray(result.uvs)
+        count = len(np.asarray(triangles))
+        if out.shape != (3 * count, 2) or not np.isfinite(out).all():
+            return f"uvs shape {out.shape} (or non-finite) for {count} triangles"
+        corners = np.arange(3 * count).reshape(-1, 3)
+        check = lm.check_layout(out, corners, resolution, padding=padding)
+        return None if check["valid"] else f"recharted layout not valid: {check}"
     uvs = np.asarray(uvs, np.float32)
     triangles = np.asarray(triangles)
     out = np.asarray(result.uvs)

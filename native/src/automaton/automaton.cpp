@@ -28,11 +28,8 @@ constexpr int kCoarsestCells = 8;
 constexpr double kSettledMove = 1e-3;
 // Levels with blocks of at least kManyStepsBlock texels get kCoarseStepFactor
 // x max_steps: they cost 1/64 of the finest level per step or less, and room
-// moves across the map there. Strength 24, Smart UV samples at 256^2,
-// equal-error ratio courtyard / game_level / fence_and_tree: 1.603 / 1.582 /
-// 1.294 with max_steps everywhere, 1.589 / 1.599 / 1.342 with this; blocks
-// >= 4 gave 1.602 / 1.611 / 1.345 but 15% more time at 1024^2, 8x steps made
-// the courtyard flip and back off half its nodes.
+// moves across the map there (how the values were chosen: docs/refiner.md,
+// "Constants and how they were chosen").
 constexpr int kManyStepsBlock = 8;
 constexpr int kCoarseStepFactor = 4;
 
@@ -58,6 +55,7 @@ Level make_level(const AutomatonInput& input, const std::vector<uint8_t>& rigid,
     const NodeGrid inner = identity_grid(input.width, input.height, block);
     const int pad = ring ? 1 : 0;
     Level level;
+    level.block = block;
     level.channels = input.channels;
     NodeGrid& grid = level.grid;
     grid.rows = inner.rows + 2 * pad;
@@ -186,12 +184,15 @@ void run_level(Level& level, const AutomatonOptions& options, bool ring, LevelSt
                Progress* progress) {
     automaton_detail::prepare_level(level, options, ring);
     // The finest level's grid: every bound holds from its start.
-    if (level.grid.xs[1] - level.grid.xs[0] == 1) stats.fit_rounds = automaton_detail::fit_to_bounds(level);
+    if (level.block == 1) stats.fit_rounds = automaton_detail::fit_to_bounds(level);
     automaton_detail::measure_cells(level);
-    if (options.check_invariants) automaton_detail::check_invariants(level, total_steps);
+    if (options.check_invariants) {
+        level.start_nodes = level.grid.nodes;
+        automaton_detail::check_invariants(level, total_steps);
+    }
     stats.steps = 0;
     stats.converged = false;
-    const int budget = level_step_budget(int(level.grid.xs[1] - level.grid.xs[0]), options);
+    const int budget = level_step_budget(level.block, options);
     for (int s = 0; s < budget; ++s) {
         if (progress) progress->check();
         const automaton_detail::StepStats step = automaton_detail::step(level, options);
@@ -293,6 +294,24 @@ AutomatonResult run_automaton(const AutomatonInput& input, const AutomatonOption
         }
     }
     return result;
+}
+
+RuleStep automaton_rule_step(const AutomatonInput& input, const AutomatonOptions& options,
+                             const std::vector<glm::dvec2>& nodes) {
+    LMREFINE_REQUIRE(input.width > 0 && input.height > 0, "the energy map is empty");
+    LMREFINE_REQUIRE(input.channels == 1 || input.channels == 4, "the energy map needs 1 or 4 channels");
+    const bool ring = options.border == BorderMode::ExtraRing;
+    Level level = make_level(input, rigid_texels(input), options.edge_shrink, 1, nullptr, ring);
+    LMREFINE_REQUIRE(nodes.size() == level.grid.nodes.size(),
+                     "nodes must be the level's (rows + 1) x (cols + 1) nodes, ring included");
+    level.grid.nodes = nodes;
+    automaton_detail::prepare_level(level, options, ring);
+    automaton_detail::measure_cells(level);
+    RuleStep out;
+    out.difference = automaton_detail::apply_rule(level, options);
+    out.nodes = std::move(level.next_nodes);
+    out.energy = std::move(level.next_energy);
+    return out;
 }
 
 }  // namespace lmrefine

@@ -78,16 +78,16 @@ struct Shape {
     double quality2;
 };
 
-// Two doubles divided at once (SSE2 divpd, in every x86-64): the divisions
-// were most of a step's time, and IEEE division rounds the same either way.
-typedef double Pair __attribute__((vector_size(16)));
-
 // A cell's quality is only ever compared with kMinQuality^2 and, below
 // that, with its previous quality, so any value at or above this bound
 // gives the same decisions: a well-shaped cell reports the bound itself and
 // skips the quality's divisions.
 constexpr double kQualityExactBelow = 0.25;
 static_assert(kQualityExactBelow > kMinQuality * kMinQuality, "the bound must lie above every decision");
+
+// The quality of a cell that is not well shaped (the rare case, kept out of
+// shape() so that it stays small): c2 and l2 as there.
+double exact_quality2(const double c2[4], const double l2[4], double shortest, double longest);
 
 inline Shape shape(const glm::dvec2 q[4]) {
     glm::dvec2 e[4];
@@ -103,18 +103,19 @@ inline Shape shape(const glm::dvec2 q[4]) {
         if (!(c > 0)) return {quad_area(q), 0.0, -1.0};
         c2[k] = c * c;
     }
-    const Pair radius01 = Pair{c2[0], c2[1]} / Pair{8 * (l2[3] + l2[0]), 8 * (l2[0] + l2[1])};
-    const Pair radius23 = Pair{c2[2], c2[3]} / Pair{8 * (l2[1] + l2[2]), 8 * (l2[2] + l2[3])};
-    const double r2 = std::min(std::min(radius01[0], radius01[1]), std::min(radius23[0], radius23[1]));
+    // The divisions are most of a step's time: all four in one loop over
+    // contiguous arrays, which the compiler can pair into SIMD divisions
+    // (IEEE division rounds the same either way).
+    const double over[4] = {8 * (l2[3] + l2[0]), 8 * (l2[0] + l2[1]), 8 * (l2[1] + l2[2]), 8 * (l2[2] + l2[3])};
+    double radius2[4];
+    for (int k = 0; k < 4; ++k) radius2[k] = c2[k] / over[k];
+    const double r2 = std::min(std::min(radius2[0], radius2[1]), std::min(radius2[2], radius2[3]));
     const double shortest = std::min({l2[0], l2[1], l2[2], l2[3]});
     const double longest = std::max({l2[0], l2[1], l2[2], l2[3]});
     bool well_shaped = 16 * shortest >= kQualityExactBelow * longest;
     for (int k = 0; k < 4; ++k) well_shaped = well_shaped && c2[k] >= kQualityExactBelow * l2[(k + 3) % 4] * l2[k];
     if (well_shaped) return {quad_area(q), std::sqrt(r2), kQualityExactBelow};
-    const Pair sine01 = Pair{c2[0], c2[1]} / Pair{l2[3] * l2[0], l2[0] * l2[1]};
-    const Pair sine23 = Pair{c2[2], c2[3]} / Pair{l2[1] * l2[2], l2[2] * l2[3]};
-    const double sin2 = std::min({1.0, sine01[0], sine01[1], sine23[0], sine23[1]});
-    return {quad_area(q), std::sqrt(r2), std::min(sin2, 16 * shortest / longest)};
+    return {quad_area(q), std::sqrt(r2), exact_quality2(c2, l2, shortest, longest)};
 }
 
 // Distance across the cell between its left and right edges, and between
@@ -122,6 +123,64 @@ inline Shape shape(const glm::dvec2 q[4]) {
 inline glm::dvec2 thickness(const glm::dvec2 q[4], double area) {
     return {area / std::max(glm::length(q[3] - q[0]), glm::length(q[2] - q[1])),
             area / std::max(glm::length(q[1] - q[0]), glm::length(q[2] - q[3]))};
+}
+
+// What a cell must keep (docs/refiner.md "Invariants"): its area within
+// [min_area, max_area] and, a cell of rigid texels only, at least its width
+// and height at rest.
+struct CellBounds {
+    double min_area = 0;
+    double max_area = std::numeric_limits<double>::infinity();
+    bool rigid = false;
+    double width = 0, height = 0;  // at rest (rigid cells)
+};
+
+inline CellBounds bounds_of(const Level& level, int i, int j) {
+    const size_t c = level.cell(i, j);
+    return {level.min_area[c], level.max_area[c], !(level.rigid_area[c] < level.original_area[c]),
+            level.grid.xs[j + 1] - level.grid.xs[j], level.grid.ys[i + 1] - level.grid.ys[i]};
+}
+
+// The validity of a cell: the one definition the step guard, fit_to_bounds
+// and check_invariants use. A valid cell is well shaped (quality2 >=
+// kMinQuality^2: every corner's |sin| >= 0.2 and its shortest edge at least
+// 1/20 of its longest, so convex and not inverted), has its area within its
+// bounds and, if rigid, is at least as wide and as tall as at rest. Each
+// flag names one bound the cell breaks.
+struct Validity {
+    bool ill_shaped = false;
+    bool too_small = false, too_large = false;
+    bool too_narrow = false, too_short = false;  // rigid cells: thinner than at rest across x, across y
+    glm::dvec2 thickness{0.0};                   // computed for rigid cells only
+
+    bool valid() const { return !(ill_shaped || too_small || too_large || too_narrow || too_short); }
+};
+
+inline Validity validity(const glm::dvec2 q[4], const Shape& shape, const CellBounds& bounds) {
+    Validity v;
+    v.ill_shaped = shape.quality2 < kMinQuality * kMinQuality;
+    v.too_small = shape.area < bounds.min_area;
+    v.too_large = shape.area > bounds.max_area;
+    if (bounds.rigid) {
+        v.thickness = thickness(q, shape.area);
+        v.too_narrow = v.thickness.x < bounds.width;
+        v.too_short = v.thickness.y < bounds.height;
+    }
+    return v;
+}
+
+// The step guard's second rule, for a cell that is not valid: it may not
+// break a bound further than it did before (a cell interpolated from a
+// coarser level may start outside one). `now` and `v` are the cell's shape
+// and validity, `before` its earlier shape; thickness_before() gives its
+// earlier thickness (computed only when a thickness bound is broken).
+template <class ThicknessBefore>
+bool breaks_further(const Validity& v, const Shape& now, const Shape& before, const ThicknessBefore& thickness_before) {
+    if ((v.too_small && now.area < before.area) || (v.too_large && now.area > before.area)) return true;
+    if (v.ill_shaped && now.quality2 < before.quality2) return true;
+    if (!v.too_narrow && !v.too_short) return false;
+    const glm::dvec2 was = thickness_before();
+    return (v.too_narrow && v.thickness.x < was.x) || (v.too_short && v.thickness.y < was.y);
 }
 
 }  // namespace lmrefine::automaton_detail

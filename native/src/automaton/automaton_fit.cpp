@@ -17,10 +17,8 @@ constexpr double kFitSnap = 0.05;
 constexpr int kFitRounds = 40;
 constexpr double kFitFactor = 0.8;
 // fit_to_bounds first smooths the nodes around out-of-bounds cells for this
-// many rounds (strength 24 on the sample scenes: 126 rounds of blending to
-// rest and an equal-error ratio of 1.28 on the courtyard before, 1.60 with
-// 10 rounds). 20: with the coarse margin 1.5 (automaton_step.cpp), 10 rounds left
-// fence_and_tree cascading (94 rounds, ratio 1.13), 20 end in 16.
+// many rounds, so the fit moves a neighbourhood instead of cascading cell by
+// cell (docs/refiner.md, "Constants and how they were chosen").
 constexpr int kFitSmoothRounds = 20;
 
 }  // namespace
@@ -28,16 +26,15 @@ constexpr int kFitSmoothRounds = 20;
 int fit_to_bounds(Level& level) {
     const int rows = level.rows(), cols = level.cols();
     const NodeGrid& grid = level.grid;
+    // The bounds of `validity` (automaton_cell.h), except that a convex cell
+    // counts as well shaped enough here: requiring |sin| >= kMinQuality too
+    // changes results (docs/refiner.md, "Invariants").
     auto out_of_bounds = [&](int i, int j) {
-        const size_t c = level.cell(i, j);
         glm::dvec2 q[4];
         corners(level, grid.nodes, i, j, q);
         const Shape now = shape(q);
-        if (now.quality2 < 0) return true;  // not convex
-        if (now.area < level.min_area[c] || now.area > level.max_area[c]) return true;
-        if (level.rigid_area[c] < level.original_area[c]) return false;
-        const glm::dvec2 thin = thickness(q, now.area);
-        return thin.x < grid.xs[j + 1] - grid.xs[j] || thin.y < grid.ys[i + 1] - grid.ys[i];
+        const Validity v = validity(q, now, bounds_of(level, i, j));
+        return now.quality2 < 0 || v.too_small || v.too_large || v.too_narrow || v.too_short;
     };
     // Round 0 checks every cell; later rounds only the cells around the
     // nodes moved in the round before (a bad cell's own corners are among

@@ -26,6 +26,10 @@ constexpr double kMinQuality = 0.2;
 enum class NodeMode : uint8_t { Free, SlideX, SlideY, Fixed };
 
 struct Level {
+    // Texels per cell side: 1 at the finest level, 2^k at pyramid level k.
+    // Stored, not read off the grid: a map one texel wide has xs = {0, 1} at
+    // every level.
+    int block = 1;
     NodeGrid grid;                       // current node positions (and original xs, ys)
     std::vector<glm::dvec2> next_nodes;  // the second buffer
     int channels = 1;
@@ -50,6 +54,9 @@ struct Level {
     std::vector<uint8_t> breaking_cell;   // per cell: breaks a bound (dense revert rounds)
     std::vector<uint8_t> reverted_node;   // per node: put back in this dense round
     uint32_t revert_round = 0;
+    // The nodes at the level's start (after fit_to_bounds), kept for
+    // check_invariants only.
+    std::vector<glm::dvec2> start_nodes;
 
     int rows() const { return grid.rows; }
     int cols() const { return grid.cols; }
@@ -82,7 +89,14 @@ struct StepStats {
 // One synchronous step (needs measure_cells' state, and keeps it current).
 StepStats step(Level& level, const AutomatonOptions& options);
 
-// Throws lmrefine::Error naming the first broken invariant (tests, debugging).
+// The rule alone, the first half of step(): new energies into next_energy,
+// proposed nodes into next_nodes, no guard. Returns the step's `difference`.
+double apply_rule(Level& level, const AutomatonOptions& options);
+
+// Throws lmrefine::Error naming the first broken invariant (tests,
+// debugging): a cell neither valid (automaton_cell.h) nor inside a bound it
+// broke at the level's start (start_nodes) as far as then, a node outside
+// the grid's rectangle, a negative energy, the total energy changed.
 void check_invariants(const Level& level, int step_index);
 
 }  // namespace lmrefine::automaton_detail

@@ -23,10 +23,7 @@ namespace {
 constexpr int64_t kDenseRevertFraction = 32;
 // Coarse levels keep cells above min_shrink x this: cells interpolated from
 // a coarse cell differ in size, and the finest level must start (nearly)
-// inside its bounds. 1.25 left fit_to_bounds cascading at strength >= 24;
-// 1.6 (with 10 smoothing rounds) cost 0.04 / 0.04 / 0.01 of equal-error
-// ratio on the sample scenes against 1.5; 1.4-1.55 all fit in <= 16 rounds
-// at strength 20-28, 1.3 cascades (docs/refiner.md).
+// inside its bounds (docs/refiner.md, "Constants and how they were chosen").
 constexpr double kCoarseShrinkMargin = 1.5;
 
 // The channel of a cell that faces each side (directional variant); with one
@@ -51,7 +48,7 @@ void prepare_level(Level& level, const AutomatonOptions& options, bool ring) {
     std::array<double, 4> energy{}, covered_area{};
     // Coarse levels keep a margin inside the bounds: cells interpolated from
     // a coarse cell differ in size, and the finest level must start inside.
-    const bool coarse = level.grid.xs[1] - level.grid.xs[0] > 1;
+    const bool coarse = level.block > 1;
     const double lowest = coarse ? std::min(1.0, options.min_area * kCoarseShrinkMargin) : options.min_area;
     const double highest = coarse ? std::max(1.0, options.max_area * 0.8) : options.max_area;
     for (int i = 0; i < rows; ++i) {
@@ -143,9 +140,16 @@ void row_densities(const Level& level, int i, double* diffusion, double* pressur
         const size_t c = level.cell(i, j);
         const double a = level.area[c];
         const double* e = &level.energy[c * channels];
+        if (channels == 1 && level.uncovered_area[c] == 0) {
+            // One channel, no uncovered texel: the pressure's numerator is
+            // e + reference x 0 = e exactly, so one division gives both.
+            const double density = e[0] / a;
+            diffusion[j] = level.kind[c] == CellKind::Material ? density : 0.0;
+            pressure[j] = density;
+            continue;
+        }
         // Numerators: each channel's energy, then each axis' pressure
-        // energy; divided by the area in pairs.
-        static_assert((channels + axes) % 2 == 0, "the divisions go in pairs");
+        // energy; divided by the area in one loop the compiler may vectorise.
         double numerator[channels + axes];
         for (int k = 0; k < channels; ++k) numerator[k] = e[k];
         for (int axis = 0; axis < axes; ++axis) {
@@ -157,11 +161,7 @@ void row_densities(const Level& level, int i, double* diffusion, double* pressur
             numerator[channels + axis] = sum + reference * level.uncovered_area[c];
         }
         double quotient[channels + axes];
-        for (int k = 0; k < channels + axes; k += 2) {
-            const Pair q = Pair{numerator[k], numerator[k + 1]} / Pair{a, a};
-            quotient[k] = q[0];
-            quotient[k + 1] = q[1];
-        }
+        for (int k = 0; k < channels + axes; ++k) quotient[k] = numerator[k] / a;
         const bool material = level.kind[c] == CellKind::Material;
         for (int k = 0; k < channels; ++k) diffusion[j * channels + k] = material ? quotient[k] : 0.0;
         for (int axis = 0; axis < axes; ++axis) pressure[j * axes + axis] = quotient[channels + axis];
@@ -169,6 +169,14 @@ void row_densities(const Level& level, int i, double* diffusion, double* pressur
 }
 
 }  // namespace
+
+double exact_quality2(const double c2[4], const double l2[4], double shortest, double longest) {
+    const double sine_over[4] = {l2[3] * l2[0], l2[0] * l2[1], l2[1] * l2[2], l2[2] * l2[3]};
+    double sine2[4];
+    for (int k = 0; k < 4; ++k) sine2[k] = c2[k] / sine_over[k];
+    const double sin2 = std::min({1.0, sine2[0], sine2[1], sine2[2], sine2[3]});
+    return std::min(sin2, 16 * shortest / longest);
+}
 
 void measure_cells(Level& level) {
     parallel_for(level.rows(), kRowGrain, [&](int64_t begin, int64_t end) {
@@ -185,10 +193,74 @@ void measure_cells(Level& level) {
 
 namespace {
 
-// The step for one or four channels (constants let the compiler unroll the
-// per-channel loops of the inner kernels).
+// The rule's move of a node that is not fixed: rate / 2 x sqrt(mean area
+// of its cells) x (fx, fy), fx the sum of the pushes of the vertical edges
+// above and below it, fy of the horizontal edges left and right of it (an
+// edge missing at the border adds nothing); a border node keeps to its
+// border; shortened to the smallest move radius of its cells (a quarter
+// cell for a square) and clamped to the grid's rectangle.
+template <class PushV, class PushH>
+inline glm::dvec2 propose_node(const Level& level, const AutomatonOptions& options, int i, int j, const PushV& push_v,
+                        const PushH& push_h) {
+    const int rows = level.rows(), cols = level.cols();
+    const NodeMode mode = level.node_mode[level.node(i, j)];
+    double fx = 0, fy = 0, area_sum = 0, radius = std::numeric_limits<double>::infinity();
+    int adjacent = 0;
+    if (i > 0 && i < rows && j > 0 && j < cols) {
+        // Inside (nearly every node): all four edges and cells, in the order
+        // of the general case below (same rounding).
+        const size_t up = size_t(i - 1) * cols + j, down = up + cols;
+        fx = push_v(i - 1, j) + push_v(i, j);
+        fy = push_h(i, j - 1) + push_h(i, j);
+        area_sum = level.area[up - 1] + level.area[up] + level.area[down - 1] + level.area[down];
+        radius = std::min(std::min(level.safe_radius[up - 1], level.safe_radius[up]),
+                          std::min(level.safe_radius[down - 1], level.safe_radius[down]));
+        adjacent = 4;
+    } else {
+        if (i > 0) fx += push_v(i - 1, j);
+        if (i < rows) fx += push_v(i, j);
+        if (j > 0) fy += push_h(i, j - 1);
+        if (j < cols) fy += push_h(i, j);
+        for (int di = -1; di <= 0; ++di) {
+            for (int dj = -1; dj <= 0; ++dj) {
+                const int ci = i + di, cj = j + dj;
+                if (ci < 0 || cj < 0 || ci >= rows || cj >= cols) continue;
+                area_sum += level.area[level.cell(ci, cj)];
+                radius = std::min(radius, level.safe_radius[level.cell(ci, cj)]);
+                ++adjacent;
+            }
+        }
+    }
+    // x / 4 == x * 0.25 exactly; a division costs as much as the root.
+    const double size = std::sqrt(adjacent == 4 ? area_sum * 0.25 : area_sum / adjacent);
+    glm::dvec2 move = 0.5 * options.rate * size * glm::dvec2(fx, fy);
+    if (mode == NodeMode::SlideX) move.y = 0;
+    if (mode == NodeMode::SlideY) move.x = 0;
+    // Squared first: the root is only needed to shorten a move.
+    const double length2 = glm::dot(move, move);
+    if (length2 > radius * radius) move *= radius / std::sqrt(length2);
+    glm::dvec2 p = level.grid.nodes[level.node(i, j)] + move;
+    p.x = std::clamp(p.x, level.grid.xs.front(), level.grid.xs.back());
+    p.y = std::clamp(p.y, level.grid.ys.front(), level.grid.ys.back());
+    return p;
+}
+
+// The rule (docs/refiner.md "The automaton", the plain version in
+// tests/automaton_reference.py), for one or four channels (constants let the
+// compiler unroll the per-channel loops). From the current state only:
+// 1. per cell, the diffusion density energy / area (0 outside chart cells)
+//    and the pressure per axis (the axis' energies plus the reference
+//    density times the uncovered area, over the area);
+// 2. per edge between 4-neighbours, the flux diffusion x min(area) x the
+//    difference of the facing densities (between chart cells only) and the
+//    push (p_a - p_b) / (p_a + p_b) of the pressures across it;
+// 3. new energies into next_energy (each flux leaves one cell and enters the
+//    other: the total is conserved) and proposed nodes into next_nodes
+//    (propose_node). No guard: step() judges the proposal.
+// Returns the largest neighbour density difference relative to the
+// reference density (the stop criterion), before the step.
 template <int channels>
-StepStats step_of(Level& level, const AutomatonOptions& options) {
+double rule_of(Level& level, const AutomatonOptions& options) {
     const int rows = level.rows(), cols = level.cols();
     constexpr Facing face = facing(channels);
     constexpr int axes = channels == 4 ? 2 : 1;  // pressure: y (and x) axis
@@ -305,49 +377,8 @@ StepStats step_of(Level& level, const AutomatonOptions& options) {
             for (int j = 0; j <= cols; ++j) {
                 const size_t n = level.node(i, j);
                 glm::dvec2 p = nodes[n];
-                const NodeMode mode = level.node_mode[n];
-                if (mode != NodeMode::Fixed) {
-                    // The vertical edges above and below the node move it in x,
-                    // the horizontal edges left and right of it in y; a missing
-                    // edge (at the border) contributes nothing.
-                    double fx = 0, fy = 0, area_sum = 0, radius = std::numeric_limits<double>::infinity();
-                    int adjacent = 0;
-                    if (i > 0 && i < rows && j > 0 && j < cols) {
-                        // Inside (nearly every node): all four edges and cells, in
-                        // the order of the general case below (same rounding).
-                        const size_t up = size_t(i - 1) * cols + j, down = up + cols;
-                        fx = push_v(i - 1, j) + push_v(i, j);
-                        fy = push_h(i, j - 1) + push_h(i, j);
-                        area_sum = level.area[up - 1] + level.area[up] + level.area[down - 1] + level.area[down];
-                        radius = std::min(std::min(level.safe_radius[up - 1], level.safe_radius[up]),
-                                          std::min(level.safe_radius[down - 1], level.safe_radius[down]));
-                        adjacent = 4;
-                    } else {
-                        if (i > 0) fx += push_v(i - 1, j);
-                        if (i < rows) fx += push_v(i, j);
-                        if (j > 0) fy += push_h(i, j - 1);
-                        if (j < cols) fy += push_h(i, j);
-                        for (int di = -1; di <= 0; ++di) {
-                            for (int dj = -1; dj <= 0; ++dj) {
-                                const int ci = i + di, cj = j + dj;
-                                if (ci < 0 || cj < 0 || ci >= rows || cj >= cols) continue;
-                                area_sum += level.area[level.cell(ci, cj)];
-                                radius = std::min(radius, level.safe_radius[level.cell(ci, cj)]);
-                                ++adjacent;
-                            }
-                        }
-                    }
-                    // x / 4 == x * 0.25 exactly; a division costs as much as the root.
-                    const double size = std::sqrt(adjacent == 4 ? area_sum * 0.25 : area_sum / adjacent);
-                    glm::dvec2 move = 0.5 * options.rate * size * glm::dvec2(fx, fy);
-                    if (mode == NodeMode::SlideX) move.y = 0;
-                    if (mode == NodeMode::SlideY) move.x = 0;
-                    // Squared first: the root is only needed to shorten a move.
-                    const double length2 = glm::dot(move, move);
-                    if (length2 > radius * radius) move *= radius / std::sqrt(length2);
-                    p += move;
-                    p.x = std::clamp(p.x, level.grid.xs.front(), level.grid.xs.back());
-                    p.y = std::clamp(p.y, level.grid.ys.front(), level.grid.ys.back());
+                if (level.node_mode[n] != NodeMode::Fixed) {
+                    p = propose_node(level, options, i, j, push_v, push_h);
                     const glm::dvec2 d = p - nodes[n];
                     largest_move = std::max(largest_move, glm::dot(d, d));
                 }
@@ -356,77 +387,75 @@ StepStats step_of(Level& level, const AutomatonOptions& options) {
             level.row_moved[size_t(i)] = largest_move;
         }
     });
-    const double difference = *std::max_element(level.row_difference.begin(), level.row_difference.end());
+    return *std::max_element(level.row_difference.begin(), level.row_difference.end());
+}
 
-    // 3. Shape bounds: a cell may not leave [min_area, max_area], get a corner
-    // sharper or an edge shorter than kMinQuality allows (which includes
-    // turning concave or inside out), or (a cell of rigid texels only) get
-    // thinner than its original width or height; nor move further out of a
-    // bound it already breaks (cells interpolated from a coarser level may).
-    // Cells that would are frozen by putting their corners back. A cell all
-    // of whose corners are back is in its previous, valid state, so
-    // repeating until nothing breaks a bound ends in a valid state. The first round
-    // checks every cell in parallel; later rounds only the cells around the
-    // corners just put back (rounds are whole sets, so the order within a
-    // round does not matter).
-    // Every cell is measured here for its new corners and energies (the next
-    // step's state): a cell whose corners did not move keeps its shape.
-    auto breaks_bound = [&](int i, int j) {
-        const size_t c = level.cell(i, j);
-        glm::dvec2 q[4];
-        corners(level, level.next_nodes, i, j, q);
-        glm::dvec2 old[4];
-        corners(level, nodes, i, j, old);
-        const bool unchanged = q[0] == old[0] && q[1] == old[1] && q[2] == old[2] && q[3] == old[3];
-        const Shape now = unchanged ? Shape{level.area[c], level.safe_radius[c], level.quality[c]} : shape(q);
-        write_shape(c, now, level.next_area.data(), level.next_safe_radius.data(), level.next_quality.data());
-        if (unchanged) return false;
-        const double a = now.area, before = level.area[c];
-        if ((a < level.min_area[c] && a < before) || (a > level.max_area[c] && a > before)) return true;
-        if (now.quality2 < kMinQuality * kMinQuality && now.quality2 < level.quality[c]) return true;
-        if (level.rigid_area[c] < level.original_area[c]) return false;
-        const glm::dvec2 thin = thickness(q, a);
-        const double w0 = level.grid.xs[j + 1] - level.grid.xs[j];
-        const double h0 = level.grid.ys[i + 1] - level.grid.ys[i];
-        if (!(thin.x < w0) && !(thin.y < h0)) return false;  // as thick as at rest: the usual case
-        const glm::dvec2 was = thickness(old, before);
-        return (thin.x < w0 && thin.x < was.x) || (thin.y < h0 && thin.y < was.y);
-    };
-    // Judges the cells of the whole grid in parallel (all of them, or only
-    // those with a corner put back in this round): verdicts in breaking_cell,
-    // counts per row in row_count.
-    std::vector<uint8_t>& breaking_cell = level.breaking_cell;
-    std::vector<int64_t> row_count(size_t(rows), 0);
-    auto judge_grid = [&](bool only_reverted) {
-        parallel_for(rows, kRowGrain, [&](int64_t begin, int64_t end) {
-            for (int i = int(begin); i < int(end); ++i) {
-                int64_t count = 0;
-                for (int j = 0; j < cols; ++j) {
-                    const bool suspect = !only_reverted || level.reverted_node[level.node(i, j)] ||
-                                         level.reverted_node[level.node(i, j + 1)] ||
-                                         level.reverted_node[level.node(i + 1, j)] ||
-                                         level.reverted_node[level.node(i + 1, j + 1)];
-                    const bool breaks = suspect && breaks_bound(i, j);
-                    breaking_cell[level.cell(i, j)] = breaks;
-                    count += breaks;
-                }
-                row_count[size_t(i)] = count;
+// The guards. Two rules: a moved cell must be valid (`validity`,
+// automaton_cell.h: well shaped, area within its bounds, a rigid cell as wide
+// and tall as at rest), or, where it already broke a bound before the step
+// (cells interpolated from a coarser level may), not break that bound
+// further. Invariant: a cell all of whose corners are put back is its
+// previous self, which passed these rules (an unchanged cell breaks
+// nothing), so putting back the corners of every breaking cell, round after
+// round until none breaks, ends in a state that passes them. Rounds are whole sets (every cell judged on
+// the same nodes), so the order within a round does not matter.
+//
+// Judging a cell also measures it for its proposed corners into next_area,
+// next_safe_radius and next_quality (the next step's state): a cell whose
+// corners did not move keeps its shape and breaks nothing.
+inline bool breaks_bound(Level& level, int i, int j) {
+    const size_t c = level.cell(i, j);
+    glm::dvec2 q[4];
+    corners(level, level.next_nodes, i, j, q);
+    glm::dvec2 old[4];
+    corners(level, level.grid.nodes, i, j, old);
+    const bool unchanged = q[0] == old[0] && q[1] == old[1] && q[2] == old[2] && q[3] == old[3];
+    const Shape now = unchanged ? Shape{level.area[c], level.safe_radius[c], level.quality[c]} : shape(q);
+    write_shape(c, now, level.next_area.data(), level.next_safe_radius.data(), level.next_quality.data());
+    if (unchanged) return false;
+    const Validity v = validity(q, now, bounds_of(level, i, j));
+    if (v.valid()) return false;
+    const Shape before{level.area[c], level.safe_radius[c], level.quality[c]};
+    return breaks_further(v, now, before, [&] { return thickness(old, before.area); });
+}
+
+// Judges the cells of the whole grid in parallel (all of them, or only those
+// with a corner put back in this dense round): verdicts in breaking_cell,
+// counts per cell row in row_count.
+void judge_grid(Level& level, bool only_reverted, std::vector<int64_t>& row_count) {
+    const int cols = level.cols();
+    parallel_for(level.rows(), kRowGrain, [&](int64_t begin, int64_t end) {
+        for (int i = int(begin); i < int(end); ++i) {
+            int64_t count = 0;
+            for (int j = 0; j < cols; ++j) {
+                const bool suspect = !only_reverted || level.reverted_node[level.node(i, j)] ||
+                                     level.reverted_node[level.node(i, j + 1)] ||
+                                     level.reverted_node[level.node(i + 1, j)] ||
+                                     level.reverted_node[level.node(i + 1, j + 1)];
+                const bool breaks = suspect && breaks_bound(level, i, j);
+                level.breaking_cell[level.cell(i, j)] = breaks;
+                count += breaks;
             }
-        });
-    };
-    judge_grid(false);
-    std::vector<uint8_t> reverted_rows(size_t(rows) + 1, 0);  // node rows with a node put back
-    // Dense rounds, while many cells break (a seventh of the finest level's
-    // cells on a Lightmap Pack layout): two passes over the whole grid, in
-    // parallel. Nodes of breaking cells go back; the cells around them are
-    // judged again. The same sets as the sparse rounds below.
+            row_count[size_t(i)] = count;
+        }
+    });
+}
+
+// Dense revert rounds, while more than 1/kDenseRevertFraction of the cells
+// break a bound (a seventh of the finest level's cells on a Lightmap Pack
+// layout): two passes over the whole grid, in parallel. The nodes of
+// breaking cells go back; the cells around them are judged again. The same
+// sets as revert_sparse's rounds. Marks node rows with a node put back in
+// reverted_rows.
+void revert_dense(Level& level, std::vector<int64_t>& row_count, std::vector<uint8_t>& reverted_rows) {
+    const int rows = level.rows(), cols = level.cols();
     auto total = [&] { return std::accumulate(row_count.begin(), row_count.end(), int64_t(0)); };
     while (total() > int64_t(rows) * cols / kDenseRevertFraction) {
         parallel_for(rows + 1, kRowGrain, [&](int64_t begin, int64_t end) {
             for (int i = int(begin); i < int(end); ++i) {
                 // The cell rows above and below node row i, where they exist.
-                const uint8_t* above = i > 0 ? &breaking_cell[level.cell(i - 1, 0)] : nullptr;
-                const uint8_t* below = i < rows ? &breaking_cell[level.cell(i, 0)] : nullptr;
+                const uint8_t* above = i > 0 ? &level.breaking_cell[level.cell(i - 1, 0)] : nullptr;
+                const uint8_t* below = i < rows ? &level.breaking_cell[level.cell(i, 0)] : nullptr;
                 for (int j = 0; j <= cols; ++j) {
                     uint8_t revert = 0;
                     for (const uint8_t* row : {above, below}) {
@@ -437,28 +466,36 @@ StepStats step_of(Level& level, const AutomatonOptions& options) {
                     const size_t n = level.node(i, j);
                     level.reverted_node[n] = revert;
                     if (!revert) continue;
-                    level.next_nodes[n] = nodes[n];
+                    level.next_nodes[n] = level.grid.nodes[n];
                     reverted_rows[size_t(i)] = 1;
                 }
             }
         });
-        judge_grid(true);
+        judge_grid(level, true, row_count);
     }
+}
+
+// Sparse revert rounds on lists: the corners of the cells still breaking a
+// bound (in breaking_cell, counted per row in row_count) go back, and the
+// cells around them are judged again (in parallel, each once per round),
+// until none breaks. Marks node rows with a node put back in reverted_rows.
+void revert_sparse(Level& level, const std::vector<int64_t>& row_count, std::vector<uint8_t>& reverted_rows) {
+    const int rows = level.rows(), cols = level.cols();
     std::vector<std::vector<int32_t>> row_breaking(static_cast<size_t>(rows));
     parallel_for(rows, kRowGrain, [&](int64_t begin, int64_t end) {
         for (int i = int(begin); i < int(end); ++i) {
             row_breaking[size_t(i)].clear();
             if (!row_count[size_t(i)]) continue;
             for (int j = 0; j < cols; ++j) {
-                if (breaking_cell[level.cell(i, j)]) row_breaking[size_t(i)].push_back(int32_t(level.cell(i, j)));
+                if (level.breaking_cell[level.cell(i, j)]) row_breaking[size_t(i)].push_back(int32_t(level.cell(i, j)));
             }
         }
     });
     std::vector<int32_t> breaking;
     for (const auto& r : row_breaking) breaking.insert(breaking.end(), r.begin(), r.end());
-    // Sparse rounds: lists of the breaking cells and their neighbours.
     std::vector<int32_t> suspects;
     std::vector<uint8_t> verdicts;
+    const auto judge = [&level](int i, int j) { return breaks_bound(level, i, j); };
     while (!breaking.empty()) {
         // Each cell once per round (a stamp, not a sort: within a round the
         // order does not matter, every cell is judged on the same nodes).
@@ -469,42 +506,62 @@ StepStats step_of(Level& level, const AutomatonOptions& options) {
             reverted_rows[size_t(i)] = reverted_rows[size_t(i) + 1] = 1;
             for (int ni = i; ni <= i + 1; ++ni) {
                 for (int nj = j; nj <= j + 1; ++nj) {
-                    level.next_nodes[level.node(ni, nj)] = nodes[level.node(ni, nj)];
+                    level.next_nodes[level.node(ni, nj)] = level.grid.nodes[level.node(ni, nj)];
                     queue_cells_around(level, ni, nj, round, suspects);
                 }
             }
         }
         // Judged in parallel: each suspect once, writing only its own state.
-        judge_cells(level, suspects, breaks_bound, verdicts, breaking);
+        judge_cells(level, suspects, judge, verdicts, breaking);
     }
+}
 
-    // The largest node move actually made, in cell sizes of this level.
-    parallel_for(rows + 1, kRowGrain, [&](int64_t begin, int64_t end) {
+// The largest node move actually made, in cell sizes of this level: the
+// rule's per-row largest moves (row_moved), measured again in the node rows
+// a guard put a node back in.
+double largest_move(Level& level, const std::vector<uint8_t>& reverted_rows) {
+    const int cols = level.cols();
+    parallel_for(level.rows() + 1, kRowGrain, [&](int64_t begin, int64_t end) {
         for (int i = int(begin); i < int(end); ++i) {
             if (!reverted_rows[size_t(i)]) continue;
             double largest = 0.0;
             for (int j = 0; j <= cols; ++j) {
-                const glm::dvec2 d = level.next_nodes[level.node(i, j)] - nodes[level.node(i, j)];
+                const glm::dvec2 d = level.next_nodes[level.node(i, j)] - level.grid.nodes[level.node(i, j)];
                 largest = std::max(largest, glm::dot(d, d));
             }
             level.row_moved[size_t(i)] = largest;
         }
     });
-    const double block = level.grid.xs[1] - level.grid.xs[0];
-    const double moved = std::sqrt(*std::max_element(level.row_moved.begin(), level.row_moved.end()));
+    return std::sqrt(*std::max_element(level.row_moved.begin(), level.row_moved.end())) / level.block;
+}
+
+// The step for one or four channels: the rule proposes, the guards put back
+// what would break a bound, and the buffers swap.
+template <int channels>
+StepStats step_of(Level& level, const AutomatonOptions& options) {
+    const double difference = rule_of<channels>(level, options);
+    std::vector<int64_t> row_count(size_t(level.rows()), 0);
+    std::vector<uint8_t> reverted_rows(size_t(level.rows()) + 1, 0);  // node rows with a node put back
+    judge_grid(level, false, row_count);
+    revert_dense(level, row_count, reverted_rows);
+    revert_sparse(level, row_count, reverted_rows);
+    const double moved = largest_move(level, reverted_rows);
 
     level.grid.nodes.swap(level.next_nodes);
     level.energy.swap(level.next_energy);
     level.area.swap(level.next_area);
     level.safe_radius.swap(level.next_safe_radius);
     level.quality.swap(level.next_quality);
-    return {difference, moved / block};
+    return {difference, moved};
 }
-
 }  // namespace
 
 StepStats step(Level& level, const AutomatonOptions& options) {
     return level.channels == 4 ? step_of<4>(level, options) : step_of<1>(level, options);
+}
+
+double apply_rule(Level& level, const AutomatonOptions& options) {
+    return level.channels == 4 ? rule_of<4>(level, options) : rule_of<1>(level, options);
 }
 
 void check_invariants(const Level& level, int step_index) {
@@ -516,9 +573,23 @@ void check_invariants(const Level& level, int step_index) {
     const NodeGrid& grid = level.grid;
     for (int i = 0; i < level.rows(); ++i) {
         for (int j = 0; j < level.cols(); ++j) {
-            if (!(min_corner_cross(grid, i, j) > 0)) {
-                fail("cell (" + std::to_string(i) + ", " + std::to_string(j) + ") is inverted or degenerate");
+            glm::dvec2 q[4];
+            corners(level, grid.nodes, i, j, q);
+            const Shape s = shape(q);
+            const Validity v = validity(q, s, bounds_of(level, i, j));
+            if (v.valid()) continue;
+            // Valid, or no further outside a bound than at the level's start.
+            glm::dvec2 start[4];
+            corners(level, level.start_nodes, i, j, start);
+            const Shape was = shape(start);
+            if (!breaks_further(v, s, was, [&] { return thickness(start, was.area); })) continue;
+            const std::string cell = "cell (" + std::to_string(i) + ", " + std::to_string(j) + ") ";
+            if (!(s.quality2 > 0)) fail(cell + "is inverted, concave or degenerate");
+            if (v.ill_shaped) fail(cell + "is less well shaped than allowed and than at the level's start");
+            if (v.too_small || v.too_large) {
+                fail(cell + "has area " + std::to_string(s.area) + ", further outside its bounds than at the level's start");
             }
+            fail(cell + "is thinner than at rest and than at the level's start");
         }
     }
     for (const glm::dvec2& p : grid.nodes) {

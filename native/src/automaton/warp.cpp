@@ -102,16 +102,6 @@ void warp_uvs(const UvGridView& grid, const float* uvs, int64_t count, float* ou
     warp_uvs_through(grid, grid.cols, grid.rows, uvs, count, out);
 }
 
-double min_corner_cross(const NodeGrid& grid, int i, int j) {
-    // Corners in order around the cell: top-left, top-right, bottom-right, bottom-left.
-    const glm::dvec2 q[4] = {grid.node(i, j), grid.node(i, j + 1), grid.node(i + 1, j + 1), grid.node(i + 1, j)};
-    double smallest = cross(q[1] - q[0], q[3] - q[0]);
-    for (int k = 1; k < 4; ++k) {
-        smallest = std::min(smallest, cross(q[(k + 1) % 4] - q[k], q[(k + 3) % 4] - q[k]));
-    }
-    return smallest;
-}
-
 }  // namespace lmrefine
 
 namespace lmrefine {

@@ -183,6 +183,7 @@ bool RayTracer::intersect(const glm::vec3& origin, const glm::vec3& direction, f
     hit.triangle = int64_t(rayhit.hit.primID);
     hit.u = rayhit.hit.u;
     hit.v = rayhit.hit.v;
+    hit.t = rayhit.ray.tfar;
     return true;
 }
 

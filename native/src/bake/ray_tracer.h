@@ -22,6 +22,7 @@ struct Hit {
     int mesh = -1;
     int64_t triangle = -1;
     float u = 0.0f, v = 0.0f;  // barycentrics of corners 1 and 2
+    float t = 0.0f;            // distance along the ray, in units of |direction|
 };
 
 class RayTracer {

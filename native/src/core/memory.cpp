@@ -1,6 +1,15 @@
 #include "lmrefine/core/memory.h"
 
+// Physical memory has no standard C++ query: one branch per platform.
+#if defined(_WIN32)
+#define NOMINMAX
+#include <windows.h>
+#elif defined(__APPLE__)
+#include <sys/sysctl.h>
+#include <sys/types.h>
+#else
 #include <unistd.h>
+#endif
 
 #include <cstdio>
 #include <limits>
@@ -10,8 +19,19 @@
 namespace lmrefine {
 
 uint64_t physical_memory() {
+    const uint64_t unknown = uint64_t(1) << 34;
+#if defined(_WIN32)
+    MEMORYSTATUSEX status;
+    status.dwLength = sizeof status;
+    return GlobalMemoryStatusEx(&status) ? uint64_t(status.ullTotalPhys) : unknown;
+#elif defined(__APPLE__)
+    uint64_t bytes = 0;
+    size_t size = sizeof bytes;
+    return sysctlbyname("hw.memsize", &bytes, &size, nullptr, 0) == 0 && bytes > 0 ? bytes : unknown;
+#else
     const long pages = sysconf(_SC_PHYS_PAGES), page = sysconf(_SC_PAGE_SIZE);
-    return pages > 0 && page > 0 ? uint64_t(pages) * uint64_t(page) : (uint64_t(1) << 34);
+    return pages > 0 && page > 0 ? uint64_t(pages) * uint64_t(page) : unknown;
+#endif
 }
 
 std::string gib(uint64_t bytes) {

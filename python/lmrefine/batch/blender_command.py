@@ -16,21 +16,26 @@ def find_blender(explicit=None):
     return blender
 
 
-def batch_script_candidates():
-    """Where the add-on's batch.py may be, most specific first."""
+def addon_script_candidates(script):
+    """Where the add-on's headless entry `script` (batch.py, export_scene.py)
+    may be, most specific first."""
     candidates = []
-    if os.environ.get("LMREFINE_BATCH_SCRIPT"):
-        candidates.append(os.environ["LMREFINE_BATCH_SCRIPT"])
     # A checkout: python/lmrefine/ beside addon/lmrefine_blender/.
-    candidates.append(os.path.join(PACKAGE_DIR, "..", "..", "addon", "lmrefine_blender", "batch.py"))
+    candidates.append(os.path.join(PACKAGE_DIR, "..", "..", "addon", "lmrefine_blender", script))
     # The add-on zip puts lmrefine under lmrefine_blender/lib/.
-    candidates.append(os.path.join(PACKAGE_DIR, "..", "..", "batch.py"))
+    candidates.append(os.path.join(PACKAGE_DIR, "..", "..", script))
     # An add-on installed into Blender's user scripts.
     if os.environ.get("BLENDER_USER_SCRIPTS"):
-        candidates.append(os.path.join(os.environ["BLENDER_USER_SCRIPTS"], "addons", "lmrefine_blender", "batch.py"))
+        candidates.append(os.path.join(os.environ["BLENDER_USER_SCRIPTS"], "addons", "lmrefine_blender", script))
     candidates.extend(sorted(glob.glob(os.path.expanduser(
-        "~/.config/blender/*/scripts/addons/lmrefine_blender/batch.py")), reverse=True))
+        f"~/.config/blender/*/scripts/addons/lmrefine_blender/{script}")), reverse=True))
     return [os.path.normpath(c) for c in candidates]
+
+
+def batch_script_candidates():
+    """Where the add-on's batch.py may be, most specific first."""
+    extra = [os.path.normpath(os.environ["LMREFINE_BATCH_SCRIPT"])] if os.environ.get("LMREFINE_BATCH_SCRIPT") else []
+    return extra + addon_script_candidates("batch.py")
 
 
 def find_batch_script(explicit=None):

@@ -41,6 +41,11 @@ def add_batch_parser(commands):
                                                    "gets cores / workers threads")
     where.add_argument("--scheduler", help="address of an existing Dask scheduler, e.g. tcp://host:8786")
     parser.add_argument("--force", action="store_true", help="redo every level, finished or not")
+    parser.add_argument("--evaluate", action="store_true",
+                        help="also measure every refined level with `python3 -m lmrefine evaluate` (same objects, "
+                             "UV map and resolution; bakes it at up to 4x the resolution, so slow): its "
+                             "equal-error resolution ratio goes into the summary, its report into "
+                             "OUT/<level>/evaluation/")
     parser.add_argument("--retries", type=int, default=2,
                         help="times a level whose Blender crashed or whose worker died runs again (default: 2)")
     parser.add_argument("--blender", help="Blender executable on the workers (default: $BLENDER or `blender`)")
@@ -60,6 +65,6 @@ def run_batch_command(args):
         raise ValueError(f"--retries must be 0 or more, got {args.retries}")
     options = BatchOptions(flags=list(args.flags) + list(getattr(args, "extra", []) or []), workers=args.workers,
                            scheduler=args.scheduler, force=args.force, retries=args.retries,
-                           blender=args.blender, batch_script=args.batch_script)
+                           blender=args.blender, batch_script=args.batch_script, evaluate=args.evaluate)
     summary = run_batch(args.levels, args.out, options, stream=sys.stderr)
     return summary

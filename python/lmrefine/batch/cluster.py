@@ -2,6 +2,7 @@
 
 import importlib.util
 import logging
+import multiprocessing
 import os
 from collections import Counter
 
@@ -38,6 +39,15 @@ class Cluster:
             # A worker that dies with its task (a killed process): Dask reruns the task
             # elsewhere this many times before giving up on it.
             dask.config.set({"distributed.scheduler.allowed-failures": max(0, retries)})
+            # Worker processes set up their logging from the environment when they import
+            # distributed, before silence_logs reaches them: without this each one prints
+            # INFO lines about the preload. A user's own setting wins.
+            os.environ.setdefault("DASK_LOGGING__DISTRIBUTED", "warning")
+            # Workers forked from a fork server start in a fraction of the time spawned
+            # ones take (they do not import Python, Dask and lmrefine anew), and unlike a
+            # plain fork they inherit none of this process's threads. Spawn where there is none.
+            if "forkserver" in multiprocessing.get_all_start_methods():
+                dask.config.set({"distributed.worker.multiprocessing-method": "forkserver"})
             self.local = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
                                       dashboard_address=dashboard, silence_logs=logging.ERROR,
                                       host="127.0.0.1", preload=["lmrefine.batch.worker_setup"])

@@ -66,8 +66,9 @@ def _threads_here(threads):
     return max(1, (os.cpu_count() or 1) // max(1, threads.get(host, 1)))
 
 
-def run_level(name, level_path, out_dir, flags, threads=None, blender=None, batch_script=None):
-    """Run one attempt; returns a result dict (never raises for a failed Blender)."""
+def run_level(name, level_path, out_dir, flags, threads=None, blender=None, batch_script=None, evaluate=False):
+    """Run one attempt; returns a result dict (never raises for a failed Blender).
+    With `evaluate`, a refined level is also measured (evaluate_level)."""
     attempt = f"{time.strftime('%Y%m%d-%H%M%S')}-{uuid.uuid4().hex[:8]}"
     attempt_dir = os.path.join(work_dir(out_dir, name), attempt)
     target = os.path.join(attempt_dir, "out")
@@ -113,6 +114,11 @@ def run_level(name, level_path, out_dir, flags, threads=None, blender=None, batc
             report = None
     if returncode == 0 and report and report.get("ok"):
         result.update(ok=True, retry=False, objects=len(report.get("objects", {})), error=None)
+        if evaluate:
+            _emit({"name": name, "state": "running", "fraction": 0.95, "stage": "evaluating", "attempt": attempt})
+            result.update(evaluate_level(level_path, os.path.join(target, "evaluation"), flags, blender, log_path,
+                                         objects=sorted(report.get("objects", {}))))
+            result["seconds"] = time.perf_counter() - started
     elif report is not None and report.get("ok") is False:
         # batch.py ran and refused the level (its message): the same again would fail the same way.
         result.update(ok=False, retry=False, error=report.get("error", f"exit code {returncode}"))
@@ -124,6 +130,66 @@ def run_level(name, level_path, out_dir, flags, threads=None, blender=None, batc
     _emit({"name": name, "state": "finished", "fraction": 1.0, "stage": "done" if result["ok"] else "failed",
            "attempt": attempt})
     return result
+
+
+# The add-on batch flags that say what the evaluation must measure: the same
+# receivers, UV map and lightmap size.
+EVALUATION_FLAGS = {"--objects": "--objects", "--source-layer": "--uv-map", "--resolution": "--resolution"}
+
+
+def evaluate_level(level_path, out, flags, blender, log_path, objects=()):
+    """`python3 -m lmrefine evaluate LEVEL.blend` into `out` (its report and
+    pictures). Objects that share one atlas are measured together; when their
+    lightmap maps are separate (one lightmap each, as the add-on bakes them),
+    each of `objects` is measured on its own into out/<object>/ and the level's
+    figure is the lowest (the object that gained least). Returns
+    {"equal_error": ratio or None, "equal_error_objects": {...}} and, when it
+    could not measure, "evaluation_error". A failed evaluation never fails the
+    level: the refined outputs are there either way."""
+    figure, why = _evaluate(level_path, out, flags, blender, log_path)
+    if figure is not None or "cover the same part" not in (why or "") or len(objects) < 2:
+        return {"equal_error": figure} if figure is not None else {"equal_error": None, "evaluation_error": why}
+    per_object, problems = {}, []
+    for name in objects:
+        figure, why = _evaluate(level_path, os.path.join(out, name), flags, blender, log_path, only=name)
+        per_object[name] = figure
+        if figure is None:
+            problems.append(f"{name}: {why}")
+    measured = [f for f in per_object.values() if f is not None]
+    result = {"equal_error": min(measured) if measured else None, "equal_error_objects": per_object}
+    if problems:
+        result["evaluation_error"] = "; ".join(problems)
+    return result
+
+
+def _evaluate(level_path, out, flags, blender, log_path, only=None):
+    """One evaluate run; returns (equal-error ratio, None) or (None, why)."""
+    import sys
+
+    import lmrefine
+
+    command = [sys.executable, "-m", "lmrefine", "evaluate", level_path, "--out", out]
+    for index, flag in enumerate(flags[:-1]):
+        if flag in EVALUATION_FLAGS and not (only and flag == "--objects"):
+            command += [EVALUATION_FLAGS[flag], flags[index + 1]]
+    if only:
+        command += ["--objects", only]
+    if blender:
+        command += ["--blender", blender]
+    package_root = os.path.dirname(os.path.dirname(os.path.abspath(lmrefine.__file__)))
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in (package_root, os.environ.get("PYTHONPATH")) if p))
+    with open(log_path, "a", encoding="utf-8") as log:
+        log.write("$ " + " ".join(command) + "\n")
+        log.flush()
+        code = subprocess.run(command, stdout=log, stderr=subprocess.STDOUT, env=env).returncode
+    try:
+        with open(os.path.join(out, "report.json"), encoding="utf-8") as stream:
+            scene = json.load(stream)["scenes"][0]
+    except (OSError, ValueError, KeyError, IndexError):
+        return None, f"the evaluation failed (exit code {code}): {_tail(log_path, 1)}"
+    if scene.get("equal_error_status") == "flat":
+        return None, "noise-limited: no equal-error resolution"
+    return scene.get("equal_error_resolution_ratio"), None
 
 
 def _tail(log_path, lines=3):

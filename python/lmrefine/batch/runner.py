@@ -30,6 +30,7 @@ class BatchOptions:
     retries: int = 2
     blender: str = None
     batch_script: str = None
+    evaluate: bool = False  # also measure each level's equal-error resolution ratio (lmrefine evaluate)
 
 
 def _rewrite_paths(value, old, new):
@@ -111,12 +112,14 @@ def run_batch(inputs, out_dir, options, stream=None):
     os.makedirs(out_dir, exist_ok=True)
     manifest = Manifest(out_dir)
     flags = list(options.flags)
+    # What a level was done with: a run asking for the evaluation redoes levels done without it.
+    recorded = flags + (["--evaluate"] if options.evaluate else [])
     progress = BatchProgress(len(levels), stream)
-    to_run, skipped = _plan(levels, manifest, out_dir, flags, options.force, progress.message)
+    to_run, skipped = _plan(levels, manifest, out_dir, recorded, options.force, progress.message)
     for level, fingerprint, reason in to_run:
         shutil.rmtree(work_dir(out_dir, level.name), ignore_errors=True)  # an interrupted run's attempts
-        manifest.update(level.name, input={"path": level.path, **fingerprint}, options=flags,
-                        options_key=options_key(flags), status="pending", reason=reason, attempts=0,
+        manifest.update(level.name, input={"path": level.path, **fingerprint}, options=recorded,
+                        options_key=options_key(recorded), status="pending", reason=reason, attempts=0,
                         error=None)
     manifest.save()
     workers = 0
@@ -153,7 +156,7 @@ def _run_levels(levels, out_dir, flags, options, manifest, progress):
             others = [w for w in cluster.client.scheduler_info()["workers"] if w != exclude] if exclude else None
             return cluster.client.submit(
                 run_level, level.name, level.path, out_dir, flags, cluster.threads, options.blender,
-                options.batch_script, key=f"lmrefine-batch-{level.name}-{uuid.uuid4().hex[:8]}", pure=False,
+                options.batch_script, options.evaluate, key=f"lmrefine-batch-{level.name}-{uuid.uuid4().hex[:8]}", pure=False,
                 **({"workers": others, "allow_other_workers": True} if others else {}))
 
         pending = {}
@@ -202,7 +205,9 @@ def _finish(future, name, out_dir, options, manifest, progress):
         outputs = commit(out_dir, name, result)
         manifest.update(name, status="done", outputs=outputs, attempts=attempts, seconds=result["seconds"],
                         objects=result.get("objects"), log=os.path.join(outputs["dir"], "blender.log"),
-                        error=None, host=result.get("host"))
+                        error=None, host=result.get("host"), equal_error=result.get("equal_error"),
+                        equal_error_objects=result.get("equal_error_objects"),
+                        evaluation_error=result.get("evaluation_error"))
         progress.level_done(name, "done", result["seconds"],
                             f"attempt {attempts}" if attempts > 1 else "")
         return None

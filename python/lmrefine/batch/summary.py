@@ -16,24 +16,34 @@ def level_rows(levels, manifest, skipped):
             status = "skipped (done before)"
         rows.append({"level": level.name, "status": status, "seconds": record.get("seconds"),
                      "objects": record.get("objects"), "attempts": record.get("attempts"),
+                     "equal_error": record.get("equal_error"), "equal_error_objects": record.get("equal_error_objects"),
+                     "evaluation_error": record.get("evaluation_error"),
                      "error": record.get("error"), "log": record.get("log"), "outputs": record.get("outputs")})
     return rows
 
 
 def summary_table(rows):
+    """The terminal table; the equal-error column only when some level was evaluated."""
     def cell(row, key):
         value = row[key]
         if value is None:
             return "-"
+        if key == "equal_error":
+            return f"{value:.2f}x"
         return f"{value:.1f}" if isinstance(value, float) else str(value)
 
-    table = [list(COLUMNS)] + [[cell(row, key) for key in COLUMNS] for row in rows]
-    widths = [max(len(line[i]) for line in table) for i in range(len(COLUMNS))]
+    columns = COLUMNS + (("equal_error",) if any(row.get("equal_error") is not None or row.get("evaluation_error")
+                                                 for row in rows) else ())
+    table = [[("equal-error" if key == "equal_error" else key) for key in columns]]
+    table += [[cell(row, key) for key in columns] for row in rows]
+    widths = [max(len(line[i]) for line in table) for i in range(len(columns))]
     lines = ["  ".join(text.ljust(width) for text, width in zip(line, widths)).rstrip() for line in table]
     lines.insert(1, "  ".join("-" * width for width in widths))
     for row in rows:
         if row["status"] == "failed":
             lines.append(f"{row['level']}: {row['error']} (log: {row['log']})")
+        elif row.get("evaluation_error"):
+            lines.append(f"{row['level']}: not measured: {row['evaluation_error']}")
     return "\n".join(lines)
 
 

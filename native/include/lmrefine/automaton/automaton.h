@@ -6,11 +6,13 @@
 //
 // Steps are synchronous (every cell reads the previous state, writes a second
 // buffer), so the result does not depend on visiting order or thread count.
-// Guards hold after every step: every cell a well-shaped convex
-// quadrilateral (no sharp corner, no collapsed edge), no negative energy,
-// total energy conserved, every node inside the grid's rectangle. To converge in a number of steps that does not
-// grow with the resolution, the automaton runs coarse-to-fine on a pyramid of
-// grids (cells of 2^k x 2^k texels), each level starting from the one above.
+// Guards hold after every step: every cell valid (well shaped, within its
+// area bounds, a rigid cell as thick as at rest; docs/refiner.md,
+// "Invariants") or no further outside a bound than at its level's start, no
+// negative energy, total energy conserved, every node inside the grid's
+// rectangle. To converge in a number of steps that does not grow with the
+// resolution, the automaton runs coarse-to-fine on a pyramid of grids (cells
+// of 2^k x 2^k texels), each level starting from the one above.
 #pragma once
 
 #include <cstdint>
@@ -92,5 +94,19 @@ AutomatonResult run_automaton(const AutomatonInput& input, const AutomatonOption
                               Progress* progress = nullptr);
 
 BorderMode parse_border_mode(const std::string& name);
+
+// Test hook, not part of the method: one synchronous step of the rule with
+// the guards off, for the plain reference in tests/automaton_reference.py.
+// One level of one-texel cells (with BorderMode::ExtraRing, plus its ring)
+// starts from `nodes`, the level's (rows + 1) x (cols + 1) node positions in
+// pixel space, ring included; the result is what the rule proposes, before
+// any guard puts a node back.
+struct RuleStep {
+    std::vector<glm::dvec2> nodes;  // proposed node positions, as `nodes`
+    std::vector<double> energy;     // new energies, level cells x channels
+    double difference = 0;          // largest neighbour density difference / reference density, before
+};
+RuleStep automaton_rule_step(const AutomatonInput& input, const AutomatonOptions& options,
+                             const std::vector<glm::dvec2>& nodes);
 
 }  // namespace lmrefine

@@ -56,11 +56,6 @@ struct UvGridView {
 // warp_uvs and cell_areas of the NodeGrid the view describes.
 void warp_uvs(const UvGridView& grid, const float* uvs, int64_t count, float* out);
 
-// Twice the signed area of the cell's corner triangle at each corner, the
-// smallest of the four: positive iff the cell is a convex, non-inverted
-// quadrilateral (x right, y down: clockwise on screen counts as positive).
-double min_corner_cross(const NodeGrid& grid, int i, int j);
-
 }  // namespace lmrefine
 
 namespace lmrefine {
@@ -74,7 +69,10 @@ std::vector<float> cell_areas(const UvGridView& grid);
 // (rows + 1) x (cols + 1) of (u, v) with v up, that are not convex,
 // non-inverted quadrilaterals: some corner's cross product, computed in
 // float32 (the grid's own precision, as the refiner's numpy code did), is
-// >= 0. Reads the float32 nodes in place: no NodeGrid conversion.
+// >= 0. Reads the float32 nodes in place: no NodeGrid conversion. This is
+// what the warp needs to be one-to-one (the back-off judges blended grids
+// with it), weaker than the automaton's cell validity (automaton_cell.h):
+// judging by that instead changes results (docs/refiner.md, "Invariants").
 std::vector<uint8_t> invalid_cells(const float* uv_nodes, int rows, int cols);
 
 }  // namespace lmrefine

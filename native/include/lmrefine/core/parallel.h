@@ -1,5 +1,6 @@
-// A small work-sharing loop over all cores. The calling thread takes part,
-// so it keeps reporting progress (and Python keeps seeing Ctrl-C).
+// A work-sharing loop over all cores on oneTBB (the scheduler Embree already
+// loads). The calling thread takes part, so it keeps reporting progress (and
+// Python keeps seeing Ctrl-C). docs/architecture.md says why oneTBB.
 #pragma once
 
 #include <cstdint>
@@ -9,8 +10,14 @@ namespace lmrefine {
 
 class Progress;
 
-// Number of worker threads: LMREFINE_THREADS if set, else all hardware threads.
+// Number of worker threads: LMREFINE_THREADS if set, else all hardware
+// threads; 1 in a child made by fork() (see serial_after_fork).
 int thread_count();
+
+// Called in a child process right after fork() (the Python package registers
+// it with os.register_at_fork): from then on every loop runs serially, since
+// oneTBB does not survive a fork taken while its workers run.
+void serial_after_fork();
 
 // Calls body(begin, end) on disjoint chunks of [0, count) of about `grain`
 // items, on all threads. Chunks are handed out dynamically, so `body` must

@@ -1,0 +1,76 @@
+"""Is a change to the automaton as fast as before? The CPU time of
+`run_automaton` on the bench plane's energy map (hard shadow edge, D4
+gradient map, strength 24), scalar and four-spring, in two builds, each in
+its own subprocess with PYTHONPATH set to that build's python/ directory,
+alternating base and new so both see the same machine load. Prints the best
+time of each and the ratio new / base.
+
+CPU time of the whole process, one worker thread by default: on a shared
+machine that is steadier than wall time (other jobs take cores, not CPU
+time); a ratio within about 3% is noise.
+
+    /usr/bin/python3 bench/compare_speed.py --base /tmp/base/python --new python [--rounds 5] [--size 1024] [--threads 1]
+"""
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+
+CHILD = r"""
+import json, sys, time
+size, tests = int(sys.argv[1]), sys.argv[2]
+sys.path.insert(0, tests)
+import numpy as np
+import lmrefine
+from layouts import plane, shadow_edge_lightmap
+uvs, tris = plane(128, margin=0.02)
+lightmap = shadow_edge_lightmap(size, 0.5, 0.3)
+mask = lmrefine.coverage_mask(uvs, tris, size)
+gradient = lmrefine.gradient_map(lightmap, mask)
+times = {}
+for name, energy in (("scalar", gradient.sum(axis=2)), ("four-spring", gradient)):
+    scale = max(float(np.percentile(energy[mask], 99)), 1e-9)
+    energy = ((1 + 24 * np.clip(energy / scale, 0, 1)) / 25).astype(np.float32)
+    energy[~mask] = 0
+    best = float("inf")
+    for _ in range(3):
+        start = time.process_time()
+        lmrefine.run_automaton(energy, mask)
+        best = min(best, time.process_time() - start)
+    times[name] = best
+print(json.dumps(times))
+"""
+
+
+def measure(python_dir, size, threads):
+    env = dict(os.environ, PYTHONPATH=os.path.abspath(python_dir), LMREFINE_THREADS=str(threads))
+    out = subprocess.run([sys.executable, "-c", CHILD, str(size), os.path.join(HERE, "..", "tests")],
+                         env=env, capture_output=True, text=True, check=True).stdout
+    return json.loads(out)
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--base", required=True, help="the baseline build's python/ directory")
+    parser.add_argument("--new", required=True, help="the new build's python/ directory")
+    parser.add_argument("--rounds", type=int, default=5, help="subprocesses per build, alternating (default 5)")
+    parser.add_argument("--size", type=int, default=1024, help="lightmap resolution (default 1024)")
+    parser.add_argument("--threads", type=int, default=1, help="LMREFINE_THREADS (default 1)")
+    args = parser.parse_args()
+    runs = {"base": [], "new": []}
+    for _ in range(args.rounds):
+        for build, path in (("base", args.base), ("new", args.new)):
+            runs[build].append(measure(path, args.size, args.threads))
+    print(f"run_automaton at {args.size}^2, {args.threads} thread(s), CPU seconds, best of {3 * args.rounds}:")
+    for name in runs["base"][0]:
+        base = min(r[name] for r in runs["base"])
+        new = min(r[name] for r in runs["new"])
+        print(f"  {name:<12} base {base:.3f}  new {new:.3f}  new/base {new / base:.3f}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,73 @@
+#include <pybind11/pybind11.h>
+
+#include <cmath>
+#include <string>
+
+#include "lmrefine/chart/rechart.h"
+#include "lmrefine/core/error.h"
+#include "numpy_util.h"
+#include "progress_binding.h"
+
+namespace py = pybind11;
+
+namespace lmrefine::bindings {
+namespace {
+
+py::tuple rechart_mesh(const py::handle& positions_in, const py::handle& triangles_in, const py::handle& angle_in,
+                       const py::handle& weld_tolerance_in, py::object progress_callback) {
+    RechartOptions options;
+    options.angle_degrees = py_util::real_param(angle_in, "angle");
+    if (!weld_tolerance_in.is_none()) {
+        options.weld_tolerance = py_util::real_param(weld_tolerance_in, "weld_tolerance");
+        if (!(options.weld_tolerance >= 0.0)) {
+            throw py::value_error("weld_tolerance must be a distance >= 0, or None for 1e-6 of the mesh's size (got " +
+                                  std::to_string(options.weld_tolerance) + ")");
+        }
+    }
+    auto positions = py_util::require_points(positions_in, "positions", 3);
+    auto triangles = py_util::require_indices(triangles_in, "triangles", 3);
+    const SurfaceMesh mesh{positions.data(), positions.shape(0), triangles.data(), triangles.shape(0)};
+    py_util::PythonProgress progress(std::move(progress_callback));
+    RechartResult result = progress.run([&](Progress& p) { return rechart(mesh, options, &p); });
+    py::dict report;
+    report["charts"] = result.chart_count;
+    report["grown_charts"] = result.grown_charts;
+    report["split_charts"] = result.split_charts;
+    report["degenerate_triangles"] = result.degenerate;
+    report["welded_vertices"] = result.welded_vertices;
+    const py::ssize_t count = py::ssize_t(mesh.triangle_count);
+    return py::make_tuple(py_util::to_numpy(std::move(result.uvs), {3 * count, 2}),
+                          py_util::to_numpy(std::move(result.triangle_chart), {count}), report);
+}
+
+}  // namespace
+
+void bind_rechart(py::module_& m) {
+    m.def("rechart_mesh", &rechart_mesh, py::arg("positions"), py::arg("triangles"), py::arg("angle") = 10.0,
+          py::arg("weld_tolerance") = py::none(), py::arg("progress") = py::none(),
+          R"doc(Charts of a mesh, each unwrapped with a least-squares conformal map (not packed).
+
+lmrefine.rechart is the public entry (it packs the charts too).
+
+Args:
+    positions (numpy.ndarray): (V, 3) vertex positions.
+    triangles (numpy.ndarray): (T, 3) integer indices into ``positions``.
+    angle (float): largest angle in degrees, in (0, 90), between a chart's
+        face normals and its first (largest) face's.
+    weld_tolerance (float or None): positions closer than this are one
+        vertex; None: 1e-6 of the diagonal of the mesh's bounding box.
+    progress: callable ``progress(fraction, stage)``; False cancels.
+
+Returns:
+    (uvs, charts, report): uvs float32 (3T, 2), corner k of triangle t at
+    row 3t + k, in world units (every chart's UV area is its world area);
+    charts int32 (T,); report dict (charts, grown_charts, split_charts,
+    degenerate_triangles, welded_vertices).
+
+Raises:
+    ValueError: bad shapes, indices out of range, non-finite positions, no
+        triangle with an area, an angle outside (0, 90).
+)doc");
+}
+
+}  // namespace lmrefine::bindings

@@ -1,0 +1,62 @@
+// Surface charts: a triangle mesh cut into charts of neighbouring faces whose
+// normals stay within an angle of the chart's first face, ready to be
+// unwrapped one by one (conformal_map.h) and packed (pack/packer.h). Faces
+// are neighbours when they share an edge in 3D: positions are welded first,
+// since a lightmap UV split (Lightmap Pack cuts every face) may have left
+// coincident copies of one vertex. Details: docs/refiner.md, "Re-charting".
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include <glm/vec3.hpp>
+
+namespace lmrefine {
+
+// A triangle mesh as it crosses the boundary. Views only.
+struct SurfaceMesh {
+    const float* positions = nullptr;    // (vertex_count, 3)
+    int64_t vertex_count = 0;
+    const int32_t* triangles = nullptr;  // (triangle_count, 3) indices into positions
+    int64_t triangle_count = 0;
+};
+
+// Throws InvalidArgument naming the first index out of range or
+// non-finite position a triangle uses (loose vertices are not read).
+void validate_surface(const SurfaceMesh& mesh);
+
+// Per vertex, the smallest index of the used vertices it is welded to
+// (positions closer than `tolerance`, chained); itself when none or unused.
+std::vector<int32_t> weld_positions(const SurfaceMesh& mesh, double tolerance);
+
+// Per-face geometry and its edge neighbours on the welded mesh.
+struct SurfaceFaces {
+    std::vector<glm::dvec3> normal;    // unit, from the winding; 0 for a degenerate face
+    std::vector<double> area;          // world-space area
+    std::vector<uint8_t> degenerate;   // zero area, a sliver or two corners welded together
+    // Per face and edge k (corner k to corner k + 1): the face across it, or
+    // -1 when none, the edge is shared by more than two faces, the two
+    // faces wind it the same way (a flipped neighbour would fold), or
+    // either face is degenerate.
+    std::vector<int64_t> neighbour;    // (triangle_count * 3)
+};
+
+SurfaceFaces surface_faces(const SurfaceMesh& mesh, const std::vector<int32_t>& welded);
+
+// Grows charts over `faces` (non-degenerate face ids): the largest face not
+// yet in a chart (faces within about 1% of one size: the first index) seeds one, which takes every face reachable through edge
+// neighbours in `faces` whose normal is within `angle_radians` of the
+// seed's. Every chart is edge-connected, and for an angle below 90 degrees
+// no face of a chart turns its back to the seed's plane. Deterministic.
+std::vector<std::vector<int64_t>> grow_charts(const SurfaceFaces& faces, const std::vector<int64_t>& face_ids,
+                                              double angle_radians);
+
+// A chart (two or more face ids) cut in two halves at the median of its
+// face centroids along their widest axis, each half split into its
+// edge-connected parts: for a chart whose faces all lie within a small
+// angle and that still folds (a folded or self-intersecting input), so the
+// fold ends up in a small chart instead of the whole chart in single faces.
+std::vector<std::vector<int64_t>> bisect_chart(const SurfaceMesh& mesh, const SurfaceFaces& faces,
+                                               const std::vector<int64_t>& chart);
+
+}  // namespace lmrefine

@@ -1,0 +1,273 @@
+"""Tessellation along light transitions (docs/refiner.md, "Tessellation").
+
+A UV warp moves vertices, and inside a triangle the lightmap mapping is
+affine: a shadow edge that crosses a triangle of many texels gains nothing
+from the refinement, however the automaton deforms the grid there. So before
+refining, the triangles that a strong transition crosses and that cover more
+than a few texels are split, within a vertex budget.
+
+The rule: longest-edge bisection. Each round takes the candidate triangles
+(peak transition strength >= `threshold` somewhere inside, more than
+`min_texels` texels in the lightmap layout), largest transition mass first,
+and splits each one's longest edge (measured in texels) at its midpoint,
+together with every triangle across that edge, so the mesh stays conforming
+(no T-junctions). A triangle is split at most once per round; rounds repeat
+until no candidate is left or the budget of new vertices is spent.
+
+Every split puts the new vertex on the edge: positions, and every per-corner
+attribute (UV maps, normals, colours) of each triangle touching the edge,
+are the mean of that triangle's two corners on it. The surface is unchanged
+and every UV map keeps its mapping, seams included (a seam edge's two sides
+keep their own UVs).
+"""
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import _native
+from ._native import coverage_mask, gradient_map
+from .refine import transition_strength
+
+DEFAULT_BUDGET = 0.25       # at most +25% vertices
+DEFAULT_MIN_TEXELS = 8.0    # triangles at or below this many texels are left alone
+DEFAULT_THRESHOLD = 0.5     # peak transition strength (0..1) that marks a triangle
+MAX_ROUNDS = 32
+_POINTS_PER_CHUNK = 1 << 20
+
+
+@dataclass
+class TessellationResult:
+    positions: np.ndarray           # (V', 3) float64: the original vertices first, then one per split
+    triangles: np.ndarray           # (T', 3) int64 into positions
+    uvs: np.ndarray                 # (3T', 2) float32 per corner: the lightmap UVs, same mapping
+    corner_attributes: dict         # name -> (3T', k) per corner, interpolated
+    parent: np.ndarray              # (T',) int64: the input triangle each output triangle lies in
+    splits: np.ndarray              # (S, 3) int64: (a, b, new vertex) in the order applied
+    report: dict = field(default_factory=dict)
+
+
+def peak_strength(corner_uvs, strength):
+    """(T,) the largest value of `strength` (H, W) at points about one texel
+    apart inside each triangle (corner_uvs: (T, 3, 2))."""
+    height, width = strength.shape
+    texel = corner_uvs * np.array([width, height], np.float64)
+    edges = np.linalg.norm(texel - np.roll(texel, -1, axis=1), axis=2)
+    steps = np.clip(np.ceil(edges.max(axis=1)), 1, 256).astype(np.int64)
+    peak = np.zeros(len(corner_uvs))
+    for n in np.unique(steps):
+        every = np.nonzero(steps == n)[0]
+        i, j = np.meshgrid(np.arange(n + 1), np.arange(n + 1), indexing="ij")
+        keep = i + j <= n
+        weights = np.stack([i[keep], j[keep], n - i[keep] - j[keep]], axis=1) / n  # (P, 3) barycentric
+        per_chunk = max(1, _POINTS_PER_CHUNK // len(weights))  # bounded memory for many large triangles
+        for start in range(0, len(every), per_chunk):
+            rows = every[start:start + per_chunk]
+            points = np.einsum("pk,tkd->tpd", weights, corner_uvs[rows])
+            cols = np.clip(np.floor(points[..., 0] * width), 0, width - 1).astype(np.int64)
+            lines = np.clip(np.floor((1.0 - points[..., 1]) * height), 0, height - 1).astype(np.int64)
+            peak[rows] = strength[lines, cols].max(axis=1)
+    return peak
+
+
+def _texel_areas(corner_uvs, shape):
+    a, b, c = corner_uvs[:, 0], corner_uvs[:, 1], corner_uvs[:, 2]
+    cross = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+    return 0.5 * np.abs(cross) * shape[0] * shape[1]
+
+
+def _number(name, value):
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise TypeError(f"{name} must be a number, got {type(value).__name__}")
+    return float(value)
+
+
+def _array(name, value, dtype):
+    try:
+        raw = np.asarray(value)
+        if dtype is not None and raw.dtype != dtype:
+            # Checked before converting: a huge (broadcast) input fails at once, not after a long copy.
+            _native._require_memory(f"{name} as {np.dtype(dtype).name}", float(raw.size) * np.dtype(dtype).itemsize,
+                                    f"pass a smaller {name}")
+        return np.asarray(raw, dtype)
+    except (TypeError, ValueError) as error:
+        raise TypeError(f"{name} must be a numeric array: {error}") from None
+
+
+def _check_inputs(positions, triangles, uvs, strength, budget, min_texels, threshold, corner_attributes):
+    positions = _array("positions", positions, np.float64)
+    triangles = _array("triangles", triangles, None)
+    if positions.ndim != 2 or positions.shape[1] != 3:
+        raise ValueError(f"positions must be a (V, 3) array, got shape {positions.shape}")
+    if triangles.ndim != 2 or triangles.shape[1] != 3 or not np.issubdtype(triangles.dtype, np.integer):
+        raise ValueError(f"triangles must be a (T, 3) integer array, got {triangles.dtype} {triangles.shape}")
+    triangles = triangles.astype(np.int64)  # a copy: split in place below
+    if triangles.size and (triangles.min() < 0 or triangles.max() >= len(positions)):
+        raise ValueError(f"triangles index vertices outside 0..{len(positions) - 1}")
+    if not np.isfinite(positions).all():
+        raise ValueError("positions hold NaN or Inf values")
+    uvs = _array("uvs", uvs, np.float64)
+    if uvs.shape != (3 * len(triangles), 2):
+        raise ValueError(f"uvs must be per corner, shape ({3 * len(triangles)}, 2); got {uvs.shape}")
+    if not np.isfinite(uvs).all():
+        raise ValueError("uvs hold NaN or Inf values")
+    strength = _array("strength", strength, np.float64)
+    if strength.ndim != 2 or min(strength.shape) < 1:
+        raise ValueError(f"strength must be an (H, W) array, got shape {strength.shape}")
+    if not np.isfinite(strength).all():
+        raise ValueError("strength holds NaN or Inf values")
+    budget, min_texels, threshold = (_number(n, v) for n, v in (("budget", budget), ("min_texels", min_texels),
+                                                                  ("threshold", threshold)))
+    if not (0.0 <= budget <= 16.0):
+        raise ValueError(f"budget must be a fraction of the vertex count in [0, 16], got {budget}")
+    if not (min_texels >= 0.0 and np.isfinite(min_texels)):
+        raise ValueError(f"min_texels must be 0 or more, got {min_texels}")
+    if not (0.0 <= threshold <= 1.0):
+        raise ValueError(f"threshold must be in [0, 1], got {threshold}")
+    attributes = {}
+    if corner_attributes is not None and not isinstance(corner_attributes, dict):
+        raise TypeError(f"corner_attributes must be a dict of name -> (3T, k) arrays, got "
+                        f"{type(corner_attributes).__name__}")
+    for name, values in (corner_attributes or {}).items():
+        values = _array(f"corner attribute '{name}'", values, None)
+        if not np.issubdtype(values.dtype, np.number):
+            raise TypeError(f"corner attribute '{name}' must be numeric, got {values.dtype}")
+        if values.ndim != 2 or len(values) != 3 * len(triangles):
+            raise ValueError(f"corner attribute '{name}' must be per corner, shape ({3 * len(triangles)}, k); "
+                             f"got {values.shape}")
+        attributes[name] = values
+    return positions, triangles, uvs, strength, attributes
+
+
+def tessellate(positions, triangles, uvs, strength, *, budget=DEFAULT_BUDGET, min_texels=DEFAULT_MIN_TEXELS,
+               threshold=DEFAULT_THRESHOLD, corner_attributes=None):
+    """Split the triangles a strong light transition crosses (module doc).
+
+    positions (V, 3), triangles (T, 3) vertex indices, uvs (3T, 2) the
+    lightmap UVs per corner (corner k of triangle t at row 3t + k), and
+    `strength` (H, W): transition strength in [0, 1] per texel of a lightmap
+    baked on `uvs` (see transition_strength_of). `budget`: most new vertices,
+    as a fraction of V. corner_attributes: name -> (3T, k) per-corner arrays
+    interpolated with the UVs (other UV maps, normals: renormalise those).
+
+    Returns a TessellationResult; its report holds vertices before/after,
+    triangles before/after, splits, rounds, candidates left and why it stopped.
+    """
+    positions, triangles, uvs, strength, attributes = _check_inputs(
+        positions, triangles, uvs, strength, budget, min_texels, threshold, corner_attributes)
+    vertex_count = len(positions)
+    allowed = int(np.floor(budget * vertex_count))
+    # Copies: the caller's arrays are never modified.
+    corner = {"uv": uvs.reshape(-1, 3, 2).copy()}
+    corner.update({name: values.reshape(len(triangles), 3, -1).copy() for name, values in attributes.items()})
+    new_positions = [positions]
+    parent = np.arange(len(triangles), dtype=np.int64)
+    splits = []
+    rounds, stopped = 0, "no triangle crossed by a transition is larger than min_texels"
+    next_vertex = vertex_count
+    candidates_left = 0
+    while rounds < MAX_ROUNDS:
+        texels = _texel_areas(corner["uv"], strength.shape)
+        large = np.nonzero(texels > min_texels)[0]
+        peak = np.zeros(len(triangles))
+        if large.size:
+            peak[large] = peak_strength(corner["uv"][large], strength)
+        candidates = large[peak[large] >= threshold]
+        candidates_left = int(candidates.size)
+        if not candidates.size:
+            break
+        if len(splits) >= allowed:
+            stopped = "the vertex budget is spent"
+            break
+        rounds += 1
+        order = candidates[np.argsort(-(peak[candidates] * texels[candidates]), kind="stable")]
+        edge_users = _edge_users(triangles)
+        touched = np.zeros(len(triangles), bool)
+        new_rows = {name: [] for name in corner}
+        new_triangles, new_parent, round_positions = [], [], []
+        for t in order:
+            if len(splits) >= allowed:
+                break
+            if touched[t]:
+                continue
+            texel_uv = corner["uv"][t] * np.array([strength.shape[1], strength.shape[0]])
+            local = int(np.argmax(np.linalg.norm(texel_uv - np.roll(texel_uv, -1, axis=0), axis=1)))
+            a, b = triangles[t, local], triangles[t, (local + 1) % 3]
+            users = edge_users.get((min(a, b), max(a, b)), [t])
+            if touched[users].any():
+                continue
+            m = next_vertex
+            next_vertex += 1
+            round_positions.append(0.5 * (_position(new_positions, a) + _position(new_positions, b)))
+            splits.append((a, b, m))
+            for u in users:
+                touched[u] = True
+                k = int(np.nonzero(triangles[u] == a)[0][0])
+                if triangles[u, (k + 1) % 3] != b:  # the edge runs b -> a in this triangle
+                    k = int(np.nonzero(triangles[u] == b)[0][0])
+                p, q, r = triangles[u, k], triangles[u, (k + 1) % 3], triangles[u, (k + 2) % 3]
+                # (p, q, r) -> (p, m, r) in place and (m, q, r) appended: orientation kept.
+                for name, values in corner.items():
+                    vp, vq, vr = values[u, k], values[u, (k + 1) % 3], values[u, (k + 2) % 3]
+                    vm = 0.5 * (vp + vq)
+                    new_rows[name].append(np.stack([vm, vq, vr]))
+                    values[u] = np.stack([vp, vm, vr])
+                triangles[u] = (p, m, r)
+                new_triangles.append((m, q, r))
+                new_parent.append(parent[u])
+        if not new_triangles:
+            stopped = "the vertex budget is spent"
+            break
+        new_positions.append(np.array(round_positions))
+        triangles = np.concatenate([triangles, np.array(new_triangles, np.int64)])
+        parent = np.concatenate([parent, np.array(new_parent, np.int64)])
+        for name in corner:
+            corner[name] = np.concatenate([corner[name], np.array(new_rows[name])])
+    else:
+        stopped = f"{MAX_ROUNDS} rounds"
+    if rounds and stopped.startswith("no triangle"):
+        stopped = "every triangle a transition crosses is at most min_texels"
+    positions_out = np.concatenate(new_positions)
+    report = {
+        "vertices_before": int(vertex_count), "vertices_after": int(len(positions_out)),
+        "vertices_added": int(len(positions_out) - vertex_count), "vertex_budget": allowed,
+        "triangles_before": int(len(uvs) // 3),
+        "triangles_after": int(len(triangles)), "rounds": rounds, "candidates_left": candidates_left,
+        "stopped": stopped, "min_texels": float(min_texels), "threshold": float(threshold),
+    }
+    return TessellationResult(
+        positions=positions_out, triangles=triangles,
+        uvs=corner["uv"].reshape(-1, 2).astype(np.float32),
+        corner_attributes={name: corner[name].reshape(3 * len(triangles), -1).astype(attributes[name].dtype)
+                           for name in attributes},
+        parent=parent, splits=np.array(splits, np.int64).reshape(-1, 3), report=report)
+
+
+def _position(chunks, index):
+    for chunk in chunks:
+        if index < len(chunk):
+            return chunk[index]
+        index -= len(chunk)
+    raise IndexError(index)
+
+
+def _edge_users(triangles):
+    """{(a, b) with a < b: [triangles using that edge]}."""
+    users = {}
+    for t, (a, b, c) in enumerate(triangles.tolist()):
+        for p, q in ((a, b), (b, c), (c, a)):
+            users.setdefault((min(p, q), max(p, q)), []).append(t)
+    return {key: np.array(value) for key, value in users.items()}
+
+
+def transition_strength_of(lightmap, uvs, triangles, wavelet="d4"):
+    """Transition strength in [0, 1] per texel of `lightmap` (H, W[, C])
+    baked on the layout (uvs, triangles): its wavelet gradient map's energy
+    (lmrefine.gradient_map), scaled as refine_uvs scales it."""
+    raw = _array("lightmap", lightmap, None)
+    if raw.ndim not in (2, 3) or min(raw.shape[:2]) < 1:
+        raise ValueError(f"the lightmap must be an (H, W) or (H, W, C) array, got shape {raw.shape}")
+    mask = coverage_mask(uvs, triangles, raw.shape[:2])  # validates the layout and the size first
+    lightmap = np.ascontiguousarray(_array("lightmap", raw, np.float32))
+    gradient = gradient_map(lightmap, mask, wavelet=wavelet)
+    return transition_strength(np.where(mask, gradient.sum(axis=2), 0.0), mask)

@@ -1,0 +1,404 @@
+"""Re-charting (lmrefine.rechart, docs/refiner.md "Re-charting"): charts of a
+mesh by face normals, least-squares conformal unwraps, packed into a valid
+layout. The charting is checked against a plain reference beside it."""
+
+import collections
+
+import numpy as np
+import pytest
+
+import lmrefine
+from lmrefine import _native
+from lmrefine.charting import corner_triangles
+
+
+# --- meshes -------------------------------------------------------------------
+
+def cube(split=False):
+    """A unit cube, 12 triangles wound outwards; split: every face its own
+    4 vertices (coincident positions, as a UV split leaves them)."""
+    corners = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], np.float64)
+    quads = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
+    if not split:
+        return corners, np.array([t for a, b, c, d in quads for t in ((a, b, c), (a, c, d))], np.int32)
+    positions, triangles = [], []
+    for quad in quads:
+        base = len(positions)
+        positions += [corners[i] for i in quad]
+        triangles += [(base, base + 1, base + 2), (base, base + 2, base + 3)]
+    return np.array(positions), np.array(triangles, np.int32)
+
+
+def grid(n, size=1.0, jitter=0.0, seed=0):
+    """An n x n quad grid in the z = 0 plane, interior vertices jittered."""
+    rng = np.random.default_rng(seed)
+    xs, ys = np.meshgrid(np.linspace(0, size, n + 1), np.linspace(0, size, n + 1))
+    positions = np.stack([xs.ravel(), ys.ravel(), np.zeros(xs.size)], axis=1)
+    interior = (xs.ravel() > 0) & (xs.ravel() < size) & (ys.ravel() > 0) & (ys.ravel() < size)
+    positions[interior, :2] += rng.uniform(-jitter, jitter, (interior.sum(), 2)) * size / n
+    triangles = []
+    for i in range(n):
+        for j in range(n):
+            a, b, c, d = i * (n + 1) + j, i * (n + 1) + j + 1, (i + 1) * (n + 1) + j + 1, (i + 1) * (n + 1) + j
+            triangles += [(a, b, c), (a, c, d)]
+    return positions, np.array(triangles, np.int32)
+
+
+def cylinder(segments, height=2.0, radius=1.0, rings=1):
+    """An open tube around z, wound outwards; segment k is triangles 2k, 2k+1 of each ring."""
+    angles = 2 * np.pi * np.arange(segments) / segments
+    positions = np.array([[radius * np.cos(a), radius * np.sin(a), height * r / rings]
+                          for r in range(rings + 1) for a in angles])
+    triangles = []
+    for r in range(rings):
+        for k in range(segments):
+            a, b = r * segments + k, r * segments + (k + 1) % segments
+            triangles += [(a, b, b + segments), (a, b + segments, a + segments)]
+    return positions, np.array(triangles, np.int32)
+
+
+def turned(positions, seed=3):
+    """The same mesh under a random rotation and offset (a chart's shape must not care)."""
+    rng = np.random.default_rng(seed)
+    q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    q *= np.sign(np.linalg.det(q))
+    return positions @ q.T + rng.normal(size=3)
+
+
+def split_per_triangle(positions, triangles):
+    """Every triangle its own three vertices (Lightmap Pack's cut, on the mesh)."""
+    return positions[triangles.reshape(-1)], np.arange(3 * len(triangles), dtype=np.int32).reshape(-1, 3)
+
+
+# --- a plain reference of the charting ----------------------------------------
+
+def reference_charts(positions, triangles, angle):
+    """Chart id per triangle, as grow_charts defines it: exact weld, edges of
+    two oppositely wound faces, largest area class (log2 in 64ths) first,
+    then index; a chart takes every face reachable across such edges whose
+    normal is within `angle` of its seed's."""
+    positions = np.asarray(positions, np.float32).astype(np.float64)
+    keys = {}
+    weld = np.array([keys.setdefault(tuple(p), i) for i, p in enumerate(positions)])
+    tris = weld[triangles]
+    cross = np.cross(positions[tris[:, 1]] - positions[tris[:, 0]], positions[tris[:, 2]] - positions[tris[:, 0]])
+    area = 0.5 * np.linalg.norm(cross, axis=1)
+    normal = cross / np.linalg.norm(cross, axis=1, keepdims=True)
+    uses = collections.defaultdict(list)
+    for t, tri in enumerate(tris):
+        for k in range(3):
+            a, b = int(tri[k]), int(tri[(k + 1) % 3])
+            uses[(min(a, b), max(a, b))].append((t, a < b))
+    neighbours = collections.defaultdict(list)
+    for edge_uses in uses.values():
+        if len(edge_uses) == 2 and edge_uses[0][1] != edge_uses[1][1]:
+            neighbours[edge_uses[0][0]].append(edge_uses[1][0])
+            neighbours[edge_uses[1][0]].append(edge_uses[0][0])
+    order = sorted(range(len(tris)), key=lambda t: (-np.floor(np.log2(area[t]) * 64), t))
+    chart = np.full(len(tris), -1)
+    count = 0
+    for seed in order:
+        if chart[seed] >= 0:
+            continue
+        chart[seed] = count
+        stack = [seed]
+        while stack:
+            f = stack.pop()
+            for g in neighbours[f]:
+                if chart[g] < 0 and normal[g] @ normal[seed] >= np.cos(np.radians(angle)):
+                    chart[g] = count
+                    stack.append(g)
+        count += 1
+    return chart
+
+
+def same_partition(a, b):
+    pairs = set(zip(a.tolist(), b.tolist()))
+    return len(pairs) == len(set(a.tolist())) == len(set(b.tolist()))
+
+
+def overlapping_pairs(uvs, triangles):
+    """Pairs of triangles whose interiors intersect (separating-axis test on
+    every pair: the plain check, no grid)."""
+    corners = np.asarray(uvs, np.float64)[triangles]
+    scale = np.ptp(corners.reshape(-1, 2), axis=0).max()
+    found = []
+    for i in range(len(corners)):
+        for j in range(i + 1, len(corners)):
+            p, q = corners[i], corners[j]
+            separated = False
+            for shape in (p, q):
+                for k in range(3):
+                    e = shape[(k + 1) % 3] - shape[k]
+                    axis = np.array([-e[1], e[0]])
+                    a, b = p @ axis, q @ axis
+                    if min(a.max(), b.max()) - max(a.min(), b.min()) <= 1e-6 * scale * np.linalg.norm(axis):
+                        separated = True
+            if not separated:
+                found.append((i, j))
+    return found
+
+
+def corner_angles(corners):
+    angles = []
+    for k in range(3):
+        a = corners[:, (k + 1) % 3] - corners[:, k]
+        b = corners[:, (k + 2) % 3] - corners[:, k]
+        cosine = np.sum(a * b, axis=1) / (np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1))
+        angles.append(np.degrees(np.arccos(np.clip(cosine, -1, 1))))
+    return np.stack(angles, axis=1)
+
+
+# --- chart counts -------------------------------------------------------------
+
+@pytest.mark.parametrize("angle", [10.0, 45.0, 66.0, 89.0])
+@pytest.mark.parametrize("split", [False, True])
+def test_cube_makes_six_charts(angle, split):
+    positions, triangles = cube(split)
+    _, charts, report = _native.rechart_mesh(positions, triangles, angle)
+    assert report["charts"] == 6 and report["split_charts"] == 0
+    # The two triangles of each side share a chart, no two sides do.
+    np.testing.assert_array_equal(charts[0::2], charts[1::2])
+    assert len(set(charts[0::2].tolist())) == 6
+
+
+@pytest.mark.parametrize("angle", [1.0, 66.0])
+def test_plane_is_one_chart_even_split_per_triangle(angle):
+    positions, triangles = split_per_triangle(*grid(6, jitter=0.3))
+    _, charts, report = _native.rechart_mesh(turned(positions), triangles, angle)
+    assert report["charts"] == 1
+    assert report["welded_vertices"] == len(positions) - 49
+
+
+def test_weld_tolerance_joins_nearly_coincident_vertices():
+    positions, triangles = split_per_triangle(*grid(4))
+    rng = np.random.default_rng(5)
+    noisy = positions + rng.uniform(-1e-8, 1e-8, positions.shape)
+    assert _native.rechart_mesh(noisy, triangles, 66.0)[2]["charts"] == 1   # default: 1e-6 of the size
+    assert _native.rechart_mesh(noisy, triangles, 66.0, weld_tolerance=0.0)[2]["charts"] == len(triangles)
+
+
+@pytest.mark.parametrize("angle,expected", [(10.0, 24), (20.0, 12), (40.0, 8), (66.0, 4), (80.0, 4)])
+def test_cylinder_chart_count(angle, expected):
+    # 24 segments, 15 degrees apart, equal faces: seeds in index order. At
+    # 20 degrees segment 0 takes -1..1, then 2 takes 2..3, ..., 20 takes
+    # 20..21 and 22 is left: 12 charts. At 40 segment 0 takes -2..2, then 3 takes 3..5, ...,
+    # 18 takes 18..20 and 21 is left alone: 8 charts. At 66: 0 takes -4..4,
+    # then 5..9, 10..14, 15..19: 4.
+    positions, triangles = cylinder(24)
+    _, charts, report = _native.rechart_mesh(positions, triangles, angle)
+    assert report["charts"] == expected
+    assert same_partition(charts, reference_charts(positions, triangles, angle))
+
+
+@pytest.mark.parametrize("angle", [15.0, 40.0, 66.0])
+def test_charting_matches_the_reference_on_a_bumpy_surface(angle):
+    positions, triangles = grid(14)
+    x, y = positions[:, 0], positions[:, 1]
+    positions[:, 2] = 0.15 * np.sin(7 * x) * np.cos(5 * y) + 0.3 * x * y
+    _, charts, report = _native.rechart_mesh(positions, triangles, angle)
+    if report["split_charts"] == 0:
+        assert same_partition(charts, reference_charts(positions, triangles, angle))
+    assert report["charts"] >= report["grown_charts"]
+
+
+# --- the conformal map --------------------------------------------------------
+
+def test_planar_chart_is_an_isometry():
+    # Jittered grid, turned into a random plane: the unwrap (scaled to world
+    # area) keeps every angle and every length.
+    positions, triangles = grid(8, size=3.0, jitter=0.35, seed=2)
+    positions = turned(positions)
+    uvs, charts, report = _native.rechart_mesh(positions, triangles, 66.0)
+    assert report["charts"] == 1
+    uv = uvs.astype(np.float64).reshape(-1, 3, 2)
+    world = positions[triangles]
+    np.testing.assert_allclose(corner_angles(uv), corner_angles(world), atol=1e-3)
+    uv_lengths = np.linalg.norm(uv - np.roll(uv, 1, axis=1), axis=2)
+    world_lengths = np.linalg.norm(world - np.roll(world, 1, axis=1), axis=2)
+    np.testing.assert_allclose(uv_lengths, world_lengths, rtol=1e-4)
+    # Counter-clockwise, as the faces are wound seen from their front.
+    e1, e2 = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
+    assert np.all(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0] > 0)
+
+
+def test_developable_chart_keeps_its_angles():
+    # A cylinder strip is developable: its conformal map is an isometry too.
+    positions, triangles = cylinder(24, rings=3)
+    uvs, charts, report = _native.rechart_mesh(positions, triangles, 66.0)
+    uv = uvs.astype(np.float64).reshape(-1, 3, 2)
+    np.testing.assert_allclose(corner_angles(uv), corner_angles(positions[triangles]), atol=1e-3)
+
+
+def test_curved_chart_is_nearly_conformal_and_keeps_world_area():
+    # A sphere cap is not developable: angles stay close, the chart's area
+    # is its world area.
+    positions, triangles = grid(12, size=1.0)
+    x, y = positions[:, 0] - 0.5, positions[:, 1] - 0.5
+    positions[:, 2] = np.sqrt(4.0 - x * x - y * y)
+    uvs, charts, report = _native.rechart_mesh(positions, triangles, 66.0)
+    assert report["charts"] == 1
+    uv = uvs.astype(np.float64).reshape(-1, 3, 2)
+    error = np.abs(corner_angles(uv) - corner_angles(positions[triangles]))
+    assert error.mean() < 0.5 and error.max() < 3.0
+    uv_area = 0.5 * np.abs(np.cross(uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0])).sum()
+    world = positions[triangles]
+    world_area = 0.5 * np.linalg.norm(np.cross(world[:, 1] - world[:, 0], world[:, 2] - world[:, 0]), axis=1).sum()
+    assert uv_area == pytest.approx(world_area, rel=1e-5)
+
+
+def test_a_chart_that_would_overlap_itself_is_split():
+    # A helical fan: 15 near-horizontal triangles around one vertex turning
+    # 450 degrees. Its normals are within a few degrees of each other, so it
+    # grows into one chart, but flattened it overlaps itself.
+    turns = np.radians(30.0) * np.arange(16)
+    rim = np.stack([np.cos(turns), np.sin(turns), 0.02 * np.arange(16)], axis=1)
+    positions = np.concatenate([[[0.0, 0.0, 0.0]], rim])
+    triangles = np.array([(0, k, k + 1) for k in range(1, 16)], np.int32)
+    uvs, charts, report = _native.rechart_mesh(positions, triangles, 66.0)
+    assert report["grown_charts"] == 1 and report["split_charts"] >= 1 and report["charts"] >= 2
+    for c in range(report["charts"]):
+        mine = np.flatnonzero(charts == c)
+        assert overlapping_pairs(uvs, corner_triangles(len(triangles))[mine]) == [], c
+
+
+def test_a_folded_input_is_cut_around_the_fold_not_into_single_faces():
+    # A grid jittered so far that 4 of its 800 triangles turned over: the
+    # plane folds onto itself there. No angle separates the fold from the
+    # rest of its chart, so the chart is cut in halves until it unwraps.
+    positions, triangles = grid(20, jitter=0.45, seed=0)
+    corners = positions[triangles]
+    flipped = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])[:, 2] < 0
+    assert flipped.sum() == 4
+    uvs, charts, report = _native.rechart_mesh(positions, triangles, 10.0)
+    assert report["split_charts"] > 0 and report["charts"] < 50
+    for c in range(report["charts"]):
+        mine = np.flatnonzero(charts == c)
+        assert overlapping_pairs(uvs, corner_triangles(len(triangles))[mine]) == [], c
+    packed, packed_report = lmrefine.rechart(positions, triangles, 10.0, 128, 2.0)
+    assert packed_report["layout"]["valid"]
+
+
+# --- the packed layout --------------------------------------------------------
+
+def meshes():
+    bumpy = grid(10)
+    bumpy[0][:, 2] = 0.2 * np.sin(5 * bumpy[0][:, 0])
+    return {"cube": cube(), "cylinder": cylinder(16, rings=2), "plane": grid(5, jitter=0.3), "bumpy": bumpy,
+            "cube_split": cube(split=True)}
+
+
+@pytest.mark.parametrize("name", sorted(meshes()))
+@pytest.mark.parametrize("resolution,padding", [(64, 2.0), ((48, 80), 1.0)])
+def test_layout_is_valid_with_the_padding(name, resolution, padding):
+    positions, triangles = meshes()[name]
+    before = positions.copy(), triangles.copy()
+    uvs, report = lmrefine.rechart(positions, triangles, 66.0, resolution, padding)
+    np.testing.assert_array_equal(positions, before[0])  # inputs untouched
+    np.testing.assert_array_equal(triangles, before[1])
+    assert uvs.shape == (3 * len(triangles), 2) and uvs.dtype == np.float32
+    check = lmrefine.check_layout(uvs, corner_triangles(len(triangles)), resolution, padding)
+    assert check["valid"] and check["min_gutter_texels"] >= padding, check
+    assert report["layout"]["valid"]
+    assert overlapping_pairs(uvs, corner_triangles(len(triangles))) == []
+    # Uniform texel density: every triangle's UV area over its world area is one number.
+    world = positions[triangles]
+    world_area = 0.5 * np.linalg.norm(np.cross(world[:, 1] - world[:, 0], world[:, 2] - world[:, 0]), axis=1)
+    uv = uvs.astype(np.float64).reshape(-1, 3, 2)
+    uv_area = 0.5 * np.abs(np.cross(uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]))
+    if name != "bumpy":  # developable: exactly uniform
+        np.testing.assert_allclose(uv_area / world_area, np.median(uv_area / world_area), rtol=1e-3)
+    assert report["density_spread"] < 1.5
+
+
+def test_deterministic():
+    positions, triangles = meshes()["bumpy"]
+    first = lmrefine.rechart(positions, triangles, 40.0, 128, 2.0)
+    second = lmrefine.rechart(positions, triangles, 40.0, 128, 2.0)
+    assert first.uvs.tobytes() == second.uvs.tobytes()
+    np.testing.assert_array_equal(first.report["chart_ids"], second.report["chart_ids"])
+
+
+def test_sample_scene_layout_is_valid():
+    from lmrefine.sample_scenes import load_sample
+
+    scene = load_sample("room")
+    uvs, report = lmrefine.rechart(scene.positions, scene.triangles, resolution=256, padding=2.0)
+    assert report["layout"]["valid"] and report["charts"] == report["layout"]["charts"]
+    assert report["utilisation"] > 0.8
+
+
+# --- bad input ----------------------------------------------------------------
+
+def test_degenerate_triangles_get_charts_of_their_own():
+    positions, triangles = cube()
+    positions = np.concatenate([positions, [[5.0, 5.0, 5.0], [6.0, 6.0, 6.0], [7.0, 7.0, 7.0]]])
+    extra = np.array([(0, 0, 1), (8, 9, 10), (2, 3, 3)], np.int32)  # repeated corner, collinear, repeated
+    triangles = np.concatenate([triangles, extra])
+    uvs, report = lmrefine.rechart(positions, triangles, 66.0, 64, 2.0)
+    assert report["degenerate_triangles"] == 3 and report["charts"] == 9
+    assert report["layout"]["valid"]
+
+
+def test_a_pile_of_copies_welds_without_quadratic_cost():
+    # 60,000 copies of three positions (Lightmap Pack's split, taken to the
+    # extreme) weld into one triangle's worth of vertices.
+    positions = np.tile(np.array([[0, 0, 0], [1, 0, 0], [0, 1, -0.0]], np.float32), (20000, 1))
+    positions[3::3, 2] = 0.0  # -0 and 0 are one position
+    triangles = np.arange(60000, dtype=np.int32).reshape(-1, 3)
+    _, charts, report = _native.rechart_mesh(positions, triangles, 10.0)
+    assert report["welded_vertices"] == 59997
+    # Every edge is shared by all 20,000 faces: no neighbours, a chart each.
+    assert report["charts"] == 20000 and report["degenerate_triangles"] == 0
+
+
+def test_loose_vertices_are_ignored_even_when_not_finite():
+    positions, triangles = cube()
+    positions = np.concatenate([positions, [[np.nan, 0.0, np.inf]]])
+    uvs, report = lmrefine.rechart(positions, triangles, 66.0, 64, 2.0)
+    assert report["charts"] == 6 and report["layout"]["valid"]
+
+
+@pytest.mark.parametrize("change,error,words", [
+    (lambda p, t: (p, t[:0]), ValueError, "triangles"),
+    (lambda p, t: (p, np.concatenate([t, [[0, 1, 99]]])), ValueError, "triangles"),
+    (lambda p, t: (p, np.concatenate([t, [[0, 1, -1]]])), ValueError, "triangles"),
+    (lambda p, t: (np.where(np.arange(len(p))[:, None] == 3, np.nan, p), t), ValueError, "positions[3]"),
+    (lambda p, t: (p[:, :2], t), ValueError, "positions"),
+    (lambda p, t: (p, np.concatenate([t, t[:, :1]], axis=1)), ValueError, "triangles"),  # quads: triangulate first
+    (lambda p, t: (p, t.astype(np.float64) + 0.5), (ValueError, TypeError), "triangles"),
+    (lambda p, t: (np.zeros_like(p), t), ValueError, "degenerate"),
+])
+def test_bad_mesh_raises_a_clear_error(change, error, words):
+    positions, triangles = change(*cube())
+    with pytest.raises(error, match=None) as caught:
+        lmrefine.rechart(positions, triangles, 66.0, 64, 2.0)
+    assert words in str(caught.value)
+
+
+@pytest.mark.parametrize("kwargs,error,words", [
+    ({"angle": 0.0}, ValueError, "angle"),
+    ({"angle": 90.0}, ValueError, "angle"),
+    ({"angle": float("nan")}, ValueError, "angle"),
+    ({"angle": True}, TypeError, "angle"),
+    ({"angle": "66"}, TypeError, "angle"),
+    ({"weld_tolerance": -1.0}, ValueError, "weld_tolerance"),
+    ({"weld_tolerance": 0.5}, ValueError, "weld_tolerance"),  # half the cube: would merge its corners
+    ({"resolution": 0}, ValueError, "resolution"),
+    ({"padding": -1.0}, ValueError, "padding"),
+    ({"resolution": 4, "padding": 8.0}, ValueError, ""),
+])
+def test_bad_settings_raise_a_clear_error(kwargs, error, words):
+    positions, triangles = cube()
+    with pytest.raises(error) as caught:
+        lmrefine.rechart(positions, triangles, **{"resolution": 64, **kwargs})
+    assert words in str(caught.value)
+
+
+def test_progress_reports_and_cancels():
+    positions, triangles = cylinder(32, rings=4)
+    stages = []
+    lmrefine.rechart(positions, triangles, 66.0, 128, 2.0, progress=lambda f, s: stages.append(s) or True)
+    assert any("rechart" in s for s in stages)
+    with pytest.raises(lmrefine.CancelledError):
+        lmrefine.rechart(positions, triangles, 66.0, 128, 2.0, progress=lambda f, s: False)

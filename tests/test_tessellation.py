@@ -1,0 +1,185 @@
+"""Tessellation along light transitions (python/lmrefine/tessellation.py):
+where it splits, and that the surface and every UV map keep their mapping."""
+
+import numpy as np
+import pytest
+
+from lmrefine.tessellation import peak_strength, tessellate
+
+R = 64
+
+
+def bent_grid(n=4, seam=False):
+    """An n x n grid of quads over [0, 1]^2, bent along x (a roof: not planar),
+    two triangles per quad; per-corner UVs = (x, y) inset in [0.05, 0.95]
+    (with `seam`, the right half's UVs are shifted by +0.01 in v: its edge
+    with the left half is a UV seam)."""
+    xs = np.linspace(0, 1, n + 1)
+    x, y = np.meshgrid(xs, xs, indexing="xy")
+    z = 0.3 * (0.5 - np.abs(x - 0.5))
+    positions = np.stack([x.ravel(), y.ravel(), z.ravel()], axis=1)
+    triangles = []
+    for j in range(n):
+        for i in range(n):
+            v = j * (n + 1) + i
+            triangles += [(v, v + 1, v + n + 2), (v, v + n + 2, v + n + 1)]
+    triangles = np.array(triangles)
+    corners = positions[triangles.ravel()]
+    uvs = 0.05 + 0.9 * corners[:, :2]
+    if seam:
+        right = np.repeat(positions[triangles][:, :, 0].mean(axis=1) > 0.5, 3)
+        uvs[right, 1] += 0.01
+    return positions, triangles, uvs.astype(np.float32)
+
+
+def edge_strength(position=0.5):
+    """A transition along the vertical line u = position: strength 1 on the
+    two texel columns beside it, 0 elsewhere."""
+    strength = np.zeros((R, R))
+    column = int(position * R)
+    strength[:, column - 1:column + 1] = 1.0
+    return strength
+
+
+def barycentric(points, corners):
+    """Barycentric coordinates of 3-D points in their triangles (least squares on the plane)."""
+    a, b, c = corners[:, 0], corners[:, 1], corners[:, 2]
+    basis = np.stack([b - a, c - a], axis=2)  # (T, 3, 2)
+    out = np.empty((len(points), 3))
+    for t in range(len(points)):
+        w, *_ = np.linalg.lstsq(basis[t], points[t] - a[t], rcond=None)
+        out[t] = (1 - w.sum(), w[0], w[1])
+    return out
+
+
+def test_splits_only_triangles_the_transition_crosses():
+    positions, triangles, uvs = bent_grid()
+    inputs = [a.copy() for a in (positions, triangles, uvs)]
+    result = tessellate(positions, triangles, uvs, edge_strength(0.4), budget=16.0, min_texels=8)
+    for before, after in zip(inputs, (positions, triangles, uvs)):
+        np.testing.assert_array_equal(before, after)  # the inputs are not modified
+    report = result.report
+    assert report["vertices_added"] > 0 and report["triangles_after"] > report["triangles_before"]
+    # Triangles far from the line u = 0.39 (every corner well away from it) are untouched.
+    original_uv = uvs.reshape(-1, 3, 2)
+    far = (np.abs(original_uv[..., 0] - 0.39) > 0.25).all(axis=1)
+    out_uv = result.uvs.reshape(-1, 3, 2)
+    for t in np.nonzero(far)[0]:
+        children = np.nonzero(result.parent == t)[0]
+        assert len(children) == 1 and np.array_equal(out_uv[children[0]], original_uv[t])
+    # Every triangle over the transition was split down to min_texels or below.
+    texels = 0.5 * np.abs(np.cross(out_uv[:, 1] - out_uv[:, 0], out_uv[:, 2] - out_uv[:, 0])) * R * R
+    band = (out_uv[..., 0].min(axis=1) < 26 / R) & (out_uv[..., 0].max(axis=1) > 24 / R)  # strength 1 columns
+    assert band.sum() > 20 and texels[band].max() <= 8 + 1e-9
+    assert report["stopped"] == "every triangle a transition crosses is at most min_texels"
+
+
+@pytest.mark.parametrize("seam", [False, True])
+def test_surface_and_every_uv_map_keep_their_mapping(seam):
+    positions, triangles, uvs = bent_grid(seam=seam)
+    other = np.random.default_rng(1).random((len(uvs), 2))  # a texture map: any per-corner values
+    normals = np.tile([0.0, 0.0, 1.0], (len(uvs), 1))
+    other_before = other.copy()
+    result = tessellate(positions, triangles, uvs, edge_strength(0.37), budget=1.0, min_texels=4,
+                        corner_attributes={"texture": other, "normal": normals})
+    assert result.report["vertices_added"] > 10
+    np.testing.assert_array_equal(other, other_before)
+    corners_in = positions[triangles]                    # (T, 3, 3)
+    corners_out = result.positions[result.triangles]     # (T', 3, 3)
+    parent = result.parent
+    # Each output corner lies in its parent triangle's plane, inside it: the surface is unchanged.
+    bary = barycentric(corners_out.reshape(-1, 3), np.repeat(corners_in[parent], 3, axis=0))
+    assert bary.min() > -1e-9 and bary.max() < 1 + 1e-9
+    rebuilt = np.einsum("nk,nkd->nd", bary, np.repeat(corners_in[parent], 3, axis=0))
+    np.testing.assert_allclose(rebuilt, corners_out.reshape(-1, 3), atol=1e-12)
+    # Every per-corner map is the parent's affine map at the same barycentrics (seams keep their sides).
+    for values_in, values_out in ((uvs, result.uvs), (other, result.corner_attributes["texture"]),
+                                  (normals, result.corner_attributes["normal"])):
+        expected = np.einsum("nk,nkd->nd", bary, np.repeat(values_in.reshape(-1, 3, values_in.shape[1])[parent], 3,
+                                                           axis=0))
+        np.testing.assert_allclose(values_out, expected, atol=1e-6)
+    # Areas (3-D and UV) add up to the parent's, and orientation is kept.
+    def areas(c):
+        return np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0])
+    cross_in, cross_out = areas(corners_in), areas(corners_out)
+    np.testing.assert_allclose(np.bincount(parent, weights=np.linalg.norm(cross_out, axis=1)),
+                               np.linalg.norm(cross_in, axis=1), rtol=1e-9)
+    assert (np.einsum("td,td->t", cross_out, cross_in[parent]) > 0).all()
+
+
+def test_no_t_junctions():
+    positions, triangles, uvs = bent_grid(n=3)
+    result = tessellate(positions, triangles, uvs, edge_strength(0.61), budget=2.0, min_texels=2)
+    p, tris = result.positions, result.triangles
+    assert result.report["vertices_added"] > 5
+    # No vertex lies strictly inside another triangle's edge (a crack in the making).
+    for a, b in {tuple(sorted((t[k], t[(k + 1) % 3]))) for t in tris.tolist() for k in range(3)}:
+        d = p[b] - p[a]
+        s = ((p - p[a]) @ d) / (d @ d)
+        off = np.linalg.norm(p - p[a] - np.outer(s, d), axis=1)
+        inside = (s > 1e-9) & (s < 1 - 1e-9) & (off < 1e-9)
+        assert not inside.any(), f"vertex {np.nonzero(inside)[0]} splits edge {(a, b)} without its triangles"
+    # A manifold grid stays one: every edge is used by one (border) or two triangles.
+    counts = {}
+    for t in tris.tolist():
+        for k in range(3):
+            key = tuple(sorted((t[k], t[(k + 1) % 3])))
+            counts[key] = counts.get(key, 0) + 1
+    assert set(counts.values()) <= {1, 2}
+
+
+def test_budget_caps_the_new_vertices():
+    positions, triangles, uvs = bent_grid(n=6)
+    strength = np.ones((R, R))  # a transition everywhere: only the budget stops it
+    for budget in (0.0, 0.1, 0.25):
+        result = tessellate(positions, triangles, uvs, strength, budget=budget, min_texels=1)
+        allowed = int(np.floor(budget * len(positions)))
+        assert result.report["vertices_added"] == allowed
+        assert result.report["stopped"] == "the vertex budget is spent"
+    untouched = tessellate(positions, triangles, uvs, strength, budget=0.0)
+    np.testing.assert_array_equal(untouched.triangles, triangles)
+    np.testing.assert_array_equal(untouched.uvs, uvs)
+
+
+def test_flat_light_and_small_triangles_are_left_alone():
+    positions, triangles, uvs = bent_grid()
+    flat = tessellate(positions, triangles, uvs, np.zeros((R, R)))
+    assert flat.report["vertices_added"] == 0
+    assert flat.report["stopped"] == "no triangle crossed by a transition is larger than min_texels"
+    small = tessellate(positions, triangles, uvs, edge_strength(), min_texels=1e6)
+    assert small.report["vertices_added"] == 0
+
+
+def test_deterministic():
+    positions, triangles, uvs = bent_grid(n=5)
+    strength = np.random.default_rng(3).random((R, R))
+    first = tessellate(positions, triangles, uvs, strength, budget=0.5)
+    second = tessellate(positions, triangles, uvs, strength, budget=0.5)
+    np.testing.assert_array_equal(first.triangles, second.triangles)
+    np.testing.assert_array_equal(first.splits, second.splits)
+
+
+def test_peak_strength_sees_a_line_between_the_corners():
+    """A thin transition crossing the middle of a big triangle, far from its corners and centroid."""
+    strength = np.zeros((R, R))
+    strength[:, 20] = 1.0
+    corner_uvs = np.array([[[0.05, 0.1], [0.6, 0.1], [0.05, 0.9]],   # crosses column 20 (u = 0.32)
+                           [[0.5, 0.1], [0.9, 0.1], [0.5, 0.9]]])    # does not
+    np.testing.assert_array_equal(peak_strength(corner_uvs, strength), [1.0, 0.0])
+
+
+@pytest.mark.parametrize("change, message", [
+    (lambda a: a.update(positions=np.zeros((4, 2))), "positions must be a \\(V, 3\\)"),
+    (lambda a: a.update(triangles=np.array([[0, 1, 99]])), "triangles index vertices outside"),
+    (lambda a: a.update(uvs=np.zeros((5, 2))), "uvs must be per corner"),
+    (lambda a: a.update(strength=np.zeros(5)), "strength must be an \\(H, W\\)"),
+    (lambda a: a.update(budget=-1), "budget must be"),
+    (lambda a: a.update(threshold=2), "threshold must be in"),
+    (lambda a: a.update(corner_attributes={"n": np.zeros((2, 3))}), "corner attribute 'n' must be per corner"),
+])
+def test_bad_input_is_named(change, message):
+    positions, triangles, uvs = bent_grid(n=1)
+    args = {"positions": positions, "triangles": triangles, "uvs": uvs, "strength": np.zeros((R, R))}
+    change(args)
+    with pytest.raises(ValueError, match=message):
+        tessellate(**args)
