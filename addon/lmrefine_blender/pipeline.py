@@ -308,9 +308,12 @@ def run(context, targets, options, journal, image_dir=None):
             continue
         done += 1
         # An independent check of the promise refine_uvs makes: never worse than the source layout.
+        # In-chart moves keep each chart pair's own gap (relative gutter); a repack
+        # places the charts anew, so its gutter is held to the source's narrowest.
         source_check = lmrefine.check_layout(layout.uvs, layout.triangles, resolution, padding=padding)
+        repacked = bool((result.report.get("repack") or {}).get("used"))
         check = lmrefine.check_layout(result.uvs, layout.triangles, resolution, padding=padding,
-                                      reference_uvs=layout.uvs, relative_gutter=True)
+                                      reference_uvs=layout.uvs, relative_gutter=not repacked)
         worse = failures(check, source_check, padding)
         if worse:
             raise RuntimeError(f"refine_uvs returned a layout for '{name}' that is worse than the source "
