@@ -419,3 +419,19 @@ def test_padded_utilisation_counts_each_chart_grown_by_half_the_gutter():
     np.testing.assert_allclose(perimeter, [32.0, 32.0])  # the shared diagonal is not outline
     grown = 64.0 + 32.0 * 1.0 + np.pi * 4.0 / 4.0  # padding 2: area + perimeter * 1 + pi * 2^2 / 4
     assert allocation.padded_utilisation(area, perimeter, 2.0, (64, 64)) == pytest.approx(2 * grown / 64 ** 2)
+
+
+def test_worse_than_source_holds_moved_charts_to_their_gaps_and_repacked_ones_to_the_padding():
+    from lmrefine.backoff import worse_than_source
+
+    # Two 8 x 8-texel charts 16 texels apart at 64^2; padding 2.
+    source = merge(grid_chart(2, (0.0, 0.0), (0.125, 0.125)), grid_chart(2, (0.375, 0.0), (0.5, 0.125)))
+    uvs, tris = source
+    closer = uvs.copy()
+    closer[len(uvs) // 2:, 0] -= 12 / 64  # 4 texels apart: a repack may do this, an in-chart move may not
+    assert worse_than_source(closer, uvs, tris, 64, 2.0)[0] == []
+    touching = uvs.copy()
+    touching[len(uvs) // 2:, 0] -= 15 / 64  # 1 texel apart: narrower than the padding and the source
+    worse, check = worse_than_source(touching, uvs, tris, 64, 2.0)
+    assert worse == ["gutter"] and check["min_gutter_texels"] == pytest.approx(1.0, abs=0.01)
+    assert worse_than_source(uvs, uvs, tris, 64, 2.0)[0] == []
