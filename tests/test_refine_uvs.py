@@ -435,3 +435,21 @@ def test_worse_than_source_holds_moved_charts_to_their_gaps_and_repacked_ones_to
     worse, check = worse_than_source(touching, uvs, tris, 64, 2.0)
     assert worse == ["gutter"] and check["min_gutter_texels"] == pytest.approx(1.0, abs=0.01)
     assert worse_than_source(uvs, uvs, tris, 64, 2.0)[0] == []
+
+
+def test_the_packer_is_not_run_when_even_a_full_atlas_would_not_pay():
+    # One chart covering 92% of the atlas: scaled to fill all of it, the model's
+    # error would be 0.96 of the unpacked one, short of the 0.95 a repack needs.
+    uvs, tris = plane(64, margin=0.02)
+    gradient = finite_difference_gradient(shadow_edge_lightmap(R, angle=0.3), lmrefine.coverage_mask(uvs, tris, R))
+    result = lmrefine.refine_uvs(None, uvs, tris, R, gradient=gradient)
+    repack = result.report["repack"]
+    assert repack["used"] is False and "placement" not in repack  # the packer did not run
+    assert repack["predicted_error"] == pytest.approx(0.96, abs=0.005)
+    assert any("even filling the whole atlas" in note for note in result.report["notes"])
+    np.testing.assert_array_equal(result.uvs, lmrefine.refine_uvs(None, uvs, tris, R, gradient=gradient,
+                                                                  repack=False).uvs)
+    # With a wider margin the same chart can grow 11% and the packer runs (and is used).
+    uvs, tris = plane(64, margin=0.05)
+    gradient = finite_difference_gradient(shadow_edge_lightmap(R, angle=0.3), lmrefine.coverage_mask(uvs, tris, R))
+    assert lmrefine.refine_uvs(None, uvs, tris, R, gradient=gradient).report["repack"]["used"] is True

@@ -111,6 +111,17 @@ def repack(source_uvs, refined_uvs, triangles, energy, resolution, padding, min_
     not better than `refined_uvs` by the error model (the report says so)."""
     charts = find_charts(source_uvs, triangles, tolerance=CHART_TOLERANCE)
     scales, chart_energy, _ = chart_scales(source_uvs, triangles, charts, energy, min_scale, max_scale)
+    total = chart_energy.sum()
+    # No packing can scale the charts beyond filling the whole atlas, gutters
+    # aside: when the model's error at that scale is no clear gain, the
+    # packer need not run (a single chart filling its atlas, for example).
+    area_refined = np.bincount(charts, weights=np.abs(signed_areas(refined_uvs, triangles)), minlength=len(scales))
+    largest = 1.0 / np.sqrt(max(float((area_refined * scales ** 2).sum()), 1e-300))
+    best = float((chart_energy / (largest * scales)).sum() / total) if total > 0 else 1.0
+    if best >= REQUIRED_GAIN:
+        return None, {"charts": int(len(scales)), "used": False, "predicted_error": best,
+                      "reason": f"even filling the whole atlas the error model predicts {best:.3f} of the unpacked "
+                                f"error at best (a repack needs below {REQUIRED_GAIN})"}
     try:
         packed, pack_report = pack_charts(refined_uvs, triangles, charts, scales, resolution, padding,
                                           progress=progress)
@@ -120,7 +131,6 @@ def repack(source_uvs, refined_uvs, triangles, energy, resolution, padding, min_
     # Areas and outlines: the packed charts are bit-exact; the input's outlines are theirs unscaled.
     area_after, perimeter_out = chart_outlines(packed, triangles, charts, resolution)
     area_before, _ = chart_outlines(refined_uvs, triangles, charts, resolution)
-    total = chart_energy.sum()
     # Predicted error of the packed layout relative to refined_uvs (1.0 = the same).
     predicted = float((chart_energy / np.maximum(final, 1e-12)).sum() / total) if total > 0 else 1.0
     report = {
