@@ -399,11 +399,9 @@ def run(context, targets, options, journal, image_dir=None):
 def _check_refined(lmrefine, name, uvs, layout, reference_uvs, resolution, padding):
     """An independent check of the promise refine_uvs makes: never worse than the layout it started
     from. Returns (check of `uvs`, check of `reference_uvs`); a worse layout is a bug, raised."""
-    from lmrefine.backoff import failures
+    from lmrefine.backoff import worse_than_source
     reference_check = lmrefine.check_layout(reference_uvs, layout.triangles, resolution, padding=padding)
-    check = lmrefine.check_layout(uvs, layout.triangles, resolution, padding=padding,
-                                  reference_uvs=reference_uvs, relative_gutter=True)
-    worse = failures(check, reference_check, padding)
+    worse, check = worse_than_source(uvs, reference_uvs, layout.triangles, resolution, padding)
     if worse:
         raise RuntimeError(f"refine_uvs returned a layout for '{name}' that is worse than the one it started from "
                            f"({', '.join(worse)}: {dict(check)}); this is a bug in lmrefine, please report "
