@@ -213,11 +213,11 @@ def _per_effect(sample, uvs, triangles, resolution, options, stages, points, tru
     on the input layout at its own resolution, refine_uvs from that bake, the
     effect baked on its refined layout; at the points, the effects' maps added
     up against the combined truth, and each effect against its own uniform
-    bakes (its equal-error ratio). `first_bakes` {effect: bake at R},
+    bakes (its equal-error ratio). `first_bakes` {effect: (bake at R, another seed's)},
     `sweep` the combined uniform bakes at R x multipliers. Returns (report,
     {(rule, effect): refined uvs})."""
     everywhere = np.ones(len(truth), bool)
-    energies = {name: gradient_energy(first_bakes[name]) for name in EFFECTS}
+    energies = {name: gradient_energy(*first_bakes[name]) for name in EFFECTS}
     bakes = {}  # (effect, layout, side) -> lookup at the points: rules that share a side share its bakes
 
     def lookup(name, layout_uvs, side, key):
@@ -352,10 +352,14 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
 
     first_bakes = None
     if options.per_effect:
-        # The combined baseline and each effect's bake at R (its signal energy) in one bake.
+        # The combined baseline and each effect's bake at R in one bake, and
+        # the effects again with another seed: their energy without the noise.
         maps = stages.run("bake baseline", lambda p: _bake_passes(sample, uvs, resolution, options, p,
                                                                   ("combined",) + EFFECTS))
-        baseline, first_bakes = np.ascontiguousarray(maps[0][..., :3]), dict(zip(EFFECTS, maps[1:]))
+        again = stages.run("per-effect energy bake", lambda p: _bake_passes(
+            sample, uvs, resolution, replace(options, seed=options.seed + 1), p, EFFECTS))
+        baseline = np.ascontiguousarray(maps[0][..., :3])
+        first_bakes = {name: (first, second) for name, first, second in zip(EFFECTS, maps[1:], again)}
     else:
         baseline = stages.run("bake baseline", lambda p: _bake_map(sample, uvs, resolution, options, p))
     tessellation = None

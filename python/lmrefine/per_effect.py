@@ -11,7 +11,8 @@ compared with (R^2), by a split rule:
 - ``equal``: half each.
 - ``energy``: in proportion to each effect's gradient energy G (the sum of
   squared differences between neighbouring covered texels of its first bake
-  at R): the effect with more edges gets more texels.
+  at R, without the bake's noise: see gradient_energy): the effect with more
+  edges gets more texels.
 - ``sqrt``: in proportion to sqrt(G). With the first-order error model
   err^2 ~ G h^2 ~ G / n (h the texel size, n the texel count), this split
   minimises the summed squared error of the effects under sum n = R^2.
@@ -52,17 +53,26 @@ def parse_rules(value):
     return names
 
 
-def gradient_energy(image):
+def gradient_energy(image, second=None):
     """Sum of squared RGB differences between horizontally and vertically
     neighbouring texels that are both covered (alpha > 0.5) in a baked map
-    (H, W, 4): the signal an effect's layout has to resolve."""
+    (H, W, 4): the signal an effect's layout has to resolve.
+
+    A bake's noise adds its own energy, and an indirect bake at a few dozen
+    samples is mostly noise texel to texel. With `second`, an independent
+    bake of the same map (another seed), the sum is of products of the two
+    bakes' differences instead: the noises are independent, so its
+    expectation is the energy of the light alone."""
     image = np.asarray(image, np.float64)
-    rgb, covered = image[..., :3], image[..., 3] > 0.5
+    other = image if second is None else np.asarray(second, np.float64)
+    if other.shape != image.shape:
+        raise ValueError(f"second must be a bake of the same map, shape {image.shape}; got {other.shape}")
+    covered = (image[..., 3] > 0.5) & (other[..., 3] > 0.5)
     energy = 0.0
     for axis in (0, 1):
         both = np.logical_and(np.delete(covered, 0, axis), np.delete(covered, -1, axis))
-        difference = np.diff(rgb, axis=axis)
-        energy += float((difference ** 2).sum(axis=-1)[both].sum())
+        product = np.diff(image[..., :3], axis=axis) * np.diff(other[..., :3], axis=axis)
+        energy += float(product.sum(axis=-1)[both].sum())
     return energy
 
 
