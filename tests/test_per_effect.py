@@ -82,7 +82,6 @@ def test_the_split_rules_share_out_at_most_r_squared_texels():
         split_resolutions(10, {"direct": 0.5, "indirect": 0.5})
 
 
-@pytest.mark.slow
 def test_per_effect_layouts_are_valid_and_their_sum_is_measured_against_one_combined_map(tmp_path):
     scene = tiny_scene(24)
     options = EvaluationOptions(resolution=40, points=1500, samples=8, truth_samples=32, multipliers=(1.0, 2.0, 4.0),
