@@ -213,19 +213,21 @@ def _per_effect(sample, uvs, triangles, resolution, options, stages, points, tru
     on the input layout at its own resolution, refine_uvs from that bake, the
     effect baked on its refined layout; at the points, the effects' maps added
     up against the combined truth, and each effect against its own uniform
-    bakes (its equal-error ratio). `first_bakes` {effect: (bake at R, another seed's)},
-    `sweep` the combined uniform bakes at R x multipliers. Returns (report,
-    {(rule, effect): refined uvs})."""
+    bakes (its equal-error ratio). `first_bakes` {effect: (bake at R,
+    another seed's)}, `sweep` the combined uniform bakes at R x multipliers.
+    Returns (report, {(rule, effect): refined uvs})."""
     everywhere = np.ones(len(truth), bool)
     energies = {name: gradient_energy(*first_bakes[name]) for name in EFFECTS}
-    bakes = {}  # (effect, layout, side) -> lookup at the points: rules that share a side share its bakes
+    # (effect, layout, side) -> (map or None, values at the points): rules
+    # that give an effect the same side share its bakes on the input layout.
+    bakes = {}
 
-    def lookup(name, layout_uvs, side, key):
+    def lookup(name, layout_uvs, side, key, keep_map=False):
         if (name, key, side) not in bakes:
             image = stages.run(f"per-effect bake {name}", lambda p: _bake_map(sample, layout_uvs, side, options, p,
                                                                               passes=name))
             at_points = metrics.interpolate_corners(layout_uvs, points.triangle, points.bary)
-            bakes[(name, key, side)] = (image, metrics.bilinear_lookup(image, at_points))
+            bakes[(name, key, side)] = (image if keep_map else None, metrics.bilinear_lookup(image, at_points))
         return bakes[(name, key, side)]
 
     def figures(plain, refined, target, sweep_errors, sweep_transition_errors):
@@ -250,7 +252,7 @@ def _per_effect(sample, uvs, triangles, resolution, options, stages, points, tru
             side = sides[name]
             gutter = check_layout(uvs, triangles, side, options.padding)["min_gutter_texels"]
             padding = min(float(options.padding), float(gutter))
-            first, plain = lookup(name, uvs, side, "input")
+            first, plain = lookup(name, uvs, side, "input", keep_map=True)
             refined = stages.run("per-effect refine", lambda p: refine_uvs(
                 first, uvs, triangles, side, padding=padding, progress=p, **options.refine_options))
             _, refined_lookup = lookup(name, refined.uvs, side, f"{rule} refined")
@@ -438,8 +440,8 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
         sweep.append({"multiplier": multiplier, "resolution": size, "lookup": metrics.bilinear_lookup(image, uv_base)})
     per_effect = per_effect_layouts = None
     if options.per_effect:
-        per_effect, per_effect_layouts = _per_effect(sample, uvs, triangles, resolution, options, stages, points, truth, effect_truth,
-                                 transitions, first_bakes, sweep)
+        per_effect, per_effect_layouts = _per_effect(sample, uvs, triangles, resolution, options, stages, points,
+                                                     truth, effect_truth, transitions, first_bakes, sweep)
 
     # The re-charted maps against uniform bakes of the scene's own layouts.
     compared = []
