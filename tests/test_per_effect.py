@@ -120,9 +120,9 @@ def test_bad_per_effect_options_are_refused_with_the_fix(tmp_path, capsys):
         parse_rules("sqrt,sqrt")
     with pytest.raises(TypeError, match="split rule"):
         parse_rules(3)
-    with pytest.raises(ValueError, match="leave the pass unset or use 'combined'"):
+    with pytest.raises(ValueError, match=r"leave the pass \(--pass\) unset or use 'combined'"):
         EvaluationOptions(per_effect="sqrt", bake_pass="direct").check()
-    with pytest.raises(ValueError, match="stages=1"):
+    with pytest.raises(ValueError, match="stages=1 \\(--stages 1\\)"):
         EvaluationOptions(per_effect="sqrt", stages=2).check()
     assert cli.main(["evaluate", "courtyard", "--per-effect", "bright", "--out", str(tmp_path)]) == 2
     assert "unknown per-effect split rule 'bright'" in capsys.readouterr().err

@@ -74,11 +74,12 @@ class EvaluationOptions:
         if self.per_effect is not None:
             self.per_effect = parse_rules(self.per_effect)
             if self.bake_pass not in (None, "combined"):
-                raise ValueError(f"per_effect compares the effects' maps, added up, with the combined light: "
-                                 f"leave the pass unset or use 'combined', not {self.bake_pass!r}")
+                raise ValueError(f"per_effect (--per-effect) compares the effects' maps, added up, with the "
+                                 f"combined light: leave the pass (--pass) unset or use 'combined', not "
+                                 f"{self.bake_pass!r}")
             if self.stages != 1:
-                raise ValueError(f"per_effect refines each effect's layout once: use it with stages=1, "
-                                 f"not {self.stages}")
+                raise ValueError(f"per_effect (--per-effect) refines each effect's layout once: use it with "
+                                 f"stages=1 (--stages 1), not {self.stages}")
 
     @property
     def layout_name(self):
