@@ -247,7 +247,7 @@ def run(context, targets, options, journal, image_dir=None):
     (default: next to the .blend, or packed into it when it was never saved).
     """
     lmrefine = import_core()
-    from lmrefine.backoff import failures
+    from lmrefine.backoff import worse_than_source
     from lmrefine.layout_input import describe_problems
     outcome = Outcome(objects=[t.obj.name for t in targets])
     outcome.warnings += [f"Skipped: {message}" for message in getattr(targets, "skipped", [])]
@@ -309,9 +309,7 @@ def run(context, targets, options, journal, image_dir=None):
         done += 1
         # An independent check of the promise refine_uvs makes: never worse than the source layout.
         source_check = lmrefine.check_layout(layout.uvs, layout.triangles, resolution, padding=padding)
-        check = lmrefine.check_layout(result.uvs, layout.triangles, resolution, padding=padding,
-                                      reference_uvs=layout.uvs, relative_gutter=True)
-        worse = failures(check, source_check, padding)
+        worse, check = worse_than_source(result.uvs, layout.uvs, layout.triangles, resolution, padding)
         if worse:
             raise RuntimeError(f"refine_uvs returned a layout for '{name}' that is worse than the source "
                                f"({', '.join(worse)}: {dict(check)}); this is a bug in lmrefine, please report "

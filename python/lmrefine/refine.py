@@ -184,9 +184,11 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
         repack: after the in-chart refinement, scale each chart by its
             signal (the error model in docs/refiner.md, "Chart scaling")
             and pack all charts into one atlas with lmrefine.pack_charts
-            (rotations, at least `padding` texels apart). Kept only if the
-            model predicts less error than the unpacked result and the
-            packed layout passes the same checks; report["repack"] says
+            (rotations, at least `padding` texels apart, or the input's
+            gutter where that is narrower, but at least a texel). Kept only
+            if the model predicts less error than the unpacked result, the
+            packed atlas is about as dense as the input and the packed
+            layout passes the same checks; report["repack"] says
             what happened (None when off). `grid` stays the automaton's
             in-chart deformation, before the charts are scaled and moved.
         min_chart_scale, max_chart_scale: bounds on a chart's linear scale
@@ -290,7 +292,11 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
         if not 0 < min_chart_scale <= 1 <= max_chart_scale < np.inf:
             raise ValueError(f"need 0 < min_chart_scale <= 1 <= max_chart_scale (finite), got {min_chart_scale} "
                              f"and {max_chart_scale}")
-        packed, repack_report = allocation.repack(uvs, new_uvs, triangles, scalar_energy, shape, float(padding),
+        # Pack at the gutter the checks ask for: the padding, or the input's
+        # gutter where that is narrower (backoff.allowed_gutter), never below
+        # a texel unless the padding is (dilation needs a texel between charts).
+        pack_padding = min(float(padding), max(float(original["min_gutter_texels"]), min(float(padding), 1.0)))
+        packed, repack_report = allocation.repack(uvs, new_uvs, triangles, scalar_energy, shape, pack_padding,
                                                   float(min_chart_scale), float(max_chart_scale), progress)
         if packed is not None:
             packed_check = _native.check_layout(packed, triangles, shape, padding)
@@ -313,8 +319,9 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
             notes.append(f"repack not used: {repack_report['reason']}")
         else:
             notes.append(f"repack not used: the error model predicts {repack_report['predicted_error']:.3f} of the "
-                         f"unpacked error and the atlas would cover {repack_report['utilisation_after']:.0%} of "
-                         f"the texels (the input: {repack_report['utilisation_before']:.0%})")
+                         f"unpacked error and the packed atlas would be "
+                         f"{repack_report['padded_utilisation_after']:.0%} full with its gutters "
+                         f"(the input: {repack_report['padded_utilisation_before']:.0%})")
         timings["repack"] = time.perf_counter() - clock
     areas = _native.grid_cell_areas(grid)
     covered_areas = areas[mask] if mask.any() else np.ones(1, np.float32)

@@ -16,7 +16,7 @@ dead or stuck Blender was running. Outcomes:
     other exception     the operator failed with an unexpected error, or raised
     scene modified      a CANCELLED run changed the scene, or a FINISHED one changed
                         the user's geometry or UV maps (only *_refined maps may change)
-    invalid layout      a refined map worse than its source (lmrefine.backoff.failures)
+    invalid layout      a refined map worse than its source (lmrefine.backoff.worse_than_source)
     good object not refined
                         the floor or the box was selected but not refined (a broken
                         object beside them must be skipped, not stop the run)
@@ -38,7 +38,7 @@ import numpy as np  # noqa: E402
 import lmrefine  # noqa: E402
 import lmrefine_blender  # noqa: E402
 import scenes  # noqa: E402
-from lmrefine.backoff import failures  # noqa: E402
+from lmrefine.backoff import worse_than_source  # noqa: E402
 from scene_state import _array, _digest, changed, fingerprint  # noqa: E402
 
 REFINED = "_refined"
@@ -207,10 +207,7 @@ def refined_layouts_valid(selected, settings):
             continue
         layout = bridge.read_layout(mesh, "Lightmap")
         refined = bridge.read_uv_layer(mesh, "Lightmap" + REFINED)
-        source = lmrefine.check_layout(layout.uvs, layout.triangles, settings.resolution, padding=settings.padding)
-        check = lmrefine.check_layout(refined, layout.triangles, settings.resolution, padding=settings.padding,
-                                      reference_uvs=layout.uvs, relative_gutter=True)
-        worse = failures(check, source, settings.padding)
+        worse, _ = worse_than_source(refined, layout.uvs, layout.triangles, settings.resolution, settings.padding)
         if worse:
             bad.append(f"{obj.name}: {worse}")
     return bad
