@@ -100,6 +100,9 @@ def speed():
     uvs, tris = many_charts()
     resolution, padding = 1024, 2.0
     packer_s, (out, report) = best_of(3, lambda: lmrefine.pack_charts(uvs, tris, None, None, resolution, padding))
+    # Footprints only: the packer before boxes were tried too (its search is unchanged).
+    grid_s, (_, grid_report) = best_of(3, lambda: lmrefine.pack_charts(uvs, tris, None, None, resolution, padding,
+                                                                      boxes=False))
     check = lmrefine.check_layout(out, tris, resolution, padding)
     shelf_s, (shelf_uvs, shelf_scale) = best_of(1, lambda: shelf_pack(uvs, tris, resolution, padding))
     shelf_util = lmrefine.coverage_mask(shelf_uvs, tris, resolution).mean()
@@ -114,6 +117,9 @@ def speed():
     print(f"{'':16} {'seconds':>8} {'utilisation':>12} {'global scale':>13}")
     print(f"{'pack_charts':16} {packer_s:8.3f} {report['utilisation']:12.3f} {report['global_scale']:13.3f}"
           f"   trials {report['trials']}, check_layout valid: {check['valid']}")
+    print(f"{'  boxes=False':16} {grid_s:8.3f} {grid_report['utilisation']:12.3f} {grid_report['global_scale']:13.3f}"
+          f"   footprints only; pack_charts / boxes=False: {packer_s / grid_s:.2f} time; placement kept: "
+          f"{report['placement']}")
     print(f"{'shelf packer':16} {shelf_s:8.3f} {shelf_util:12.3f} {shelf_scale:13.3f}   (bounding boxes)")
     print(f"{'refine_uvs 1024':16} {refine_s:8.3f}")
     print(f"pack_charts / refine_uvs at 1024^2: {packer_s / refine_s:.2f}; "
@@ -124,7 +130,7 @@ def speed():
 def scenes():
     print("texels covered (coverage_mask) / chart area (triangles), over the atlas; shelf: texels covered")
     print(f"{'scene':16} {'layout':8} {'size':>5} {'input':>13} {'packed':>13} {'shelf':>6} {'charts':>7} {'seconds':>8} "
-          f"{'valid':>6}")
+          f"{'valid':>6} {'placement':>10} {'boxes=False':>13} {'seconds':>8}")
     for name in sorted(f[:-4] for f in os.listdir(SAMPLES) if f.endswith(".npz")):
         data = np.load(os.path.join(SAMPLES, name + ".npz"))
         if "uv_smart" not in data.files:
@@ -134,12 +140,15 @@ def scenes():
             tris = np.arange(len(uvs), dtype=np.int32).reshape(-1, 3)
             for resolution in (256, 512, 1024):
                 seconds, (out, report) = best_of(1, lambda: lmrefine.pack_charts(uvs, tris, None, None, resolution, 2.0))
+                grid_s, (_, grid) = best_of(1, lambda: lmrefine.pack_charts(uvs, tris, None, None, resolution, 2.0,
+                                                                            boxes=False))
                 valid = lmrefine.check_layout(out, tris, resolution, 2.0)["valid"]
                 shelf = lmrefine.coverage_mask(shelf_pack(uvs, tris, resolution, 2.0)[0], tris, resolution).mean()
                 print(f"{name:16} {layout[3:]:8} {resolution:5} "
                       f"{report['utilisation_input']:6.3f}/{report['area_utilisation_input']:.3f} "
                       f"{report['utilisation']:6.3f}/{report['area_utilisation']:.3f} {shelf:6.3f} {report['charts']:7} "
-                      f"{seconds:8.3f} {str(valid):>6}", flush=True)
+                      f"{seconds:8.3f} {str(valid):>6} {report['placement']:>10} "
+                      f"{grid['utilisation']:6.3f}/{grid['area_utilisation']:.3f} {grid_s:8.3f}", flush=True)
 
 
 if __name__ == "__main__":

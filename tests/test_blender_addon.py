@@ -90,7 +90,7 @@ def fact(facts, name):
 def test_register_and_unregister(facts):
     value = fact(facts, "registration")
     registered, unregistered = value["registered"], value["unregistered"]
-    assert len(registered["panels"]) == 4
+    assert len(registered["panels"]) == 5
     assert registered["category"] == "Lightmap" and registered["space"] == "VIEW_3D"
     assert registered["operators"] == [True, True] and registered["label"] == "Refine Lightmap UVs"
     assert registered["scene_property"]
@@ -472,6 +472,62 @@ def test_threaded_driver_runs_and_cancels(facts):
     assert cancel["changed"] == [] and not cancel["has_layer"]
 
 
+# --------------------------------------------------- tessellation and stages
+
+def test_tessellation_adds_vertices_within_the_budget_and_keeps_every_attribute(facts):
+    value = fact(facts, "tessellation_writes_the_split_into_the_mesh")
+    assert value["outcome"] == "FINISHED", value["message"]
+    # 25 vertices, budget 0.25: at most 6 more; the shadow edge crosses enough large triangles to use them all.
+    assert value["vertices_before"] == 25 and value["vertices_after"] == 31
+    assert value["panel_tessellated"] and value["panel_vertices_added"] == 6
+    assert "tessellation added 6 vertices" in value["result_message"]
+    assert value["triangles_after"] > 0  # split quads became triangles
+    assert value["largest_height"] == 0.0  # every new vertex lies on the floor
+    # Linear attributes stay linear: UVMap and the colour over the floor, Lightmap per original quad (seams).
+    assert value["uvmap_residual"] < 1e-6 and value["lightmap_residual"] < 1e-6
+    assert value["tint_residual"] < 1e-6
+    assert value["refined_triangles"] > 32  # the refinement ran on the tessellated layout (32 before)
+    assert value["leftover_meshes"] == ["Cube", "FloorMesh"]  # the rollback copy is gone after success
+    # Ctrl+Z: one step back restores the original mesh exactly.
+    assert value["undo_vertices"] == 25 and value["undo_coordinates_equal"]
+    assert value["undo_layers"] == ["UVMap", "Lightmap"] and value["can_undo_further"] is False
+
+
+def test_tessellation_rolls_back_exactly(facts):
+    value = fact(facts, "tessellation_rolls_back_exactly")
+    assert value["raised"] == "CancelledError"
+    assert value["vertices_when_stopped"] == 50  # budget 1.0: tessellated when the run was cancelled
+    assert value["vertices"] == value["vertices_before"] == 25 and value["coordinates_equal"]
+    assert value["mesh_name"] == "FloorMesh" and value["meshes"] == value["meshes_before"]
+    assert value["changed"] == []
+
+
+@pytest.mark.parametrize("case, advice", [
+    ("shared", "shares mesh 'FloorMesh' with 1 other object(s)"),
+    ("modifier", "has modifiers (Bevel)"),
+])
+def test_tessellation_is_refused_where_it_would_change_more(facts, case, advice):
+    value = fact(facts, "tessellation_refused_where_it_would_change_more")[case]
+    assert value["outcome"] == "CANCELLED" and advice in value["message"]
+    assert "or turn off Tessellate" in value["message"] and value["changed"] == []
+
+
+def test_stages_refine_again_and_report_the_stages_kept(facts):
+    value = fact(facts, "stages_refine_the_layout_again")
+    one, two = value["1"], value["2"]
+    assert one["outcome"] == two["outcome"] == "FINISHED"
+    assert one["stages"] == 1 and one["stages_kept"] == 1 and "stages kept" not in one["result_message"]
+    assert two["stages"] == 2 and two["stages_kept"] == 2
+    assert "stages kept: 2 of 2 (Floor: 2 stages done)" in two["result_message"] and two["stopped"] == ""
+    assert value["layout_change"] >= value["stage_min_change"]  # stage 2 moved the layout again
+    assert one["valid"] and two["valid"]
+    still = value["still"]
+    assert still["outcome"] == "FINISHED" and still["stages_kept"] == 1
+    assert still["stopped"] == "Floor: stage 2 did not move"  # the panel's line
+    assert "stage 2 changed the layout by 0.0% (median texel density), under 5%: stage 1 kept" in \
+        still["result_message"]
+
+
 # ------------------------------------------------------------------ batch
 
 def run_batch(blend, *flags):
@@ -607,6 +663,29 @@ def test_batch_float32_writes_32_bit_exrs(facts, work_dir):
     header = exr_header(out / "Floor_lightmap_direct.exr")
     assert header["compression"] == "ZIP" and set(header["channels"].values()) == {"FLOAT"}, header
     assert not (out / "Floor_lightmap_before.exr").exists()  # no preview, no "before" image
+
+
+def test_batch_stages_and_tessellate(facts, work_dir):
+    blend = fact(facts, "save_coarse_scene_for_batch")["path"]
+    out = work_dir / "batch_tessellate"
+    process = run_batch(blend, "--objects", "Floor", "--resolution", "64", "--samples", "4", "--stages", "3",
+                        "--tessellate", "0.5", "--out", str(out))
+    assert process.returncode == 0, process.stderr[-3000:]
+    report = json.loads((out / "report.json").read_text())
+    floor = report["objects"]["Floor"]
+    assert floor["tessellation"]["vertices_before"] == 25
+    assert floor["tessellation"]["vertices_added"] == report["summary"]["vertices_added"] == 12  # floor(0.5 x 25)
+    stages = floor["report"]["stages"]
+    assert [entry["stage"] for entry in stages["stages"]][0] == 1 and len(stages["stages"]) >= 2
+    kept = sum(entry["kept"] for entry in stages["stages"])
+    assert report["summary"]["stages_kept"] == kept and stages["stopped"]
+    assert report["settings"]["stages"] == 3 and report["settings"]["tessellate"] == 0.5
+    probe = "import bpy; print('PROBE', len(bpy.data.objects['Floor'].data.vertices))"
+    process = run_blender(report["blend"], "--python-expr", probe)
+    saved = next(line for line in process.stdout.splitlines() if line.startswith("PROBE"))
+    assert saved == "PROBE 37"  # the saved copy holds the tessellated mesh
+    process = run_batch(blend, "--objects", "Floor", "--tessellate", "--no-tessellate", "--out", str(out))
+    assert process.returncode == 1 and "contradict" in process.stderr
 
 
 # -------------------------------------------------------------- packaging

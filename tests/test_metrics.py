@@ -159,3 +159,18 @@ def test_truth_noise_is_the_noise_of_the_mean_of_two_estimates(rng):
     assert metrics.truth_noise(first, second) == pytest.approx(0.1 / np.sqrt(2), rel=0.01)
     measured = metrics.error_stats((first + second) / 2, truth)["rmse"]
     assert metrics.truth_noise(first, second) == pytest.approx(measured, rel=0.01)
+
+
+def test_layout_change_is_the_median_texel_density_change_and_drives_the_stage_rule():
+    uvs = np.array([(0, 0), (0.5, 0), (0, 0.5), (1, 0), (1, 0.5), (0.5, 1)], np.float32)
+    triangles = np.array([(0, 1, 2), (1, 3, 4), (2, 4, 5)])
+    assert metrics.layout_change(uvs, uvs, triangles) == 0.0
+    moved = uvs.copy()
+    moved[0] = (0.0, -0.5)  # the first triangle's area x 2, the others unchanged: changes 1, 0, 0
+    assert metrics.layout_change(uvs, moved, triangles) == 0.0
+    moved[5] = (0.5, 1.5)   # the third triangle grows too: changes 1, 0, > 0
+    third = metrics.uv_areas(moved, triangles)[2] / metrics.uv_areas(uvs, triangles)[2] - 1
+    assert metrics.layout_change(uvs, moved, triangles) == pytest.approx(min(1.0, third))
+    assert metrics.stage_stop_reason(2, True, metrics.STAGE_MIN_CHANGE) is None
+    assert "stage 1 kept" in metrics.stage_stop_reason(2, True, 0.01)
+    assert "stage 2 kept" in metrics.stage_stop_reason(3, False, 0.5)

@@ -70,15 +70,55 @@ def test_every_output_passes_check_layout_with_the_padding(kind, resolution, pad
 @pytest.mark.parametrize("kind", ["lightmap_pack", "concave", "slivers"])
 def test_every_subdivision_keeps_the_padding(kind, subdivision):
     uvs, tris = kinds()[kind]
-    out, report = lmrefine.pack_charts(uvs, tris, None, None, 128, 2.0, subdivision=subdivision)
+    out, report = lmrefine.pack_charts(uvs, tris, None, None, 128, 2.0, subdivision=subdivision, boxes=False)
+    assert report["placement"] == "footprints"
     assert lmrefine.check_layout(out, tris, 128, 2.0)["valid"]
 
 
 def test_sub_texel_positions_fit_small_charts_denser():
     uvs, tris = lightmap_pack(charts_across=20, seed=5)
-    whole = lmrefine.pack_charts(uvs, tris, None, None, 256, 2.0, subdivision=1).report
-    halves = lmrefine.pack_charts(uvs, tris, None, None, 256, 2.0, subdivision=2).report
+    whole = lmrefine.pack_charts(uvs, tris, None, None, 256, 2.0, subdivision=1, boxes=False).report
+    halves = lmrefine.pack_charts(uvs, tris, None, None, 256, 2.0, subdivision=2, boxes=False).report
     assert halves["area_utilisation"] > whole["area_utilisation"]
+
+
+def equal_squares(across=24, resolution=128, gutter_texels=1.0):
+    """Blender's Lightmap Pack at a low resolution: equal one-quad squares in
+    rows, `gutter_texels` apart, at continuous (off-grid) positions."""
+    cell = 1.0 / across
+    size = cell - gutter_texels / resolution
+    return merge(*(grid_chart(1, (j * cell, i * cell), (j * cell + size, i * cell + size))
+                   for i in range(across) for j in range(across)))
+
+
+def test_rectangular_charts_are_placed_as_boxes_at_continuous_positions():
+    # Squares of 4.3 texels and 1-texel gutters: on a half-texel grid each
+    # gutter takes 1.5 texels and each square rounds up; as boxes they fit as
+    # tightly as the input.
+    uvs, tris = equal_squares()
+    gutter = lmrefine.check_layout(uvs, tris, 128, 1.0)["min_gutter_texels"]
+    out, report = lmrefine.pack_charts(uvs, tris, None, None, 128, gutter)
+    assert report["placement"] == "boxes"
+    assert report["global_scale"] > 0.99 and report["area_utilisation"] > 0.99 * report["area_utilisation_input"]
+    check = lmrefine.check_layout(out, tris, 128, gutter)
+    assert check["valid"] and check["min_gutter_texels"] >= gutter
+    grid = lmrefine.pack_charts(uvs, tris, None, None, 128, gutter, boxes=False).report
+    assert grid["placement"] == "footprints" and grid["global_scale"] < 0.95 * report["global_scale"]
+
+
+@pytest.mark.parametrize("resolution", [128, (96, 160)])
+def test_boxes_of_mixed_sizes_and_turns_keep_the_padding_and_the_transforms(resolution):
+    rng = np.random.default_rng(4)
+    uvs, tris = merge(*(grid_chart(1, (k, 0), (k + w, h)) for k, (w, h) in enumerate(rng.uniform(0.005, 0.04, (300, 2)))))
+    scales = rng.uniform(0.5, 2.0, 300)
+    out, report = lmrefine.pack_charts(uvs, tris, None, scales, resolution, 1.5)
+    assert report["placement"] == "boxes" and set(np.unique(report["rotations"])) == {0, 1}
+    check = lmrefine.check_layout(out, tris, resolution, 1.5)
+    assert check["valid"] and check["min_gutter_texels"] >= 1.5
+    for c in range(report["charts"]):
+        corners = np.unique(tris[report["chart_ids"] == c])
+        m = report["transforms"][c]
+        np.testing.assert_allclose(out[corners], uvs[corners] @ m[:, :2].T + m[:, 2], atol=1e-6)
 
 
 def test_report_transforms_reproduce_the_output():

@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 import lmrefine
+from lmrefine import allocation
 from layouts import (finite_difference_gradient, grid_chart, lightmap_pack, merge, plane, shadow_edge_lightmap,
                      smart_uv)
 
@@ -117,13 +118,14 @@ def test_smart_uv_layout_stays_valid_and_is_refined():
 
 def test_a_layout_packed_tighter_than_the_padding_is_still_refined():
     # Packed with a 1.2-texel margin but refined at the default padding 2:
-    # every chart pair keeps at least its original distance (docs/method.md §7),
-    # and the shadow edge still gets more texels.
+    # inside the charts every chart pair keeps at least its original distance
+    # (docs/method.md §7), and the shadow edge still gets more texels. (A
+    # repack moves the charts: it keeps the input's gutter globally, tested below.)
     resolution = 128
     uvs, tris = lightmap_pack(charts_across=4, margin_texels=1.2, resolution=resolution, quads=6)
     mask = lmrefine.coverage_mask(uvs, tris, resolution)
     gradient = finite_difference_gradient(shadow_edge_lightmap(resolution), mask)
-    result = lmrefine.refine_uvs(None, uvs, tris, resolution, padding=2, gradient=gradient)
+    result = lmrefine.refine_uvs(None, uvs, tris, resolution, padding=2, gradient=gradient, repack=False)
     report = result.report
     original = report["original_check"]["min_gutter_texels"]
     assert original < 2
@@ -354,3 +356,120 @@ def test_repack_accepts_a_chart_that_already_overlapped_itself():
     before = lmrefine.check_layout(uvs, tris, 64, 2, failing_charts=True)
     assert set(check["failing_charts"].tolist()) <= set(before["failing_charts"].tolist())
     assert check["flipped"] == 0 and check["out_of_bounds"] == 0 and check["min_gutter_texels"] >= 2
+
+
+def tiny_chart_scene(resolution=128):
+    """Like Lightmap Pack at a low resolution: 24 x 24 one-quad charts of
+    3-4 texels in rows with 1-texel gutters, a shadow edge across the atlas."""
+    from layouts import lightmap_pack
+    uvs, tris = lightmap_pack(charts_across=24, margin_texels=1.0, resolution=resolution, quads=1)
+    gradient = finite_difference_gradient(shadow_edge_lightmap(resolution, angle=0.3),
+                                          lmrefine.coverage_mask(uvs, tris, resolution))
+    return uvs, tris, gradient
+
+
+def test_a_lightmap_pack_layout_of_tiny_charts_gains_through_the_repack():
+    resolution = 128
+    uvs, tris, gradient = tiny_chart_scene(resolution)
+    original = lmrefine.check_layout(uvs, tris, resolution, 2)["min_gutter_texels"]
+    assert 0.9 < original < 2  # tighter than the padding asked for
+    result = lmrefine.refine_uvs(None, uvs, tris, resolution, padding=2, gradient=gradient)
+    repack = result.report["repack"]
+    assert repack["used"] is True, result.report["notes"]
+    assert repack["charts"] == 24 * 24 and repack["placement"] == "boxes"
+    assert repack["padding"] == pytest.approx(original)  # the input's gutter, not 2
+    assert repack["predicted_error"] < 0.95
+    assert repack["padded_utilisation_after"] >= 0.95 * repack["padded_utilisation_before"]
+    # Valid with the padding rule the input is checked with (its own gutter).
+    check = lmrefine.check_layout(result.uvs, tris, resolution, original - 1e-4)
+    assert check["valid"], check
+    # Measured on the output: triangles on the shadow edge gained far more texels than flat ones.
+    density = result.report["triangle_density"]
+    energy = allocation.triangle_energy(uvs, tris, gradient.sum(axis=2))
+    edge = energy > np.percentile(energy, 90)
+    flat = energy == 0
+    assert np.mean(density[edge]) > 2 * np.mean(density[flat])
+
+
+def test_the_repack_falls_back_when_the_model_sees_no_gain():
+    resolution = 128
+    # Equal squares in rows with 1-texel gutters (as Blender packs them): with
+    # the scales pinned to 1 a repack can match this packing, not beat it by 5%.
+    cell = 1.0 / 24
+    gutter = 1.0 / resolution
+    uvs, tris = merge(*(grid_chart(1, (j * cell, i * cell), (j * cell + cell - gutter, i * cell + cell - gutter))
+                        for i in range(24) for j in range(24)))
+    gradient = finite_difference_gradient(shadow_edge_lightmap(resolution, angle=0.3),
+                                          lmrefine.coverage_mask(uvs, tris, resolution))
+    result = lmrefine.refine_uvs(None, uvs, tris, resolution, padding=2, gradient=gradient,
+                                 min_chart_scale=1.0, max_chart_scale=1.0)
+    repack = result.report["repack"]
+    assert repack["used"] is False and repack["predicted_error"] > 0.95
+    assert any("repack not used" in note for note in result.report["notes"])
+    unpacked = lmrefine.refine_uvs(None, uvs, tris, resolution, padding=2, gradient=gradient, repack=False)
+    np.testing.assert_array_equal(result.uvs, unpacked.uvs)
+
+
+def test_padded_utilisation_counts_each_chart_grown_by_half_the_gutter():
+    # Two squares of 8 x 8 texels (two triangles each, the diagonal inside) at 64^2.
+    uvs, tris = merge(grid_chart(1, (0.0, 0.0), (0.125, 0.125)), grid_chart(1, (0.5, 0.5), (0.625, 0.625)))
+    charts = lmrefine.find_charts(uvs, tris)
+    area, perimeter = allocation.chart_outlines(uvs, tris, charts, (64, 64))
+    np.testing.assert_allclose(area, [64.0, 64.0])
+    np.testing.assert_allclose(perimeter, [32.0, 32.0])  # the shared diagonal is not outline
+    grown = 64.0 + 32.0 * 1.0 + np.pi * 4.0 / 4.0  # padding 2: area + perimeter * 1 + pi * 2^2 / 4
+    assert allocation.padded_utilisation(area, perimeter, 2.0, (64, 64)) == pytest.approx(2 * grown / 64 ** 2)
+
+
+def test_worse_than_source_holds_moved_charts_to_their_gaps_and_repacked_ones_to_the_padding():
+    from lmrefine.backoff import worse_than_source
+
+    # Two 8 x 8-texel charts 16 texels apart at 64^2; padding 2.
+    source = merge(grid_chart(2, (0.0, 0.0), (0.125, 0.125)), grid_chart(2, (0.375, 0.0), (0.5, 0.125)))
+    uvs, tris = source
+    closer = uvs.copy()
+    closer[len(uvs) // 2:, 0] -= 12 / 64  # 4 texels apart: a repack may do this, an in-chart move may not
+    assert worse_than_source(closer, uvs, tris, 64, 2.0)[0] == []
+    touching = uvs.copy()
+    touching[len(uvs) // 2:, 0] -= 15 / 64  # 1 texel apart: narrower than the padding and the source
+    worse, check = worse_than_source(touching, uvs, tris, 64, 2.0)
+    assert worse == ["gutter"] and check["min_gutter_texels"] == pytest.approx(1.0, abs=0.01)
+    assert worse_than_source(uvs, uvs, tris, 64, 2.0)[0] == []
+
+
+def test_the_packer_is_not_run_when_even_a_full_atlas_would_not_pay():
+    # One chart covering 92% of the atlas: scaled to fill all of it, the model's
+    # error would be 0.96 of the unpacked one, short of the 0.95 a repack needs.
+    uvs, tris = plane(64, margin=0.02)
+    gradient = finite_difference_gradient(shadow_edge_lightmap(R, angle=0.3), lmrefine.coverage_mask(uvs, tris, R))
+    result = lmrefine.refine_uvs(None, uvs, tris, R, gradient=gradient)
+    repack = result.report["repack"]
+    assert repack["used"] is False and "placement" not in repack  # the packer did not run
+    assert repack["predicted_error"] == pytest.approx(0.96, abs=0.005)
+    assert any("even filling the whole atlas" in note for note in result.report["notes"])
+    np.testing.assert_array_equal(result.uvs, lmrefine.refine_uvs(None, uvs, tris, R, gradient=gradient,
+                                                                  repack=False).uvs)
+    # With a wider margin the same chart can grow 11% and the packer runs (and is used).
+    uvs, tris = plane(64, margin=0.05)
+    gradient = finite_difference_gradient(shadow_edge_lightmap(R, angle=0.3), lmrefine.coverage_mask(uvs, tris, R))
+    assert lmrefine.refine_uvs(None, uvs, tris, R, gradient=gradient).report["repack"]["used"] is True
+
+
+def test_layout_figures_of_one_refinement_are_its_report_and_compose_over_two():
+    """lmrefine.refine.layout_figures measures a layout made by any number of refinements against the
+    first one's input at the first lightmap's edges (what the add-on's Stages report); for one
+    refinement it is refine_uvs' own report."""
+    uvs, tris = plane(16)
+    lightmap = shadow_edge_lightmap(64, angle=0.3)
+    first = lmrefine.refine_uvs(lightmap, uvs, tris, 64, repack=False)
+    figures = lmrefine.refine.layout_figures(lightmap, uvs, first.uvs, tris)
+    for key in ("transition_widening", "density_min", "density_max"):
+        assert figures[key] == first.report[key], key
+    np.testing.assert_array_equal(figures["triangle_density"], first.report["triangle_density"])
+    second = lmrefine.refine_uvs(lightmap, first.uvs, tris, 64, repack=False)
+    both = lmrefine.refine.layout_figures(lightmap, uvs, second.uvs, tris)
+    # UV area ratios multiply along the stages.
+    np.testing.assert_allclose(both["triangle_density"],
+                               first.report["triangle_density"] * second.report["triangle_density"], rtol=1e-4)
+    with pytest.raises(ValueError, match="new_uvs must have the shape"):
+        lmrefine.refine.layout_figures(lightmap, uvs, first.uvs[:-1], tris)

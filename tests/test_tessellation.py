@@ -183,3 +183,19 @@ def test_bad_input_is_named(change, message):
     change(args)
     with pytest.raises(ValueError, match=message):
         tessellate(**args)
+
+
+def test_a_triangle_that_repeats_a_vertex_is_left_alone_with_its_edges():
+    # Found by the fuzz suite: a triangle (a, b, a) lists edge (a, b) twice.
+    positions, triangles, uvs = bent_grid()
+    t = 5
+    a, b, _ = triangles[t]
+    triangles = np.vstack([triangles, [[a, b, a]]])
+    uvs = np.vstack([uvs, uvs[3 * t:3 * t + 3][[0, 1, 0]]])
+    result = tessellate(positions, triangles, uvs, np.ones((R, R)), budget=16.0, min_texels=8)
+    last = len(triangles) - 1
+    children = np.nonzero(result.parent == last)[0]
+    assert len(children) == 1 and list(result.triangles[children[0]]) == [a, b, a]
+    assert result.report["vertices_added"] > 0  # the rest is split
+    # Its edge (a, b) is never split (the triangle would then lose b).
+    assert {(a, b), (b, a)}.isdisjoint((p, q) for p, q, _ in result.splits)

@@ -29,6 +29,7 @@ from lmrefine_blender import pipeline  # noqa: E402
 from lmrefine_blender.journal import Journal  # noqa: E402
 
 PASSES = ("direct", "indirect", "combined", "ao")
+FLAG_OF = {"tessellate_budget": "tessellate"}  # settings whose flag has another name
 
 
 def _csv(text):
@@ -76,6 +77,13 @@ def build_parser():
                         help="four energies per cell")
     parser.add_argument("--wavelet", choices=("d4", "haar", "d12", "d20", "cdf53", "cdf97"),
                         help="gradient-map filter")
+    parser.add_argument("--stages", type=int, help="refinement stages: bake, refine, bake, refine...; an object "
+                        "stops at the first stage that changes its layout by less than 5%% (default 1)")
+    parser.add_argument("--tessellate", type=float, nargs="?", const=0.25, metavar="BUDGET",
+                        help="before refining, split the triangles strong light transitions cross, in the mesh; "
+                             "BUDGET: most vertices added, as a fraction of each object's (default 0.25)")
+    parser.add_argument("--no-tessellate", action="store_true", help="turn tessellation off (when the .blend "
+                        "has it on)")
     parser.add_argument("--backend", choices=("embree", "cycles"), help="baker of the final lightmaps")
     parser.add_argument("--bake-passes", type=_passes, help=f"comma-separated, of: {', '.join(PASSES)}")
     parser.add_argument("--samples", type=int, help="samples per texel")
@@ -93,13 +101,19 @@ def apply_flags(settings, args):
         "source_layer": args.source_layer, "resolution": args.resolution, "padding": args.padding,
         "strength": args.strength, "max_magnification": args.max_magnification, "min_shrink": args.min_shrink,
         "delta": args.delta, "passes": args.passes, "directional": args.directional, "samples": args.samples,
-        "preview": args.preview, "exr_float32": args.float32,
+        "preview": args.preview, "exr_float32": args.float32, "stages": args.stages,
     }
     upper = {"first_lightmap": args.first_lightmap, "driving_pass": args.driving_pass, "border": args.border,
              "wavelet": args.wavelet, "backend": args.backend}
     mapping.update({key: value.upper() for key, value in upper.items() if value is not None})
     if args.bake_passes is not None:
         mapping["bake_passes"] = {name.upper() for name in args.bake_passes}
+    if args.tessellate is not None and args.no_tessellate:
+        raise pipeline.UserError("--tessellate and --no-tessellate contradict each other: pass one of them")
+    if args.tessellate is not None:
+        mapping.update(tessellate=True, tessellate_budget=args.tessellate)
+    elif args.no_tessellate:
+        mapping["tessellate"] = False
     if args.lightmap_image is not None:
         image = bpy.data.images.get(args.lightmap_image)
         if image is None:
@@ -111,7 +125,7 @@ def apply_flags(settings, args):
             try:
                 setattr(settings, key, value)
             except (TypeError, ValueError) as error:
-                raise pipeline.UserError(f"--{key.replace('_', '-')}: {error}") from error
+                raise pipeline.UserError(f"--{FLAG_OF.get(key, key).replace('_', '-')}: {error}") from error
 
 
 def _check_range(settings, key, value):
@@ -122,7 +136,7 @@ def _check_range(settings, key, value):
         return
     low, high = prop.hard_min, prop.hard_max
     if not low <= value <= high:
-        raise pipeline.UserError(f"--{key.replace('_', '-')} {value:g} is outside {low:g} to {high:g}: "
+        raise pipeline.UserError(f"--{FLAG_OF.get(key, key).replace('_', '-')} {value:g} is outside {low:g} to {high:g}: "
                                  f"pass a value in that range")
 
 
@@ -209,6 +223,7 @@ def run(args):
         "blend": blend_copy,
         "objects": {name: {"source_layer": t.source, "refined_layer": t.refined,
                            "report": outcome.reports[name],
+                           "tessellation": outcome.tessellation.get(name),
                            "images": {p: outcome.image_files[i] for p, i in outcome.images[name].items()}}
                     for name, t in ((t.obj.name, t) for t in targets)},
         "summary": outcome.summary(),

@@ -28,6 +28,12 @@ def _report_outcome(operator, context, outcome, seconds):
     result.limited_by = summary["limited_by"]
     result.warnings = len(outcome.warnings)
     result.timings = "  ".join(f"{stage} {value:.2f}s" for stage, value in outcome.timings.items())
+    result.tessellated = bool(outcome.tessellation)
+    result.vertices_added = summary["vertices_added"]
+    result.stages = outcome.stages_asked
+    result.stages_kept = summary["stages_kept"]
+    result.stages_stopped = "; ".join(_stage_stop(name, entry) for name, entry in outcome.stages.items()
+                                      if not entry["stages"][-1]["kept"])
     if summary["moved"] == 0:
         result.message = (f"Nothing moved: the refined UV maps of {len(outcome.objects)} object(s) equal their "
                           f"source maps ({seconds:.1f}s; the warnings say why)")
@@ -37,9 +43,21 @@ def _report_outcome(operator, context, outcome, seconds):
                           f"{summary['transition_widening']:.2f}x their area, texel density "
                           f"{summary['density_min']:.2f}x to {summary['density_max']:.2f}x"
                           + (f"; {still} did not move (see warnings)" if still else ""))
+    if outcome.tessellation:
+        result.message += f"; tessellation added {summary['vertices_added']} vertices"
+    if outcome.stages:
+        why = "; ".join(f"{name}: {entry['stopped']}" for name, entry in outcome.stages.items())
+        result.message += f"; stages kept: {summary['stages_kept']} of {result.stages} ({why})"
     for warning in outcome.warnings:
         operator.report({'WARNING'}, warning)
     operator.report({'INFO'}, result.message)
+
+
+def _stage_stop(name, entry):
+    """Short, for the panel: which stage an object stopped at and why (the report has the sentence)."""
+    last = entry["stages"][-1]
+    moved = f"moved {last['layout_change']:.1%}" if last["moved"] else "did not move"
+    return f"{name}: stage {last['stage']} {moved}"
 
 
 def _rollback(operator, journal):

@@ -88,6 +88,21 @@ class LMREFINE_PT_refine_options(_LightmapTab, bpy.types.Panel):
             column.prop(settings, name)
 
 
+class LMREFINE_PT_refine_stages(_LightmapTab, bpy.types.Panel):
+    bl_label = "Stages and Tessellation"
+    bl_parent_id = "LMREFINE_PT_refine"
+    bl_options = {'DEFAULT_CLOSED'}
+
+    def draw(self, context):
+        settings = context.scene.lmrefine
+        column = self.split_layout().column()
+        column.prop(settings, "stages")
+        column.prop(settings, "tessellate")
+        row = column.row()
+        row.active = settings.tessellate
+        row.prop(settings, "tessellate_budget")
+
+
 class LMREFINE_PT_refine_bake(_LightmapTab, bpy.types.Panel):
     bl_label = "Second Bake"
     bl_parent_id = "LMREFINE_PT_refine"
@@ -117,7 +132,7 @@ class LMREFINE_PT_refine_result(_LightmapTab, bpy.types.Panel):
     bl_parent_id = "LMREFINE_PT_refine"
 
     def draw(self, context):
-        """Nine rows in every state (placeholders greyed out), so the panel keeps its size."""
+        """Eleven rows in every state (with one stage) (placeholders greyed out), so the panel keeps its size."""
         result = context.scene.lmrefine.result
         column = self.layout.column(align=True)
         rows = []
@@ -138,6 +153,15 @@ class LMREFINE_PT_refine_result(_LightmapTab, bpy.types.Panel):
         warnings = result.warnings if result.valid else 0
         rows.append((f"Warnings: {warnings} (Info log)" if warnings else "Warnings: none", 'ERROR' if warnings
                      else 'INFO', bool(warnings)))
+        tessellated = result.valid and result.tessellated
+        rows.append((f"Tessellation: +{result.vertices_added} vertices" if tessellated else "Tessellation: off",
+                     'MOD_TRIANGULATE', tessellated))
+        staged = result.valid and result.stages > 1
+        rows.append((f"Stages kept: {result.stages_kept} of {result.stages}" if staged else "Stages: 1", 'SORTTIME',
+                     staged))
+        if staged:  # more than one stage is a setting: its rows come with it
+            # An object whose next stage moved its texels too little (under 5%).
+            rows += [(entry, 'BLANK1', True) for entry in result.stages_stopped.split("; ") if entry]
         timings = dict(entry.rsplit(" ", 1) for entry in result.timings.split("  ") if entry)
         for stage in ("first bake", "refine", "second bake"):
             seconds = timings.get(stage)
@@ -149,6 +173,7 @@ class LMREFINE_PT_refine_result(_LightmapTab, bpy.types.Panel):
             row.label(text=text, icon=icon)
 
 
-CLASSES = (LMREFINE_PT_refine, LMREFINE_PT_refine_options, LMREFINE_PT_refine_bake, LMREFINE_PT_refine_result)
+CLASSES = (LMREFINE_PT_refine, LMREFINE_PT_refine_options, LMREFINE_PT_refine_stages, LMREFINE_PT_refine_bake,
+           LMREFINE_PT_refine_result)
 
 register, unregister = bpy.utils.register_classes_factory(CLASSES)

@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 import bpy
 import numpy as np
 
-from . import bridge, cycles_bake, materials
+from . import bridge, cycles_bake, materials, tessellation
 from .errors import Cancelled, UserError  # noqa: F401  (re-exported for the drivers)
 
 REFINED_SUFFIX = "_refined"
@@ -68,6 +68,9 @@ class Outcome:
     image_files: dict = field(default_factory=dict)  # image name -> file path ('' when packed)
     timings: dict = field(default_factory=dict)  # stage -> seconds
     warnings: list = field(default_factory=list)  # things the user should know, though the run succeeded
+    tessellation: dict = field(default_factory=dict)  # object name -> lmrefine.tessellate report
+    stages: dict = field(default_factory=dict)  # object name -> {"stages": [...], "stopped": why}
+    stages_asked: int = 1
 
     def summary(self):
         reports = list(self.reports.values())
@@ -80,12 +83,15 @@ class Outcome:
         for report in reports:
             limited_by = report.get("limited_by") or []
             limits.update([limited_by] if isinstance(limited_by, str) else limited_by)
+        kept = [len([s for s in entry["stages"] if s["kept"]]) for entry in self.stages.values()]
         return {
             "moved": moved,
             "transition_widening": widening,
             "density_min": float(low),
             "density_max": float(high),
             "limited_by": ", ".join(sorted(limits)),
+            "vertices_added": sum(report["vertices_added"] for report in self.tessellation.values()),
+            "stages_kept": max(kept, default=1),
         }
 
 
@@ -114,6 +120,8 @@ def settings_snapshot(settings):
         "samples": settings.samples,
         "preview": settings.preview,
         "exr_float32": settings.exr_float32,
+        "tessellate": settings.tessellate_budget if settings.tessellate else None,
+        "stages": settings.stages,
     }
 
 
@@ -218,6 +226,10 @@ def _validate_object(obj, options, owners, resolution, depsgraph):
     problem = bridge.evaluated_problem(depsgraph, obj, source)
     if problem:
         raise UserError(problem)
+    if options.get("tessellate") is not None:
+        problem = tessellation.problem(obj)
+        if problem:
+            raise UserError(problem)
     target = Target(obj, source, refined, layout, zero_area=zero_3d)
     if options["first_lightmap"] == 'IMAGE':
         target.image = _first_image(obj, source, options)
@@ -254,9 +266,8 @@ def run(context, targets, options, journal, image_dir=None):
     (default: next to the .blend, or packed into it when it was never saved).
     """
     lmrefine = import_core()
-    from lmrefine.backoff import failures
     from lmrefine.layout_input import describe_problems
-    outcome = Outcome(objects=[t.obj.name for t in targets])
+    outcome = Outcome(objects=[t.obj.name for t in targets], stages_asked=options.get("stages", 1))
     outcome.warnings += [f"Skipped: {message}" for message in getattr(targets, "skipped", [])]
     for target in targets:
         if target.zero_area:
@@ -266,9 +277,11 @@ def run(context, targets, options, journal, image_dir=None):
     resolution = options["resolution"]
     padding = options["padding"]
     backend_first = options["first_lightmap"]
-    # Progress in units of one map's work: each bake one unit per map, each refinement one.
+    # Progress in units of one map's work: every bake one unit per map, every refinement and tessellation one.
     maps = len(targets)
-    span = 1.0 / ((0 if backend_first == 'IMAGE' else maps) + maps + maps)
+    further = options.get("stages", 1) - 1  # each: a bake of all targets and a refinement of each
+    span = 1.0 / ((0 if backend_first == 'IMAGE' else maps) + maps + maps + further * 2 * maps
+                  + (maps if options.get("tessellate") is not None else 0))
     done = 0
 
     # 1. The first lightmap, on the source layout.
@@ -293,6 +306,15 @@ def run(context, targets, options, journal, image_dir=None):
             outcome.warnings.append(f"'{name}': the first lightmap is black (no light reaches it), so there is "
                                     "nothing to refine for: add lights or a world colour")
 
+    # 1b. Opt-in: split the triangles that strong transitions of the first lightmap cross, in the mesh.
+    if options.get("tessellate") is not None:
+        clock = time.perf_counter()
+        for target in targets:
+            yield from _tessellate(lmrefine, target, lightmaps[target.obj.name], options["tessellate"], journal,
+                                   outcome, done * span, span)
+            done += 1
+        outcome.timings["tessellate"] = time.perf_counter() - clock
+
     # 2. Refine every layout (native, off the main thread), check it, write it.
     clock = time.perf_counter()
     refined_uvs = {}
@@ -315,15 +337,7 @@ def run(context, targets, options, journal, image_dir=None):
             done += 1
             continue
         done += 1
-        # An independent check of the promise refine_uvs makes: never worse than the source layout.
-        source_check = lmrefine.check_layout(layout.uvs, layout.triangles, resolution, padding=padding)
-        check = lmrefine.check_layout(result.uvs, layout.triangles, resolution, padding=padding,
-                                      reference_uvs=layout.uvs, relative_gutter=True)
-        worse = failures(check, source_check, padding)
-        if worse:
-            raise RuntimeError(f"refine_uvs returned a layout for '{name}' that is worse than the source "
-                               f"({', '.join(worse)}: {dict(check)}); this is a bug in lmrefine, please report "
-                               "it with the .blend")
+        check, source_check = _check_refined(lmrefine, name, result.uvs, layout, layout.uvs, resolution, padding)
         if not source_check["valid"] and (source_check["overlapping"] or source_check["min_gutter_texels"] <= 0.0):
             # Charts that overlap or touch share texels: the layout of a texture, not of a lightmap.
             outcome.warnings.append(
@@ -350,6 +364,23 @@ def run(context, targets, options, journal, image_dir=None):
     for target in targets:
         _write_refined_layer(target, refined_uvs[target.obj.name], journal)
     outcome.timings["refine"] = time.perf_counter() - clock
+
+    # 2b. Opt-in: further stages, each refining from a bake with the previous stage's layout.
+    if further:
+        clock = time.perf_counter()
+        done = yield from _further_stages(context, lmrefine, targets, refined_uvs, options, journal, outcome,
+                                          done, span)
+        for target in targets:
+            name = target.obj.name
+            if sum(entry["kept"] for entry in outcome.stages[name]["stages"]) > 1:
+                # The figures of the layout the user gets, against the source map, at the first bake's edges.
+                figures = lmrefine.refine.layout_figures(lightmaps[name], target.layout.uvs, refined_uvs[name],
+                                                         target.layout.triangles,
+                                                         wavelet=options["refine_options"]["wavelet"])
+                figures.pop("triangle_density")
+                outcome.reports[name].update(_plain(figures))
+            outcome.reports[name]["stages"] = _plain(outcome.stages[name])
+        outcome.timings["stages"] = time.perf_counter() - clock
 
     # 3. The second bake with the refined layout, one image per pass.
     clock = time.perf_counter()
@@ -386,6 +417,93 @@ def run(context, targets, options, journal, image_dir=None):
             outcome.image_files[image_name] = _save_image(lmrefine, image, image_dir,
                                                           "float" if options["exr_float32"] else "half")
     return outcome
+
+
+def _check_refined(lmrefine, name, uvs, layout, reference_uvs, resolution, padding):
+    """An independent check of the promise refine_uvs makes: never worse than the layout it started
+    from. Returns (check of `uvs`, check of `reference_uvs`); a worse layout is a bug, raised."""
+    from lmrefine.backoff import worse_than_source
+    reference_check = lmrefine.check_layout(reference_uvs, layout.triangles, resolution, padding=padding)
+    worse, check = worse_than_source(uvs, reference_uvs, layout.triangles, resolution, padding)
+    if worse:
+        raise RuntimeError(f"refine_uvs returned a layout for '{name}' that is worse than the one it started from "
+                           f"({', '.join(worse)}: {dict(check)}); this is a bug in lmrefine, please report "
+                           "it with the .blend")
+    return check, reference_check
+
+
+def _tessellate(lmrefine, target, lightmap, budget, journal, outcome, start, span):
+    """Split the triangles of `target` that the transitions of `lightmap` (baked on its source map)
+    cross, in its mesh (journalled); its layout becomes the tessellated mesh's."""
+    obj = target.obj
+    layout = target.layout
+    positions, triangles, corner_uvs = tessellation.mesh_arrays(obj.data, layout)
+
+    def split(progress):
+        strength = lmrefine.transition_strength_of(lightmap, layout.uvs, layout.triangles)
+        return lmrefine.tessellate(positions, triangles, corner_uvs, strength, budget=budget)
+
+    result = yield NativeWork(f"Tessellating {obj.name}", split, start, span)
+    added = tessellation.write(obj, result, journal)
+    report = _plain(result.report)
+    report["vertices_added"] = added
+    outcome.tessellation[obj.name] = report
+    if added:
+        target.layout = bridge.read_layout(obj.data, target.source)
+
+
+def _further_stages(context, lmrefine, targets, refined_uvs, options, journal, outcome, done, span):
+    """Stages 2..options["stages"]: bake the driving pass with each object's refined map, refine that map
+    from it, write it. An object stops at the first stage that moves its layout by less than
+    lmrefine.metrics.STAGE_MIN_CHANGE (the rule of `evaluate --stages`); its last kept map stays.
+    Updates `refined_uvs` and outcome.stages; returns the progress steps done."""
+    from lmrefine import metrics
+    resolution, padding = options["resolution"], options["padding"]
+    driving = options["driving_pass"]
+    for target in targets:
+        outcome.stages[target.obj.name] = {
+            "stages": [{"stage": 1, "moved": bool(outcome.reports[target.obj.name]["moved"]), "kept": True}],
+            "stopped": f"{options['stages']} stages done"}
+    active = list(targets)
+    # Progress: each stage one unit per map for its bake and one per refinement, as run() counts them.
+    end = done + (options["stages"] - 1) * 2 * len(targets)
+    for stage in range(2, options["stages"] + 1):
+        if not active:
+            break
+        refined_of = {t.obj.name: t.refined for t in active}
+        label = f"Stage {stage} bake"
+        if options["backend"] == 'EMBREE':
+            baked = yield from _bake_embree(context, lmrefine, active, refined_of, (driving,), options, label,
+                                            done * span, len(active) * span, outcome.warnings)
+        else:
+            baked = yield from _bake_cycles(context, active, refined_of, (driving,), options, label, done * span,
+                                            len(active) * span)
+        done += len(active)
+        for target in list(active):
+            name = target.obj.name
+            previous = refined_uvs[name]
+            result = yield NativeWork(
+                f"Stage {stage}: refining {name}",
+                lambda progress, lightmap=baked[driving][name], previous=previous, layout=target.layout:
+                    lmrefine.refine_uvs(lightmap, previous, layout.triangles, resolution, padding=padding,
+                                        progress=progress, **options["refine_options"]),
+                done * span, span, parts=REFINE_STAGES)
+            done += 1
+            change = metrics.layout_change(previous, result.uvs, target.layout.triangles)
+            moved = bool(result.report["moved"])
+            history = outcome.stages[name]
+            reason = metrics.stage_stop_reason(stage, moved, change)
+            history["stages"].append({"stage": stage, "moved": moved, "layout_change": change,
+                                      "kept": reason is None})
+            if reason is not None:
+                history["stopped"] = reason
+                active.remove(target)
+                continue
+            _check_refined(lmrefine, name, result.uvs, target.layout, previous, resolution, padding)
+            refined_uvs[name] = result.uvs
+            _write_refined_layer(target, result.uvs, journal)
+    # Objects that stopped early left their share of the progress undone: catch up.
+    return end
 
 
 def _plain(value):

@@ -68,6 +68,14 @@ class LMREFINE_PG_result(bpy.types.PropertyGroup):
     warnings: IntProperty(name="Warnings", description="Warnings of the last run (in the Info log)")
     timings: StringProperty(name="Timings", description="Seconds per stage of the last run")
     message: StringProperty(name="Message", description="Summary of the last run")
+    vertices_added: IntProperty(name="Vertices Added",
+                                description="Vertices the tessellation along transitions added to the meshes")
+    tessellated: BoolProperty(name="Tessellated", description="Whether the last run tessellated", default=False)
+    stages: IntProperty(name="Stages", description="Refinement stages asked for in the last run", default=1)
+    stages_kept: IntProperty(name="Stages Kept", description="Refinement stages the last run kept (the most of "
+                             "any object)", default=1)
+    stages_stopped: StringProperty(name="Stages Stopped",
+                                   description="Objects whose stages stopped early: the stage that moved too little")
 
 
 class LMREFINE_PG_settings(bpy.types.PropertyGroup):
@@ -133,6 +141,24 @@ class LMREFINE_PG_settings(bpy.types.PropertyGroup):
     )
     wavelet: EnumProperty(name="Wavelet", description="Filter of the gradient map", items=WAVELET_ITEMS,
                           default='D4')
+    stages: IntProperty(
+        name="Stages",
+        description="Bake, refine, bake, refine...: each further stage refines the layout again from a bake "
+                    "with it. An object stops at the first stage that changes its layout by less than 5%",
+        default=1, min=1, max=8,
+    )
+    tessellate: BoolProperty(
+        name="Tessellate",
+        description="Before refining, split the mesh's triangles that strong light transitions cross and that "
+                    "cover many texels, so the refinement can move texels inside them. Writes into the mesh "
+                    "(same surface, every attribute interpolated; undone with the run)",
+        default=False,
+    )
+    tessellate_budget: FloatProperty(
+        name="Vertex Budget",
+        description="Most vertices the tessellation may add, as a fraction of each object's vertex count",
+        default=0.25, min=0.0, max=16.0, soft_max=1.0, subtype='FACTOR',
+    )
 
     # Second bake.
     backend: EnumProperty(name="Baker", description="Baker of the final lightmaps (the second bake)", items=BACKEND_ITEMS,

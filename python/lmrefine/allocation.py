@@ -22,8 +22,9 @@ from ._native import find_charts
 # (FLOOR)^(1/3) before the scale bounds apply.
 ENERGY_FLOOR = 0.05
 # repack is kept when the model predicts at most this fraction of the
-# unpacked error, and the packed atlas covers at least this fraction of the
-# texels the input covered (docs/refiner.md, "Chart scaling").
+# unpacked error, and the packed atlas is at least this fraction as dense as
+# the input, charts grown by half the padding (padded_utilisation;
+# docs/refiner.md, "Chart scaling").
 REQUIRED_GAIN = 0.95
 MIN_UTILISATION_KEPT = 0.95
 
@@ -70,6 +71,39 @@ def chart_scales(uvs, triangles, charts, energy, min_scale=0.5, max_scale=2.0):
     return np.clip(scales, min_scale, max_scale), chart_energy, chart_area
 
 
+def chart_outlines(uvs, triangles, charts, shape):
+    """(C,) each chart's area and boundary length in texels. Edges are matched
+    by their exact end points, so the layout's charts must be bit-exact
+    (pack_charts' output is)."""
+    height, width = shape
+    corners = uvs[triangles].astype(np.float64) * (width, height)  # (T, 3, 2) texel space
+    start = corners.reshape(-1, 2)
+    end = np.roll(corners, -1, axis=1).reshape(-1, 2)
+    # An edge's key: its chart and its end points in a fixed order.
+    forward = (start[:, 0] < end[:, 0]) | ((start[:, 0] == end[:, 0]) & (start[:, 1] <= end[:, 1]))
+    low = np.where(forward[:, None], start, end)
+    high = np.where(forward[:, None], end, start)
+    edge_chart = np.repeat(charts, 3)
+    keys = np.column_stack([edge_chart.astype(np.float64), low, high])
+    _, inverse, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
+    outline = counts[inverse.ravel()] == 1
+    count = int(charts.max()) + 1 if len(charts) else 0
+    length = np.hypot(*(end - start).T)
+    perimeter = np.bincount(edge_chart[outline], weights=length[outline], minlength=count)
+    area = np.bincount(charts, weights=np.abs(signed_areas(uvs, triangles)) * width * height, minlength=count)
+    return area, perimeter
+
+
+def padded_utilisation(area, perimeter, padding, shape):
+    """The atlas fraction the charts take with half the padding around each
+    (the area of each chart grown by padding / 2: area + perimeter * padding / 2
+    + pi padding^2 / 4, exact for convex charts): how densely a layout is
+    packed for its padding, whatever the charts' sizes and however they sit
+    on the texel grid."""
+    grown = area + perimeter * (0.5 * padding) + np.pi * padding * padding / 4.0
+    return float(grown[area > 0].sum() / (shape[0] * shape[1]))
+
+
 def repack(source_uvs, refined_uvs, triangles, energy, resolution, padding, min_scale, max_scale, progress=None):
     """Scale the charts of `refined_uvs` by their signal (measured on the
     source layout `source_uvs`, where `energy` was baked) and pack them into
@@ -77,13 +111,26 @@ def repack(source_uvs, refined_uvs, triangles, energy, resolution, padding, min_
     not better than `refined_uvs` by the error model (the report says so)."""
     charts = find_charts(source_uvs, triangles, tolerance=CHART_TOLERANCE)
     scales, chart_energy, _ = chart_scales(source_uvs, triangles, charts, energy, min_scale, max_scale)
+    total = chart_energy.sum()
+    # No packing can scale the charts beyond filling the whole atlas, gutters
+    # aside: when the model's error at that scale is no clear gain, the
+    # packer need not run (a single chart filling its atlas, for example).
+    area_refined = np.bincount(charts, weights=np.abs(signed_areas(refined_uvs, triangles)), minlength=len(scales))
+    largest = 1.0 / np.sqrt(max(float((area_refined * scales ** 2).sum()), 1e-300))
+    best = float((chart_energy / (largest * scales)).sum() / total) if total > 0 else 1.0
+    if best >= REQUIRED_GAIN:
+        return None, {"charts": int(len(scales)), "used": False, "predicted_error": best,
+                      "reason": f"even filling the whole atlas the error model predicts {best:.3f} of the unpacked "
+                                f"error at best (a repack needs below {REQUIRED_GAIN})"}
     try:
         packed, pack_report = pack_charts(refined_uvs, triangles, charts, scales, resolution, padding,
                                           progress=progress)
     except ValueError as error:  # the charts do not fit at a usable scale: keep the unpacked layout
         return None, {"charts": int(len(scales)), "used": False, "reason": str(error)}
     final = pack_report["chart_scales"]  # linear scale of each chart against refined_uvs
-    total = chart_energy.sum()
+    # Areas and outlines: the packed charts are bit-exact; the input's outlines are theirs unscaled.
+    area_after, perimeter_out = chart_outlines(packed, triangles, charts, resolution)
+    area_before, _ = chart_outlines(refined_uvs, triangles, charts, resolution)
     # Predicted error of the packed layout relative to refined_uvs (1.0 = the same).
     predicted = float((chart_energy / np.maximum(final, 1e-12)).sum() / total) if total > 0 else 1.0
     report = {
@@ -93,11 +140,20 @@ def repack(source_uvs, refined_uvs, triangles, energy, resolution, padding, min_
         "global_scale": float(pack_report["global_scale"]),
         "utilisation_before": float(pack_report["utilisation_input"]),
         "utilisation_after": float(pack_report["utilisation"]),
+        "area_utilisation_before": float(pack_report["area_utilisation_input"]),
+        "area_utilisation_after": float(pack_report["area_utilisation"]),
+        "padding": float(padding),
+        "padded_utilisation_before": padded_utilisation(area_before, perimeter_out / final, padding, resolution),
+        "padded_utilisation_after": padded_utilisation(area_after, perimeter_out, padding, resolution),
+        "placement": pack_report["placement"],
         "predicted_error": predicted,
     }
-    # The model sees only the edge term: it misses what small charts lose to
-    # the texel grid and the gutters, so it must promise a clear gain, and
-    # the packed atlas may not cover fewer texels than the input did.
-    report["used"] = bool(predicted < REQUIRED_GAIN
-                          and report["utilisation_after"] >= MIN_UTILISATION_KEPT * report["utilisation_before"])
+    # The model sees only the edge term: it misses what a packing that wastes
+    # the atlas costs the flat charts, so it must promise a clear gain, and
+    # the packed atlas must be about as dense as the input for its padding.
+    # Density of the charts grown by half the padding, not texels touched: a
+    # chart off the texel grid touches more texels than the same chart on it,
+    # and shrunk charts need the same gutters (docs/refiner.md).
+    report["used"] = bool(predicted < REQUIRED_GAIN and report["padded_utilisation_after"]
+                          >= MIN_UTILISATION_KEPT * report["padded_utilisation_before"])
     return (packed if report["used"] else None), report

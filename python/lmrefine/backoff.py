@@ -42,6 +42,22 @@ def failures(report, original, padding):
     return failed
 
 
+def worse_than_source(uvs, source_uvs, triangles, resolution, padding):
+    """The promise refine_uvs makes, checked from the outside: what makes the
+    refined layout `uvs` worse than `source_uvs` (an empty list: nothing), and
+    the refined layout's check_layout report. Moved inside charts, each chart
+    pair keeps its own distance (relative gutter); repacked, the charts sit
+    anew, and the gutter is held to the padding or the source's narrowest."""
+    source = _native.check_layout(source_uvs, triangles, resolution, padding)
+    check = _native.check_layout(uvs, triangles, resolution, padding, reference_uvs=source_uvs,
+                                 relative_gutter=True)
+    worse = failures(check, source, padding)
+    if worse == ["gutter"]:
+        check = _native.check_layout(uvs, triangles, resolution, padding)
+        worse = failures(check, source, padding)
+    return worse, check
+
+
 def allowed_gutter(padding, original):
     """The padding, or the original's gutter if that is already narrower
     (less float32 rounding: about 1e-4 texel at 4k)."""

@@ -77,7 +77,7 @@ def evaluation_options(args):
                              padding=args.padding, denoise=args.denoise, bake_pass=args.bake_pass,
                              refine_options=refine_options, view_width=args.view_width,
                              tessellate=args.tessellate, rechart=rechart, compare_variants=compare,
-                             stages=args.stages)
+                             stages=args.stages, per_effect=getattr(args, "per_effect", None))
 
 
 def load_scenes(names, args=None):
@@ -205,6 +205,11 @@ def add_evaluation_arguments(parser, resolution, points):
     parser.add_argument("--tessellate", type=float, nargs="?", const=0.25, metavar="BUDGET",
                         help="split the triangles strong transitions cross before refining, at most BUDGET more "
                              "vertices as a fraction (default 0.25 = +25%%; docs/refiner.md, Tessellation)")
+    parser.add_argument("--per-effect", nargs="?", const="sqrt", metavar="RULES",
+                        help="also give direct and indirect light each its own refined layout and map, the texels "
+                             "split by RULES (comma-separated, each one measured: equal, energy, sqrt; default "
+                             "sqrt), and compare their sum with one combined map of R^2 texels (evaluates the "
+                             "combined light; docs/refiner.md, Separate layouts for separate effects)")
     parser.add_argument("--pass", dest="bake_pass", choices=("direct", "ao", "indirect", "combined"),
                         help="light to bake and compare (default: the scene's own: direct, combined for the room)")
 

@@ -18,6 +18,7 @@ import numpy as np
 from . import bake, check_layout, find_charts, metrics, pack_charts, refine_uvs, write_image
 from . import evaluate as evaluate_light
 from .charting import rechart
+from .per_effect import EFFECTS, gradient_energy, parse_rules, split_fractions, split_resolutions
 
 DEFAULT_MULTIPLIERS = (1.0, 1.5, 2.0, 3.0, 4.0)
 # A transition-point RMSE at least this much lower counts as a gain.
@@ -46,6 +47,9 @@ class EvaluationOptions:
     view_width: int = 480             # pixels across the pictures of the lit surface (0: none)
     tessellate: float = None          # vertex budget (fraction) of a tessellation along transitions; None: off
     stages: int = 1                   # refine + bake stages, each refining from the previous stage's bake
+    # Separate layouts for separate effects (lmrefine.per_effect): the split
+    # rules to measure, e.g. ("sqrt",) or "equal,energy,sqrt"; None: off.
+    per_effect: tuple = None
 
     def check(self):
         if self.resolution < 8:
@@ -67,6 +71,15 @@ class EvaluationOptions:
         if self.tessellate is not None and not (0.0 <= self.tessellate <= 16.0):
             raise ValueError(f"the tessellation budget is a fraction of the vertex count in [0, 16] "
                              f"(0.25 = at most 25% more vertices), got {self.tessellate}")
+        if self.per_effect is not None:
+            self.per_effect = parse_rules(self.per_effect)
+            if self.bake_pass not in (None, "combined"):
+                raise ValueError(f"per_effect (--per-effect) compares the effects' maps, added up, with the "
+                                 f"combined light: leave the pass (--pass) unset or use 'combined', not "
+                                 f"{self.bake_pass!r}")
+            if self.stages != 1:
+                raise ValueError(f"per_effect (--per-effect) refines each effect's layout once: use it with "
+                                 f"stages=1 (--stages 1), not {self.stages}")
 
     @property
     def layout_name(self):
@@ -93,12 +106,19 @@ class _Stages:
         return result
 
 
-def _bake_map(sample, uvs, resolution, options, progress):
-    scene = sample.to_scene(uvs)
-    passes = _single_pass(sample, options)
-    result = bake(scene, resolution, passes=passes, samples=options.samples, seed=options.seed,
+def _bake_map(sample, uvs, resolution, options, progress, passes=None):
+    """The RGB map of the evaluation's pass (or of `passes`, one name) at
+    `resolution` on the layout `uvs`."""
+    return np.ascontiguousarray(_bake_passes(sample, uvs, resolution, options, progress,
+                                             (passes or _single_pass(sample, options),))[0][..., :3])
+
+
+def _bake_passes(sample, uvs, resolution, options, progress, passes):
+    """Several passes in one bake (each transport traced once): a list of
+    (H, W, 4) maps, alpha = coverage, in the order of `passes`."""
+    result = bake(sample.to_scene(uvs), resolution, passes=passes, samples=options.samples, seed=options.seed,
                   progress=progress, denoise=options.denoise)
-    return np.ascontiguousarray(result[0][..., :3])
+    return [result[0]] if len(passes) == 1 else [result[name][0] for name in passes]
 
 
 def _tessellated(sample, variant, baseline, budget):
@@ -123,10 +143,8 @@ def _tessellated(sample, variant, baseline, budget):
     return scene, result.report
 
 
-# A further stage is kept only if its layout moves texels by at least this
-# much (median relative change of triangle texel density against the
-# previous stage): the rule needs no ground truth, as in the add-on.
-STAGE_MIN_CHANGE = 0.05
+# The stop rule of further stages is shared with the add-on (lmrefine.metrics).
+STAGE_MIN_CHANGE = metrics.STAGE_MIN_CHANGE
 
 
 def _further_stages(sample, triangles, resolution, padding, options, stages, points, truth, transitions, refined,
@@ -136,7 +154,6 @@ def _further_stages(sample, triangles, resolution, padding, options, stages, poi
     previous one (STAGE_MIN_CHANGE); the world-space error of every stage is
     measured at the evaluation's points for the report, never used to choose.
     Returns the last kept stage's (refine result, map, lookup) and the history."""
-    areas = sample.triangle_areas()
     everywhere = np.ones(len(truth), bool)
 
     def errors(stage, result, lookup, change=None):
@@ -153,15 +170,12 @@ def _further_stages(sample, triangles, resolution, padding, options, stages, poi
         previous, previous_map = refined, refined_map
         candidate = stages.run("refine", lambda p: refine_uvs(previous_map, previous.uvs, triangles, resolution,
                                                               padding=padding, progress=p, **options.refine_options))
-        before = metrics.texel_density(previous.uvs, triangles, areas, resolution)
-        after = metrics.texel_density(candidate.uvs, triangles, areas, resolution)
-        ratio = after / np.maximum(before, 1e-30)
-        change = float(np.median(np.abs(ratio[before > 0] - 1))) if (before > 0).any() else 0.0
-        if not candidate.report["moved"] or change < STAGE_MIN_CHANGE:
+        change = metrics.layout_change(previous.uvs, candidate.uvs, triangles)
+        reason = metrics.stage_stop_reason(stage, bool(candidate.report["moved"]), change)
+        if reason is not None:
             history.append({"stage": stage, "moved": bool(candidate.report["moved"]), "layout_change": change,
                             "kept": False})
-            stopped = (f"stage {stage} changed the layout by {change:.1%} (median texel density), under "
-                       f"{STAGE_MIN_CHANGE:.0%}: stage {stage - 1} kept")
+            stopped = reason
             break
         candidate_map = stages.run("bake refined", lambda p: _bake_map(sample, candidate.uvs, resolution, options, p))
         uv = metrics.interpolate_corners(candidate.uvs, points.triangle, points.bary)
@@ -187,7 +201,79 @@ def _uniform_repack(sample, uvs, triangles, resolution, padding, options, points
             "utilisation_after": float(report["utilisation"]), "global_scale": float(report["global_scale"])}
 
 
+def _per_effect(sample, uvs, triangles, resolution, options, stages, points, truth, effect_truth, transitions,
+                first_bakes, sweep):
+    """Separate layouts for separate effects (lmrefine.per_effect), once per
+    split rule: each effect's texels (R^2 split by the rule), its first bake
+    on the input layout at its own resolution, refine_uvs from that bake, the
+    effect baked on its refined layout; at the points, the effects' maps added
+    up against the combined truth, and each effect against its own uniform
+    bakes (its equal-error ratio). `first_bakes` {effect: (bake at R,
+    another seed's)}, `sweep` the combined uniform bakes at R x multipliers.
+    Returns (report, {(rule, effect): refined uvs})."""
+    everywhere = np.ones(len(truth), bool)
+    energies = {name: gradient_energy(*first_bakes[name]) for name in EFFECTS}
+    # (effect, layout, side) -> (map or None, values at the points): rules
+    # that give an effect the same side share its bakes on the input layout.
+    bakes = {}
+
+    def lookup(name, layout_uvs, side, key, keep_map=False):
+        if (name, key, side) not in bakes:
+            image = stages.run(f"per-effect bake {name}", lambda p: _bake_map(sample, layout_uvs, side, options, p,
+                                                                              passes=name))
+            at_points = metrics.interpolate_corners(layout_uvs, points.triangle, points.bary)
+            bakes[(name, key, side)] = (image if keep_map else None, metrics.bilinear_lookup(image, at_points))
+        return bakes[(name, key, side)]
+
+    def figures(plain, refined, target, sweep_errors, sweep_transition_errors):
+        out = {}
+        for where, prefix, errors in ((everywhere, "", sweep_errors), (transitions, "transition_",
+                                                                       sweep_transition_errors)):
+            rmse_plain = metrics.error_stats(plain, target, where)["rmse"]
+            rmse_refined = metrics.error_stats(refined, target, where)["rmse"]
+            ratio, status = metrics.equal_error_resolution(options.multipliers, errors, rmse_refined)
+            out.update({f"{prefix}rmse_plain": rmse_plain, f"{prefix}rmse_refined": rmse_refined,
+                        f"{prefix}equal_error_resolution_ratio": ratio, f"{prefix}equal_error_status": status})
+        return out
+
+    combined_errors = [metrics.error_stats(s["lookup"], truth, everywhere)["rmse"] for s in sweep]
+    combined_transition_errors = [metrics.error_stats(s["lookup"], truth, transitions)["rmse"] for s in sweep]
+    rules, layouts = [], {}
+    for rule in options.per_effect:
+        fractions = split_fractions(rule, energies)
+        sides = split_resolutions(resolution, fractions)
+        effects, plain_sum, refined_sum = {}, 0.0, 0.0
+        for name in EFFECTS:
+            side = sides[name]
+            gutter = check_layout(uvs, triangles, side, options.padding)["min_gutter_texels"]
+            padding = min(float(options.padding), float(gutter))
+            first, plain = lookup(name, uvs, side, "input", keep_map=True)
+            refined = stages.run("per-effect refine", lambda p: refine_uvs(
+                first, uvs, triangles, side, padding=padding, progress=p, **options.refine_options))
+            _, refined_lookup = lookup(name, refined.uvs, side, f"{rule} refined")
+            layouts[(rule, name)] = refined.uvs
+            # The effect's own uniform bakes at side x multipliers, against its own truth.
+            target = effect_truth[name]
+            sweep_lookups = [plain] + [lookup(name, uvs, int(round(side * m)), "input")[1]
+                                       for m in options.multipliers[1:]]
+            effects[name] = {
+                "fraction": fractions[name], "resolution": side, "texels": side * side, "energy": energies[name],
+                "layout_valid": bool(check_layout(refined.uvs, triangles, side, padding)["valid"]),
+                "moved": bool(refined.report["moved"]),
+                **figures(plain, refined_lookup, target,
+                          [metrics.error_stats(s, target, everywhere)["rmse"] for s in sweep_lookups],
+                          [metrics.error_stats(s, target, transitions)["rmse"] for s in sweep_lookups])}
+            plain_sum, refined_sum = plain_sum + plain, refined_sum + refined_lookup
+        texels = sum(e["texels"] for e in effects.values())
+        rules.append({"rule": rule, "texels": texels, "texel_fraction": texels / resolution ** 2,
+                      **figures(plain_sum, refined_sum, truth, combined_errors, combined_transition_errors),
+                      "effects": effects})
+    return {"effects": list(EFFECTS), "combined_texels": resolution ** 2, "rules": rules}, layouts
+
+
 def _single_pass(sample, options):
+    if options.per_effect:
+        return "combined"
     if options.bake_pass:
         return options.bake_pass
     if len(sample.passes) != 1:
@@ -261,7 +347,18 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
         layout = {"source": "rechart", **{k: v for k, v in recharted.report.items() if k != "chart_ids"}}
     uvs, triangles = sample.layout(variant)
 
-    baseline = stages.run("bake baseline", lambda p: _bake_map(sample, uvs, resolution, options, p))
+    first_bakes = None
+    if options.per_effect:
+        # The combined baseline and each effect's bake at R in one bake, and
+        # the effects again with another seed: their energy without the noise.
+        maps = stages.run("bake baseline", lambda p: _bake_passes(sample, uvs, resolution, options, p,
+                                                                  ("combined",) + EFFECTS))
+        again = stages.run("per-effect energy bake", lambda p: _bake_passes(
+            sample, uvs, resolution, replace(options, seed=options.seed + 1), p, EFFECTS))
+        baseline = np.ascontiguousarray(maps[0][..., :3])
+        first_bakes = {name: (first, second) for name, first, second in zip(EFFECTS, maps[1:], again)}
+    else:
+        baseline = stages.run("bake baseline", lambda p: _bake_map(sample, uvs, resolution, options, p))
     tessellation = None
     if options.tessellate is not None:
         # Same surface, same lightmap mapping: the baseline bake stays valid and
@@ -291,17 +388,27 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
         sample.positions, sample.triangles, points, step, normals=sample.normals)
     scene = sample.to_scene(uvs)
 
+    # With per_effect the truth is traced per effect, the combined light their sum.
+    truth_passes = EFFECTS if options.per_effect else passes
+
     def truth_at(p):
         every_point = np.concatenate([points.points, stencil_points])
         every_normal = np.concatenate([points.normals, stencil_normals])
-        first = evaluate_light(scene, every_point, every_normal, passes=passes, samples=options.truth_samples,
-                               seed=options.seed + 1, progress=p)
+        first = evaluate_light(scene, every_point, every_normal, passes=truth_passes,
+                               samples=options.truth_samples, seed=options.seed + 1, progress=p)
         # A second, independent estimate at the points: the truth is their
         # mean, and their difference measures the truth's own noise.
-        second = evaluate_light(scene, points.points, points.normals, passes=passes,
+        second = evaluate_light(scene, points.points, points.normals, passes=truth_passes,
                                 samples=options.truth_samples, seed=options.seed + 2, progress=p)
+        if isinstance(first, dict):
+            return {name: value.astype(np.float64) for name, value in first.items()}, \
+                {name: value.astype(np.float64) for name, value in second.items()}
         return first.astype(np.float64), second.astype(np.float64)
     every_truth, second_truth = stages.run("ground truth", truth_at)
+    effect_truth = None
+    if isinstance(every_truth, dict):
+        effect_truth = {name: (every_truth[name][:len(points)] + second_truth[name]) / 2 for name in EFFECTS}
+        every_truth, second_truth = sum(every_truth.values()), sum(second_truth.values())
     truth = (every_truth[:len(points)] + second_truth) / 2
     neighbour_truth = every_truth[len(points):]
     truth_noise = metrics.truth_noise(every_truth[:len(points)], second_truth)
@@ -326,6 +433,10 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
         size = int(round(resolution * multiplier))
         image = stages.run("bake resolution sweep", lambda p: _bake_map(sample, uvs, size, options, p))
         sweep.append({"multiplier": multiplier, "resolution": size, "lookup": metrics.bilinear_lookup(image, uv_base)})
+    per_effect = per_effect_layouts = None
+    if options.per_effect:
+        per_effect, per_effect_layouts = _per_effect(sample, uvs, triangles, resolution, options, stages, points,
+                                                     truth, effect_truth, transitions, first_bakes, sweep)
 
     # The re-charted maps against uniform bakes of the scene's own layouts.
     compared = []
@@ -431,6 +542,8 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
         result["tessellation"] = tessellation
     if stage_history is not None:
         result["stages"] = stage_history
+    if per_effect is not None:
+        result["per_effect"] = per_effect
     gain = (result["transition_rmse_refined"] <= (1 - GAIN_THRESHOLD) * result["transition_rmse_baseline"])
     result["gain"] = bool(gain)
     result["notes"] = [] if gain else _diagnose(result, context)
@@ -456,6 +569,9 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
         write_image(os.path.join(out_dir, "refined.exr"), np.ascontiguousarray(refined_map), format="half")
         np.savez_compressed(os.path.join(out_dir, "refined_layout.npz"), uvs=refined.uvs, triangles=triangles,
                             original_uvs=uvs)
+        for (rule, name), effect_uvs in (per_effect_layouts or {}).items():
+            np.savez_compressed(os.path.join(out_dir, f"per_effect_{rule}_{name}_layout.npz"), uvs=effect_uvs,
+                                triangles=triangles, original_uvs=uvs)
         stages.run("pictures", lambda p: write_pictures(out_dir, result, {
             "baseline": baseline, "refined": refined_map, "uvs": uvs, "refined_uvs": refined.uvs,
             "triangles": triangles, "density_ratio": density_refined / np.maximum(density_base, 1e-30),

@@ -292,6 +292,51 @@ def comparison_lines(r):
     return lines
 
 
+def per_effect_lines(r, heading="## Separate layouts for separate effects"):
+    """The per-effect maps added up against the one combined map of the same
+    total texels (lmrefine.per_effect), one row per split rule."""
+    pe = r.get("per_effect")
+    if not pe:
+        return []
+    lines = ["", heading, "",
+             f"Each effect ({' + '.join(pe['effects'])}) refined from its own first bake and baked at its own "
+             f"resolution, added up at the points, against the combined map refined at {r['resolution']}^2 "
+             f"(RMSE {_number(r['rmse_refined'])}, transitions {_number(r['transition_rmse_refined'])}, equal-error "
+             f"{_ratio_text(r['equal_error_resolution_ratio'], r['equal_error_status'])}). Equal-error ratios of the "
+             "sum against the combined uniform bakes; of each effect against its own uniform bakes at its own "
+             "resolution.", "",
+             "| split | resolutions | texels / R^2 | RMSE plain -> refined | transition RMSE plain -> refined | "
+             "equal-error (transitions) | per effect: equal-error |", "|---|---|---|---|---|---|---|"]
+    for rule in pe["rules"]:
+        effects = rule["effects"]
+        lines.append(
+            f"| {rule['rule']} | " + " + ".join(f"{name} {e['resolution']}^2 ({e['fraction']:.0%})"
+                                               for name, e in effects.items()) +
+            f" | {rule['texel_fraction']:.3f} | {_number(rule['rmse_plain'])} -> {_number(rule['rmse_refined'])} | "
+            f"{_number(rule['transition_rmse_plain'])} -> {_number(rule['transition_rmse_refined'])} | "
+            f"{_ratio_text(rule['equal_error_resolution_ratio'], rule['equal_error_status'])} "
+            f"({_ratio_text(rule['transition_equal_error_resolution_ratio'], rule['transition_equal_error_status'])})"
+            " | " + ", ".join(f"{name} {_ratio_text(e['equal_error_resolution_ratio'], e['equal_error_status'])}"
+                              for name, e in effects.items()) + " |")
+    return lines
+
+
+def per_effect_summary(summary):
+    """One line per scene and split rule in the summary report.md."""
+    lines = []
+    for r in summary["scenes"]:
+        for rule in (r.get("per_effect") or {}).get("rules", []):
+            lines.append(
+                f"- {r['scene']} ({r['variant']}) per-effect layouts, split `{rule['rule']}` ("
+                + " + ".join(f"{name} {e['resolution']}^2" for name, e in rule["effects"].items())
+                + f" = {rule['texel_fraction']:.3f} R^2): RMSE {_number(rule['rmse_refined'])} against "
+                f"{_number(r['rmse_refined'])} for one combined refined map "
+                f"({_change(r['rmse_refined'], rule['rmse_refined'])}); equal-error "
+                f"{_ratio_text(rule['equal_error_resolution_ratio'], rule['equal_error_status'])} against "
+                f"{_ratio_text(r['equal_error_resolution_ratio'], r['equal_error_status'])}.")
+    return lines
+
+
 def scene_markdown(result):
     r = result
     lines = [
@@ -352,6 +397,7 @@ def scene_markdown(result):
         lines.append("**No gain on this scene.** Why:")
         lines += [f"- {note}" for note in r["notes"]]
     lines += comparison_lines(r)
+    lines += per_effect_lines(r)
     lines += ["", "## Error against resolution (uniform baseline)", "",
               "| resolution | RMSE | transition RMSE |", "|---|---|---|"]
     for s in r["resolution_sweep"]:
@@ -452,6 +498,7 @@ def write_summary(out_dir, summary):
                 f"equal-error ratio {_ratio_text(c['equal_error_resolution_ratio_baseline'], c['equal_error_status_baseline'])} "
                 f"plain, {_ratio_text(c['equal_error_resolution_ratio_refined'], c['equal_error_status_refined'])} "
                 "refined.")
+    lines += per_effect_summary(summary)
     for r in summary["scenes"]:
         if not r["gain"]:
             lines.append(f"- **{r['scene']} ({r['variant']}) shows no gain**: " + "; ".join(r["notes"]) + ".")

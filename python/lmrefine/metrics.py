@@ -63,6 +63,33 @@ def uv_areas(uvs, triangles):
     return 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
 
 
+# A further refinement stage (bake, refine, bake again) is kept only if its
+# layout moves texels by at least this much against the previous stage's
+# (layout_change): the rule needs no ground truth, so `evaluate --stages` and
+# the add-on's Stages setting stop on the same rule.
+STAGE_MIN_CHANGE = 0.05
+
+
+def layout_change(previous_uvs, uvs, triangles):
+    """How much a layout moved texels: the median over the triangles of
+    |new / old texel density - 1| between two layouts of the same triangles
+    (world areas and resolution cancel: it is the UV area ratio). Triangles
+    without UV area in `previous_uvs` are left out; 0 when none has area."""
+    before, after = uv_areas(previous_uvs, triangles), uv_areas(uvs, triangles)
+    has_area = before > 0
+    return float(np.median(np.abs(after[has_area] / before[has_area] - 1))) if has_area.any() else 0.0
+
+
+def stage_stop_reason(stage, moved, change):
+    """None when refinement stage `stage` (2, 3, ...) is kept: it moved the
+    layout by `change` (layout_change) of at least STAGE_MIN_CHANGE; else why
+    the stages stop there (stage - 1 is the last one kept)."""
+    if moved and change >= STAGE_MIN_CHANGE:
+        return None
+    return (f"stage {stage} changed the layout by {change:.1%} (median texel density), under "
+            f"{STAGE_MIN_CHANGE:.0%}: stage {stage - 1} kept")
+
+
 def interpolate_corners(per_corner, triangle, bary):
     """Values given per corner (3T, K) (corner k of triangle t at 3t+k) at
     points (triangle, barycentric coordinates)."""

@@ -31,7 +31,7 @@ class PackResult(NamedTuple):
 
 
 def pack_charts(uvs, triangles, charts, scales, resolution, padding=2.0, rotations=True, progress=None, *,
-                tolerance=CHART_TOLERANCE, subdivision=2):
+                tolerance=CHART_TOLERANCE, subdivision=2, boxes=True):
     """Pack a layout's charts into one atlas, [0, 1]^2, as large as it allows.
 
     Every chart moves as a whole: chart c is scaled by
@@ -40,7 +40,9 @@ def pack_charts(uvs, triangles, charts, scales, resolution, padding=2.0, rotatio
     orientation. The packer searches the largest ``global_scale`` at which
     every chart fits; charts are fitted by their conservative texel footprint
     at ``resolution`` (the texels ``coverage_mask`` would mark), dilated by
-    ``padding``, so concave charts nest and small charts fill holes.
+    ``padding``, so concave charts nest and small charts fill holes; or by
+    their bounding boxes at continuous positions where that fits them larger
+    (``boxes``).
     Deterministic: the same input gives the same output, whatever the
     thread count. Give all objects that share an atlas in one call.
 
@@ -71,6 +73,11 @@ def pack_charts(uvs, triangles, charts, scales, resolution, padding=2.0, rotatio
             finer than the texels (1-8, resolution * subdivision <= 32768):
             charts land on sub-texel positions, so small charts lose less to
             the grid; time grows about linearly.
+        boxes: also place the charts as bounding boxes at continuous
+            positions (shelves, then a skyline) and keep that when it
+            reaches a 1% larger global scale: rectangular charts (Lightmap
+            Pack's, one per face) fit exactly, where the footprint grid
+            rounds up every small chart and gutter. False: footprints only.
 
     Returns:
         PackResult ``(uvs, report)``. ``uvs`` (N, 2) float32: the packed
@@ -100,7 +107,8 @@ def pack_charts(uvs, triangles, charts, scales, resolution, padding=2.0, rotatio
           ``chart_scales[c]`` times the identity or a quarter turn.
         * offsets (C, 2) float64: ``transforms[:, :, 2]``.
         * chart_ids (T,) int32: the charts packed (``charts`` or found).
-        * charts, trials (placements the scale search tried),
+        * placement: "footprints" or "boxes", the placement kept.
+        * charts, trials (placements the scale searches tried),
           footprint_texels, padding, resolution (height, width), seconds.
 
     Raises:
@@ -111,7 +119,7 @@ def pack_charts(uvs, triangles, charts, scales, resolution, padding=2.0, rotatio
     """
     new_uvs, report = _native.pack_charts(uvs, triangles, resolution, padding, charts=charts, scales=scales,
                                           rotate=rotations, progress=progress, tolerance=tolerance,
-                                          subdivision=subdivision)
+                                          subdivision=subdivision, boxes=boxes)
     report["offsets"] = report["transforms"][:, :, 2]
     if _flat_count(new_uvs, triangles) > _flat_count(uvs, triangles):
         # The scale search can end at a scale so small (absurd scales, a

@@ -184,9 +184,11 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
         repack: after the in-chart refinement, scale each chart by its
             signal (the error model in docs/refiner.md, "Chart scaling")
             and pack all charts into one atlas with lmrefine.pack_charts
-            (rotations, at least `padding` texels apart). Kept only if the
-            model predicts less error than the unpacked result and the
-            packed layout passes the same checks; report["repack"] says
+            (rotations, at least `padding` texels apart, or the input's
+            gutter where that is narrower, but at least a texel). Kept only
+            if the model predicts less error than the unpacked result, the
+            packed atlas is about as dense as the input and the packed
+            layout passes the same checks; report["repack"] says
             what happened (None when off). `grid` stays the automaton's
             in-chart deformation, before the charts are scaled and moved.
         min_chart_scale, max_chart_scale: bounds on a chart's linear scale
@@ -290,7 +292,11 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
         if not 0 < min_chart_scale <= 1 <= max_chart_scale < np.inf:
             raise ValueError(f"need 0 < min_chart_scale <= 1 <= max_chart_scale (finite), got {min_chart_scale} "
                              f"and {max_chart_scale}")
-        packed, repack_report = allocation.repack(uvs, new_uvs, triangles, scalar_energy, shape, float(padding),
+        # Pack at the gutter the checks ask for: the padding, or the input's
+        # gutter where that is narrower (backoff.allowed_gutter), never below
+        # a texel unless the padding is (dilation needs a texel between charts).
+        pack_padding = min(float(padding), max(float(original["min_gutter_texels"]), min(float(padding), 1.0)))
+        packed, repack_report = allocation.repack(uvs, new_uvs, triangles, scalar_energy, shape, pack_padding,
                                                   float(min_chart_scale), float(max_chart_scale), progress)
         if packed is not None:
             packed_check = _native.check_layout(packed, triangles, shape, padding)
@@ -313,8 +319,9 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
             notes.append(f"repack not used: {repack_report['reason']}")
         else:
             notes.append(f"repack not used: the error model predicts {repack_report['predicted_error']:.3f} of the "
-                         f"unpacked error and the atlas would cover {repack_report['utilisation_after']:.0%} of "
-                         f"the texels (the input: {repack_report['utilisation_before']:.0%})")
+                         f"unpacked error and the packed atlas would be "
+                         f"{repack_report['padded_utilisation_after']:.0%} full with its gutters "
+                         f"(the input: {repack_report['padded_utilisation_before']:.0%})")
         timings["repack"] = time.perf_counter() - clock
     areas = _native.grid_cell_areas(grid)
     covered_areas = areas[mask] if mask.any() else np.ones(1, np.float32)
@@ -323,7 +330,7 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
     if covered_areas.min() <= min_shrink * 1.001:
         limited_by.append("min_shrink")
     # Every figure is measured on the layout returned (triangle UV areas), not on the grid.
-    density = _triangle_density(uvs, new_uvs, triangles)
+    figures = _layout_figures(uvs, new_uvs, triangles, scalar_energy, mask)
     moved = not np.array_equal(new_uvs, uvs)
     if not moved:
         broke = [kind for kind in limited_by if kind in ("flipped", "overlapping", "gutter", "degenerate", "grid")]
@@ -333,14 +340,10 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
                "the deformation left every UV in place: UVs on chart borders keep their place, and here every "
                "UV is on one (small charts, e.g. one per face)")
         notes.append(f"nothing moved: {why}; the layout returned is the input")
-    measured = density[np.isfinite(density) & (density > 0)]
 
     report = {
         "moved": moved,
-        "transition_widening": _transition_widening(uvs, new_uvs, triangles, scalar_energy, mask),
-        "density_min": float(measured.min()) if measured.size else 1.0,
-        "density_max": float(measured.max()) if measured.size else 1.0,
-        "triangle_density": density,
+        **figures,
         "steps": int(run["steps"]),
         "levels": run["levels"],
         "converged": bool(run["converged"]),
@@ -359,6 +362,35 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
         "repack": repack_report,
     }
     return RefineResult(uvs=new_uvs, grid=grid, report=report)
+
+
+def layout_figures(lightmap, old_uvs, new_uvs, triangles, wavelet="d4"):
+    """The report's figures of a layout `new_uvs` made from `old_uvs` (one
+    refinement or several in a row) at the light changes of `lightmap`,
+    baked on `old_uvs`: transition_widening, density_min, density_max and
+    triangle_density, as refine_uvs defines them."""
+    old_uvs, triangles = _layout(old_uvs, triangles)
+    new_uvs = np.asarray(new_uvs, np.float32)
+    if new_uvs.shape != old_uvs.shape:
+        raise ValueError(f"new_uvs must have the shape of old_uvs {old_uvs.shape}, got {new_uvs.shape}")
+    lightmap = np.asarray(lightmap)
+    shape = tuple(lightmap.shape[:2]) if lightmap.ndim in (2, 3) else None
+    if shape is None:
+        raise ValueError(f"the lightmap must be an (H, W) or (H, W, C) array, got shape {lightmap.shape}")
+    mask = _native.coverage_mask(old_uvs, triangles, shape)
+    gradient = _gradient(lightmap, None, mask, shape, wavelet, None)
+    return _layout_figures(old_uvs, new_uvs, triangles, gradient.sum(axis=2), mask)
+
+
+def _layout_figures(old, new, triangles, energy, mask):
+    density = _triangle_density(old, new, triangles)
+    measured = density[np.isfinite(density) & (density > 0)]
+    return {
+        "transition_widening": _transition_widening(old, new, triangles, energy, mask),
+        "density_min": float(measured.min()) if measured.size else 1.0,
+        "density_max": float(measured.max()) if measured.size else 1.0,
+        "triangle_density": density,
+    }
 
 
 def _transition_widening(old, new, triangles, energy, mask):

@@ -182,7 +182,10 @@ def tessellate(positions, triangles, uvs, strength, *, budget=DEFAULT_BUDGET, mi
         rounds += 1
         order = candidates[np.argsort(-(peak[candidates] * texels[candidates]), kind="stable")]
         edge_users = _edge_users(triangles)
-        touched = np.zeros(len(triangles), bool)
+        # A triangle that repeats a vertex is never split, nor is an edge it uses:
+        # it lists that edge twice and has no interior to split.
+        touched = ((triangles[:, 0] == triangles[:, 1]) | (triangles[:, 1] == triangles[:, 2])
+                   | (triangles[:, 2] == triangles[:, 0]))
         new_rows = {name: [] for name in corner}
         new_triangles, new_parent, round_positions = [], [], []
         for t in order:

@@ -92,8 +92,8 @@ def fresh_shadow_scene(**values):
 def registration():
     """register() adds the operators, the panels and Scene.lmrefine; unregister() removes all of them."""
     register()
-    names = ("LMREFINE_PT_refine", "LMREFINE_PT_refine_options", "LMREFINE_PT_refine_bake",
-             "LMREFINE_PT_refine_result")
+    names = ("LMREFINE_PT_refine", "LMREFINE_PT_refine_options", "LMREFINE_PT_refine_stages",
+             "LMREFINE_PT_refine_bake", "LMREFINE_PT_refine_result")
     registered = {
         "panels": [name for name in names if hasattr(bpy.types, name)],
         "category": bpy.types.LMREFINE_PT_refine.bl_category,
@@ -953,6 +953,77 @@ def preview_wiring_toggle_and_removal():
     return facts
 
 
+# ------------------------------------------------- tessellation and stages
+
+def _corner_arrays(mesh):
+    """Per loop: position (L, 3) and every UV map and the 'Tint' colour, plus each loop's polygon."""
+    positions = _array(mesh.vertices, "co", 3).reshape(-1, 3)[_array(mesh.loops, "vertex_index", 1, np.int32)]
+    polygon_of = np.repeat(np.arange(len(mesh.polygons)), _array(mesh.polygons, "loop_total", 1, np.int32))
+    maps = {layer.name: bridge.read_uv_layer(mesh, layer.name).astype(np.float64) for layer in mesh.uv_layers}
+    maps["Tint"] = _array(mesh.color_attributes["Tint"].data, "color", 4).reshape(-1, 4).astype(np.float64)
+    return positions.astype(np.float64), polygon_of, maps
+
+
+def _affine_residual(positions, values, groups):
+    """Largest distance of `values` from the affine map of (x, y) fitted per group (least squares)."""
+    worst = 0.0
+    for group in np.unique(groups):
+        rows = groups == group
+        basis = np.column_stack([positions[rows, :2], np.ones(rows.sum())])
+        fit, *_ = np.linalg.lstsq(basis, values[rows], rcond=None)
+        worst = max(worst, float(np.abs(basis @ fit - values[rows]).max()))
+    return worst
+
+
+@check("refine", "bake")
+def tessellation_writes_the_split_into_the_mesh():
+    """Tessellate on, on a coarse floor (each quad its own Lightmap chart): more vertices, within the
+    budget, all on the floor; every UV map and the colour attribute interpolated (UVMap and Tint stay
+    one affine function of the position over the whole floor, Lightmap one per original quad, seams
+    included); then Ctrl+Z restores the original mesh exactly."""
+    scenes.coarse_shadow_scene()
+    register()
+    settings(resolution=RESOLUTION, padding=2, samples=4, first_lightmap='EMBREE', backend='EMBREE',
+             bake_passes={'DIRECT'}, tessellate=True)
+    mesh = bpy.data.objects["Floor"].data
+    before_positions, before_polygon, _ = _corner_arrays(mesh)
+    vertices_before = _array(mesh.vertices, "co", 3).reshape(-1, 3)
+    quad_corners = [before_positions[before_polygon == p, :2] for p in range(len(mesh.polygons))]
+    window = bpy.context.window_manager.windows[0]
+    with bpy.context.temp_override(window=window):
+        bpy.ops.ed.undo_push(message="before refine")
+    outcome, message = refine(undo=True)
+    mesh = bpy.data.objects["Floor"].data
+    positions, polygon_of, maps = _corner_arrays(mesh)
+    # The original quad each loop lies in: its polygon's centroid inside that quad's square.
+    centroids = np.array([positions[polygon_of == p].mean(axis=0) for p in range(len(mesh.polygons))])
+    quad_of_polygon = np.array([next(q for q, corners in enumerate(quad_corners)
+                                     if (corners.min(axis=0) <= c[:2]).all() and (c[:2] <= corners.max(axis=0)).all())
+                                for c in centroids])
+    result = bpy.context.scene.lmrefine.result
+    facts = {
+        "outcome": outcome, "message": message, "result_message": result.message,
+        "vertices_before": len(vertices_before), "vertices_after": len(mesh.vertices),
+        "panel_vertices_added": result.vertices_added, "panel_tessellated": result.tessellated,
+        "triangles_after": sum(1 for polygon in mesh.polygons if polygon.loop_total == 3),
+        "largest_height": float(np.abs(positions[:, 2]).max()),
+        "uvmap_residual": _affine_residual(positions, maps["UVMap"], np.zeros(len(positions))),
+        "tint_residual": _affine_residual(positions, maps["Tint"], np.zeros(len(positions))),
+        "lightmap_residual": _affine_residual(positions, maps["Lightmap"], quad_of_polygon[polygon_of]),
+        "refined_triangles": int(len(bridge.read_layout(mesh, "Lightmap_refined").triangles)),
+        "leftover_meshes": sorted(m.name for m in bpy.data.meshes),
+    }
+    with bpy.context.temp_override(window=window):
+        bpy.ops.ed.undo()
+        facts["can_undo_further"] = bpy.ops.ed.undo.poll()
+    mesh = bpy.data.objects["Floor"].data
+    facts["undo_vertices"] = len(mesh.vertices)
+    facts["undo_coordinates_equal"] = bool(np.array_equal(_array(mesh.vertices, "co", 3).reshape(-1, 3),
+                                                          vertices_before))
+    facts["undo_layers"] = [layer.name for layer in mesh.uv_layers]
+    return facts
+
+
 @check("refine", "bake")
 def preview_in_a_shared_material():
     """Two objects with one material: each gets its preview nodes; removing one shows the other,
@@ -974,6 +1045,95 @@ def preview_in_a_shared_material():
         scenes.select_only(floor)
         bpy.ops.object.lmrefine_remove_preview()
     facts["changed"] = changed(before, fingerprint())
+    return facts
+
+
+@check("refine", "bake")
+def tessellation_rolls_back_exactly():
+    """A run cancelled at the second bake, after the mesh was tessellated and the refined map written:
+    the journal puts back the original mesh (same datablock name, vertices, coordinates, every digest)."""
+    scenes.coarse_shadow_scene()
+    register()
+    settings(resolution=RESOLUTION, padding=2, samples=4, first_lightmap='EMBREE', backend='EMBREE',
+             bake_passes={'DIRECT'}, tessellate=True, tessellate_budget=1.0)
+    floor = bpy.data.objects["Floor"]
+    vertices_before = _array(floor.data.vertices, "co", 3).reshape(-1, 3)
+    before = fingerprint()
+    meshes_before = sorted(m.name for m in bpy.data.meshes)
+    options = pipeline.settings_snapshot(bpy.context.scene.lmrefine)
+    targets = pipeline.validate(bpy.context, [floor], options)
+    journal = Journal()
+    seen = {}
+
+    def stop():
+        if "Lightmap_refined" not in floor.data.uv_layers:
+            return False
+        seen.setdefault("vertices_when_stopped", len(floor.data.vertices))
+        return True
+
+    try:
+        pipeline.run_blocking(pipeline.run(bpy.context, targets, options, journal), should_stop=stop)
+        raised = None
+    except Exception as error:
+        raised = type(error).__name__
+        journal.rollback()
+    mesh = bpy.data.objects["Floor"].data
+    return {"raised": raised, "vertices_when_stopped": seen.get("vertices_when_stopped"),
+            "vertices": len(mesh.vertices), "vertices_before": len(vertices_before),
+            "coordinates_equal": bool(np.array_equal(_array(mesh.vertices, "co", 3).reshape(-1, 3),
+                                                     vertices_before)),
+            "mesh_name": mesh.name, "meshes": sorted(m.name for m in bpy.data.meshes),
+            "meshes_before": meshes_before, "changed": changed(before, fingerprint())}
+
+
+@check()
+def tessellation_refused_where_it_would_change_more():
+    """A mesh shared with another object, or under modifiers: the object is refused, the message names the fix."""
+    facts = {}
+    for case in ("shared", "modifier"):
+        scenes.coarse_shadow_scene()
+        register()
+        settings(resolution=RESOLUTION, padding=2, samples=4, first_lightmap='EMBREE', tessellate=True)
+        floor = bpy.data.objects["Floor"]
+        if case == "shared":
+            twin = bpy.data.objects.new("FloorTwin", floor.data)
+            bpy.context.scene.collection.objects.link(twin)
+        else:
+            floor.modifiers.new("Bevel", 'BEVEL')
+        before = fingerprint()
+        outcome, message = refine()
+        facts[case] = {"outcome": outcome, "message": message, "changed": changed(before, fingerprint())}
+    return facts
+
+
+@check("refine", "bake")
+def stages_refine_the_layout_again():
+    """Stages 2 refines the stage-1 layout again from a bake with it (the layout changes by more than
+    the stop rule's 5%); the panel and the report say how many stages were kept."""
+    from lmrefine import metrics
+
+    fresh_shadow_scene(first_lightmap='EMBREE', backend='EMBREE', bake_passes={'DIRECT'})
+    mesh = bpy.data.objects["Floor"].data
+    triangles = bridge.read_layout(mesh, "Lightmap").triangles
+    layers = {}
+    facts = {}
+    for stages in (1, 2):
+        settings(stages=stages)
+        outcome, message = refine()
+        result = bpy.context.scene.lmrefine.result
+        layers[stages] = bridge.read_uv_layer(mesh, "Lightmap_refined")
+        facts[stages] = {"outcome": outcome, "message": message, "result_message": result.message,
+                         "stages": result.stages, "stages_kept": result.stages_kept,
+                         "stopped": result.stages_stopped,
+                         "valid": bool(lmrefine.check_layout(layers[stages], triangles, RESOLUTION,
+                                                             padding=2)["valid"])}
+    facts["layout_change"] = metrics.layout_change(layers[1], layers[2], triangles)
+    facts["stage_min_change"] = metrics.STAGE_MIN_CHANGE
+    settings(stages=3, strength=0.0)  # nothing moves: stage 2 stops the stages, stage 1 is kept
+    facts["still"] = dict(zip(("outcome", "message"), refine()))
+    result = bpy.context.scene.lmrefine.result
+    facts["still"].update(stages_kept=result.stages_kept, stopped=result.stages_stopped,
+                          result_message=result.message)
     return facts
 
 
@@ -1062,6 +1222,15 @@ def menus_and_panel_rows():
         "menus": menus, "menus_after_unregister": menus_after_unregister,
         "show_operator": hasattr(bpy.ops.object, "lmrefine_show_preview"),
     }
+
+
+@check()
+def save_coarse_scene_for_batch():
+    scenes.coarse_shadow_scene()
+    register()
+    path = os.path.join(WORK_DIR, "coarse.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    return {"path": path}
 
 
 @check()

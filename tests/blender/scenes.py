@@ -132,3 +132,33 @@ def bare_mesh():
     obj = bpy.data.objects.new("Bare", mesh)
     bpy.context.scene.collection.objects.link(obj)
     return obj
+
+
+def coarse_shadow_scene(quads=4):
+    """shadow_scene with a coarse floor: quads x quads faces, each its own chart of the Lightmap map
+    (seams everywhere, like Lightmap Pack), so the box's shadow edge crosses triangles of many texels.
+    Besides UVMap and Lightmap, the floor has a corner colour attribute 'Tint' that, like UVMap, is
+    a linear function of the position: tessellation must keep both so."""
+    scene = shadow_scene()
+    floor = bpy.data.objects["Floor"]
+    old = floor.data
+    bpy.ops.mesh.primitive_grid_add(x_subdivisions=quads, y_subdivisions=quads, size=4.0)
+    coarse = bpy.context.active_object
+    mesh = coarse.data
+    floor.data = mesh
+    bpy.data.objects.remove(coarse)
+    bpy.data.meshes.remove(old)
+    mesh.name = "FloorMesh"
+    _set_face_charts_layer(mesh, columns=quads, rows=quads)
+    mesh.materials.append(bpy.data.materials["FloorMaterial"])
+    positions = np.empty(len(mesh.vertices) * 3, np.float32)
+    mesh.vertices.foreach_get("co", positions)
+    loop_vertex = np.empty(len(mesh.loops), np.int32)
+    mesh.loops.foreach_get("vertex_index", loop_vertex)
+    corner = positions.reshape(-1, 3)[loop_vertex]
+    tint = mesh.color_attributes.new("Tint", 'FLOAT_COLOR', 'CORNER')
+    colors = np.stack([0.5 + 0.1 * corner[:, 0], 0.5 - 0.05 * corner[:, 1], 0.25 + 0 * corner[:, 0],
+                       np.ones(len(corner))], axis=1).astype(np.float32)
+    tint.data.foreach_set("color", colors.ravel())
+    select_only(floor)
+    return scene

@@ -16,7 +16,7 @@ dead or stuck Blender was running. Outcomes:
     other exception     the operator failed with an unexpected error, or raised
     scene modified      a CANCELLED run changed the scene, or a FINISHED one changed
                         the user's geometry or UV maps (only *_refined maps may change)
-    invalid layout      a refined map worse than its source (lmrefine.backoff.failures)
+    invalid layout      a refined map worse than its source (lmrefine.backoff.worse_than_source)
     good object not refined
                         the floor or the box was selected but not refined (a broken
                         object beside them must be skipped, not stop the run)
@@ -38,7 +38,7 @@ import numpy as np  # noqa: E402
 import lmrefine  # noqa: E402
 import lmrefine_blender  # noqa: E402
 import scenes  # noqa: E402
-from lmrefine.backoff import failures  # noqa: E402
+from lmrefine.backoff import worse_than_source  # noqa: E402
 from scene_state import _array, _digest, changed, fingerprint  # noqa: E402
 
 REFINED = "_refined"
@@ -186,6 +186,25 @@ def user_state():
     return state
 
 
+def tessellation_problems(selected, budget, vertices_before, user_before):
+    """A tessellated mesh keeps its vertices (first, unmoved) and adds at most budget x their count; it is
+    taken out of `user_before` so the run's other changes are still checked."""
+    problems = []
+    for obj in selected:
+        mesh = obj.data if obj.type == 'MESH' else None
+        if mesh is None or mesh.name not in vertices_before:
+            continue
+        old = vertices_before[mesh.name]
+        new = _array(mesh.vertices, "co", 3).reshape(-1, 3)
+        if len(new) == len(old):
+            continue
+        if len(new) > len(old) + int(np.floor(budget * len(old))) or not np.array_equal(new[:len(old)], old):
+            problems.append(f"{obj.name}: {len(old)} -> {len(new)} vertices, originals kept: "
+                            f"{np.array_equal(new[:len(old)], old)}")
+        user_before.pop(mesh.name, None)
+    return problems
+
+
 def refine():
     window = bpy.context.window_manager.windows[0]
     with bpy.context.temp_override(window=window):
@@ -207,10 +226,7 @@ def refined_layouts_valid(selected, settings):
             continue
         layout = bridge.read_layout(mesh, "Lightmap")
         refined = bridge.read_uv_layer(mesh, "Lightmap" + REFINED)
-        source = lmrefine.check_layout(layout.uvs, layout.triangles, settings.resolution, padding=settings.padding)
-        check = lmrefine.check_layout(refined, layout.triangles, settings.resolution, padding=settings.padding,
-                                      reference_uvs=layout.uvs, relative_gutter=True)
-        worse = failures(check, source, settings.padding)
+        worse, _ = worse_than_source(refined, layout.uvs, layout.triangles, settings.resolution, settings.padding)
         if worse:
             bad.append(f"{obj.name}: {worse}")
     return bad
@@ -237,14 +253,27 @@ def run_case(seed, index):
     scenes.select_only(*selected)
     description = f"defects {defects}; selected {[o.name for o in selected]}"
     good = [o for o in selected if o.name in ("Floor", "Blocker")]
+    # The opt-in settings draw from their own stream: the cases above stay what they were.
+    extra = np.random.default_rng([seed, index, 8])
+    settings.stages = int(extra.choice([1, 1, 2, 3]))
+    settings.tessellate = bool(extra.random() < 0.3)
+    description += f"; stages {settings.stages}" + ("; tessellate" if settings.tessellate else "")
     before, user_before = fingerprint(), user_state()
+    vertices_before = {mesh.name: _array(mesh.vertices, "co", 3).reshape(-1, 3) for mesh in bpy.data.meshes}
     outcome, message = refine()
     missed = [o.name for o in good if "Lightmap" + REFINED not in o.data.uv_layers]
     if missed:  # bad geometry elsewhere must not stop these
         return "good object not refined", f"{description}: {outcome} {message}; not refined: {missed}"
     if outcome == "FINISHED":
-        if user_state() != user_before:
-            return "scene modified", f"{description}: FINISHED but changed {changed(user_before, user_state())}"
+        if settings.tessellate:
+            split = tessellation_problems(selected, settings.tessellate_budget, vertices_before, user_before)
+            if split:
+                return "scene modified", f"{description}: tessellation {split}"
+        # Meshes taken out of user_before were tessellated, and checked above; a new mesh still counts.
+        after = {name: digest for name, digest in user_state().items()
+                 if name in user_before or name not in vertices_before}
+        if after != user_before:
+            return "scene modified", f"{description}: FINISHED but changed {changed(user_before, after)}"
         bad = refined_layouts_valid(selected, settings)
         if bad:
             return "invalid layout", f"{description}: {bad}"

@@ -62,7 +62,7 @@ def _snapshot(value, depth=0):
 
 def _judge_layout(lm, case, result):
     """Why the returned layout breaks its function's promise, or None."""
-    from lmrefine.backoff import failures
+    from lmrefine.backoff import worse_than_source
 
     uvs, triangles, resolution, padding = case.layout
     if case.recharted:  # a new per-corner layout: valid with the padding
@@ -90,8 +90,7 @@ def _judge_layout(lm, case, result):
         if clean and check["min_gutter_texels"] < padding - 1e-3:
             worse.append(f"gutter {check['min_gutter_texels']:.3f} < padding {padding}")
         return f"packed layout worse than its input: {worse}" if worse else None
-    check = lm.check_layout(out, triangles, resolution, padding=padding, reference_uvs=uvs, relative_gutter=True)
-    worse = failures(check, source, padding)
+    worse, _ = worse_than_source(out, uvs, triangles, resolution, padding)
     return f"worse than the source: {worse}" if worse else None
 
 

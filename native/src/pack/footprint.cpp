@@ -45,7 +45,7 @@ std::vector<glm::dvec2> local_pixels(const ChartPiece& piece, const std::vector<
     return local;
 }
 
-glm::dvec2 turn_local(const glm::dvec2& p, int width) { return {p.y, double(width) - p.x}; }
+glm::dvec2 turn_local(const glm::dvec2& p, double width) { return {p.y, width - p.x}; }
 
 Footprint make_footprint(const ChartPiece& piece, const UvLayout& layout, const std::vector<glm::dvec2>& local,
                          double padding) {

@@ -63,7 +63,7 @@ Footprint make_footprint(const ChartPiece& piece, const UvLayout& layout, const 
 // `width` columns wide moved with them. Exact on the texel lattice, so the
 // turned chart lies in the turned footprint as the chart in the footprint.
 Footprint turned_footprint(const Footprint& fp, double padding);
-glm::dvec2 turn_local(const glm::dvec2& p, int width);
+glm::dvec2 turn_local(const glm::dvec2& p, double width);
 
 // The footprint of a bitmap ((height * width) bytes, nonzero = covered).
 Footprint footprint_of_bits(const std::vector<uint8_t>& bits, int width, int height, double padding);

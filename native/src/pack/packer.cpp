@@ -1,7 +1,8 @@
-// The scale search: the largest global scale at which the greedy first-fit
-// placement (occupancy.cpp) places every chart. Each trial rasterizes every
-// chart's footprint at the trial's scale (footprint.cpp) and places the
-// charts longest side first.
+// The scale search: the largest global scale at which a greedy placement
+// places every chart, for two placements, keeping the larger scale: the
+// first fit of texel footprints (occupancy.cpp; each trial rasterizes every
+// chart at the trial's scale, footprint.cpp) and the skyline of bounding
+// boxes at continuous positions (skyline.cpp). Charts go longest side first.
 #include "lmrefine/pack/packer.h"
 
 #include <algorithm>
@@ -17,6 +18,8 @@
 #include "lmrefine/core/progress.h"
 #include "lmrefine/layout/chart.h"
 #include "occupancy.h"
+#include "shelves.h"
+#include "skyline.h"
 #include "weld.h"
 
 namespace lmrefine {
@@ -26,7 +29,8 @@ using pack::ChartPiece;
 using pack::Footprint;
 
 struct Placement {
-    int x = 0, y = 0, turns = 0;
+    double x = 0, y = 0;  // the footprint's (or box's) corner, grid units
+    int turns = 0;
 };
 
 struct Trial {
@@ -42,7 +46,19 @@ struct Problem {
     const std::vector<glm::dvec2>& uvs;  // snapped (weld.h), double
     const std::vector<double>& scales;
     const PackOptions& options;
+    const std::vector<glm::dvec2>& extents;  // per chart, its bounding box in grid units at global scale 1
 };
+
+// Longest side first, then the larger `weight`, ties by chart id: long
+// charts placed first leave rows that shorter ones fill (docs/packer.md
+// has the orders measured).
+template <class Size>
+std::vector<int32_t> placement_order(size_t count, Size size_of) {
+    std::vector<int32_t> order(count);
+    std::iota(order.begin(), order.end(), 0);
+    std::stable_sort(order.begin(), order.end(), [&](int32_t a, int32_t b) { return size_of(a) > size_of(b); });
+    return order;
+}
 
 // Places every chart at one global scale, or stops at the first that does not fit.
 Trial run_trial(const Problem& problem, double global_scale, Progress* progress) {
@@ -61,16 +77,10 @@ Trial run_trial(const Problem& problem, double global_scale, Progress* progress)
             }
         }
     });
-    // Longest side first, then most texels, ties by chart id: long charts
-    // placed first leave rows that shorter ones fill (docs/packer.md has the
-    // orders measured).
-    std::vector<int32_t> order(count);
-    std::iota(order.begin(), order.end(), 0);
-    auto size_of = [&](int32_t c) {
+    const std::vector<int32_t> order = placement_order(count, [&](int32_t c) {
         const Footprint& f = footprints[size_t(c) * size_t(turn_options)];
         return std::make_pair(std::max(f.covered.width, f.covered.height), f.texels);
-    };
-    std::stable_sort(order.begin(), order.end(), [&](int32_t a, int32_t b) { return size_of(a) > size_of(b); });
+    });
 
     Trial trial;
     trial.placements.resize(count);
@@ -86,17 +96,163 @@ Trial run_trial(const Problem& problem, double global_scale, Progress* progress)
             // The other turn only wins at an earlier row (or the same row, further left).
             const Footprint& f = footprints[size_t(c) * size_t(turn_options) + size_t(turns)];
             if (!occupancy.first_fit(f, x, y, found ? best.y : INT32_MAX)) continue;
-            if (!found || std::make_pair(y, x) < std::make_pair(best.y, best.x)) best = {x, y, turns};
+            if (!found || std::make_pair(double(y), double(x)) < std::make_pair(best.y, best.x)) best = {double(x), double(y), turns};
             found = true;
         }
         if (!found) return trial;
         const Footprint& f = footprints[size_t(c) * size_t(turn_options) + size_t(best.turns)];
-        occupancy.place(f, best.x, best.y);
+        occupancy.place(f, int(best.x), int(best.y));
         trial.texels += f.texels;
         trial.placements[size_t(c)] = best;
     }
     trial.fits = true;
     return trial;
+}
+
+// The box of chart c at a global scale: its bounding box and kInset on every side.
+glm::dvec2 box_size(const Problem& problem, size_t c, double global_scale) {
+    return problem.extents[c] * (global_scale * problem.scales[c]) + glm::dvec2(2.0 * pack::kInset);
+}
+
+// Places every chart's box, in `order`, at one global scale: place(box, p)
+// fills the placement p (the box's corner, its turn) or returns false,
+// and the trial stops at the first box that does not fit.
+template <class Place>
+Trial run_boxes(const Problem& problem, double global_scale, const std::vector<int32_t>& order, Progress* progress,
+                Place place) {
+    const size_t count = problem.pieces.size();
+    Trial trial;
+    trial.placements.resize(count);
+    // Box areas stand in for footprint cells (the next guess after a failure).
+    for (size_t c = 0; c < count; ++c) {
+        const glm::dvec2 box = box_size(problem, c, global_scale);
+        trial.total_texels += int64_t(std::ceil(box.x * box.y));
+    }
+    for (size_t n = 0; n < count; ++n) {
+        if ((n & 63) == 0 && progress && progress->cancelled()) return trial;
+        const int32_t c = order[n];
+        if (problem.pieces[size_t(c)].corners.empty()) continue;
+        const glm::dvec2 box = box_size(problem, size_t(c), global_scale);
+        if (!place(box, trial.placements[size_t(c)])) return trial;
+        trial.texels += int64_t(std::ceil(box.x * box.y));
+    }
+    trial.fits = true;
+    return trial;
+}
+
+// The skyline: longest side first; each box at the turn whose bottom is highest.
+Trial run_skyline_trial(const Problem& problem, double global_scale, Progress* progress) {
+    const std::vector<int32_t> order = placement_order(problem.pieces.size(), [&](int32_t c) {
+        const glm::dvec2 box = box_size(problem, size_t(c), global_scale);
+        return std::make_pair(std::max(box.x, box.y), box.x * box.y);
+    });
+    pack::Skyline skyline(problem.options.width, problem.options.height, problem.options.padding);
+    return run_boxes(problem, global_scale, order, progress, [&](const glm::dvec2& box, Placement& best) {
+        bool found = false;
+        double best_bottom = INFINITY;
+        for (int turns = 0; turns < (problem.options.rotate ? 2 : 1); ++turns) {
+            const double w = turns ? box.y : box.x, h = turns ? box.x : box.y;
+            double x, y;
+            if (!skyline.find(w, h, x, y)) continue;
+            // The turn whose box ends higher (then further left) wins.
+            if (!found || std::make_pair(y + h, x) < std::make_pair(best_bottom, best.x)) {
+                best = {x, y, turns};
+                best_bottom = y + h;
+            }
+            found = true;
+        }
+        if (found) skyline.place(best.x, best.y, best.turns ? box.y : box.x, best.turns ? box.x : box.y);
+        return found;
+    });
+}
+
+// The shelves: boxes laid wide side down (when turns are allowed), tallest first.
+Trial run_shelf_trial(const Problem& problem, double global_scale, Progress* progress) {
+    const bool rotate = problem.options.rotate;
+    auto turned = [&](const glm::dvec2& box) { return rotate && box.y > box.x; };
+    const std::vector<int32_t> order = placement_order(problem.pieces.size(), [&](int32_t c) {
+        const glm::dvec2 box = box_size(problem, size_t(c), global_scale);
+        return turned(box) ? std::make_pair(box.x, box.y) : std::make_pair(box.y, box.x);
+    });
+    pack::Shelves shelves(problem.options.width, problem.options.height, problem.options.padding);
+    return run_boxes(problem, global_scale, order, progress, [&](const glm::dvec2& box, Placement& at) {
+        const int turns = int(turned(box));
+        const glm::dvec2 laid = turns ? glm::dvec2(box.y, box.x) : box;
+        at.turns = turns;
+        return shelves.place(laid.x, laid.y, at.x, at.y);
+    });
+}
+
+// The box placement is kept only when its scale beats the footprints' by this factor.
+constexpr double kBoxMargin = 1.01;
+
+struct Search {
+    double scale = 0;  // the largest global scale that fitted
+    Trial best;
+    int trials = 0;
+};
+
+// The largest global scale in (0, bound] at which `run` places every chart.
+template <class Run>
+Search search_scale(Run run, double bound, const PackOptions& options, int32_t chart_count, Progress* progress) {
+    // Bracket [low, high): `low` fits, `high` does not (the bound never
+    // fits better than exactly). Two trials per round (one per core) cut the
+    // bracket in three; the sequence of scales tried does not depend on the
+    // thread count, so neither does the result.
+    Search search;
+    double low = 0.0, high = bound * 1.0000001;
+    double guess = bound * 0.9;
+    while (!search.best.fits) {
+        Trial t = run(guess);
+        ++search.trials;
+        if (progress) {
+            progress->check();
+            progress->advance();
+        }
+        if (t.fits) {
+            search.best = std::move(t);
+            low = guess;
+        } else {
+            high = guess;
+            // The next guess shrinks by the square root of the area that did
+            // not fit (charts placed / all, in footprint cells), a little more.
+            const double placed = t.total_texels > 0 ? double(t.texels) / double(t.total_texels) : 0.5;
+            guess *= std::clamp(0.98 * std::sqrt(placed), 0.5, 0.97);
+            if (guess < bound * 1e-9) {
+                LMREFINE_THROW(InvalidArgument,
+                               std::to_string(chart_count) + " charts do not fit a " + std::to_string(options.height) +
+                                   " x " + std::to_string(options.width) + " atlas with padding " +
+                                   std::to_string(options.padding) +
+                                   " texels even at a tiny scale; use a higher resolution or a smaller padding");
+            }
+        }
+    }
+    while (high / low > 1.004) {
+        const double ratio = high / low;
+        const double s1 = low * std::pow(ratio, 1.0 / 3.0), s2 = low * std::pow(ratio, 2.0 / 3.0);
+        Trial trials[2];
+        const double tried[2] = {s1, s2};
+        parallel_for(2, 1, [&](int64_t begin, int64_t end) {
+            for (int64_t k = begin; k < end; ++k) trials[k] = run(tried[k]);
+        });
+        search.trials += 2;
+        if (progress) {
+            progress->check();
+            progress->advance(2);
+        }
+        if (trials[1].fits) {
+            low = s2;
+            search.best = std::move(trials[1]);
+        } else if (trials[0].fits) {
+            low = s1;
+            high = s2;
+            search.best = std::move(trials[0]);
+        } else {
+            high = s1;
+        }
+    }
+    search.scale = low;
+    return search;
 }
 
 }  // namespace
@@ -169,6 +325,7 @@ PackResult pack_charts(const UvLayout& layout, const std::vector<int32_t>& trian
     // the atlas upright or turned (a needle of tiny area would otherwise ask
     // for footprints of billions of cells).
     double area = 0.0, box_area = 0.0, box_bound = INFINITY;
+    std::vector<glm::dvec2> extents(size_t(chart_count), glm::dvec2(0.0));
     for (int32_t c = 0; c < chart_count; ++c) {
         const ChartPiece& piece = pieces[size_t(c)];
         double chart_area = 0.0;
@@ -185,6 +342,7 @@ PackResult pack_charts(const UvLayout& layout, const std::vector<int32_t>& trian
         const double s2 = scales[size_t(c)] * scales[size_t(c)] * grid.width * grid.height;
         area += chart_area * s2;
         if (piece.corners.empty()) continue;
+        extents[size_t(c)] = (high - low) * glm::dvec2(grid.width, grid.height);
         box_area += (high.x - low.x) * (high.y - low.y) * s2;
         const double ex = (high.x - low.x) * scales[size_t(c)] * grid.width;   // cells at global scale 1
         const double ey = (high.y - low.y) * scales[size_t(c)] * grid.height;
@@ -198,67 +356,44 @@ PackResult pack_charts(const UvLayout& layout, const std::vector<int32_t>& trian
     bound = std::min(bound, box_bound);
     if (!std::isfinite(bound) || bound > 1e12) bound = 1e12;
 
-    Problem problem{layout, pieces, uvs, scales, grid};
+    Problem problem{layout, pieces, uvs, scales, grid, extents};
     PackResult result;
     result.scale_bound = bound;
-    if (progress) progress->begin("pack", 40);
-
-    // Bracket [low, high): `low` fits, `high` does not (the bound never
-    // fits better than exactly). Two trials per round (one per core) cut the
-    // bracket in three; the sequence of scales tried does not depend on the
-    // thread count, so neither does the result.
-    Trial best;
-    double low = 0.0, high = bound * 1.0000001;
-    double guess = bound * 0.9;
-    while (!best.fits) {
-        Trial t = run_trial(problem, guess, progress);
-        ++result.trials;
-        if (progress) {
-            progress->check();
-            progress->advance();
-        }
-        if (t.fits) {
-            best = std::move(t);
-            low = guess;
-        } else {
-            high = guess;
-            // The next guess shrinks by the square root of the area that did
-            // not fit (charts placed / all, in footprint cells), a little more.
-            const double placed = t.total_texels > 0 ? double(t.texels) / double(t.total_texels) : 0.5;
-            guess *= std::clamp(0.98 * std::sqrt(placed), 0.5, 0.97);
-            if (guess < bound * 1e-9) {
-                LMREFINE_THROW(InvalidArgument,
-                               std::to_string(chart_count) + " charts do not fit a " + std::to_string(options.height) +
-                                   " x " + std::to_string(options.width) + " atlas with padding " +
-                                   std::to_string(options.padding) +
-                                   " texels even at a tiny scale; use a higher resolution or a smaller padding");
+    if (progress) progress->begin("pack", 60);
+    Search search = search_scale([&](double scale) { return run_trial(problem, scale, progress); }, bound, options,
+                                 chart_count, progress);
+    // Bounding boxes at continuous positions win where charts are
+    // rectangles small against the grid (docs/packer.md).
+    bool boxes = false;
+    // Boxes cannot beat the footprints where the boxes' total area alone
+    // would not fit at a larger scale (charts far from rectangles): skipped.
+    const double box_scale_bound = box_area > 0 ? std::min(bound, std::sqrt(atlas / box_area)) : bound;
+    if (options.boxes && box_scale_bound > kBoxMargin * search.scale) {
+        try {
+            // Shelves first (rows of near-equal boxes), the skyline where they fail.
+            Search box_search = search_scale(
+                [&](double scale) {
+                    Trial shelf = run_shelf_trial(problem, scale, progress);
+                    if (shelf.fits) return shelf;
+                    Trial sky = run_skyline_trial(problem, scale, progress);
+                    return sky.fits || sky.texels > shelf.texels ? sky : shelf;
+                },
+                box_scale_bound, options, chart_count, progress);
+            search.trials += box_search.trials;
+            // Each search ends within 0.4% of its largest scale: boxes must
+            // beat the footprints by more than that (footprints are texel-exact).
+            if (box_search.scale > kBoxMargin * search.scale) {
+                box_search.trials = search.trials;
+                search = std::move(box_search);
+                boxes = true;
             }
+        } catch (const InvalidArgument&) {  // no box placement at any scale: the footprints' stands
         }
     }
-    while (high / low > 1.004) {
-        const double ratio = high / low;
-        const double s1 = low * std::pow(ratio, 1.0 / 3.0), s2 = low * std::pow(ratio, 2.0 / 3.0);
-        Trial trials[2];
-        const double tried[2] = {s1, s2};
-        parallel_for(2, 1, [&](int64_t begin, int64_t end) {
-            for (int64_t k = begin; k < end; ++k) trials[k] = run_trial(problem, tried[k], progress);
-        });
-        result.trials += 2;
-        if (progress) {
-            progress->check();
-            progress->advance(2);
-        }
-        if (trials[1].fits) {
-            low = s2;
-            best = std::move(trials[1]);
-        } else if (trials[0].fits) {
-            low = s1;
-            high = s2;
-            best = std::move(trials[0]);
-        } else {
-            high = s1;
-        }
-    }
+    const double low = search.scale;
+    const Trial& best = search.best;
+    result.trials = search.trials;
+    result.boxes = boxes;
     result.global_scale = low;
     result.footprint_texels = double(best.texels) / (double(options.subdivision) * options.subdivision);
 
@@ -273,9 +408,10 @@ PackResult pack_charts(const UvLayout& layout, const std::vector<int32_t>& trian
         const double scale = low * scales[size_t(c)];
         result.rotations[size_t(c)] = at.turns;
         std::vector<glm::dvec2> local = pack::local_pixels(piece, uvs, scale, grid.width, grid.height);
-        const int footprint_width = pack::footprint_size(local).x;
+        // The width the turn is taken in: the footprint's, or the box's.
+        const double turn_width = boxes ? box_size(problem, size_t(c), low).x : double(pack::footprint_size(local).x);
         for (auto& p : local) {
-            if (at.turns) p = pack::turn_local(p, footprint_width);
+            if (at.turns) p = pack::turn_local(p, turn_width);
             p += glm::dvec2(at.x, at.y);
         }
         for (size_t k = 0; k < piece.corners.size(); ++k) {

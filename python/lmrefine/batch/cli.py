@@ -11,8 +11,9 @@ from .runner import BatchOptions, run_batch
 # passed too.
 VALUE_FLAGS = ("--objects", "--source-layer", "--resolution", "--padding", "--first-lightmap", "--lightmap-image",
                "--driving-pass", "--strength", "--max-magnification", "--min-shrink", "--delta", "--passes",
-               "--border", "--wavelet", "--backend", "--bake-passes", "--samples")
-SWITCH_FLAGS = ("--directional", "--no-directional", "--preview", "--no-preview")
+               "--border", "--wavelet", "--backend", "--bake-passes", "--samples", "--stages")
+SWITCH_FLAGS = ("--directional", "--no-directional", "--preview", "--no-preview", "--no-tessellate")
+OPTIONAL_VALUE_FLAGS = ("--tessellate",)  # a value may follow
 
 
 class PassThrough(argparse.Action):
@@ -56,6 +57,8 @@ def add_batch_parser(commands):
         addon.add_argument(flag, action=PassThrough, metavar="VALUE", dest=f"_{flag}")
     for flag in SWITCH_FLAGS:
         addon.add_argument(flag, action=PassThrough, nargs=0, dest=f"_{flag}")
+    for flag in OPTIONAL_VALUE_FLAGS:
+        addon.add_argument(flag, action=PassThrough, nargs="?", metavar="VALUE", dest=f"_{flag}")
     parser.set_defaults(run=run_batch_command, flags=[])
     return parser
 

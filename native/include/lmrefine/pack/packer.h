@@ -3,8 +3,9 @@
 // resolution, with at least `padding` texels between charts as check_layout
 // measures it, as large as the atlas allows. Charts are fitted by their
 // conservative footprint on a grid of (by default) half texels (the cells
-// they overlap, rasterized as coverage_mask does), not by their bounding
-// boxes. Details and measurements: docs/packer.md.
+// they overlap, rasterized as coverage_mask does), and also as bounding boxes
+// at continuous positions (shelves, then a skyline), kept when they reach a
+// 1% larger scale. Details and measurements: docs/packer.md.
 #pragma once
 
 #include <cstdint>
@@ -25,6 +26,10 @@ struct PackOptions {
     // texels: charts land on sub-texel positions, so a small chart wastes
     // less than a texel to the grid (docs/packer.md has it measured).
     int subdivision = 2;
+    // Also try bounding boxes at continuous positions (shelves, a skyline)
+    // and keep them when they reach a 1% larger scale: exact for rectangular
+    // charts, which the footprint grid wastes up to a cell per side of.
+    bool boxes = true;
 };
 
 struct PackResult {
@@ -35,7 +40,8 @@ struct PackResult {
     // Per chart, a 2 x 3 row-major affine map: a (welded) corner uv moves to
     // M[:, :2] uv + M[:, 2]. Quarter turns are turns in texel space.
     std::vector<double> transforms;
-    int trials = 0;                  // placements tried by the scale search
+    int trials = 0;                  // placements tried by the scale search (both placements)
+    bool boxes = false;              // the charts were placed as bounding boxes (else as footprints)
     double footprint_texels = 0;     // texels of the placed footprints (undilated; sub-texels / subdivision^2)
 };
 
