@@ -241,6 +241,9 @@ def test_corners_within_the_tolerance_are_snapped_into_one_chart():
     (dict(scales=np.array([1.0])), "scales"),
     (dict(charts=np.array([0, 0, 1, 1])), "charts"),
     (dict(charts=np.array([0, -1, 1])), "charts"),
+    # A huge id would size per-chart arrays (found by the fuzz suite: 117 million charts for 8 triangles).
+    (dict(charts=np.array([0, 3, 1])), r"chart ids must be in \[0, 3\)"),
+    (dict(charts=np.array([0, 7 << 24, 1], ">i4")), r"chart ids must be in \[0, 3\)"),
     (dict(tolerance=-1.0), "tolerance"),
     (dict(subdivision=0), "subdivision"),
     (dict(resolution=4, padding=50.0), "fit"),

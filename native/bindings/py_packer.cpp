@@ -83,9 +83,11 @@ py::tuple pack(const py::handle& uvs_in, const py::handle& triangles_in, const p
         chart_ids.resize(size_t(layout.triangle_count));
         for (py::ssize_t t = 0; t < wide.size(); ++t) {
             const int64_t c = wide.data()[t];
-            if (c < 0 || c >= (int64_t(1) << 30)) {
+            // Ids below the triangle count bound every per-chart array by the input's size.
+            if (c < 0 || c >= int64_t(layout.triangle_count)) {
                 throw py::value_error("charts[" + std::to_string(t) + "] is " + std::to_string(c) +
-                                      "; chart ids must be >= 0 (and below 2^30)");
+                                      "; chart ids must be in [0, " + std::to_string(layout.triangle_count) +
+                                      "), one below the triangle count: number the charts 0..C-1 (find_charts does)");
             }
             chart_ids[size_t(t)] = int32_t(c);
             chart_count = std::max(chart_count, int32_t(c) + 1);

@@ -49,8 +49,8 @@ def pack_charts(uvs, triangles, charts, scales, resolution, padding=2.0, rotatio
     Args:
         uvs: (N, 2) per-corner UVs, anywhere (not only in [0, 1]).
         triangles: (T, 3) integer indices into ``uvs``.
-        charts: (T,) integer chart id per triangle (ids 0..C-1; an id no
-            triangle has is an empty chart), or None for
+        charts: (T,) integer chart id per triangle (ids 0..C-1 with C <= T;
+            an id no triangle has is an empty chart), or None for
             ``find_charts(uvs, triangles, tolerance=tolerance)``. A chart moves
             as one piece, so a UV index may not be used by two charts.
         scales: (C,) relative linear scale per chart, finite and > 0, or None
