@@ -297,7 +297,8 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
         # a texel unless the padding is (dilation needs a texel between charts).
         pack_padding = min(float(padding), max(float(original["min_gutter_texels"]), min(float(padding), 1.0)))
         packed, repack_report = allocation.repack(uvs, new_uvs, triangles, scalar_energy, shape, pack_padding,
-                                                  float(min_chart_scale), float(max_chart_scale), progress)
+                                                  float(min_chart_scale), float(max_chart_scale), progress,
+                                                  lightmap=lightmap, mask=mask)
         if packed is not None:
             packed_check = _native.check_layout(packed, triangles, shape, padding)
             worse = backoff.failures(packed_check, original, padding)
