@@ -28,21 +28,29 @@ from ._native import find_charts
 # treated as if it had this much light change (without smooth light it
 # shrinks by at most (FLOOR)^(1/3) before the scale bounds apply).
 ENERGY_FLOOR = 0.05
-# Texel error per unit of gradient energy (the gradient map's channel sum),
-# at the input's scale. A step of height d blurred over a texel has an L1
-# error of d / 4 per unit of its length and d4 energy 1.93 d per unit
-# length; a parabola of curvature k has a linear-interpolation error of
-# k / 12 per texel and d4 energy 1.22 k per texel; a texel on a chart's
-# border (its centre outside the chart half the time, filled by dilation)
-# misses the light's slope g over about a quarter texel. Derived in
-# docs/refiner.md, not tuned.
+# Texel error per unit, at the input's scale (docs/refiner.md, "Chart
+# scaling"). EDGE_ERROR per unit of gradient energy (the gradient map's
+# channel sum): a step of height d blurred over a texel has an L1 error of
+# d / 4 per unit of its length and d4 energy 1.93 d per unit length.
+# BORDER_ERROR per unit of luminance slope and border length: a texel on a
+# chart's border (its centre outside the chart half the time, filled by
+# dilation) misses the slope over about a quarter texel. CURVATURE_ERROR per
+# unit of the smooth part of the gradient energy: a parabola of curvature k
+# has a linear-interpolation error of k / 12 per texel and d4 energy 1.22 k
+# per texel, so 1 / (12 x 1.22) as derived; it is 0 (the smooth part of the
+# gradient energy left out of both terms): the tuning scenes measured better
+# so (docs/refiner.md).
 EDGE_ERROR = 1.0 / (4.0 * 1.93)
-CURVATURE_ERROR = 1.0 / (12.0 * 1.22)
 BORDER_ERROR = 0.25
+CURVATURE_ERROR = 0.0
 # Weight of the smooth term against the edge term (1: as derived).
 SMOOTH_WEIGHT = 1.0
 # Rec. 709 luminance, as the gradient map reads RGB.
 LUMA = np.array([0.2126, 0.7152, 0.0722], np.float32)
+# repack is kept when the model predicts at most this fraction of the
+# unpacked error, and the packed atlas is at least this fraction as dense as
+# the input, charts grown by half the padding (padded_utilisation;
+# docs/refiner.md, "Chart scaling").
 REQUIRED_GAIN = 0.95
 MIN_UTILISATION_KEPT = 0.95
 
@@ -74,11 +82,13 @@ def triangle_energy(uvs, triangles, energy):
 
 
 def _window(values, mask, reduce, fill):
-    """3x3 min or max of `values` over covered texels (uncovered ones read as
-    `fill`); 0 outside the mask."""
-    padded = np.pad(np.where(mask, values, fill), 1, constant_values=fill)
-    windows = np.lib.stride_tricks.sliding_window_view(padded, (3, 3))
-    return np.where(mask, reduce(windows, axis=(2, 3)), 0.0)
+    """3x3 min or max (reduce: np.minimum or np.maximum) of `values` over
+    covered texels (uncovered ones read as `fill`), separably; 0 outside
+    the mask."""
+    out = np.pad(np.where(mask, values, values.dtype.type(fill)), 1, constant_values=fill)
+    out = reduce(reduce(out[:-2], out[1:-1]), out[2:])
+    out = reduce(reduce(out[:, :-2], out[:, 1:-1]), out[:, 2:])
+    return np.where(mask, out, out.dtype.type(0))
 
 
 def opening(values, mask):
@@ -86,8 +96,8 @@ def opening(values, mask):
     smooth part of a texel field. A feature at most two texels wide, like a
     shadow edge in the gradient map or the luminance slope across it,
     vanishes; a level that holds over three texels stays."""
-    eroded = _window(values, mask, np.min, np.inf)
-    return _window(eroded, mask, np.max, -np.inf)
+    eroded = _window(values, mask, np.minimum, np.inf)
+    return _window(eroded, mask, np.maximum, -np.inf)
 
 
 def luminance_slope(lightmap, mask):
@@ -95,21 +105,21 @@ def luminance_slope(lightmap, mask):
     from the differences to its covered neighbours (0 where it has none)."""
     image = np.asarray(lightmap, np.float32)
     lum = image if image.ndim == 2 else image[..., :3] @ LUMA[: image.shape[2]]
-    lum = lum.astype(np.float64)
+    lum = lum.astype(np.float32)
     slope = []
     for axis in (0, 1):
         head = [slice(None)] * 2
         tail = [slice(None)] * 2
         head[axis], tail[axis] = slice(1, None), slice(None, -1)
         both = mask[tuple(head)] & mask[tuple(tail)]
-        step = np.where(both, np.abs(lum[tuple(head)] - lum[tuple(tail)]), 0.0)
-        total, count = np.zeros(lum.shape), np.zeros(lum.shape)
+        step = np.where(both, np.abs(lum[tuple(head)] - lum[tuple(tail)]), np.float32(0))
+        total, count = np.zeros(lum.shape, np.float32), np.zeros(lum.shape, np.float32)
         total[tuple(head)] += step
         total[tuple(tail)] += step
         count[tuple(head)] += both
         count[tuple(tail)] += both
         slope.append(total / np.maximum(count, 1))
-    return np.where(mask, np.hypot(*slope), 0.0)
+    return np.where(mask, np.hypot(*slope), np.float32(0))
 
 
 def chart_errors(uvs, triangles, charts, energy, lightmap=None, mask=None):
@@ -127,7 +137,7 @@ def chart_errors(uvs, triangles, charts, energy, lightmap=None, mask=None):
     count = int(charts.max()) + 1 if len(charts) else 0
     if mask is None:
         mask = energy > 0
-    energy = np.where(mask, energy, 0.0).astype(np.float64)
+    energy = np.where(mask, energy, 0).astype(np.float32)
     flat = opening(energy, mask)
     sharp = triangle_energy(uvs, triangles, energy - flat)
     edge = EDGE_ERROR * np.bincount(charts, weights=sharp, minlength=count)
@@ -152,7 +162,7 @@ def _scales_at(edge, smooth, area, lam):
     falls onto it monotonically."""
     k = 2.0 * lam * area
     s = np.maximum(np.cbrt(2.0 * edge / k), (4.0 * smooth / k) ** 0.25)
-    for _ in range(40):
+    for _ in range(12):  # the start is within a factor 2 of the root: quadratic convergence
         s = s - (k * s ** 4 - edge * s - 2.0 * smooth) / (4.0 * k * s ** 3 - edge)
     return s
 
@@ -163,7 +173,7 @@ def _budget_scales(edge, smooth, area):
     bisection on log lam. Every chart needs edge > 0 and area > 0."""
     budget = area.sum()
     lo, hi = -200.0, 200.0
-    for _ in range(80):
+    for _ in range(64):
         mid = 0.5 * (lo + hi)
         used = (area * _scales_at(edge, smooth, area, np.exp(mid)) ** 2).sum()
         lo, hi = (mid, hi) if used > budget else (lo, mid)
