@@ -128,3 +128,18 @@ def test_opening_removes_thin_lines_and_keeps_plateaus():
     assert opened[2, 5] == 0 and opened[2, 6] == 0
     assert opened[10, 2] == pytest.approx(0.25)
     assert allocation.opening(values, np.zeros((12, 12), bool)).max() == 0
+
+
+def test_the_slope_reads_luminance_from_every_channel_layout():
+    rng = np.random.default_rng(5)
+    gray = rng.uniform(0, 1, (10, 12)).astype(np.float32)
+    mask = np.ones((10, 12), bool)
+    mask[:, 6] = False  # a gutter column: no difference across it
+    plain = allocation.luminance_slope(gray, mask)
+    assert allocation.luminance_slope(gray[..., None], mask) == pytest.approx(plain)
+    rgba = np.repeat(gray[..., None], 4, axis=2)
+    assert allocation.luminance_slope(rgba, mask) == pytest.approx(plain, rel=1e-5)
+    assert np.all(plain[:, 6] == 0)
+    # A ramp along columns: slope 0.1 per texel inside each covered run.
+    ramp = np.tile(0.1 * np.arange(12, dtype=np.float32), (10, 1))
+    assert allocation.luminance_slope(ramp, mask)[mask] == pytest.approx(np.full(mask.sum(), 0.1), rel=1e-5)

@@ -104,7 +104,7 @@ def luminance_slope(lightmap, mask):
     """|grad L| per covered texel (L the lightmap's luminance, per texel),
     from the differences to its covered neighbours (0 where it has none)."""
     image = np.asarray(lightmap, np.float32)
-    lum = image if image.ndim == 2 else image[..., :3] @ LUMA[: image.shape[2]]
+    lum = image if image.ndim == 2 else image[..., 0] if image.shape[2] == 1 else image[..., :3] @ LUMA
     lum = lum.astype(np.float32)
     slope = []
     for axis in (0, 1):
