@@ -44,7 +44,7 @@ def model_terms():
 
 def test_each_chart_gets_the_term_of_its_light():
     uvs, tris, charts, energy, lightmap, mask = model_terms()
-    edge, smooth, area = allocation.chart_errors(uvs, tris, charts, energy, lightmap, mask)
+    edge, smooth, area = allocation.chart_errors(uvs, tris, charts, energy, lightmap, mask, True)
     assert area == pytest.approx(np.full(3, (16 / RESOLUTION) ** 2))
     assert edge[0] == pytest.approx(0, abs=1e-6) and smooth[0] == pytest.approx(0, abs=1e-6)  # flat
     assert smooth[1] > 10 * edge[1]  # a smooth fall-off: mostly the 1/s^2 term
@@ -53,7 +53,7 @@ def test_each_chart_gets_the_term_of_its_light():
 
 def test_a_chart_of_smooth_light_alone_grows_and_a_flat_chart_still_shrinks():
     uvs, tris, charts, energy, lightmap, mask = model_terms()
-    scales, edge, smooth, area = allocation.chart_scales(uvs, tris, charts, energy, 0.5, 2.0, lightmap, mask)
+    scales, edge, smooth, area = allocation.chart_scales(uvs, tris, charts, energy, 0.5, 2.0, lightmap, mask, True)
     assert edge[1] < 0.1 * smooth[1]
     assert scales[0] < scales[1] < scales[2]
     assert scales[0] == pytest.approx(0.5)  # the flat chart shrinks to the bound
@@ -61,7 +61,7 @@ def test_a_chart_of_smooth_light_alone_grows_and_a_flat_chart_still_shrinks():
     assert free[1] > 1.5 * free[0]  # the smooth chart is well above the flat chart's floor
     # Without the lightmap (the gradient map alone: blind to linear light) the
     # smooth chart keeps only its curvature and gets less.
-    _, edge_only, smooth_only, _ = allocation.chart_scales(uvs, tris, charts, energy, 0.5, 2.0, None, mask)
+    _, edge_only, smooth_only, _ = allocation.chart_scales(uvs, tris, charts, energy, 0.5, 2.0, None, mask, True)
     assert smooth_only[1] < 0.5 * smooth[1] and edge_only[1] == pytest.approx(edge[1])
 
 
@@ -111,8 +111,8 @@ def test_the_predicted_error_counts_both_terms():
 def test_the_model_is_deterministic_and_leaves_its_inputs_alone():
     uvs, tris, charts, energy, lightmap, mask = model_terms()
     copies = [x.copy() for x in (uvs, tris, charts, energy, lightmap, mask)]
-    first = allocation.chart_scales(uvs, tris, charts, energy, 0.5, 2.0, lightmap, mask)
-    second = allocation.chart_scales(uvs, tris, charts, energy, 0.5, 2.0, lightmap, mask)
+    first = allocation.chart_scales(uvs, tris, charts, energy, 0.5, 2.0, lightmap, mask, True)
+    second = allocation.chart_scales(uvs, tris, charts, energy, 0.5, 2.0, lightmap, mask, True)
     for a, b in zip(first, second):
         assert np.array_equal(a, b)
     for before, after in zip(copies, (uvs, tris, charts, energy, lightmap, mask)):
@@ -143,3 +143,14 @@ def test_the_slope_reads_luminance_from_every_channel_layout():
     # A ramp along columns: slope 0.1 per texel inside each covered run.
     ramp = np.tile(0.1 * np.arange(12, dtype=np.float32), (10, 1))
     assert allocation.luminance_slope(ramp, mask)[mask] == pytest.approx(np.full(mask.sum(), 0.1), rel=1e-5)
+
+
+def test_off_by_default_the_model_is_the_edge_model_on_the_whole_energy():
+    uvs, tris, charts, energy, lightmap, mask = model_terms()
+    assert allocation.SMOOTH_TERM is False
+    scales, edge, smooth, area = allocation.chart_scales(uvs, tris, charts, energy, 0.5, 2.0, lightmap, mask)
+    assert np.all(smooth == 0)
+    assert edge == pytest.approx(np.bincount(charts, allocation.triangle_energy(uvs, tris, energy)))
+    density = edge / area
+    raw = np.cbrt(density + allocation.ENERGY_FLOOR * np.average(density, weights=area))
+    assert np.array_equal(scales, np.clip(raw / np.median(raw), 0.5, 2.0))

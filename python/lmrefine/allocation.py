@@ -16,7 +16,9 @@ with one lambda for all charts (`optimal_scales`). Flat charts would shrink
 to nothing: a floor on the edge density and bounds on the relative scale
 keep every chart large enough for bilinear lookup and dilation. The packer
 (lmrefine.pack_charts) then finds the largest global scale at which all
-charts fit.
+charts fit. The smooth term is off by default (SMOOTH_TERM): the edge term
+alone, on the whole gradient energy, gives s_c proportional to
+(E_c / A_c)^(1/3).
 """
 
 import numpy as np
@@ -45,6 +47,10 @@ BORDER_ERROR = 0.25
 CURVATURE_ERROR = 0.0
 # Weight of the smooth term against the edge term (1: as derived).
 SMOOTH_WEIGHT = 1.0
+# The smooth term is off by default: on the tuning scenes it lowered some
+# rows (docs/evaluation.md, "The chart model's smooth term"). Off, the
+# model is the edge term alone on the whole gradient energy, as before.
+SMOOTH_TERM = False
 # Rec. 709 luminance, as the gradient map reads RGB.
 LUMA = np.array([0.2126, 0.7152, 0.0722], np.float32)
 # repack is kept when the model predicts at most this fraction of the
@@ -122,7 +128,7 @@ def luminance_slope(lightmap, mask):
     return np.where(mask, np.hypot(*slope), np.float32(0))
 
 
-def chart_errors(uvs, triangles, charts, energy, lightmap=None, mask=None):
+def chart_errors(uvs, triangles, charts, energy, lightmap=None, mask=None, smooth_term=None):
     """(edge, smooth, area), each (C,): the error model's terms per chart at
     the input's scale (texel error units) and the chart's UV area.
 
@@ -132,9 +138,14 @@ def chart_errors(uvs, triangles, charts, energy, lightmap=None, mask=None):
     length in texels times BORDER_ERROR; both times SMOOTH_WEIGHT. Without
     a lightmap the slope term is 0 (the gradient map is blind to linear
     light). Sums over a triangle's texels use its four points
-    (`triangle_texels`)."""
+    (`triangle_texels`). smooth_term False (default: SMOOTH_TERM): edge is
+    the whole gradient energy, unscaled, and smooth is 0."""
     shape = energy.shape
     count = int(charts.max()) + 1 if len(charts) else 0
+    area = np.bincount(charts, weights=np.abs(signed_areas(uvs, triangles)), minlength=count)
+    if not (SMOOTH_TERM if smooth_term is None else smooth_term):
+        edge = np.bincount(charts, weights=triangle_energy(uvs, triangles, energy), minlength=count)
+        return edge, np.zeros(count), area
     if mask is None:
         mask = energy > 0
     energy = np.where(mask, energy, 0).astype(np.float32)
@@ -142,7 +153,6 @@ def chart_errors(uvs, triangles, charts, energy, lightmap=None, mask=None):
     sharp = triangle_energy(uvs, triangles, energy - flat)
     edge = EDGE_ERROR * np.bincount(charts, weights=sharp, minlength=count)
     curvature = np.bincount(charts, weights=triangle_energy(uvs, triangles, flat), minlength=count)
-    area = np.bincount(charts, weights=np.abs(signed_areas(uvs, triangles)), minlength=count)
     smooth = CURVATURE_ERROR * curvature
     if lightmap is not None:
         slope = opening(luminance_slope(lightmap, mask), mask)
@@ -196,6 +206,11 @@ def optimal_scales(edge, smooth, area, min_scale=0.5, max_scale=2.0):
         mean = smooth[live].sum() / area[live].sum()
     if not mean > 0:
         return scales
+    if not (smooth[live] > 0).any():  # the edge term alone: its closed form
+        with np.errstate(divide="ignore", invalid="ignore"):
+            density = np.where(live, edge / np.maximum(area, 1e-300), 0.0)
+        raw = np.cbrt(density + ENERGY_FLOOR * float(np.average(density, weights=area)))
+        return np.clip(raw / np.median(raw[live]), min_scale, max_scale)
     free = _budget_scales(edge[live] + ENERGY_FLOOR * mean * area[live], smooth[live], area[live])
     scales[live] = np.clip(free / np.median(free), min_scale, max_scale)
     return scales
@@ -210,10 +225,11 @@ def predicted_error(edge, smooth, scales):
     return float((edge / s + smooth / (s * s)).sum() / total)
 
 
-def chart_scales(uvs, triangles, charts, energy, min_scale=0.5, max_scale=2.0, lightmap=None, mask=None):
+def chart_scales(uvs, triangles, charts, energy, min_scale=0.5, max_scale=2.0, lightmap=None, mask=None,
+                 smooth_term=None):
     """Relative linear scale per chart from the error model above
     (`chart_errors`, `optimal_scales`); also returns (edge, smooth, area)."""
-    edge, smooth, area = chart_errors(uvs, triangles, charts, energy, lightmap, mask)
+    edge, smooth, area = chart_errors(uvs, triangles, charts, energy, lightmap, mask, smooth_term)
     return optimal_scales(edge, smooth, area, min_scale, max_scale), edge, smooth, area
 
 

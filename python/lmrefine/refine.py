@@ -183,8 +183,9 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
         progress: callable progress(fraction, stage); returning False cancels.
         repack: after the in-chart refinement, scale each chart by its
             signal (the error model in docs/refiner.md, "Chart scaling":
-            light changes from the gradient map, smooth light from the
-            lightmap's slope, not read when gradient= is given)
+            light changes from the gradient map; with
+            allocation.SMOOTH_TERM also smooth light from the lightmap's
+            slope, not read when gradient= is given)
             and pack all charts into one atlas with lmrefine.pack_charts
             (rotations, at least `padding` texels apart, or the input's
             gutter where that is narrower, but at least a texel). Kept only
