@@ -154,3 +154,22 @@ def test_off_by_default_the_model_is_the_edge_model_on_the_whole_energy():
     density = edge / area
     raw = np.cbrt(density + allocation.ENERGY_FLOOR * np.average(density, weights=area))
     assert np.array_equal(scales, np.clip(raw / np.median(raw), 0.5, 2.0))
+
+
+def test_refine_uvs_with_the_smooth_term_returns_a_valid_repacked_layout(monkeypatch):
+    from layouts import lightmap_pack
+    resolution = 128
+    uvs, tris = lightmap_pack(charts_across=24, margin_texels=1.0, resolution=resolution, quads=1)
+    v, u = np.mgrid[0:resolution, 0:resolution] / resolution
+    lightmap = np.where(u + 0.3 * v > 0.6, 1.0, 0.2) * (0.3 + 0.7 * u)  # an edge on a smooth ramp
+    lightmap = np.repeat(lightmap[..., None], 3, axis=2).astype(np.float32)
+    monkeypatch.setattr(allocation, "SMOOTH_TERM", True)
+    result = lmrefine.refine_uvs(lightmap, uvs, tris, resolution, padding=2)
+    repack = result.report["repack"]
+    assert 0 < repack["smooth_fraction"] < 1
+    original = lmrefine.check_layout(uvs, tris, resolution, 2)["min_gutter_texels"]
+    check = lmrefine.check_layout(result.uvs, tris, resolution, original - 1e-4)
+    assert check["valid"], check
+    monkeypatch.setattr(allocation, "SMOOTH_TERM", False)
+    off = lmrefine.refine_uvs(lightmap, uvs, tris, resolution, padding=2).report["repack"]
+    assert off["smooth_fraction"] == 0
