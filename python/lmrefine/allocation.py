@@ -1,15 +1,24 @@
 """Chart-level texel allocation: each chart's scale from its signal, then one packed atlas.
 
-The error model (docs/refiner.md, "Chart scaling"): a chart c whose linear
-texel scale is s_c (texels per UV unit, relative to the input layout) has a
-reconstruction error dominated by its light changes, which falls as
-E_c / s_c, where E_c is the gradient energy the chart covers in the first
-bake. For a fixed texel budget sum_c A_c s_c^2 (A_c the chart's UV area) the
-error sum_c E_c / s_c is smallest at s_c proportional to (E_c / A_c)^(1/3)
-(Lagrange). Flat charts would shrink to nothing: a floor on the energy
-density and bounds on the relative scale keep every chart large enough for
-bilinear lookup and dilation. The packer (lmrefine.pack_charts) then finds
-the largest global scale at which all charts fit.
+The error model (docs/refiner.md, "Chart scaling"): a chart c at linear
+texel scale s_c (texels per UV unit, relative to the input layout) has a
+reconstruction error
+
+    err_c(s_c) = edge_c / s_c + smooth_c / s_c^2,
+
+edge_c from its light changes (the sharp part of the first bake's gradient
+energy: a blurred edge's error falls with the texel size) and smooth_c from
+its smooth light (the curvature inside the chart and the gradient across its
+border texels, both falling with the texel area). For a fixed texel budget
+sum_c A_c s_c^2 (A_c the chart's UV area) the scales that minimise
+sum_c err_c solve edge_c s_c + 2 smooth_c = 2 lambda A_c s_c^4 (Lagrange),
+with one lambda for all charts (`optimal_scales`). Flat charts would shrink
+to nothing: a floor on the edge density and bounds on the relative scale
+keep every chart large enough for bilinear lookup and dilation. The packer
+(lmrefine.pack_charts) then finds the largest global scale at which all
+charts fit. The smooth term is off by default (SMOOTH_TERM): the edge term
+alone, on the whole gradient energy, gives s_c proportional to
+(E_c / A_c)^(1/3).
 """
 
 import numpy as np
@@ -17,10 +26,33 @@ import numpy as np
 from .packer import CHART_TOLERANCE, pack_charts
 from ._native import find_charts
 
-# Energy-density floor, relative to the mean over charts: a flat chart is
-# treated as if it had this much light change, so it shrinks by at most
-# (FLOOR)^(1/3) before the scale bounds apply.
+# Edge-density floor, relative to the mean over charts: a flat chart is
+# treated as if it had this much light change (without smooth light it
+# shrinks by at most (FLOOR)^(1/3) before the scale bounds apply).
 ENERGY_FLOOR = 0.05
+# Texel error per unit, at the input's scale (docs/refiner.md, "Chart
+# scaling"). EDGE_ERROR per unit of gradient energy (the gradient map's
+# channel sum): a step of height d blurred over a texel has an L1 error of
+# d / 4 per unit of its length and d4 energy 1.93 d per unit length.
+# BORDER_ERROR per unit of luminance slope and border length: a texel on a
+# chart's border (its centre outside the chart half the time, filled by
+# dilation) misses the slope over about a quarter texel. CURVATURE_ERROR per
+# unit of the smooth part of the gradient energy: a parabola of curvature k
+# has a linear-interpolation error of k / 12 per texel and d4 energy 1.22 k
+# per texel, so 1 / (12 x 1.22) as derived; it is 0 (the smooth part of the
+# gradient energy left out of both terms): the tuning scenes measured better
+# so (docs/refiner.md).
+EDGE_ERROR = 1.0 / (4.0 * 1.93)
+BORDER_ERROR = 0.25
+CURVATURE_ERROR = 0.0
+# Weight of the smooth term against the edge term (1: as derived).
+SMOOTH_WEIGHT = 1.0
+# The smooth term is off by default: on the tuning scenes it lowered some
+# rows (docs/evaluation.md, "The chart model's smooth term"). Off, the
+# model is the edge term alone on the whole gradient energy, as before.
+SMOOTH_TERM = False
+# Rec. 709 luminance, as the gradient map reads RGB.
+LUMA = np.array([0.2126, 0.7152, 0.0722], np.float32)
 # repack is kept when the model predicts at most this fraction of the
 # unpacked error, and the packed atlas is at least this fraction as dense as
 # the input, charts grown by half the padding (padded_utilisation;
@@ -55,28 +87,161 @@ def triangle_energy(uvs, triangles, energy):
     return energy[rows, cols].astype(np.float64).mean(axis=1) * texels
 
 
-def chart_scales(uvs, triangles, charts, energy, min_scale=0.5, max_scale=2.0):
-    """Relative linear scale per chart from the error model above, clamped to
-    [min_scale, max_scale] around the median chart; also returns (E_c, A_c)."""
+def _window(values, mask, reduce, fill):
+    """3x3 min or max (reduce: np.minimum or np.maximum) of `values` over
+    covered texels (uncovered ones read as `fill`), separably; 0 outside
+    the mask."""
+    out = np.pad(np.where(mask, values, values.dtype.type(fill)), 1, constant_values=fill)
+    out = reduce(reduce(out[:-2], out[1:-1]), out[2:])
+    out = reduce(reduce(out[:, :-2], out[:, 1:-1]), out[:, 2:])
+    return np.where(mask, out, out.dtype.type(0))
+
+
+def opening(values, mask):
+    """Morphological opening (3x3 min, then 3x3 max) over covered texels: the
+    smooth part of a texel field. A feature at most two texels wide, like a
+    shadow edge in the gradient map or the luminance slope across it,
+    vanishes; a level that holds over three texels stays."""
+    eroded = _window(values, mask, np.minimum, np.inf)
+    return _window(eroded, mask, np.maximum, -np.inf)
+
+
+def luminance_slope(lightmap, mask):
+    """|grad L| per covered texel (L the lightmap's luminance, per texel),
+    from the differences to its covered neighbours (0 where it has none)."""
+    image = np.asarray(lightmap, np.float32)
+    lum = image if image.ndim == 2 else image[..., 0] if image.shape[2] == 1 else image[..., :3] @ LUMA
+    lum = lum.astype(np.float32)
+    slope = []
+    for axis in (0, 1):
+        head = [slice(None)] * 2
+        tail = [slice(None)] * 2
+        head[axis], tail[axis] = slice(1, None), slice(None, -1)
+        both = mask[tuple(head)] & mask[tuple(tail)]
+        step = np.where(both, np.abs(lum[tuple(head)] - lum[tuple(tail)]), np.float32(0))
+        total, count = np.zeros(lum.shape, np.float32), np.zeros(lum.shape, np.float32)
+        total[tuple(head)] += step
+        total[tuple(tail)] += step
+        count[tuple(head)] += both
+        count[tuple(tail)] += both
+        slope.append(total / np.maximum(count, 1))
+    return np.where(mask, np.hypot(*slope), np.float32(0))
+
+
+def chart_errors(uvs, triangles, charts, energy, lightmap=None, mask=None, smooth_term=None):
+    """(edge, smooth, area), each (C,): the error model's terms per chart at
+    the input's scale (texel error units) and the chart's UV area.
+
+    edge: the gradient energy above its smooth part (`opening`) times
+    EDGE_ERROR. smooth: the smooth part times CURVATURE_ERROR, plus, with a
+    lightmap, the chart's mean smooth luminance slope times its border
+    length in texels times BORDER_ERROR; both times SMOOTH_WEIGHT. Without
+    a lightmap the slope term is 0 (the gradient map is blind to linear
+    light). Sums over a triangle's texels use its four points
+    (`triangle_texels`). smooth_term False (default: SMOOTH_TERM): edge is
+    the whole gradient energy, unscaled, and smooth is 0."""
+    shape = energy.shape
     count = int(charts.max()) + 1 if len(charts) else 0
-    chart_energy = np.bincount(charts, weights=triangle_energy(uvs, triangles, energy), minlength=count)
-    chart_area = np.bincount(charts, weights=np.abs(signed_areas(uvs, triangles)), minlength=count)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        density = np.where(chart_area > 0, chart_energy / np.maximum(chart_area, 1e-300), 0.0)
-    mean = float(np.average(density, weights=chart_area)) if chart_area.sum() > 0 else 0.0
+    area = np.bincount(charts, weights=np.abs(signed_areas(uvs, triangles)), minlength=count)
+    if not (SMOOTH_TERM if smooth_term is None else smooth_term):
+        edge = np.bincount(charts, weights=triangle_energy(uvs, triangles, energy), minlength=count)
+        return edge, np.zeros(count), area
+    if mask is None:
+        mask = energy > 0
+    energy = np.where(mask, energy, 0).astype(np.float32)
+    flat = opening(energy, mask)
+    sharp = triangle_energy(uvs, triangles, energy - flat)
+    edge = EDGE_ERROR * np.bincount(charts, weights=sharp, minlength=count)
+    curvature = np.bincount(charts, weights=triangle_energy(uvs, triangles, flat), minlength=count)
+    smooth = CURVATURE_ERROR * curvature
+    if lightmap is not None:
+        slope = opening(luminance_slope(lightmap, mask), mask)
+        slope_sum = np.bincount(charts, weights=triangle_energy(uvs, triangles, slope), minlength=count)
+        texels = area * shape[0] * shape[1]
+        mean_slope = np.where(texels > 0, slope_sum / np.maximum(texels, 1e-300), 0.0)
+        _, perimeter = chart_outlines(uvs, triangles, charts, shape, snap=CHART_TOLERANCE)
+        smooth = smooth + BORDER_ERROR * mean_slope * perimeter
+    return edge, SMOOTH_WEIGHT * smooth, area
+
+
+def _scales_at(edge, smooth, area, lam):
+    """Each chart's minimiser of edge / s + smooth / s^2 + lam area s^2: the
+    root of g(s) = 2 lam area s^4 - edge s - 2 smooth. g is convex on s > 0
+    and negative below the root, so Newton's method from a start above the
+    root (where 2 lam area s^4 is at least twice each of the other terms)
+    falls onto it monotonically."""
+    k = 2.0 * lam * area
+    s = np.maximum(np.cbrt(2.0 * edge / k), (4.0 * smooth / k) ** 0.25)
+    for _ in range(12):  # the start is within a factor 2 of the root: quadratic convergence
+        s = s - (k * s ** 4 - edge * s - 2.0 * smooth) / (4.0 * k * s ** 3 - edge)
+    return s
+
+
+def _budget_scales(edge, smooth, area):
+    """Scales minimising sum(edge / s + smooth / s^2) for the budget
+    sum(area s^2) = sum(area) (Lagrange: one lam for all charts), by
+    bisection on log lam. Every chart needs edge > 0 and area > 0."""
+    budget = area.sum()
+    lo, hi = -200.0, 200.0
+    for _ in range(64):
+        mid = 0.5 * (lo + hi)
+        used = (area * _scales_at(edge, smooth, area, np.exp(mid)) ** 2).sum()
+        lo, hi = (mid, hi) if used > budget else (lo, mid)
+    return _scales_at(edge, smooth, area, np.exp(0.5 * (lo + hi)))
+
+
+def optimal_scales(edge, smooth, area, min_scale=0.5, max_scale=2.0):
+    """Relative linear scale per chart: the model's optimum for the input's
+    texel budget, with the edge density floored at ENERGY_FLOOR of its mean,
+    then clamped to [min_scale, max_scale] times the median chart (the
+    packer's global scale sets the level). Without smooth light this is
+    (edge density)^(1/3) over its median, clamped. Charts of zero area get 1."""
+    edge, smooth, area = (np.asarray(x, np.float64) for x in (edge, smooth, area))
+    scales = np.ones(len(area))
+    live = area > 0
+    if not live.any():
+        return scales
+    mean = edge[live].sum() / area[live].sum()
+    if not mean > 0:  # no light change anywhere: the floor comes from the smooth light
+        mean = smooth[live].sum() / area[live].sum()
     if not mean > 0:
-        return np.ones(count), chart_energy, chart_area
-    raw = np.cbrt(density + ENERGY_FLOOR * mean)
-    scales = raw / np.median(raw[chart_area > 0])
-    return np.clip(scales, min_scale, max_scale), chart_energy, chart_area
+        return scales
+    if not (smooth[live] > 0).any():  # the edge term alone: its closed form
+        with np.errstate(divide="ignore", invalid="ignore"):
+            density = np.where(live, edge / np.maximum(area, 1e-300), 0.0)
+        raw = np.cbrt(density + ENERGY_FLOOR * float(np.average(density, weights=area)))
+        return np.clip(raw / np.median(raw[live]), min_scale, max_scale)
+    free = _budget_scales(edge[live] + ENERGY_FLOOR * mean * area[live], smooth[live], area[live])
+    scales[live] = np.clip(free / np.median(free), min_scale, max_scale)
+    return scales
 
 
-def chart_outlines(uvs, triangles, charts, shape):
+def predicted_error(edge, smooth, scales):
+    """The model's error at `scales` relative to the input's (1.0 = the same)."""
+    total = edge.sum() + smooth.sum()
+    if not total > 0:
+        return 1.0
+    s = np.maximum(np.asarray(scales, np.float64), 1e-12)
+    return float((edge / s + smooth / (s * s)).sum() / total)
+
+
+def chart_scales(uvs, triangles, charts, energy, min_scale=0.5, max_scale=2.0, lightmap=None, mask=None,
+                 smooth_term=None):
+    """Relative linear scale per chart from the error model above
+    (`chart_errors`, `optimal_scales`); also returns (edge, smooth, area)."""
+    edge, smooth, area = chart_errors(uvs, triangles, charts, energy, lightmap, mask, smooth_term)
+    return optimal_scales(edge, smooth, area, min_scale, max_scale), edge, smooth, area
+
+
+def chart_outlines(uvs, triangles, charts, shape, snap=0.0):
     """(C,) each chart's area and boundary length in texels. Edges are matched
-    by their exact end points, so the layout's charts must be bit-exact
-    (pack_charts' output is)."""
+    by their end points, exactly (snap 0: the charts must be bit-exact, as
+    pack_charts' output is) or rounded to multiples of `snap` in UV units."""
     height, width = shape
-    corners = uvs[triangles].astype(np.float64) * (width, height)  # (T, 3, 2) texel space
+    corners = uvs[triangles].astype(np.float64)
+    if snap > 0:
+        corners = np.round(corners / snap) * snap
+    corners = corners * (width, height)  # (T, 3, 2) texel space
     start = corners.reshape(-1, 2)
     end = np.roll(corners, -1, axis=1).reshape(-1, 2)
     # An edge's key: its chart and its end points in a fixed order.
@@ -104,20 +269,22 @@ def padded_utilisation(area, perimeter, padding, shape):
     return float(grown[area > 0].sum() / (shape[0] * shape[1]))
 
 
-def repack(source_uvs, refined_uvs, triangles, energy, resolution, padding, min_scale, max_scale, progress=None):
+def repack(source_uvs, refined_uvs, triangles, energy, resolution, padding, min_scale, max_scale, progress=None,
+           lightmap=None, mask=None):
     """Scale the charts of `refined_uvs` by their signal (measured on the
-    source layout `source_uvs`, where `energy` was baked) and pack them into
-    one atlas. Returns (uvs, report); uvs is None when the packed layout is
-    not better than `refined_uvs` by the error model (the report says so)."""
+    source layout `source_uvs`, where `energy` and `lightmap` were baked;
+    `mask` its coverage) and pack them into one atlas. Returns (uvs,
+    report); uvs is None when the packed layout is not better than
+    `refined_uvs` by the error model (the report says so)."""
     charts = find_charts(source_uvs, triangles, tolerance=CHART_TOLERANCE)
-    scales, chart_energy, _ = chart_scales(source_uvs, triangles, charts, energy, min_scale, max_scale)
-    total = chart_energy.sum()
+    scales, edge, smooth, _ = chart_scales(source_uvs, triangles, charts, energy, min_scale, max_scale,
+                                           lightmap, mask)
     # No packing can scale the charts beyond filling the whole atlas, gutters
     # aside: when the model's error at that scale is no clear gain, the
     # packer need not run (a single chart filling its atlas, for example).
     area_refined = np.bincount(charts, weights=np.abs(signed_areas(refined_uvs, triangles)), minlength=len(scales))
     largest = 1.0 / np.sqrt(max(float((area_refined * scales ** 2).sum()), 1e-300))
-    best = float((chart_energy / (largest * scales)).sum() / total) if total > 0 else 1.0
+    best = predicted_error(edge, smooth, largest * scales)
     if best >= REQUIRED_GAIN:
         return None, {"charts": int(len(scales)), "used": False, "predicted_error": best,
                       "reason": f"even filling the whole atlas the error model predicts {best:.3f} of the unpacked "
@@ -131,8 +298,8 @@ def repack(source_uvs, refined_uvs, triangles, energy, resolution, padding, min_
     # Areas and outlines: the packed charts are bit-exact; the input's outlines are theirs unscaled.
     area_after, perimeter_out = chart_outlines(packed, triangles, charts, resolution)
     area_before, _ = chart_outlines(refined_uvs, triangles, charts, resolution)
-    # Predicted error of the packed layout relative to refined_uvs (1.0 = the same).
-    predicted = float((chart_energy / np.maximum(final, 1e-12)).sum() / total) if total > 0 else 1.0
+    # Predicted error of the packed layout relative to refined_uvs (1.0 = the same), both terms.
+    predicted = predicted_error(edge, smooth, final)
     report = {
         "charts": int(len(scales)),
         "chart_scales": np.asarray(final, np.float64),
@@ -147,10 +314,11 @@ def repack(source_uvs, refined_uvs, triangles, energy, resolution, padding, min_
         "padded_utilisation_after": padded_utilisation(area_after, perimeter_out, padding, resolution),
         "placement": pack_report["placement"],
         "predicted_error": predicted,
+        "smooth_fraction": float(smooth.sum() / max(edge.sum() + smooth.sum(), 1e-300)),
     }
-    # The model sees only the edge term: it misses what a packing that wastes
-    # the atlas costs the flat charts, so it must promise a clear gain, and
-    # the packed atlas must be about as dense as the input for its padding.
+    # The model must promise a clear gain, and the packed atlas must be about
+    # as dense as the input for its padding (the model does not see what the
+    # gutters cost).
     # Density of the charts grown by half the padding, not texels touched: a
     # chart off the texel grid touches more texels than the same chart on it,
     # and shrunk charts need the same gutters (docs/refiner.md).

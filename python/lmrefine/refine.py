@@ -182,7 +182,10 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
         diffusion, max_steps: automaton details (see run_automaton).
         progress: callable progress(fraction, stage); returning False cancels.
         repack: after the in-chart refinement, scale each chart by its
-            signal (the error model in docs/refiner.md, "Chart scaling")
+            signal (the error model in docs/refiner.md, "Chart scaling":
+            light changes from the gradient map; with
+            allocation.SMOOTH_TERM also smooth light from the lightmap's
+            slope, not read when gradient= is given)
             and pack all charts into one atlas with lmrefine.pack_charts
             (rotations, at least `padding` texels apart, or the input's
             gutter where that is narrower, but at least a texel). Kept only
@@ -255,6 +258,7 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
                         else 1.0)
     timings = {"setup": time.perf_counter() - start}
     clock = time.perf_counter()
+    gradient_given = gradient  # with a gradient map the lightmap is not read (nor checked)
     gradient = _gradient(lightmap, gradient, mask, shape, wavelet, progress)
     energy, scalar_energy = _energy(gradient, mask, float(strength), directional)
     timings["gradient_map"] = time.perf_counter() - clock
@@ -297,7 +301,8 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
         # a texel unless the padding is (dilation needs a texel between charts).
         pack_padding = min(float(padding), max(float(original["min_gutter_texels"]), min(float(padding), 1.0)))
         packed, repack_report = allocation.repack(uvs, new_uvs, triangles, scalar_energy, shape, pack_padding,
-                                                  float(min_chart_scale), float(max_chart_scale), progress)
+                                                  float(min_chart_scale), float(max_chart_scale), progress,
+                                                  lightmap=lightmap if gradient_given is None else None, mask=mask)
         if packed is not None:
             packed_check = _native.check_layout(packed, triangles, shape, padding)
             worse = backoff.failures(packed_check, original, padding)

@@ -1,0 +1,175 @@
+"""The chart-allocation error model (lmrefine.allocation): edge error ~ 1/s,
+smooth error ~ 1/s^2, the optimum for a texel budget, and what it does to
+flat, smooth and edged charts."""
+
+import numpy as np
+import pytest
+
+import lmrefine
+from lmrefine import allocation
+from layouts import grid_chart, merge
+
+RESOLUTION = 64
+
+
+def three_charts():
+    """Three 16 x 16-texel square charts in a row, 4 texels apart."""
+    size, gap = 16 / RESOLUTION, 4 / RESOLUTION
+    charts = [grid_chart(2, (gap + k * (size + gap), gap), (gap + k * (size + gap) + size, gap + size))
+              for k in range(3)]
+    uvs, tris = merge(*charts)
+    return uvs, tris, lmrefine.find_charts(uvs, tris, tolerance=1e-5)
+
+
+def light(kind):
+    """(H, W, 3) lightmap: 'flat' (constant), 'smooth' (a spot light's
+    quadratic fall-off along u, no edge) or 'edge' (a hard shadow edge),
+    in each chart of three_charts() in turn: chart 0 flat, 1 smooth, 2 edge."""
+    v, u = np.mgrid[0:RESOLUTION, 0:RESOLUTION].astype(np.float64) + 0.5
+    image = np.full((RESOLUTION, RESOLUTION), 0.5)
+    smooth_chart = (u >= 24) & (u < 40)
+    image = np.where(smooth_chart, 0.2 + 0.6 * ((u - 24) / 16.0) ** 2, image)
+    edge_chart = u >= 44
+    image = np.where(edge_chart, np.where(u + 0.3 * (v - 52) > 52, 0.9, 0.1), image)
+    return np.repeat(image[..., None], 3, axis=2).astype(np.float32)
+
+
+def model_terms():
+    uvs, tris, charts = three_charts()
+    lightmap = light(None)
+    mask = lmrefine.coverage_mask(uvs, tris, RESOLUTION)
+    energy = lmrefine.gradient_map(lightmap, mask).sum(axis=2)
+    return uvs, tris, charts, energy, lightmap, mask
+
+
+def test_each_chart_gets_the_term_of_its_light():
+    uvs, tris, charts, energy, lightmap, mask = model_terms()
+    edge, smooth, area = allocation.chart_errors(uvs, tris, charts, energy, lightmap, mask, True)
+    assert area == pytest.approx(np.full(3, (16 / RESOLUTION) ** 2))
+    assert edge[0] == pytest.approx(0, abs=1e-6) and smooth[0] == pytest.approx(0, abs=1e-6)  # flat
+    assert smooth[1] > 10 * edge[1]  # a smooth fall-off: mostly the 1/s^2 term
+    assert edge[2] > 3 * smooth[2]  # a hard edge: mostly the 1/s term
+
+
+def test_a_chart_of_smooth_light_alone_grows_and_a_flat_chart_still_shrinks():
+    uvs, tris, charts, energy, lightmap, mask = model_terms()
+    scales, edge, smooth, area = allocation.chart_scales(uvs, tris, charts, energy, 0.5, 2.0, lightmap, mask, True)
+    assert edge[1] < 0.1 * smooth[1]
+    assert scales[0] < scales[1] < scales[2]
+    assert scales[0] == pytest.approx(0.5)  # the flat chart shrinks to the bound
+    free = allocation._budget_scales(edge + allocation.ENERGY_FLOOR * edge.sum() / area.sum() * area, smooth, area)
+    assert free[1] > 1.5 * free[0]  # the smooth chart is well above the flat chart's floor
+    # Without the lightmap (the gradient map alone: blind to linear light) the
+    # smooth chart keeps only its curvature and gets less.
+    _, edge_only, smooth_only, _ = allocation.chart_scales(uvs, tris, charts, energy, 0.5, 2.0, None, mask, True)
+    assert smooth_only[1] < 0.5 * smooth[1] and edge_only[1] == pytest.approx(edge[1])
+
+
+def test_without_smooth_light_the_scales_are_the_edge_models():
+    rng = np.random.default_rng(3)
+    edge, area = rng.uniform(0.01, 1, 40), rng.uniform(0.1, 2, 40)
+    edge[:5] = 0  # flat charts: the floor
+    scales = allocation.optimal_scales(edge, np.zeros(40), area, 0.5, 2.0)
+    density = edge / area + allocation.ENERGY_FLOOR * edge.sum() / area.sum()
+    raw = np.cbrt(density)
+    assert scales == pytest.approx(np.clip(raw / np.median(raw), 0.5, 2.0), rel=1e-6)
+
+
+def predicted_total(edge, smooth, scales):
+    return float((edge / scales + smooth / scales ** 2).sum())
+
+
+def test_the_free_scales_minimise_the_models_error_for_the_budget():
+    edge = np.array([0.5, 0.05, 0.2])
+    smooth = np.array([0.0, 0.4, 0.1])
+    area = np.array([1.0, 2.0, 0.5])
+    scales = allocation._budget_scales(edge, smooth, area)
+    budget = area.sum()
+    assert (area * scales ** 2).sum() == pytest.approx(budget, rel=1e-9)
+    best = predicted_total(edge, smooth, scales)
+    # Brute force over the budget's surface: s0, s1 on a fine grid, s2 from the budget.
+    s0, s1 = np.meshgrid(np.linspace(0.05, 1.5, 1200), np.linspace(0.05, 1.5, 1200))
+    rest = budget - area[0] * s0 ** 2 - area[1] * s1 ** 2
+    ok = rest > 0
+    s2 = np.sqrt(np.where(ok, rest, 1.0) / area[2])
+    total = np.where(ok, edge[0] / s0 + smooth[0] / s0 ** 2 + edge[1] / s1 + smooth[1] / s1 ** 2
+                     + edge[2] / s2 + smooth[2] / s2 ** 2, np.inf)
+    k = np.unravel_index(np.argmin(total), total.shape)
+    assert best <= total[k] + 1e-9
+    assert best == pytest.approx(total[k], rel=1e-4)
+    assert scales == pytest.approx([s0[k], s1[k], s2[k]], abs=5e-3)
+
+
+def test_the_predicted_error_counts_both_terms():
+    edge, smooth = np.array([1.0, 0.0]), np.array([0.0, 1.0])
+    assert allocation.predicted_error(edge, smooth, [1.0, 1.0]) == pytest.approx(1.0)
+    assert allocation.predicted_error(edge, smooth, [2.0, 2.0]) == pytest.approx((0.5 + 0.25) / 2)
+    # Shrinking a chart of smooth light costs by the square.
+    assert allocation.predicted_error(edge, smooth, [1.0, 0.5]) == pytest.approx((1 + 4) / 2)
+
+
+def test_the_model_is_deterministic_and_leaves_its_inputs_alone():
+    uvs, tris, charts, energy, lightmap, mask = model_terms()
+    copies = [x.copy() for x in (uvs, tris, charts, energy, lightmap, mask)]
+    first = allocation.chart_scales(uvs, tris, charts, energy, 0.5, 2.0, lightmap, mask, True)
+    second = allocation.chart_scales(uvs, tris, charts, energy, 0.5, 2.0, lightmap, mask, True)
+    for a, b in zip(first, second):
+        assert np.array_equal(a, b)
+    for before, after in zip(copies, (uvs, tris, charts, energy, lightmap, mask)):
+        assert np.array_equal(before, after)
+
+
+def test_opening_removes_thin_lines_and_keeps_plateaus():
+    mask = np.ones((12, 12), bool)
+    values = np.zeros((12, 12))
+    values[:, 5:7] = 1.0  # a line two texels wide
+    values[8:, :] += 0.25  # a plateau four texels high
+    opened = allocation.opening(values, mask)
+    assert opened[2, 5] == 0 and opened[2, 6] == 0
+    assert opened[10, 2] == pytest.approx(0.25)
+    assert allocation.opening(values, np.zeros((12, 12), bool)).max() == 0
+
+
+def test_the_slope_reads_luminance_from_every_channel_layout():
+    rng = np.random.default_rng(5)
+    gray = rng.uniform(0, 1, (10, 12)).astype(np.float32)
+    mask = np.ones((10, 12), bool)
+    mask[:, 6] = False  # a gutter column: no difference across it
+    plain = allocation.luminance_slope(gray, mask)
+    assert allocation.luminance_slope(gray[..., None], mask) == pytest.approx(plain)
+    rgba = np.repeat(gray[..., None], 4, axis=2)
+    assert allocation.luminance_slope(rgba, mask) == pytest.approx(plain, rel=1e-5)
+    assert np.all(plain[:, 6] == 0)
+    # A ramp along columns: slope 0.1 per texel inside each covered run.
+    ramp = np.tile(0.1 * np.arange(12, dtype=np.float32), (10, 1))
+    assert allocation.luminance_slope(ramp, mask)[mask] == pytest.approx(np.full(mask.sum(), 0.1), rel=1e-5)
+
+
+def test_off_by_default_the_model_is_the_edge_model_on_the_whole_energy():
+    uvs, tris, charts, energy, lightmap, mask = model_terms()
+    assert allocation.SMOOTH_TERM is False
+    scales, edge, smooth, area = allocation.chart_scales(uvs, tris, charts, energy, 0.5, 2.0, lightmap, mask)
+    assert np.all(smooth == 0)
+    assert edge == pytest.approx(np.bincount(charts, allocation.triangle_energy(uvs, tris, energy)))
+    density = edge / area
+    raw = np.cbrt(density + allocation.ENERGY_FLOOR * np.average(density, weights=area))
+    assert np.array_equal(scales, np.clip(raw / np.median(raw), 0.5, 2.0))
+
+
+def test_refine_uvs_with_the_smooth_term_returns_a_valid_repacked_layout(monkeypatch):
+    from layouts import lightmap_pack
+    resolution = 128
+    uvs, tris = lightmap_pack(charts_across=24, margin_texels=1.0, resolution=resolution, quads=1)
+    v, u = np.mgrid[0:resolution, 0:resolution] / resolution
+    lightmap = np.where(u + 0.3 * v > 0.6, 1.0, 0.2) * (0.3 + 0.7 * u)  # an edge on a smooth ramp
+    lightmap = np.repeat(lightmap[..., None], 3, axis=2).astype(np.float32)
+    monkeypatch.setattr(allocation, "SMOOTH_TERM", True)
+    result = lmrefine.refine_uvs(lightmap, uvs, tris, resolution, padding=2)
+    repack = result.report["repack"]
+    assert 0 < repack["smooth_fraction"] < 1
+    original = lmrefine.check_layout(uvs, tris, resolution, 2)["min_gutter_texels"]
+    check = lmrefine.check_layout(result.uvs, tris, resolution, original - 1e-4)
+    assert check["valid"], check
+    monkeypatch.setattr(allocation, "SMOOTH_TERM", False)
+    off = lmrefine.refine_uvs(lightmap, uvs, tris, resolution, padding=2).report["repack"]
+    assert off["smooth_fraction"] == 0
