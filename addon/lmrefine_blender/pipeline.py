@@ -424,7 +424,8 @@ def _check_refined(lmrefine, name, uvs, layout, reference_uvs, resolution, paddi
     from. Returns (check of `uvs`, check of `reference_uvs`); a worse layout is a bug, raised."""
     from lmrefine.backoff import worse_than_source
     reference_check = lmrefine.check_layout(reference_uvs, layout.triangles, resolution, padding=padding)
-    worse, check = worse_than_source(uvs, reference_uvs, layout.triangles, resolution, padding)
+    worse, check = worse_than_source(uvs, reference_uvs, layout.triangles, resolution, padding,
+                                     source=reference_check)
     if worse:
         raise RuntimeError(f"refine_uvs returned a layout for '{name}' that is worse than the one it started from "
                            f"({', '.join(worse)}: {dict(check)}); this is a bug in lmrefine, please report "

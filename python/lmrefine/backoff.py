@@ -42,13 +42,15 @@ def failures(report, original, padding):
     return failed
 
 
-def worse_than_source(uvs, source_uvs, triangles, resolution, padding):
+def worse_than_source(uvs, source_uvs, triangles, resolution, padding, source=None):
     """The promise refine_uvs makes, checked from the outside: what makes the
     refined layout `uvs` worse than `source_uvs` (an empty list: nothing), and
     the refined layout's check_layout report. Moved inside charts, each chart
     pair keeps its own distance (relative gutter); repacked, the charts sit
-    anew, and the gutter is held to the padding or the source's narrowest."""
-    source = _native.check_layout(source_uvs, triangles, resolution, padding)
+    anew, and the gutter is held to the padding or the source's narrowest.
+    `source`: the source layout's check_layout report, if the caller has it."""
+    if source is None:
+        source = _native.check_layout(source_uvs, triangles, resolution, padding)
     check = _native.check_layout(uvs, triangles, resolution, padding, reference_uvs=source_uvs,
                                  relative_gutter=True)
     worse = failures(check, source, padding)

@@ -90,7 +90,7 @@ def _judge_layout(lm, case, result):
         if clean and check["min_gutter_texels"] < padding - 1e-3:
             worse.append(f"gutter {check['min_gutter_texels']:.3f} < padding {padding}")
         return f"packed layout worse than its input: {worse}" if worse else None
-    worse, _ = worse_than_source(out, uvs, triangles, resolution, padding)
+    worse, _ = worse_than_source(out, uvs, triangles, resolution, padding, source=source)
     return f"worse than the source: {worse}" if worse else None
 
 
