@@ -187,6 +187,22 @@ def _further_stages(sample, triangles, resolution, padding, options, stages, poi
     return refined, refined_map, lookup, {"stages": history, "stopped": stopped}
 
 
+def _uniform_sweep(sample, uvs, uv_points, resolution, options, stages, label, first=None):
+    """Uniform bakes of the layout `uvs` at R x each multiplier, read at the
+    points' UVs `uv_points`: [{multiplier, resolution, lookup}]. `first`: the
+    lookup at R when it is already baked."""
+    sweep = []
+    for multiplier in options.multipliers:
+        size = int(round(resolution * multiplier))
+        if multiplier == 1.0 and first is not None:
+            lookup = first
+        else:
+            image = stages.run(label, lambda p: _bake_map(sample, uvs, size, options, p))
+            lookup = metrics.bilinear_lookup(image, uv_points)
+        sweep.append({"multiplier": multiplier, "resolution": size, "lookup": lookup})
+    return sweep
+
+
 def _uniform_repack(sample, uvs, triangles, resolution, padding, options, points, progress):
     """The input's charts repacked at one common scale (lmrefine.pack_charts,
     scales None), baked at R and read at the points; None when the charts do
@@ -428,11 +444,8 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
         density_refined = metrics.texel_density(refined.uvs, triangles, areas, resolution)
 
     # The uniform baseline at higher resolutions, for the equal-error resolution.
-    sweep = [{"multiplier": 1.0, "resolution": resolution, "lookup": lookup_base}]
-    for multiplier in options.multipliers[1:]:
-        size = int(round(resolution * multiplier))
-        image = stages.run("bake resolution sweep", lambda p: _bake_map(sample, uvs, size, options, p))
-        sweep.append({"multiplier": multiplier, "resolution": size, "lookup": metrics.bilinear_lookup(image, uv_base)})
+    sweep = _uniform_sweep(sample, uvs, uv_base, resolution, options, stages, "bake resolution sweep",
+                           first=lookup_base)
     per_effect = per_effect_layouts = None
     if options.per_effect:
         per_effect, per_effect_layouts = _per_effect(sample, uvs, triangles, resolution, options, stages, points,
@@ -446,13 +459,8 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
     for other in others:
         other_uvs, _ = sample.layout(other)
         other_points = metrics.interpolate_corners(other_uvs, points.triangle, points.bary)
-        other_sweep = []
-        for multiplier in options.multipliers:
-            size = int(round(resolution * multiplier))
-            image = stages.run("bake comparison layouts", lambda p: _bake_map(sample, other_uvs, size, options, p))
-            other_sweep.append({"multiplier": multiplier, "resolution": size,
-                                "lookup": metrics.bilinear_lookup(image, other_points)})
-        compared.append((other, other_sweep))
+        compared.append((other, _uniform_sweep(sample, other_uvs, other_points, resolution, options, stages,
+                                               "bake comparison layouts")))
     # The second baseline: the input's charts packed at one common scale, no
     # signal. What it gains is packing; what the refined map gains beyond it, signal.
     uniform = stages.run("uniform repack", lambda p: _uniform_repack(sample, uvs, triangles, resolution, padding,
