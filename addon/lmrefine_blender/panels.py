@@ -147,10 +147,9 @@ class LMREFINE_PT_refine_result(_LightmapTab, bpy.types.Panel):
             rows = [(f"Objects: {result.objects}", 'OBJECT_DATA', True),
                     (f"Moved: {result.moved} object(s)", 'CHECKMARK', True),
                     (f"Edges: {result.transition_widening:.2f}x texels", 'SHARPCURVE', True),
-                    # Per triangle, on the output: the repack's chart scale comes on top of the automaton's
-                    # bounds (Min Shrink, Max Growth bound its cells), so this range can exceed them.
-                    (f"Triangles: {result.density_min:.2f}x-{result.density_max:.2f}x texels", 'MOD_UVPROJECT',
-                     True)]
+                    # A triangle's new / old texels, on the output: the repack's chart scale comes on top of
+                    # the automaton's bounds (Min Shrink, Max Growth bound its cells), so it can exceed them.
+                    (f"Triangles: {result.density_min:.2g}x-{result.density_max:.3g}x", 'MOD_UVPROJECT', True)]
         limits = ", ".join(LIMIT_NAMES.get(name, name) for name in result.limited_by.split(", ") if name)
         rows.append((f"Limit: {limits}" if limits else "Limit: none", 'INFO', bool(limits)))
         warnings = result.warnings if result.valid else 0
