@@ -98,6 +98,15 @@ def test_messy_meshes_draw_without_errors(facts):
     assert value["rows"][0][0].startswith("Median: ")
 
 
+def test_depth_bias_and_cache(facts):
+    value = fact(facts, "depth_bias_and_cache")
+    assert value["apparent"] == pytest.approx([value["expected"]] * 3, abs=2e-5) and value["expected"] < 0.999
+    assert value["unchanged"]
+    assert value["ortho_shift"] == pytest.approx([value["ortho_shift"][0]] * 3) and value["ortho_shift"][0] > 0
+    assert value["keys"] == {"refined": [["Plane", "UVMap", 256], ["Plane", "UVMap_refined", 256]],
+                             "source": [["Plane", "UVMap", 256]], "resolution": [["Plane", "UVMap", 512]]}
+
+
 def test_the_toggle_adds_and_removes_every_handler(facts):
     value = fact(facts, "toggle_adds_and_removes_handlers")
     off = {"handles": 0, "enabled": False, "depsgraph": False, "undo": False, "redo": False, "load_pre": True,

@@ -148,7 +148,7 @@ def compute_view(scene, view_layer, depsgraph):
     drawn with the map the panel picks; densities come from the cache."""
     settings = scene.lmrefine
     resolution = int(settings.resolution)
-    entries, sources, skipped, fallback = [], [], [], []
+    entries, sources, skipped, fallback, used = [], [], [], [], set()
     for obj in scene.objects:
         if obj.type != 'MESH' or not obj.visible_get(view_layer=view_layer):
             continue
@@ -162,6 +162,7 @@ def compute_view(scene, view_layer, depsgraph):
             if key not in _State.cache:
                 _State.cache[key] = object_density(obj, name, resolution, depsgraph)
             densities[name] = _State.cache[key]
+            used.add(key)
         if isinstance(densities[shown], str) or isinstance(densities[source], str):
             why = densities[shown] if isinstance(densities[shown], str) else densities[source]
             skipped.append((obj.name, why))
@@ -170,6 +171,9 @@ def compute_view(scene, view_layer, depsgraph):
             fallback.append(obj.name)
         entries.append((obj.name, shown, densities[shown]))
         sources.append(densities[source])
+
+    for key in [key for key in _State.cache if key not in used]:  # renamed, deleted, another resolution
+        del _State.cache[key]
 
     def pooled(items):
         values = np.concatenate([d.values for d in items]) if items else np.zeros(0)
@@ -327,6 +331,7 @@ def _draw_surface():
                                                                       "color": view.colours}))
         shader, batch = _State.batch
         region = bpy.context.region_data
+        state = gpu.state.depth_test_get(), gpu.state.depth_mask_get(), gpu.state.blend_get()
         gpu.state.depth_test_set('LESS_EQUAL')
         gpu.state.depth_mask_set(False)
         gpu.state.blend_set('ALPHA')
@@ -335,9 +340,10 @@ def _draw_surface():
                 gpu.matrix.load_projection_matrix(depth_biased(gpu.matrix.get_projection_matrix(),
                                                                region.view_distance if region else 10.0))
                 batch.draw(shader)
-        finally:
-            gpu.state.blend_set('NONE')
-            gpu.state.depth_test_set('NONE')
+        finally:  # what Blender's next drawing expects
+            gpu.state.depth_test_set(state[0])
+            gpu.state.depth_mask_set(state[1])
+            gpu.state.blend_set(state[2])
     except Exception:
         _report_once("surface")
 
@@ -352,7 +358,9 @@ def _draw_legend():
         from gpu_extras.batch import batch_for_shader
         context = bpy.context
         scale = context.preferences.system.ui_scale
-        left = 16 * scale + sum(r.width for r in context.area.regions if r.type == 'TOOLS' and r.width > 1)
+        left = 16 * scale
+        if context.preferences.system.use_region_overlap:  # the toolbar is drawn over the viewport
+            left += sum(r.width for r in context.area.regions if r.type == 'TOOLS' and r.width > 1)
         line_height, size = 16 * scale, int(11 * scale)
         lines = legend_lines(view)
         font = 0

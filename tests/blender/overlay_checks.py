@@ -181,6 +181,45 @@ def messy_meshes():
 
 
 @check
+def depth_bias_and_cache():
+    """The surface is pulled towards the camera by DEPTH_BIAS of its distance in perspective, by a constant in
+    orthographic views, and the projection given is not modified; the cache keeps only what the view uses."""
+    import math
+    from mathutils import Matrix, Vector
+    near, far, focal = 0.01, 1000.0, 1.0 / math.tan(0.4)
+    perspective = Matrix(((focal, 0, 0, 0), (0, focal, 0, 0),
+                          (0, 0, (far + near) / (near - far), 2 * far * near / (near - far)), (0, 0, -1, 0)))
+    orthographic = Matrix(((0.1, 0, 0, 0), (0, 0.1, 0, 0), (0, 0, -2 / (far - near), -(far + near) / (far - near)),
+                           (0, 0, 0, 1)))
+    before = [tuple(row) for row in perspective]
+    biased = overlay.depth_biased(perspective, 10.0)
+
+    def ndc(matrix, distance):
+        clip = matrix @ Vector((0.0, 0.0, -distance, 1.0))
+        return clip.z / clip.w
+
+    # The distance whose plain depth equals the biased depth at `distance` (ndc = -A + B / d).
+    a, b = perspective[2][2], perspective[2][3]
+    apparent = {d: b / (ndc(biased, d) + a) / d for d in (0.5, 2.0, 10.0)}  # mathutils computes in float32
+    ortho_biased = overlay.depth_biased(orthographic, 10.0)
+    ortho_shift = [ndc(orthographic, d) - ndc(ortho_biased, d) for d in (0.5, 10.0, 300.0)]
+    # The cache: switch to Source, then to another resolution: only the entries in use stay.
+    settings = fresh()
+    obj = plane("Plane")
+    set_uvs(obj, "UVMap_refined", uvs_of(obj) * 0.5)
+    settings.density_overlay = True
+    keys = {"refined": sorted(overlay._State.cache)}
+    settings.density_map = 'SOURCE'
+    keys["source"] = sorted(overlay._State.cache)
+    settings.resolution = 512
+    update()
+    keys["resolution"] = sorted(overlay._State.cache)
+    return {"apparent": list(apparent.values()), "expected": 1 / (1 + overlay.DEPTH_BIAS),
+            "unchanged": [tuple(row) for row in perspective] == before, "ortho_shift": ortho_shift,
+            "keys": keys}
+
+
+@check
 def toggle_adds_and_removes_handlers():
     settings = fresh()
     plane("Plane")
