@@ -23,6 +23,7 @@ if BLENDER is None:
 
 GREEN = [0.2, 0.85, 0.2, 0.8]
 CYAN = [0.1, 0.8, 0.95, 0.8]  # half the reference
+NO_FACES = "no faces or no area after its modifiers and transform"
 BLUE, RED, MAGENTA = [0.15, 0.35, 1.0, 0.8], [1.0, 0.15, 0.1, 0.8], [1.0, 0.0, 1.0, 0.8]
 
 
@@ -91,10 +92,11 @@ def test_messy_meshes_draw_without_errors(facts):
     assert value["sliver_values"][0] > 0 and math.isnan(value["sliver_values"][1])
     skipped = dict(value["skipped"])
     assert skipped == {"Bare": "no lightmap UV map", "Huge": "vertices at NaN, Inf or beyond 1e9 units",
-                       "Flat": "no faces", "Dropped": "no faces"}
+                       "Flat": NO_FACES, "Dropped": NO_FACES}
     assert value["finite"] and value["minimum"] > 0
     assert any(line.startswith("not drawn: 4 object(s)") for line in value["legend"])
     assert value["draw_raised"] == []  # background Blender cannot draw: the callbacks swallow it
+    assert value["draw_messages"] == 1  # and say so once, not every frame
     assert value["rows"][0][0].startswith("Median: ")
 
 

@@ -93,7 +93,7 @@ def object_density(obj, uv_name, resolution, depsgraph):
     except UserError:
         return f"loses '{uv_name}' in its modifiers"
     if export is None:
-        return "no faces"
+        return "no faces or no area after its modifiers and transform"
     if not (np.abs(export.positions) <= MAX_COORDINATE).all():  # the bake refuses it too
         return "vertices at NaN, Inf or beyond 1e9 units"
     with np.errstate(all="ignore"):

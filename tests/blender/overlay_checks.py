@@ -168,13 +168,17 @@ def messy_meshes():
     facts["sliver_values"] = overlay._State.cache[("Sliver", "UVMap", 256)].values.tolist()
     facts["bare_skipped"] = [entry for entry in view.skipped if entry[0] == "Bare"]
     # The draw callbacks in a Blender that cannot draw (background): they must not raise.
-    raised = []
-    for callback in (overlay._draw_surface, overlay._draw_legend):
-        try:
-            callback()
-        except Exception as error:  # noqa: BLE001 - the fact is whether anything escapes
-            raised.append(repr(error))
+    import contextlib
+    import io
+    raised, printed = [], io.StringIO()
+    with contextlib.redirect_stdout(printed):
+        for callback in (overlay._draw_surface, overlay._draw_legend) * 3:  # three frames
+            try:
+                callback()
+            except Exception as error:  # noqa: BLE001 - the fact is whether anything escapes
+                raised.append(repr(error))
     facts["draw_raised"] = raised
+    facts["draw_messages"] = printed.getvalue().count("overlay stopped drawing")
     facts["rows"] = panels.density_rows(settings)
     del bare
     return facts
