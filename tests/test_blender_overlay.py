@@ -109,6 +109,13 @@ def test_depth_bias_and_cache(facts):
                              "source": [["Plane", "UVMap", 256]], "resolution": [["Plane", "UVMap", 512]]}
 
 
+def test_random_broken_meshes(facts):
+    value = fact(facts, "random_broken_meshes")
+    assert value["finite"] and value["colours_in_range"]
+    assert value["drawn"] + value["skipped"] == 40 and value["drawn"] > 0 and value["vertices"] > 0
+    assert max(len(line) for line in value["legend"]) < 90  # huge densities are written short (1.23e+28)
+
+
 def test_the_toggle_adds_and_removes_every_handler(facts):
     value = fact(facts, "toggle_adds_and_removes_handlers")
     off = {"handles": 0, "enabled": False, "depsgraph": False, "undo": False, "redo": False, "load_pre": True,

@@ -198,10 +198,10 @@ def compute_view(scene, view_layer, depsgraph):
 
 
 def format_density(value):
-    """A density for the legend and the panel: whole texels from 100 up, 3 digits below."""
+    """A density for the legend and the panel: whole texels from 100 to 99999, else 3 digits (1.23e+07)."""
     if not math.isfinite(value):
         return "-"
-    return f"{value:.0f}" if abs(value) >= 100 else f"{value:.3g}"
+    return f"{value:.0f}" if 100 <= abs(value) < 1e5 else f"{value:.3g}"
 
 
 def legend_lines(view):

@@ -224,6 +224,39 @@ def depth_bias_and_cache():
 
 
 @check
+def random_broken_meshes():
+    """40 meshes of random n-gons with NaN, Inf, huge and repeated vertices and NaN, Inf and collapsed UVs:
+    the view is computed without an exception and draws only finite arrays."""
+    settings = fresh()
+    rng = np.random.default_rng(13)
+    specials = np.array([np.nan, np.inf, -np.inf, 1e30, 1e-30, 0.0])
+    for index in range(40):
+        vertices = rng.normal(size=(int(rng.integers(3, 12)), 3)) * 10.0 ** rng.integers(-3, 4)
+        vertices[rng.random(vertices.shape) < 0.05] = rng.choice(specials)
+        vertices[rng.integers(len(vertices))] = vertices[0]  # a repeated vertex
+        faces = []
+        for _ in range(int(rng.integers(1, 6))):
+            corners = rng.choice(len(vertices), size=int(rng.integers(3, min(len(vertices), 6) + 1)), replace=False)
+            faces.append([int(c) for c in corners])
+        mesh = bpy.data.meshes.new(f"Broken{index}")
+        mesh.from_pydata([tuple(v) for v in vertices], [], faces)
+        layer = mesh.uv_layers.new(name="UVMap")
+        uvs = rng.random((len(mesh.loops), 2))
+        uvs[rng.random(uvs.shape) < 0.1] = rng.choice(specials)
+        if index % 5 == 0:
+            uvs[:] = 0.5  # no texels at all
+        layer.data.foreach_set("uv", uvs.astype(np.float32).ravel())
+        obj = bpy.data.objects.new(f"Broken{index}", mesh)
+        bpy.context.scene.collection.objects.link(obj)
+    settings.density_overlay = True
+    view = overlay.current_view()
+    return {"finite": bool(np.isfinite(view.positions).all() and np.isfinite(view.colours).all()),
+            "drawn": len(view.drawn), "skipped": len(view.skipped), "vertices": len(view.positions),
+            "colours_in_range": bool(((view.colours >= 0) & (view.colours <= 1)).all()),
+            "legend": overlay.legend_lines(view)}
+
+
+@check
 def toggle_adds_and_removes_handlers():
     settings = fresh()
     plane("Plane")
