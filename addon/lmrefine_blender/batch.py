@@ -89,6 +89,10 @@ def build_parser():
     parser.add_argument("--samples", type=int, help="samples per texel")
     parser.add_argument("--float32", action=argparse.BooleanOptionalAction, default=None,
                         help="write 32-bit float EXRs (default: half float; both ZIP-compressed)")
+    parser.add_argument("--shared-atlas", action=argparse.BooleanOptionalAction, default=None,
+                        help="objects whose lightmap UV maps share one atlas are refined together and baked into "
+                             "one image per pass, <first object>_atlas_lightmap_<pass>.exr (default: on); "
+                             "--no-shared-atlas writes one image per object")
     parser.add_argument("--preview", action=argparse.BooleanOptionalAction, default=None,
                         help="hook the lightmap into the materials of the saved .blend")
     parser.add_argument("--report", help="JSON report path (default: OUT/report.json)")
@@ -102,6 +106,7 @@ def apply_flags(settings, args):
         "strength": args.strength, "max_magnification": args.max_magnification, "min_shrink": args.min_shrink,
         "delta": args.delta, "passes": args.passes, "directional": args.directional, "samples": args.samples,
         "preview": args.preview, "exr_float32": args.float32, "stages": args.stages,
+        "shared_atlas": args.shared_atlas,
     }
     upper = {"first_lightmap": args.first_lightmap, "driving_pass": args.driving_pass, "border": args.border,
              "wavelet": args.wavelet, "backend": args.backend}
@@ -222,10 +227,14 @@ def run(args):
         "ok": True,
         "blend": blend_copy,
         "objects": {name: {"source_layer": t.source, "refined_layer": t.refined,
-                           "report": outcome.reports[name],
+                           "atlas": outcome.atlas_of(name),
+                           "report": outcome.reports[outcome.atlas_of(name)],
                            "tessellation": outcome.tessellation.get(name),
-                           "images": {p: outcome.image_files[i] for p, i in outcome.images[name].items()}}
-                    for name, t in ((t.obj.name, t) for t in targets)},
+                           "images": {p: outcome.image_files[i] for p, i in outcome.images[outcome.atlas_of(name)].items()}}
+                    for name, t in ((t.obj.name, t) for t in targets) if name in outcome.objects},
+        "atlases": {group: {"objects": objects,
+                            "images": {p: outcome.image_files[i] for p, i in outcome.images[group].items()}}
+                    for group, objects in outcome.atlases.items()},
         "summary": outcome.summary(),
         "warnings": outcome.warnings,
         "timings": outcome.timings,

@@ -114,6 +114,7 @@ class LMREFINE_PT_refine_bake(_LightmapTab, bpy.types.Panel):
         layout.column(heading="Passes").prop(settings, "bake_passes")
         layout.prop(settings, "samples")
         layout.prop(settings, "exr_float32")
+        layout.prop(settings, "shared_atlas")
         layout.prop(settings, "preview")
         # Before/after and removal: always drawn, greyed out when the active object has no preview.
         obj = context.active_object
@@ -132,7 +133,7 @@ class LMREFINE_PT_refine_result(_LightmapTab, bpy.types.Panel):
     bl_parent_id = "LMREFINE_PT_refine"
 
     def draw(self, context):
-        """Eleven rows in every state (with one stage) (placeholders greyed out), so the panel keeps its size."""
+        """Twelve rows in every state (with one stage) (placeholders greyed out), so the panel keeps its size."""
         result = context.scene.lmrefine.result
         column = self.layout.column(align=True)
         rows = []
@@ -153,6 +154,9 @@ class LMREFINE_PT_refine_result(_LightmapTab, bpy.types.Panel):
         warnings = result.warnings if result.valid else 0
         rows.append((f"Warnings: {warnings} (Info log)" if warnings else "Warnings: none", 'ERROR' if warnings
                      else 'INFO', bool(warnings)))
+        images = result.images if result.valid else 0
+        rows.append((f"Images: {images} for {len(result.objects.split(', '))} objects" if images else "Images: -",
+                     'IMAGE_DATA', bool(images)))
         tessellated = result.valid and result.tessellated
         rows.append((f"Tessellation: +{result.vertices_added} vertices" if tessellated else "Tessellation: off",
                      'MOD_TRIANGULATE', tessellated))

@@ -84,34 +84,63 @@ def export_blend(blend, out, objects="all", uv_map=None, blender=None, echo=prin
     return out
 
 
-# Objects evaluated together bake into one atlas: their lightmap UV maps must
-# not cover the same texels (checked at this resolution, with this tolerance
-# for charts that merely touch).
+# Objects that share one atlas: their lightmap UV maps must not cover the same
+# texels (checked at a resolution, with a tolerance for charts that merely
+# touch: a shared texel count up to this fraction of the smaller map's).
 ATLAS_CHECK_RESOLUTION = 256
 ATLAS_OVERLAP_FRACTION = 0.02
+
+
+def atlas_masks(layouts, resolution=ATLAS_CHECK_RESOLUTION):
+    """The texels each layout `(uvs, triangles)` covers at `resolution`
+    (lmrefine.coverage_mask), None for a layout without triangles."""
+    from . import _native
+
+    return [_native.coverage_mask(uvs, triangles, resolution) if len(triangles) else None
+            for uvs, triangles in layouts]
+
+
+def overlap(mask_a, mask_b, tolerance=ATLAS_OVERLAP_FRACTION):
+    """Whether two objects' coverage masks cover the same part of the atlas:
+    more shared texels than `tolerance` times the smaller mask's count."""
+    if mask_a is None or mask_b is None:
+        return False
+    shared = np.count_nonzero(mask_a & mask_b)
+    return shared > tolerance * min(np.count_nonzero(mask_a), np.count_nonzero(mask_b))
+
+
+def atlas_groups(layouts, resolution=ATLAS_CHECK_RESOLUTION, tolerance=ATLAS_OVERLAP_FRACTION):
+    """Which objects share one atlas: lists of indices into `layouts` (each
+    `(uvs, triangles)` of one object's lightmap UV map), every index in
+    exactly one list.
+
+    Greedy in the given order: each object joins the first group none of
+    whose members it overlaps (`overlap`), else starts a group of its own.
+    Objects laid out together (one Lightmap Pack or Smart UV Project of all
+    of them) form one group; objects each laid out on its own lightmap (each
+    map filling [0, 1]) form one group each."""
+    masks = atlas_masks(layouts, resolution)
+    groups = []
+    for index, mask in enumerate(masks):
+        home = next((group for group in groups if not any(overlap(mask, masks[other], tolerance)
+                                                           for other in group)), None)
+        if home is None:
+            groups.append([index])
+        else:
+            home.append(index)
+    return groups
 
 
 def shared_atlas_problem(scene):
     """None when the receivers of an exported scene share one atlas, else a
     message naming objects whose lightmap UV maps cover the same part of
     [0, 1] (each object laid out on its own lightmap) and what to do."""
-    from . import _native
-
     uvs, triangles = scene.layout("own")
     if len(scene.objects) < 2:
         return None
-    masks = []
-    for index in range(len(scene.objects)):
-        mine = triangles[scene.object_id == index]
-        masks.append(_native.coverage_mask(uvs, mine, ATLAS_CHECK_RESOLUTION) if len(mine) else None)
-    overlapping = []
-    for a in range(len(masks)):
-        for b in range(a + 1, len(masks)):
-            if masks[a] is None or masks[b] is None:
-                continue
-            shared = np.count_nonzero(masks[a] & masks[b])
-            if shared > ATLAS_OVERLAP_FRACTION * min(masks[a].sum(), masks[b].sum()):
-                overlapping.append((scene.objects[a], scene.objects[b]))
+    masks = atlas_masks([(uvs, triangles[scene.object_id == index]) for index in range(len(scene.objects))])
+    overlapping = [(scene.objects[a], scene.objects[b]) for a in range(len(masks)) for b in range(a + 1, len(masks))
+                   if overlap(masks[a], masks[b])]
     if not overlapping:
         return None
     a, b = overlapping[0]

@@ -21,12 +21,15 @@ import numpy as np  # noqa: E402
 
 import lmrefine  # noqa: E402
 import lmrefine_blender  # noqa: E402
+import lmrefine_blender.atlas  # noqa: E402
 import scenes  # noqa: E402
 from scene_state import _array, _digest, changed, fingerprint  # noqa: E402,F401
 from lmrefine_blender import bridge, cycles_bake, pipeline  # noqa: E402
 from lmrefine_blender.journal import Journal  # noqa: E402
 
 RESOLUTION = 64  # small: the whole group must stay fast
+# LMREFINE_CHECKS=name,name runs only those checks (while working on them); pytest runs them all.
+ONLY = set(filter(None, os.environ.get("LMREFINE_CHECKS", "").split(",")))
 
 results = {}
 
@@ -37,6 +40,8 @@ def check(*needs):
     exports = {"refine": ("refine_uvs", "check_layout"), "bake": ("bake", "Scene")}
 
     def run(function):
+        if ONLY and function.__name__ not in ONLY:
+            return function
         missing = [name for need in needs for name in exports[need] if not hasattr(lmrefine, name)]
         if missing:
             results[function.__name__] = {"exception": f"lmrefine lacks {', '.join(missing)}"}
@@ -953,6 +958,87 @@ def preview_wiring_toggle_and_removal():
     return facts
 
 
+# -------------------------------------------------------- shared atlas
+
+ATLAS = ("Blocker", "Floor", "Post")  # the objects atlas_scene lays out in one atlas
+
+
+def _atlas_run(**values):
+    """atlas_scene refined in one undoable run; facts on images, previews, layouts, then one undo."""
+    scenes.atlas_scene()
+    register()
+    settings(resolution=RESOLUTION, padding=2, samples=4, first_lightmap='EMBREE', backend='EMBREE',
+             bake_passes={'DIRECT', 'AO'}, **values)
+    objects = [bpy.data.objects[name] for name in ATLAS + ("Lonely",)]
+    source = {obj.name: bridge.read_layout(obj.data, "Lightmap") for obj in objects}
+    window = bpy.context.window_manager.windows[0]
+    with bpy.context.temp_override(window=window):
+        bpy.ops.ed.undo_push(message="before refine")
+    before = fingerprint()
+    outcome, message = refine(undo=True)
+    if outcome != "FINISHED":
+        return {"outcome": outcome, "message": message}
+    ours = [image for image in bpy.data.images if image.get("lmrefine_object")]
+    facts = {"outcome": outcome, "message": bpy.context.scene.lmrefine.result.message,
+             "result_images": bpy.context.scene.lmrefine.result.images,
+             "images": {image.name: image["lmrefine_objects"] for image in ours}, "objects": {}}
+    refined = {obj.name: bridge.read_uv_layer(obj.data, "Lightmap_refined") for obj in objects}
+    masks = {name: lmrefine.coverage_mask(refined[name], source[name].triangles, RESOLUTION) for name in refined}
+    for obj in objects:
+        name = obj.name
+        wiring = _wiring(obj.material_slots[0].material.node_tree, name)
+        shown = bpy.data.images.get(wiring["image"]) if wiring else None
+        light = bridge.image_to_array(shown)[masks[name]][:, :3].mean(axis=1) if shown is not None else None
+        facts["objects"][name] = {
+            "preview_image": wiring and wiring["image"], "preview_uv": wiring and wiring["uv_map"],
+            "before_image": obj.get("lmrefine_preview", {}).get("before_image"),
+            "moved": float(np.abs(refined[name] - source[name].uvs).max()),
+            "texels": int(masks[name].sum()),
+            "light_max": float(light.max()) if light is not None else None,
+        }
+    # The atlas members' refined charts: no two objects share a texel, and the joined layout is valid.
+    facts["shared_texels"] = {f"{a}/{b}": int(np.count_nonzero(masks[a] & masks[b]))
+                              for i, a in enumerate(ATLAS) for b in ATLAS[i + 1:]}
+    uvs, triangles, _, _ = lmrefine_blender.atlas.join_layouts([(refined[n], source[n].triangles) for n in ATLAS])
+    check = lmrefine.check_layout(uvs, triangles, RESOLUTION, padding=2)
+    facts["joined_check"] = {"valid": bool(check["valid"]), "min_gutter_texels": float(check["min_gutter_texels"])}
+    source_uvs, _, _, _ = lmrefine_blender.atlas.join_layouts([(source[n].uvs, source[n].triangles) for n in ATLAS])
+    facts["joined_repacked"] = bool(not np.allclose(uvs, source_uvs))
+    with bpy.context.temp_override(window=window):
+        bpy.ops.ed.undo()
+        facts["changed_after_undo"] = changed(before, fingerprint())
+        facts["can_undo_further"] = bpy.ops.ed.undo.poll()
+    return facts
+
+
+@check("refine", "bake")
+def shared_atlas_one_image_per_pass():
+    """Floor, Blocker and Post share an atlas: one refinement, one image per pass they all show;
+    Lonely, laid out on its own lightmap, gets its own images."""
+    return _atlas_run()
+
+
+@check("refine", "bake")
+def shared_atlas_off_one_image_per_object():
+    return _atlas_run(shared_atlas=False)
+
+
+@check("refine", "bake")
+def shared_atlas_grouping_ignores_selection_order():
+    """The same groups and names whichever order the objects come in (validate's order is Blender's)."""
+    from lmrefine_blender import atlas
+    scenes.atlas_scene()
+    register()
+    settings(resolution=RESOLUTION)
+    options = pipeline.settings_snapshot(bpy.context.scene.lmrefine)
+    orders = (ATLAS + ("Lonely",), ("Lonely", "Post", "Floor", "Blocker"))
+    found = []
+    for order in orders:
+        targets = pipeline.validate(bpy.context, [bpy.data.objects[name] for name in order], options)
+        found.append([(group.name, group.objects) for group in atlas.group_targets(targets, RESOLUTION)])
+    return {"groups": found}
+
+
 # ------------------------------------------------- tessellation and stages
 
 def _corner_arrays(mesh):
@@ -1229,6 +1315,15 @@ def save_coarse_scene_for_batch():
     scenes.coarse_shadow_scene()
     register()
     path = os.path.join(WORK_DIR, "coarse.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    return {"path": path}
+
+
+@check()
+def save_atlas_scene_for_batch():
+    scenes.atlas_scene()
+    register()
+    path = os.path.join(WORK_DIR, "atlas.blend")
     bpy.ops.wm.save_as_mainfile(filepath=path)
     return {"path": path}
 
