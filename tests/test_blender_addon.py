@@ -328,6 +328,21 @@ def test_a_shared_atlas_gets_one_image_per_pass_that_every_member_shows(facts):
     assert value["changed_after_undo"] == [] and value["can_undo_further"] is False
 
 
+@pytest.mark.parametrize("name", ["shared_atlas_cycles", "shared_atlas_stages_and_tessellation"])
+def test_a_shared_atlas_with_cycles_and_with_stages(facts, name):
+    value = fact(facts, name)
+    assert value["outcome"] == "FINISHED", value["message"]
+    assert sorted(value["images"]) == ["Floor_atlas_lightmap_before", "Floor_atlas_lightmap_direct",
+                                       "Lonely_lightmap_before", "Lonely_lightmap_direct"]
+    for name in ATLAS:
+        member = value["objects"][name]
+        assert member["preview_image"] == "Floor_atlas_lightmap_direct"
+        assert member["texels"] > 100 and member["light_max"] > 0.5
+    assert set(value["shared_texels"].values()) == {0}
+    assert value["joined_check"]["valid"] and value["joined_check"]["min_gutter_texels"] >= 2
+    assert value["changed_after_undo"] == [] and value["can_undo_further"] is False
+
+
 def test_shared_atlas_off_gives_one_image_per_object(facts):
     value = fact(facts, "shared_atlas_off_one_image_per_object")
     assert value["outcome"] == "FINISHED", value["message"]

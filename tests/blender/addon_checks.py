@@ -967,8 +967,8 @@ def _atlas_run(**values):
     """atlas_scene refined in one undoable run; facts on images, previews, layouts, then one undo."""
     scenes.atlas_scene()
     register()
-    settings(resolution=RESOLUTION, padding=2, samples=4, first_lightmap='EMBREE', backend='EMBREE',
-             bake_passes={'DIRECT', 'AO'}, **values)
+    settings(**{"resolution": RESOLUTION, "padding": 2, "samples": 4, "first_lightmap": 'EMBREE',
+                "backend": 'EMBREE', "bake_passes": {'DIRECT', 'AO'}, **values})
     objects = [bpy.data.objects[name] for name in ATLAS + ("Lonely",)]
     source = {obj.name: bridge.read_layout(obj.data, "Lightmap") for obj in objects}
     window = bpy.context.window_manager.windows[0]
@@ -983,6 +983,7 @@ def _atlas_run(**values):
              "result_images": bpy.context.scene.lmrefine.result.images,
              "images": {image.name: image["lmrefine_objects"] for image in ours}, "objects": {}}
     refined = {obj.name: bridge.read_uv_layer(obj.data, "Lightmap_refined") for obj in objects}
+    source = {obj.name: bridge.read_layout(obj.data, "Lightmap") for obj in objects}  # tessellated, maybe
     masks = {name: lmrefine.coverage_mask(refined[name], source[name].triangles, RESOLUTION) for name in refined}
     for obj in objects:
         name = obj.name
@@ -1021,6 +1022,19 @@ def shared_atlas_one_image_per_pass():
 @check("refine", "bake")
 def shared_atlas_off_one_image_per_object():
     return _atlas_run(shared_atlas=False)
+
+
+@check("refine")
+def shared_atlas_cycles():
+    """The same with Cycles for both bakes: each member baked on its own, merged by its charts' coverage."""
+    return _atlas_run(first_lightmap='CYCLES', backend='CYCLES', bake_passes={'DIRECT'})
+
+
+@check("refine", "bake")
+def shared_atlas_stages_and_tessellation():
+    """Three stages and tessellation: each stage refines the joined layout again; tessellated members
+    rejoin the atlas; one undo puts every mesh back."""
+    return _atlas_run(stages=3, tessellate=True, tessellate_budget=0.5, bake_passes={'DIRECT'})
 
 
 @check("refine", "bake")
