@@ -546,11 +546,7 @@ def _end_to_end(first, backend, passes):
     texture_uvs = bridge.read_uv_layer(mesh, "UVMap")
     source_uvs = bridge.read_uv_layer(mesh, "Lightmap")
     geometry = geometry_digest(mesh)
-    window = bpy.context.window_manager.windows[0]
-    with bpy.context.temp_override(window=window):
-        bpy.ops.ed.undo_push(message="before refine")
-    before = fingerprint()
-    outcome, message = refine(undo=True)
+    before, outcome, message = _refine_as_one_undo_step()
     if outcome != "FINISHED":
         return {"outcome": outcome, "message": message}
     after = fingerprint()
@@ -578,11 +574,27 @@ def _end_to_end(first, backend, passes):
         "density_range": [result.density_min, result.density_max],
         "timings": result.timings,
     }
+    facts.update(_undo_once(before))
+    return facts
+
+
+def _refine_as_one_undo_step():
+    """An undo step, then the operator run as a script with undo: (fingerprint before, outcome, message)."""
+    window = bpy.context.window_manager.windows[0]
     with bpy.context.temp_override(window=window):
-        facts["can_undo"] = bpy.ops.ed.undo.poll()
+        bpy.ops.ed.undo_push(message="before refine")
+    before = fingerprint()
+    outcome, message = refine(undo=True)
+    return before, outcome, message
+
+
+def _undo_once(before):
+    """One Ctrl+Z after _refine_as_one_undo_step: what still differs from `before`, and whether a
+    further step is left (it must not be: the run was exactly one undo step)."""
+    with bpy.context.temp_override(window=bpy.context.window_manager.windows[0]):
+        facts = {"can_undo": bpy.ops.ed.undo.poll()}
         bpy.ops.ed.undo()
         facts["changed_after_undo"] = changed(before, fingerprint())
-        # Only the 'before refine' step is left: the run was exactly one undo step.
         facts["can_undo_further"] = bpy.ops.ed.undo.poll()
     return facts
 
@@ -971,11 +983,7 @@ def _atlas_run(**values):
                 "backend": 'EMBREE', "bake_passes": {'DIRECT', 'AO'}, **values})
     objects = [bpy.data.objects[name] for name in ATLAS + ("Lonely",)]
     source = {obj.name: bridge.read_layout(obj.data, "Lightmap") for obj in objects}
-    window = bpy.context.window_manager.windows[0]
-    with bpy.context.temp_override(window=window):
-        bpy.ops.ed.undo_push(message="before refine")
-    before = fingerprint()
-    outcome, message = refine(undo=True)
+    before, outcome, message = _refine_as_one_undo_step()
     if outcome != "FINISHED":
         return {"outcome": outcome, "message": message}
     ours = [image for image in bpy.data.images if image.get("lmrefine_object")]
@@ -1005,10 +1013,7 @@ def _atlas_run(**values):
     facts["joined_check"] = {"valid": bool(check["valid"]), "min_gutter_texels": float(check["min_gutter_texels"])}
     source_uvs, _, _, _ = lmrefine_blender.atlas.join_layouts([(source[n].uvs, source[n].triangles) for n in ATLAS])
     facts["joined_repacked"] = bool(not np.allclose(uvs, source_uvs))
-    with bpy.context.temp_override(window=window):
-        bpy.ops.ed.undo()
-        facts["changed_after_undo"] = changed(before, fingerprint())
-        facts["can_undo_further"] = bpy.ops.ed.undo.poll()
+    facts.update(_undo_once(before))
     return facts
 
 
@@ -1324,30 +1329,27 @@ def menus_and_panel_rows():
     }
 
 
-@check()
-def save_coarse_scene_for_batch():
-    scenes.coarse_shadow_scene()
+def _save_for_batch(make_scene, filename):
+    make_scene()
     register()
-    path = os.path.join(WORK_DIR, "coarse.blend")
+    path = os.path.join(WORK_DIR, filename)
     bpy.ops.wm.save_as_mainfile(filepath=path)
     return {"path": path}
+
+
+@check()
+def save_coarse_scene_for_batch():
+    return _save_for_batch(scenes.coarse_shadow_scene, "coarse.blend")
 
 
 @check()
 def save_atlas_scene_for_batch():
-    scenes.atlas_scene()
-    register()
-    path = os.path.join(WORK_DIR, "atlas.blend")
-    bpy.ops.wm.save_as_mainfile(filepath=path)
-    return {"path": path}
+    return _save_for_batch(scenes.atlas_scene, "atlas.blend")
 
 
 @check()
 def save_scene_for_batch():
-    fresh_shadow_scene()
-    path = os.path.join(WORK_DIR, "shadow.blend")
-    bpy.ops.wm.save_as_mainfile(filepath=path)
-    return {"path": path}
+    return _save_for_batch(fresh_shadow_scene, "shadow.blend")
 
 
 with open(OUT_JSON, "w", encoding="utf-8") as stream:
