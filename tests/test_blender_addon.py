@@ -731,6 +731,9 @@ def test_batch_writes_one_image_per_shared_atlas_and_reports_who_shares_it(facts
     for name in ("Blocker", "Floor", "Post"):
         assert report["objects"][name]["atlas"] == "Floor_atlas"
         assert report["objects"][name]["images"] == atlas["images"]
+        assert "report" not in report["objects"][name]  # the one refinement's report is the atlas's
+    assert atlas["report"]["check_layout"]["valid"] is True
+    assert report["objects"]["Lonely"]["report"] == report["atlases"]["Lonely"]["report"]
     assert report["summary"]["images_per_pass"] == 2 and report["summary"]["objects"] == 4
     assert report["summary"]["shared_images"] == {"Floor_atlas": ["Blocker", "Floor", "Post"]}
     out_off = work_dir / "batch_atlas_off"

@@ -226,13 +226,9 @@ def run(args):
     return {
         "ok": True,
         "blend": blend_copy,
-        "objects": {name: {"source_layer": t.source, "refined_layer": t.refined,
-                           "atlas": outcome.atlas_of(name),
-                           "report": outcome.reports[outcome.atlas_of(name)],
-                           "tessellation": outcome.tessellation.get(name),
-                           "images": {p: outcome.image_files[i] for p, i in outcome.images[outcome.atlas_of(name)].items()}}
-                    for name, t in ((t.obj.name, t) for t in targets) if name in outcome.objects},
-        "atlases": {group: {"objects": objects,
+        "objects": {name: _object_entry(outcome, name, t) for name, t in ((t.obj.name, t) for t in targets)
+                    if name in outcome.objects},
+        "atlases": {group: {"objects": objects, "report": outcome.reports[group],
                             "images": {p: outcome.image_files[i] for p, i in outcome.images[group].items()}}
                     for group, objects in outcome.atlases.items()},
         "summary": outcome.summary(),
@@ -240,6 +236,18 @@ def run(args):
         "timings": outcome.timings,
         "settings": {key: value for key, value in options.items() if key != "lightmap_image"},
     }
+
+
+def _object_entry(outcome, name, target):
+    """One object of the report: its maps, its atlas group and that group's images. The refinement
+    report is the group's (atlases[group]["report"]); an object alone in its group carries it here too."""
+    group = outcome.atlas_of(name)
+    entry = {"source_layer": target.source, "refined_layer": target.refined, "atlas": group,
+             "tessellation": outcome.tessellation.get(name),
+             "images": {p: outcome.image_files[i] for p, i in outcome.images[group].items()}}
+    if len(outcome.atlases[group]) == 1:
+        entry["report"] = outcome.reports[group]
+    return entry
 
 
 def main(argv):
