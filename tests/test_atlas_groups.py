@@ -55,6 +55,39 @@ def test_an_empty_layout_overlaps_nothing():
     assert atlas_groups([square(0.1, 0.1, 0.9, 0.9), empty]) == [[0, 1]]
 
 
+def groups_reference(layouts, resolution):
+    """Plain reference of atlas_groups: greedy, every pair of masks compared with `overlap`."""
+    masks = [lmrefine.coverage_mask(uvs, triangles, resolution) if len(triangles) else None
+             for uvs, triangles in layouts]
+    groups = []
+    for index, mask in enumerate(masks):
+        home = next((group for group in groups if not any(overlap(mask, masks[other]) for other in group)), None)
+        if home is None:
+            groups.append([index])
+        else:
+            home.append(index)
+    return groups
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_grouping_equals_the_pairwise_reference_on_random_atlases(seed):
+    """Random rectangles: some side by side in a grid of cells (one atlas), some filling most of the
+    square (a lightmap of their own), some straddling two cells."""
+    rng = np.random.default_rng(seed)
+    layouts = []
+    for _ in range(14):
+        kind = rng.integers(3)
+        if kind == 0:
+            cell = rng.integers(4, size=2) / 4.0
+            layouts.append(square(*(cell + 0.02), *(cell + 0.23)))
+        elif kind == 1:
+            layouts.append(square(*rng.uniform(0.0, 0.1, 2), *rng.uniform(0.9, 1.0, 2)))
+        else:
+            low = rng.uniform(0.0, 0.7, 2)
+            layouts.append(square(*low, *(low + rng.uniform(0.05, 0.3, 2))))
+    assert atlas_groups(layouts, 64) == groups_reference(layouts, 64)
+
+
 def test_groups_are_named_after_their_largest_member_and_sorted_by_name():
     targets = [target("Wall", square(0.55, 0.05, 0.95, 0.3)), target("Ground", square(0.05, 0.05, 0.5, 0.95)),
                target("Crate", square(0.55, 0.4, 0.7, 0.55)), target("Solo", square(0.05, 0.05, 0.95, 0.95))]
