@@ -343,6 +343,17 @@ def test_a_shared_atlas_with_cycles_and_with_stages(facts, name):
     assert value["changed_after_undo"] == [] and value["can_undo_further"] is False
 
 
+def test_a_shared_atlas_driven_by_an_existing_atlas_image(facts):
+    value = fact(facts, "shared_atlas_from_an_existing_image")
+    assert value["first"] == ["FINISHED", None]
+    assert value["outcome"] == "FINISHED", value["message"]
+    # The members' one image drove one refinement; it stays their "before", no new one is stored.
+    assert value["images"] == ["Floor_atlas_lightmap_before", "Floor_atlas_lightmap_direct"]
+    assert set(value["before_images"].values()) == {"Floor_atlas_lightmap_before"}
+    assert set(value["after_images"].values()) == {"Floor_atlas_lightmap_direct"}
+    assert value["result_images"] == 1 and value["moved"]["Floor"] > 0.01
+
+
 def test_shared_atlas_off_gives_one_image_per_object(facts):
     value = fact(facts, "shared_atlas_off_one_image_per_object")
     assert value["outcome"] == "FINISHED", value["message"]

@@ -1043,6 +1043,36 @@ def shared_atlas_stages_and_tessellation():
 
 
 @check("refine", "bake")
+def shared_atlas_from_an_existing_image():
+    """First Map Image: the three members' materials sample one atlas image through 'Lightmap' (the
+    'before' image of an Embree run); it drives the one refinement and stays the preview's 'before'."""
+    scenes.atlas_scene()
+    register()
+    settings(resolution=RESOLUTION, padding=2, samples=4, first_lightmap='EMBREE', backend='EMBREE',
+             bake_passes={'DIRECT'})
+    members = [bpy.data.objects[name] for name in ATLAS]
+    scenes.select_only(*members)
+    first = refine()
+    atlas_image = bpy.data.images["Floor_atlas_lightmap_before"]
+    for obj in members:
+        tree = obj.material_slots[0].material.node_tree
+        uv_node = tree.nodes.new("ShaderNodeUVMap")
+        uv_node.uv_map = "Lightmap"
+        image_node = tree.nodes.new("ShaderNodeTexImage")
+        image_node.image = atlas_image
+        tree.links.new(uv_node.outputs["UV"], image_node.inputs["Vector"])
+    settings(first_lightmap='IMAGE')
+    outcome, message = refine()
+    return {"first": first, "outcome": outcome, "message": message,
+            "images": sorted(image.name for image in bpy.data.images if image.get("lmrefine_object")),
+            "before_images": {obj.name: obj["lmrefine_preview"]["before_image"] for obj in members},
+            "after_images": {obj.name: obj["lmrefine_preview"]["after_image"] for obj in members},
+            "moved": {obj.name: float(np.abs(bridge.read_uv_layer(obj.data, "Lightmap_refined")
+                                             - bridge.read_layout(obj.data, "Lightmap").uvs).max()) for obj in members},
+            "result_images": bpy.context.scene.lmrefine.result.images}
+
+
+@check("refine", "bake")
 def shared_atlas_grouping_ignores_selection_order():
     """The same groups and names whichever order the objects come in (validate's order is Blender's)."""
     from lmrefine_blender import atlas
