@@ -133,7 +133,7 @@ class LMREFINE_PT_refine_result(_LightmapTab, bpy.types.Panel):
     bl_parent_id = "LMREFINE_PT_refine"
 
     def draw(self, context):
-        """Twelve rows in every state (with one stage) (placeholders greyed out), so the panel keeps its size."""
+        """Thirteen rows in every state (with one stage) (placeholders greyed out), so the panel keeps its size."""
         result = context.scene.lmrefine.result
         column = self.layout.column(align=True)
         rows = []
@@ -157,6 +157,10 @@ class LMREFINE_PT_refine_result(_LightmapTab, bpy.types.Panel):
         images = result.images if result.valid else 0
         rows.append((f"Images: {images} for {len(result.objects.split(', '))} objects" if images else "Images: -",
                      'IMAGE_DATA', bool(images)))
+        shared = [entry.split(": ", 1) for entry in result.shared.split("; ") if entry] if result.valid else []
+        rows.append((f"Shared: {shared[0][0]} ({len(shared[0][1].split(', '))} objects)"
+                     + (f" +{len(shared) - 1}" if len(shared) > 1 else "") if shared else "Shared: none",
+                     'LINKED' if shared else 'UNLINKED', bool(shared)))
         tessellated = result.valid and result.tessellated
         rows.append((f"Tessellation: +{result.vertices_added} vertices" if tessellated else "Tessellation: off",
                      'MOD_TRIANGULATE', tessellated))

@@ -76,7 +76,7 @@ class LMREFINE_PG_result(bpy.types.PropertyGroup):
                              "any object)", default=1)
     images: IntProperty(name="Images", description="Images the last run wrote per pass (one per atlas group)")
     shared: StringProperty(name="Shared Images",
-                           description="Images of the last run that several objects share, with their objects")
+                           description="Atlas groups of the last run that several objects share ('name: objects; ...')")
     stages_stopped: StringProperty(name="Stages Stopped",
                                    description="Objects whose stages stopped early: the stage that moved too little")
 
