@@ -98,6 +98,12 @@ def test_groups_are_named_after_their_largest_member_and_sorted_by_name():
         "Wall", "Ground", "Crate", "Solo"]
 
 
+def test_group_names_never_collide_with_an_object_named_like_an_atlas():
+    targets = [target("Ground", square(0.05, 0.05, 0.5, 0.95)), target("Crate", square(0.55, 0.05, 0.95, 0.5)),
+               target("Ground_atlas", square(0.05, 0.05, 0.95, 0.95))]
+    assert [group.name for group in atlas.group_targets(targets, 64)] == ["Ground_atlas_2", "Ground_atlas"]
+
+
 def test_join_and_split_round_trip_with_offset_triangles():
     targets = [target("A", square(0.1, 0.1, 0.4, 0.4)), target("B", square(0.6, 0.6, 0.9, 0.9))]
     [group] = atlas.group_targets(targets, 64)

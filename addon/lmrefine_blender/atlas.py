@@ -94,14 +94,24 @@ def join_layouts(layouts):
 def group_targets(targets, resolution, shared=True):
     """The targets' AtlasGroups: lmrefine's rule (atlas_groups, greedy) at `resolution` over the
     targets in object-name order, so the grouping does not depend on the selection's order; one
-    group per target (in target order) when `shared` is off."""
+    group per target (in target order) when `shared` is off. Names are unique within a run (an
+    object named 'Floor_atlas' beside Floor's atlas makes the latter 'Floor_atlas_2')."""
     if not shared or len(targets) < 2:
         return [AtlasGroup([target]) for target in targets]
-    targets = sorted(targets, key=lambda target: target.obj.name)
     from lmrefine.scene_export import atlas_groups
 
+    targets = sorted(targets, key=lambda target: target.obj.name)
     indices = atlas_groups([(t.layout.uvs, t.layout.triangles) for t in targets], resolution)
-    return [AtlasGroup([targets[index] for index in group]) for group in indices]
+    groups = [AtlasGroup([targets[index] for index in group]) for group in indices]
+    taken = {group.name for group in groups if not group.shared}  # an object's own name stays its own
+    for group in groups:
+        if group.shared:
+            base, number = group.name, 1
+            while group.name in taken:
+                number += 1
+                group.name = f"{base}_{number}"
+            taken.add(group.name)
+    return groups
 
 
 def merge_maps(maps, masks, margin):

@@ -473,15 +473,16 @@ def _write_group_layers(group, joined_uvs, journal):
         _write_refined_layer(target, own[target.obj.name], journal)
 
 
-def _check_refined(lmrefine, name, uvs, layout, reference_uvs, resolution, padding):
+def _check_refined(lmrefine, label, uvs, layout, reference_uvs, resolution, padding):
     """An independent check of the promise refine_uvs makes: never worse than the layout it started
-    from. Returns (check of `uvs`, check of `reference_uvs`); a worse layout is a bug, raised."""
+    from (the joined layout of an atlas group, `label` naming it). Returns (check of `uvs`, check of
+    `reference_uvs`); a worse layout is a bug, raised."""
     from lmrefine.backoff import worse_than_source
     reference_check = lmrefine.check_layout(reference_uvs, layout.triangles, resolution, padding=padding)
     worse, check = worse_than_source(uvs, reference_uvs, layout.triangles, resolution, padding,
                                      source=reference_check)
     if worse:
-        raise RuntimeError(f"refine_uvs returned a layout for '{name}' that is worse than the one it started from "
+        raise RuntimeError(f"refine_uvs returned a layout for {label} that is worse than the one it started from "
                            f"({', '.join(worse)}: {dict(check)}); this is a bug in lmrefine, please report "
                            "it with the .blend")
     return check, reference_check
