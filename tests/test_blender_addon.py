@@ -432,6 +432,12 @@ def test_progress_moves_per_map_and_per_stage(facts):
                         if label.startswith("Second bake") and "map 1/2" in label)
     assert first_map_end == pytest.approx(2 / 3 + 1 / 6, abs=1e-6)
     assert any("map 2/2" in label for label in value["real_labels"] if label.startswith("First bake"))
+    # A shared atlas is one map: 4 objects in 2 maps give 6 units (first bake, refinement, second bake
+    # 2 each), the atlas's one refinement the third unit, Lonely's the fourth.
+    atlas = value["atlas_fractions"]
+    assert all(b >= a - 1e-9 for a, b in zip(atlas, atlas[1:])) and atlas[-1] == pytest.approx(1.0)
+    assert value["atlas_refining"] == {"Refining Floor_atlas": [pytest.approx(2 / 6), pytest.approx(3 / 6)],
+                                       "Refining Lonely": [pytest.approx(3 / 6), pytest.approx(4 / 6)]}
 
 
 def test_preview_is_wired_through_the_refined_map_in_every_viewport_mode(facts):

@@ -28,6 +28,7 @@ from lmrefine_blender import bridge, cycles_bake, pipeline  # noqa: E402
 from lmrefine_blender.journal import Journal  # noqa: E402
 
 RESOLUTION = 64  # small: the whole group must stay fast
+ATLAS = ("Blocker", "Floor", "Post")  # the objects scenes.atlas_scene lays out in one atlas
 # LMREFINE_CHECKS=name,name runs only those checks (while working on them); pytest runs them all.
 ONLY = set(filter(None, os.environ.get("LMREFINE_CHECKS", "").split(",")))
 
@@ -856,7 +857,20 @@ def progress_moves_per_map_and_stage():
     real = []
     pipeline.run_blocking(pipeline.run(bpy.context, targets, options, Journal()),
                           progress=lambda fraction, label: real.append((fraction, label)))
+    # A shared atlas: four objects, two maps (the atlas of three, Lonely's own).
+    scenes.atlas_scene()
+    settings(resolution=RESOLUTION, padding=2, samples=4, first_lightmap='EMBREE', backend='EMBREE',
+             bake_passes={'DIRECT'})
+    options = pipeline.settings_snapshot(bpy.context.scene.lmrefine)
+    objects = [bpy.data.objects[name] for name in ATLAS + ("Lonely",)]
+    atlas_run = []
+    pipeline.run_blocking(pipeline.run(bpy.context, pipeline.validate(bpy.context, objects, options), options,
+                                       Journal()), progress=lambda fraction, label: atlas_run.append((fraction, label)))
     return {"value": value, "fractions": [f for f, _ in seen], "ends": ends,
+            "atlas_fractions": [f for f, _ in atlas_run],
+            "atlas_refining": {label.split(" (")[0]: [min(f for f, l in atlas_run if l.split(" (")[0] == label.split(" (")[0]),
+                                                      max(f for f, l in atlas_run if l.split(" (")[0] == label.split(" (")[0])]
+                               for _, label in atlas_run if label.startswith("Refining")},
             "real_fractions": [f for f, _ in real],
             "real_labels": sorted({label for _, label in real}),
             "real_at": {label: [min(f for f, l in real if l == label), max(f for f, l in real if l == label)]
@@ -971,9 +985,6 @@ def preview_wiring_toggle_and_removal():
 
 
 # -------------------------------------------------------- shared atlas
-
-ATLAS = ("Blocker", "Floor", "Post")  # the objects atlas_scene lays out in one atlas
-
 
 def _atlas_run(**values):
     """atlas_scene refined in one undoable run; facts on images, previews, layouts, then one undo."""
