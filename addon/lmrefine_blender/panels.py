@@ -158,8 +158,8 @@ class LMREFINE_PT_refine_result(_LightmapTab, bpy.types.Panel):
         rows.append((f"Images: {images} for {len(result.objects.split(', '))} objects" if images else "Images: -",
                      'IMAGE_DATA', bool(images)))
         shared = [entry.split(": ", 1) for entry in result.shared.split("; ") if entry] if result.valid else []
-        rows.append((f"Shared: {shared[0][0]} ({len(shared[0][1].split(', '))} objects)"
-                     + (f" +{len(shared) - 1}" if len(shared) > 1 else "") if shared else "Shared: none",
+        rows.append((f"Atlas: {shared[0][0]} ({len(shared[0][1].split(', '))})"  # (objects sharing it)
+                     + (f" +{len(shared) - 1}" if len(shared) > 1 else "") if shared else "Atlas: none",
                      'LINKED' if shared else 'UNLINKED', bool(shared)))
         tessellated = result.valid and result.tessellated
         rows.append((f"Tessellation: +{result.vertices_added} vertices" if tessellated else "Tessellation: off",
