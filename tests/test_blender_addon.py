@@ -354,6 +354,14 @@ def test_a_shared_atlas_driven_by_an_existing_atlas_image(facts):
     assert value["result_images"] == 1 and value["moved"]["Floor"] > 0.01
 
 
+def test_removing_a_shared_atlas_preview_restores_every_member(facts):
+    value = fact(facts, "shared_atlas_preview_removal")
+    assert value["outcome"] == "FINISHED", value["message"]
+    assert value["removed"] == ["FINISHED"] and value["previews_left"] == []
+    # The meshes keep their new refined map, the images stay; every material is as it was.
+    assert value["changed"] == ["images", "mesh:Cube", "mesh:Cube.001", "mesh:FloorMesh", "mesh:Plane", "result"]
+
+
 def test_shared_atlas_off_gives_one_image_per_object(facts):
     value = fact(facts, "shared_atlas_off_one_image_per_object")
     assert value["outcome"] == "FINISHED", value["message"]

@@ -1084,6 +1084,24 @@ def shared_atlas_from_an_existing_image():
 
 
 @check("refine", "bake")
+def shared_atlas_preview_removal():
+    """Remove Preview on the atlas members puts back every material and active UV map; only the refined
+    maps and the images stay."""
+    scenes.atlas_scene()
+    register()
+    settings(resolution=RESOLUTION, padding=2, samples=4, first_lightmap='EMBREE', backend='EMBREE',
+             bake_passes={'DIRECT'})
+    before = fingerprint()
+    outcome, message = refine()
+    window = bpy.context.window_manager.windows[0]
+    with bpy.context.temp_override(window=window):
+        removed = sorted(bpy.ops.object.lmrefine_remove_preview())
+    return {"outcome": outcome, "message": message, "removed": removed,
+            "previews_left": [obj.name for obj in bpy.data.objects if obj.get("lmrefine_preview") is not None],
+            "changed": changed(before, fingerprint())}
+
+
+@check("refine", "bake")
 def shared_atlas_grouping_ignores_selection_order():
     """The same groups and names whichever order the objects come in (validate's order is Blender's)."""
     from lmrefine_blender import atlas
