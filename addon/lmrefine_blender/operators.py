@@ -30,6 +30,8 @@ def _report_outcome(operator, context, outcome, seconds):
     result.timings = "  ".join(f"{stage} {value:.2f}s" for stage, value in outcome.timings.items())
     result.tessellated = bool(outcome.tessellation)
     result.vertices_added = summary["vertices_added"]
+    result.images = summary["images_per_pass"]
+    result.shared = "; ".join(f"{name}: {', '.join(objects)}" for name, objects in summary["shared_images"].items())
     result.stages = outcome.stages_asked
     result.stages_kept = summary["stages_kept"]
     result.stages_stopped = "; ".join(_stage_stop(name, entry) for name, entry in outcome.stages.items()
@@ -43,6 +45,7 @@ def _report_outcome(operator, context, outcome, seconds):
                           f"{summary['transition_widening']:.2f}x their area, texel density "
                           f"{summary['density_min']:.2f}x to {summary['density_max']:.2f}x"
                           + (f"; {still} did not move (see warnings)" if still else ""))
+    result.message += "; " + images_sentence(summary)
     if outcome.tessellation:
         result.message += f"; tessellation added {summary['vertices_added']} vertices"
     if outcome.stages:
@@ -51,6 +54,16 @@ def _report_outcome(operator, context, outcome, seconds):
     for warning in outcome.warnings:
         operator.report({'WARNING'}, warning)
     operator.report({'INFO'}, result.message)
+
+
+def images_sentence(summary):
+    """How many images a run wrote for how many objects, and which objects share which."""
+    per_pass, objects = summary["images_per_pass"], summary["objects"]
+    text = f"{per_pass} image(s) per pass for {objects} object(s)"
+    shared = summary["shared_images"]
+    if shared:
+        text += " (" + "; ".join(f"{name}_lightmap_*: {', '.join(names)}" for name, names in shared.items()) + ")"
+    return text
 
 
 def _stage_stop(name, entry):

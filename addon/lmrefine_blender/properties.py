@@ -74,6 +74,9 @@ class LMREFINE_PG_result(bpy.types.PropertyGroup):
     stages: IntProperty(name="Stages", description="Refinement stages asked for in the last run", default=1)
     stages_kept: IntProperty(name="Stages Kept", description="Refinement stages the last run kept (the most of "
                              "any object)", default=1)
+    images: IntProperty(name="Images", description="Images the last run wrote per pass (one per atlas group)")
+    shared: StringProperty(name="Shared Images",
+                           description="Atlas groups of the last run that several objects share ('name: objects; ...')")
     stages_stopped: StringProperty(name="Stages Stopped",
                                    description="Objects whose stages stopped early: the stage that moved too little")
 
@@ -174,6 +177,13 @@ class LMREFINE_PG_settings(bpy.types.PropertyGroup):
         description="Write the lightmaps as 32-bit float EXR. Off: half float (16-bit), which holds lighting "
                     "values with about 3 significant digits at half the size; both use lossless ZIP compression",
         default=False,
+    )
+    shared_atlas: BoolProperty(
+        name="Shared Atlas",
+        description="Objects whose lightmap UV maps share one atlas (laid out together, their charts apart) are "
+                    "refined together and baked into one image per pass, named after the first of them "
+                    "('<object>_atlas_lightmap_<pass>'). Off: one image per object",
+        default=True,
     )
     preview: BoolProperty(
         name="Preview",
