@@ -86,6 +86,7 @@ class LMREFINE_PT_refine_options(_LightmapTab, bpy.types.Panel):
         for name in ("strength", "max_magnification", "min_shrink", "delta", "passes", "border", "wavelet",
                      "directional"):
             column.prop(settings, name)
+        column.prop(settings, "rechart", text="Re-chart if No Room")
 
 
 class LMREFINE_PT_refine_stages(_LightmapTab, bpy.types.Panel):
@@ -132,7 +133,7 @@ class LMREFINE_PT_refine_result(_LightmapTab, bpy.types.Panel):
     bl_parent_id = "LMREFINE_PT_refine"
 
     def draw(self, context):
-        """Eleven rows in every state (with one stage) (placeholders greyed out), so the panel keeps its size."""
+        """Twelve rows in every state (with one stage) (placeholders greyed out), so the panel keeps its size."""
         result = context.scene.lmrefine.result
         column = self.layout.column(align=True)
         rows = []
@@ -153,6 +154,9 @@ class LMREFINE_PT_refine_result(_LightmapTab, bpy.types.Panel):
         warnings = result.warnings if result.valid else 0
         rows.append((f"Warnings: {warnings} (Info log)" if warnings else "Warnings: none", 'ERROR' if warnings
                      else 'INFO', bool(warnings)))
+        recharted = result.valid and result.recharted > 0
+        rows.append((f"Re-charted: {result.recharted} (no room)" if recharted else "Re-charted: none", 'UV_DATA',
+                     recharted))
         tessellated = result.valid and result.tessellated
         rows.append((f"Tessellation: +{result.vertices_added} vertices" if tessellated else "Tessellation: off",
                      'MOD_TRIANGULATE', tessellated))

@@ -113,6 +113,7 @@ def settings_snapshot(settings):
             "border": settings.border.lower(),
             "directional": settings.directional,
             "wavelet": settings.wavelet.lower(),
+            "rechart": settings.rechart,
         },
         "backend": settings.backend,
         "bake_passes": [name.lower() for name in ("DIRECT", "INDIRECT", "COMBINED", "AO")
@@ -201,7 +202,7 @@ def _validate_object(obj, options, owners, resolution, depsgraph):
     if refined not in mesh.uv_layers and len(mesh.uv_layers) >= 8:
         raise UserError(f"'{obj.name}' already has 8 UV maps, Blender's limit: remove one to make room "
                         f"for '{refined}'")
-    layout = bridge.read_layout(mesh, source)
+    layout = bridge.read_layout(mesh, source, obj.matrix_world)
     if len(layout.triangles) == 0:
         raise UserError(f"'{obj.name}' has no faces: nothing to lightmap")
     not_finite = int(np.count_nonzero(~np.isfinite(layout.uvs).all(axis=1)))
@@ -326,7 +327,7 @@ def run(context, targets, options, journal, image_dir=None):
                 f"Refining {name}",
                 lambda progress, lightmap=lightmaps[name], layout=layout: lmrefine.refine_uvs(
                     lightmap, layout.uvs, layout.triangles, resolution, padding=padding, progress=progress,
-                    **options["refine_options"]),
+                    positions=layout.positions, **options["refine_options"]),
                 done * span, span, parts=REFINE_STAGES)
         except (ValueError, TypeError, MemoryError) as error:
             # The core refused this object's input: skip it, refine the others
@@ -450,7 +451,7 @@ def _tessellate(lmrefine, target, lightmap, budget, journal, outcome, start, spa
     report["vertices_added"] = added
     outcome.tessellation[obj.name] = report
     if added:
-        target.layout = bridge.read_layout(obj.data, target.source)
+        target.layout = bridge.read_layout(obj.data, target.source, obj.matrix_world)
 
 
 def _further_stages(context, lmrefine, targets, refined_uvs, options, journal, outcome, done, span):
