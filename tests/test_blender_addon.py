@@ -688,6 +688,23 @@ def test_batch_stages_and_tessellate(facts, work_dir):
     assert process.returncode == 1 and "contradict" in process.stderr
 
 
+def test_batch_rechart_flag(facts, work_dir):
+    """The coarse floor's Lightmap map has one chart per quad: re-charted by default, not with --no-rechart."""
+    blend = fact(facts, "save_coarse_scene_for_batch")["path"]
+    used = {}
+    for flag in ("--rechart", "--no-rechart"):
+        out = work_dir / f"batch{flag}"
+        process = run_batch(blend, "--objects", "Floor", "--resolution", "64", "--samples", "4",
+                            "--bake-passes", "direct", "--no-preview", flag, "--out", str(out))
+        assert process.returncode == 0, process.stderr[-3000:]
+        report = json.loads((out / "report.json").read_text())
+        floor = report["objects"]["Floor"]["report"]
+        assert floor["check_layout"]["valid"] is True
+        used[flag] = floor["rechart"]["used"]
+        assert floor["rechart"]["room"]["no_room"] is True
+    assert used == {"--rechart": True, "--no-rechart": False}
+
+
 # -------------------------------------------------------------- packaging
 
 def test_zip_installs_enables_and_carries_the_core(tmp_path):

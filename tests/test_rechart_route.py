@@ -179,7 +179,8 @@ def test_route_off_switch(lightmap_pack_case):
     corners, uvs, triangles, lightmap = lightmap_pack_case
     plain = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2)
     off = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, positions=corners, rechart=False)
-    assert plain.report["rechart"] is None and off.report["rechart"] is None
+    assert plain.report["rechart"] is None
+    assert not off.report["rechart"]["used"] and "off" in off.report["rechart"]["reason"]
     assert np.array_equal(plain.uvs, off.uvs)
     assert len(np.unique(lmrefine.find_charts(off.uvs, triangles, lmrefine.CHART_TOLERANCE))) == CELLS ** 2
 

@@ -205,10 +205,14 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
             predicts clearly less error than the source layout (below
             rechart_route.REQUIRED_GAIN; docs/refiner.md, "The re-chart
             route"), else the source layout's own refinement is returned.
-            report["rechart"] says what happened (None without positions).
+            report["rechart"] says what happened: used, room (the rule's
+            figures), reason when not used, the new layout's charts and
+            the model's predicted_error when re-charted (None without
+            positions).
             The result keeps the input's indexing: result.uvs (N, 2) for
             the same triangles.
-        rechart: False turns the re-chart route off.
+        rechart: False turns the re-chart route off (the source layout
+            is refined as without positions).
 
     Returns:
         RefineResult with uvs, grid and report. Its figures are measured on
@@ -241,7 +245,7 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
                "repack": repack, "min_chart_scale": min_chart_scale, "max_chart_scale": max_chart_scale}
     if not isinstance(rechart, (bool, np.bool_)):
         raise TypeError(f"rechart must be True or False, got {type(rechart).__name__}")
-    if positions is None or not rechart:
+    if positions is None:
         result, _, _ = _refine(lightmap, uvs, triangles, resolution, padding, mask, gradient, progress, options)
         result.report["rechart"] = None
         return result
@@ -251,7 +255,9 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
     room = rechart_route.layout_room(uvs, triangles)
     result, energy, source_mask = _refine(lightmap, uvs, triangles, resolution, padding, mask, gradient, progress,
                                           options)
-    if not room["no_room"]:
+    if not rechart:
+        info = {"used": False, "room": room, "reason": "re-charting is off (rechart=False)"}
+    elif not room["no_room"]:
         info = {"used": False, "room": room, "reason": f"the source layout has room: "
                 f"{room['room_fraction']:.0%} of its area is in triangles with a UV inside their chart"}
     elif gradient is not None or lightmap is None:
@@ -266,7 +272,7 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
             lightmap, uvs, triangles, shape, padding, positions, room, energy, result, progress)
         if recharted is not None:
             result = _recharted_result(recharted, result, uvs, triangles, energy, source_mask, info)
-    if not info["used"] and room["no_room"]:
+    if not info["used"] and room["no_room"] and rechart:
         result.report["notes"].append(f"not re-charted: {info['reason']}")
     result.report["rechart"] = info
     result.report["seconds"] = time.perf_counter() - start
