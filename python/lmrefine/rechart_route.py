@@ -166,7 +166,7 @@ def positions_array(positions, count):
         raise TypeError(f"positions must be an (N, 3) array of the UVs' 3-D positions, got "
                         f"{type(positions).__name__}")
     array = np.asarray(positions)
-    if array.dtype == object or not (np.issubdtype(array.dtype, np.number) or array.dtype == bool):
+    if not (np.issubdtype(array.dtype, np.integer) or np.issubdtype(array.dtype, np.floating)):
         raise TypeError(f"positions must hold real numbers, got dtype {array.dtype}")
     if array.ndim != 2 or array.shape != (count, 3):
         raise ValueError(f"positions must have shape ({count}, 3), one 3-D position per UV (the uvs' indexing), "
