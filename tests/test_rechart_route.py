@@ -150,6 +150,25 @@ def test_predicted_error_of_scaled_layouts():
     assert rechart_route.predicted_error(half, uvs, triangles, energy) == pytest.approx(0.5, rel=1e-6)
 
 
+def test_predicted_error_counts_chart_borders():
+    # A smooth light ramp (no edges): the same floor at the same texel density costs less with
+    # one chart than with a chart per quad, whose borders the dilation fills.
+    corners, (per_face, triangles), (one_chart, _) = _floor_layouts()
+    y, x = np.mgrid[0:RESOLUTION, 0:RESOLUTION] + 0.5
+    ramp = (x / RESOLUTION).astype(np.float32)
+    energy = np.zeros((RESOLUTION, RESOLUTION), np.float32)
+    mask = lmrefine.coverage_mask(per_face, triangles, RESOLUTION)
+    # Scale the one-chart layout to the per-face layout's UV area: only the borders differ.
+    area = lambda u: np.abs(lmrefine.allocation.signed_areas(u, triangles)).sum()
+    centre = one_chart.mean(axis=0)
+    same_density = (centre + (one_chart - centre) * np.sqrt(area(per_face) / area(one_chart))).astype(np.float32)
+    ratio = rechart_route.predicted_error(per_face, same_density, triangles, energy, corners, ramp, mask)
+    # Border length: 4 sides per quad against the floor's 4 sides; the ramp's slope is the same.
+    assert ratio == pytest.approx(4 * CELLS / (4 * CELLS * CELLS), rel=0.05)
+    assert rechart_route.predicted_error(per_face, per_face, triangles, energy, corners, ramp, mask) == \
+        pytest.approx(1.0)
+
+
 # --- the route ----------------------------------------------------------------
 
 def test_route_recharts_a_lightmap_pack_source(lightmap_pack_case):

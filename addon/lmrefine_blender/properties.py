@@ -146,7 +146,7 @@ class LMREFINE_PG_settings(bpy.types.PropertyGroup):
     rechart: BoolProperty(
         name="Re-chart when the source has no room",
         description="When the source map gives the refiner no room (one chart per face, as Lightmap Pack makes), "
-                    "re-chart the mesh (charts of faces whose normals are within 10 degrees, conformal unwrap) "
+                    "re-chart the mesh (charts of faces whose normals are within 20 degrees, conformal unwrap) "
                     "and refine that layout instead, if the error model predicts less error. The source map is "
                     "never changed; the refined map gets the new layout",
         default=True,

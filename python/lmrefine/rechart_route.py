@@ -14,7 +14,7 @@ when the error model predicts clearly less error than the source layout
 import numpy as np
 
 from . import _native, allocation, backoff, metrics
-from .charting import DEFAULT_ANGLE, rechart
+from .charting import rechart
 from .packer import CHART_TOLERANCE
 
 # A layout has no room when less than this fraction of its UV area lies in
@@ -25,6 +25,17 @@ MIN_ROOM_FRACTION = 0.25
 # The re-charted layout is kept when the model predicts at most this
 # fraction of the source layout's error (as allocation.REQUIRED_GAIN).
 REQUIRED_GAIN = allocation.REQUIRED_GAIN
+# The re-chart angle of the route, in degrees. Chosen on courtyard, the only
+# tuning scene whose charts change with it: 5-17 degrees (231 charts)
+# measured 2.35x / 1.59x at 256^2 / 512^2, 20 (201 charts) 2.40x / 2.27x,
+# 30 2.31x / 1.97x, 45 2.22x / 1.92x (docs/evaluation.md, "The re-chart
+# route"). lmrefine.rechart keeps its own default for evaluate --rechart.
+ANGLE = 20.0
+# Texels at least between the re-charted charts (more when the caller's
+# padding asks): the new layout is not held to the source's gutter, and a
+# re-charted courtyard (tuning) measured 2.00x at the source's 1.03-texel
+# gutter against 2.35x at 2 (docs/evaluation.md, "The re-chart route").
+PADDING = 2.0
 # UVs closer than this (a power of two near CHART_TOLERANCE) are one vertex
 # of a chart when telling border corners from inner ones.
 _VERTEX_GRID = float(1 << 17)
@@ -43,24 +54,34 @@ def layout_room(uvs, triangles):
     uvs = np.asarray(uvs)
     triangles = np.asarray(triangles)
     count = len(triangles)
-    charts = _native.find_charts(uvs, triangles, tolerance=CHART_TOLERANCE) if count else np.zeros(0, np.int32)
+    charts, vertex, border = _chart_borders(uvs, triangles)
     chart_count = int(charts.max()) + 1 if count else 0
     fraction = 0.0
     if count:
-        snapped = np.round(np.asarray(uvs, np.float64)[triangles.ravel()] * _VERTEX_GRID).astype(np.int64)
-        keys = np.column_stack([np.repeat(charts, 3), snapped])
-        _, vertex = np.unique(keys, axis=0, return_inverse=True)
-        vertex = vertex.reshape(count, 3)
-        edges = np.sort(np.stack([vertex, np.roll(vertex, -1, axis=1)], axis=2).reshape(-1, 2), axis=1)
-        _, edge_id, uses = np.unique(edges, axis=0, return_inverse=True, return_counts=True)
         inner = np.ones(int(vertex.max()) + 1, bool)
-        inner[edges[uses[edge_id.ravel()] == 1].ravel()] = False
-        area = np.abs(allocation.signed_areas(np.asarray(uvs), triangles))
+        inner[vertex[border]] = False  # the start of a border edge (its end starts the next one)
+        area = np.abs(allocation.signed_areas(uvs, triangles))
         total = float(area.sum())
         fraction = float(area[inner[vertex].any(axis=1)].sum() / total) if total > 0 else 0.0
     return {"charts": chart_count, "triangles": int(count),
             "triangles_per_chart": float(count / chart_count) if chart_count else 0.0,
             "room_fraction": fraction, "no_room": bool(count and fraction < MIN_ROOM_FRACTION)}
+
+
+def _chart_borders(uvs, triangles):
+    """(charts (T,), vertex (T, 3) ids of the corners' chart vertices, border
+    (T, 3) bool: the edge from corner k to corner k + 1 is a border edge of
+    its chart)."""
+    count = len(triangles)
+    if not count:
+        return np.zeros(0, np.int32), np.zeros((0, 3), np.int64), np.zeros((0, 3), bool)
+    charts = _native.find_charts(uvs, triangles, tolerance=CHART_TOLERANCE)
+    snapped = np.round(np.asarray(uvs, np.float64)[triangles.ravel()] * _VERTEX_GRID).astype(np.int64)
+    _, vertex = np.unique(np.column_stack([np.repeat(charts, 3), snapped]), axis=0, return_inverse=True)
+    vertex = vertex.reshape(count, 3)
+    edges = np.sort(np.stack([vertex, np.roll(vertex, -1, axis=1)], axis=2).reshape(-1, 2), axis=1)
+    _, edge_id, uses = np.unique(edges, axis=0, return_inverse=True, return_counts=True)
+    return charts, vertex, (uses[edge_id.ravel()] == 1).reshape(count, 3)
 
 
 def resample_lightmap(lightmap, source_uvs, source_triangles, uvs, triangles, mask):
@@ -132,20 +153,53 @@ def _texel_points(uvs, triangles, shape, mask, chunk=1 << 22):
     return best_triangle[where], bary
 
 
-def predicted_error(source_uvs, uvs, triangles, energy):
+def predicted_error(source_uvs, uvs, triangles, energy, positions=None, lightmap=None, mask=None):
     """The error model's prediction for layout `uvs` relative to the source
-    layout `source_uvs` (same triangles; 1.0 = the same): the edge term, each
-    triangle's gradient energy in the first bake (on the source layout)
-    over its linear texel scale sqrt(new UV area / source UV area)."""
-    edge = allocation.triangle_energy(np.asarray(source_uvs), triangles, energy)
-    before = np.abs(allocation.signed_areas(np.asarray(source_uvs), triangles))
-    after = np.abs(allocation.signed_areas(np.asarray(uvs), triangles))
-    keep = (before > 0) & (edge > 0)
-    total = float(edge[keep].sum())
-    if total <= 0:
-        return 1.0
-    scale = np.sqrt(np.maximum(after[keep], 1e-300) / before[keep])
-    return float((edge[keep] / scale).sum() / total)
+    layout `source_uvs` (same triangles; 1.0 = the same), from the first
+    bake on the source layout: its gradient `energy` (H, W) and, with
+    `positions` and `lightmap`, its luminance slope.
+
+    Both terms of docs/refiner.md "Chart scaling", in world units so that
+    layouts with different charts compare: the edge term, each triangle's
+    gradient energy times its texel size in the source and in `uvs`
+    (EDGE_ERROR); the border term, each chart border edge's world length
+    times the luminance slope of its triangle (per world unit) times the
+    squared texel size there (BORDER_ERROR: the border texels, filled by
+    dilation, miss the slope over a quarter texel). Without positions the
+    edge term alone, by the linear texel scale sqrt(new / source UV area)."""
+    source_uvs, uvs = np.asarray(source_uvs), np.asarray(uvs)
+    shape = energy.shape
+    edge = allocation.triangle_energy(source_uvs, triangles, energy)
+    before = np.abs(allocation.signed_areas(source_uvs, triangles))
+    after = np.abs(allocation.signed_areas(uvs, triangles))
+    if positions is None or lightmap is None:
+        keep = (before > 0) & (edge > 0)
+        total = float(edge[keep].sum())
+        if total <= 0:
+            return 1.0
+        return float((edge[keep] / np.sqrt(np.maximum(after[keep], 1e-300) / before[keep])).sum() / total)
+    corners = np.asarray(positions, np.float64)[triangles]
+    world = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
+    texels = float(shape[0] * shape[1])
+    keep = (before > 0) & (after > 0) & (world > 0)
+    # Texel size in world units per triangle, in each layout.
+    size_before = np.where(keep, np.sqrt(world / np.maximum(before * texels, 1e-300)), 0.0)
+    size_after = np.where(keep, np.sqrt(world / np.maximum(after * texels, 1e-300)), 0.0)
+    # Slope per world unit: the source bake's slope per texel over its texel size.
+    if mask is None:
+        mask = _native.coverage_mask(source_uvs, triangles, shape)
+    slope = allocation.opening(allocation.luminance_slope(lightmap, mask), mask)
+    rows, cols = allocation.triangle_texels(source_uvs, triangles, shape)
+    slope_world = np.where(keep, slope[rows, cols].mean(axis=1) / np.maximum(size_before, 1e-300), 0.0)
+    lengths = np.linalg.norm(corners - np.roll(corners, -1, axis=1), axis=2)  # edge k: corner k to k + 1
+
+    def error(layout, size):
+        border = (_chart_borders(layout, triangles)[2] * lengths).sum(axis=1)
+        return (allocation.EDGE_ERROR * (edge * size_before * size)[keep].sum()
+                + allocation.BORDER_ERROR * (slope_world * border * size * size)[keep].sum())
+
+    source_error = error(source_uvs, size_before)
+    return float(error(uvs, size_after) / source_error) if source_error > 0 else 1.0
 
 
 def _per_index(recharted, uvs, triangles):
@@ -181,17 +235,17 @@ def positions_array(positions, count):
 
 def refine_recharted(refine, lightmap, uvs, triangles, shape, padding, positions, room, energy, source_result,
                      progress):
-    """The re-chart route: `refine(lightmap, uvs, mask)` (refine_uvs without
+    """The re-chart route: `refine(lightmap, uvs, mask, padding)` (refine_uvs without
     positions, with the caller's options) on the re-charted mesh, from
     `lightmap` carried over to it. `source_result` is
     the source layout's own refinement, `energy` the first bake's gradient
     energy on the source layout. Returns (result or None, rechart report)."""
-    info = {"used": False, "room": room, "angle": DEFAULT_ANGLE}
+    info = {"used": False, "room": room, "angle": float(ANGLE)}
     original = source_result.report["original_check"]
-    # Pack the new charts at the gutter the checks ask for (as repack does).
-    pack_padding = min(float(padding), max(float(original["min_gutter_texels"]), min(float(padding), 1.0)))
+    # The new layout is not held to the source's gutter: at least PADDING.
+    pack_padding = max(float(padding), PADDING)
     try:
-        recharted = rechart(positions, triangles, DEFAULT_ANGLE, shape, pack_padding, progress=progress)
+        recharted = rechart(positions, triangles, ANGLE, shape, pack_padding, progress=progress)
     except ValueError as error:
         info["reason"] = f"the mesh could not be re-charted: {error}"
         return None, info
@@ -204,19 +258,21 @@ def refine_recharted(refine, lightmap, uvs, triangles, shape, padding, positions
         return None, info
     new_mask = _native.coverage_mask(new_uvs, triangles, shape)
     carried = resample_lightmap(lightmap, uvs, triangles, new_uvs, triangles, new_mask)
-    result = refine(carried, new_uvs, new_mask)
+    result = refine(carried, new_uvs, new_mask, pack_padding)
     worse, check = backoff.worse_than_source(result.uvs, uvs, triangles, shape, padding, source=original)
     if worse:
         info["reason"] = f"the re-charted layout failed {', '.join(worse)} against the source layout"
         return None, info
-    info["predicted_error"] = predicted_error(uvs, result.uvs, triangles, energy)
-    info["predicted_error_source_route"] = predicted_error(uvs, source_result.uvs, triangles, energy)
-    # Against the source layout only: the edge term does not see what the
-    # source's chart borders cost (a border texel per face in Lightmap Pack),
-    # so it cannot rank the two routes (docs/refiner.md, "The re-chart route").
-    if not info["predicted_error"] < REQUIRED_GAIN:
+    info["predicted_error"] = predicted_error(uvs, result.uvs, triangles, energy, positions, lightmap)
+    info["predicted_error_source_route"] = predicted_error(uvs, source_result.uvs, triangles, energy, positions,
+                                                           lightmap)
+    # Both against the source layout; the lower prediction wins (the source
+    # layout's own refinement is never worse than the source by its checks).
+    if not (info["predicted_error"] < REQUIRED_GAIN
+            and info["predicted_error"] <= info["predicted_error_source_route"]):
         info["reason"] = (f"the error model predicts {info['predicted_error']:.3f} of the source layout's error "
-                          f"re-charted (a re-charted layout needs below {REQUIRED_GAIN})")
+                          f"re-charted and {info['predicted_error_source_route']:.3f} refining the source layout "
+                          f"(re-charting needs below {REQUIRED_GAIN} and below the other)")
         return None, info
     info["used"] = True
     result.report["check"] = check

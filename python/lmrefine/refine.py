@@ -267,8 +267,8 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
     else:
         shape = _resolution(resolution)
         recharted, info = rechart_route.refine_recharted(
-            lambda carried, new_uvs, new_mask: _refine(carried, new_uvs, triangles, shape, padding, new_mask, None,
-                                                       progress, options)[0],
+            lambda carried, new_uvs, new_mask, new_padding: _refine(carried, new_uvs, triangles, shape, new_padding,
+                                                                    new_mask, None, progress, options)[0],
             lightmap, uvs, triangles, shape, padding, positions, room, energy, result, progress)
         if recharted is not None:
             result = _recharted_result(recharted, result, uvs, triangles, energy, source_mask, info)
