@@ -443,6 +443,7 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
     lookup_base = metrics.bilinear_lookup(baseline, uv_base)
     lookup_refined = metrics.bilinear_lookup(refined_map, uv_refined)
     stage_history = None
+    first_rechart = refined.report.get("rechart")  # the first stage chose the layout the later ones refine
     if options.stages > 1:
         refined, refined_map, lookup_refined, stage_history = _further_stages(
             sample, triangles, resolution, padding, options, stages, points, truth, transitions, refined,
@@ -549,6 +550,7 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
     }
     result.update({k: v for k, v in context.items() if k != "refine_report"})
     result["refine"] = {k: v for k, v in refined.report.items() if k != "triangle_density"}
+    result["refine"]["rechart"] = first_rechart
     if uniform is not None:
         ratio, refined_ratio = uniform["equal_error_resolution_ratio"], result["equal_error_resolution_ratio"]
         uniform["signal_gain"] = (refined_ratio / ratio if ratio and refined_ratio and ratio > 0 else None)
