@@ -803,6 +803,23 @@ def test_batch_stages_and_tessellate(facts, work_dir):
     assert process.returncode == 1 and "contradict" in process.stderr
 
 
+def test_batch_rechart_flag(facts, work_dir):
+    """The coarse floor's Lightmap map has one chart per quad: re-charted by default, not with --no-rechart."""
+    blend = fact(facts, "save_coarse_scene_for_batch")["path"]
+    used = {}
+    for flag in ("--rechart", "--no-rechart"):
+        out = work_dir / f"batch{flag}"
+        process = run_batch(blend, "--objects", "Floor", "--resolution", "64", "--samples", "4",
+                            "--bake-passes", "direct", "--no-preview", flag, "--out", str(out))
+        assert process.returncode == 0, process.stderr[-3000:]
+        report = json.loads((out / "report.json").read_text())
+        floor = report["objects"]["Floor"]["report"]
+        assert floor["check_layout"]["valid"] is True
+        used[flag] = floor["rechart"]["used"]
+        assert floor["rechart"]["room"]["no_room"] is True
+    assert used == {"--rechart": True, "--no-rechart": False}
+
+
 # -------------------------------------------------------------- packaging
 
 def test_zip_installs_enables_and_carries_the_core(tmp_path):
@@ -836,3 +853,19 @@ def test_zip_installs_enables_and_carries_the_core(tmp_path):
     enabled, location, idname = line.split()[1:]
     assert enabled == "True" and idname == "OBJECT_OT_lmrefine_refine_uvs"
     assert location.startswith(str(tmp_path / "scripts" / "addons" / "lmrefine_blender" / "lib"))
+
+
+def test_addon_recharts_a_lightmap_pack_source(facts):
+    value = fact(facts, "rechart_lightmap_pack_source")
+    on, off = value["rechart_True"], value["rechart_False"]
+    for run in (on, off):
+        assert run["outcome"] == "FINISHED", run["message"]
+        assert run["valid"] and run["min_gutter_texels"] >= 2.0 - 1e-3
+        assert run["source_identical"] and run["geometry_identical"]
+        assert run["image"] is not None and run["image"]["std"] > 0
+    # 64 quads, one chart each: the flat floor re-charts to one chart.
+    assert on["source_charts"] == 64
+    assert on["panel_recharted"] == 1 and on["refined_charts"] == 1
+    assert "re-charted from the mesh: Floor" in on["result_message"]
+    assert off["panel_recharted"] == 0 and off["refined_charts"] == 64
+    assert "re-charted" not in off["result_message"]

@@ -84,6 +84,9 @@ def build_parser():
                              "BUDGET: most vertices added, as a fraction of each object's (default 0.25)")
     parser.add_argument("--no-tessellate", action="store_true", help="turn tessellation off (when the .blend "
                         "has it on)")
+    parser.add_argument("--rechart", action=argparse.BooleanOptionalAction, default=None,
+                        help="re-chart an object whose source map gives the refiner no room (one chart per face, "
+                             "as Lightmap Pack makes) from its mesh; --no-rechart refines the source map as it is")
     parser.add_argument("--backend", choices=("embree", "cycles"), help="baker of the final lightmaps")
     parser.add_argument("--bake-passes", type=_passes, help=f"comma-separated, of: {', '.join(PASSES)}")
     parser.add_argument("--samples", type=int, help="samples per texel")
@@ -107,6 +110,7 @@ def apply_flags(settings, args):
         "delta": args.delta, "passes": args.passes, "directional": args.directional, "samples": args.samples,
         "preview": args.preview, "exr_float32": args.float32, "stages": args.stages,
         "shared_atlas": args.shared_atlas,
+        "rechart": args.rechart,
     }
     upper = {"first_lightmap": args.first_lightmap, "driving_pass": args.driving_pass, "border": args.border,
              "wavelet": args.wavelet, "backend": args.backend}

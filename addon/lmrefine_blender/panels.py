@@ -86,6 +86,7 @@ class LMREFINE_PT_refine_options(_LightmapTab, bpy.types.Panel):
         for name in ("strength", "max_magnification", "min_shrink", "delta", "passes", "border", "wavelet",
                      "directional"):
             column.prop(settings, name)
+        column.prop(settings, "rechart", text="Re-chart if No Room")
 
 
 class LMREFINE_PT_refine_stages(_LightmapTab, bpy.types.Panel):
@@ -134,6 +135,7 @@ class LMREFINE_PT_refine_result(_LightmapTab, bpy.types.Panel):
 
     def draw(self, context):
         """Thirteen rows in every state (with one stage) (placeholders greyed out), so the panel keeps its size."""
+        """Twelve rows in every state (with one stage) (placeholders greyed out), so the panel keeps its size."""
         result = context.scene.lmrefine.result
         column = self.layout.column(align=True)
         rows = []
@@ -161,6 +163,9 @@ class LMREFINE_PT_refine_result(_LightmapTab, bpy.types.Panel):
         rows.append((f"Atlas: {shared[0][0]} ({len(shared[0][1].split(', '))})"  # (objects sharing it)
                      + (f" +{len(shared) - 1}" if len(shared) > 1 else "") if shared else "Atlas: none",
                      'LINKED' if shared else 'UNLINKED', bool(shared)))
+        recharted = result.valid and result.recharted > 0
+        rows.append((f"Re-charted: {result.recharted} (no room)" if recharted else "Re-charted: none", 'UV_DATA',
+                     recharted))
         tessellated = result.valid and result.tessellated
         rows.append((f"Tessellation: +{result.vertices_added} vertices" if tessellated else "Tessellation: off",
                      'MOD_TRIANGULATE', tessellated))

@@ -122,6 +122,7 @@ def settings_snapshot(settings):
             "border": settings.border.lower(),
             "directional": settings.directional,
             "wavelet": settings.wavelet.lower(),
+            "rechart": settings.rechart,
         },
         "backend": settings.backend,
         "bake_passes": [name.lower() for name in ("DIRECT", "INDIRECT", "COMBINED", "AO")
@@ -211,7 +212,7 @@ def _validate_object(obj, options, owners, resolution, depsgraph):
     if refined not in mesh.uv_layers and len(mesh.uv_layers) >= 8:
         raise UserError(f"'{obj.name}' already has 8 UV maps, Blender's limit: remove one to make room "
                         f"for '{refined}'")
-    layout = bridge.read_layout(mesh, source)
+    layout = bridge.read_layout(mesh, source, obj.matrix_world)
     if len(layout.triangles) == 0:
         raise UserError(f"'{obj.name}' has no faces: nothing to lightmap")
     not_finite = int(np.count_nonzero(~np.isfinite(layout.uvs).all(axis=1)))
@@ -351,7 +352,7 @@ def run(context, targets, options, journal, image_dir=None):
                 f"Refining {name}",
                 lambda progress, lightmap=lightmaps[name], group=group: lmrefine.refine_uvs(
                     lightmap, group.uvs, group.triangles, resolution, padding=padding, progress=progress,
-                    **options["refine_options"]),
+                    positions=group.positions, **options["refine_options"]),
                 done * span, span, parts=REFINE_STAGES)
         except (ValueError, TypeError, MemoryError) as error:
             # The core refused this map's input: skip its objects, refine the others
@@ -505,7 +506,7 @@ def _tessellate(lmrefine, target, lightmap, budget, journal, outcome, start, spa
     report["vertices_added"] = added
     outcome.tessellation[obj.name] = report
     if added:
-        target.layout = bridge.read_layout(obj.data, target.source)
+        target.layout = bridge.read_layout(obj.data, target.source, obj.matrix_world)
 
 
 def _further_stages(context, lmrefine, groups, refined_uvs, options, journal, outcome, done, span):

@@ -1411,5 +1411,40 @@ def save_scene_for_batch():
     return _save_for_batch(fresh_shadow_scene, "shadow.blend")
 
 
+@check("refine", "bake")
+def rechart_lightmap_pack_source():
+    """A source map with one chart per face (Lightmap Pack's kind) gives the refiner no room: the run
+    re-charts the floor from the mesh and writes a valid refined map (the source map, the geometry
+    untouched; the panel and the Info line say so). With the setting off it refines the source layout."""
+    facts = {}
+    for rechart in (True, False):
+        scenes.coarse_shadow_scene(quads=8)
+        register()
+        settings(resolution=RESOLUTION, padding=2, samples=4, first_lightmap='EMBREE', backend='EMBREE',
+                 bake_passes={'DIRECT'}, rechart=rechart)
+        floor = bpy.data.objects["Floor"]
+        mesh = floor.data
+        layout = bridge.read_layout(mesh, "Lightmap")
+        source_uvs = bridge.read_uv_layer(mesh, "Lightmap")
+        geometry = geometry_digest(mesh)
+        outcome, message = refine()
+        result = bpy.context.scene.lmrefine.result
+        refined = bridge.read_uv_layer(mesh, "Lightmap_refined")
+        check = lmrefine.check_layout(refined, layout.triangles, RESOLUTION, padding=2)
+        facts[f"rechart_{rechart}"] = {
+            "outcome": outcome, "message": message, "panel_recharted": result.recharted,
+            "result_message": result.message,
+            "valid": bool(check["valid"]), "min_gutter_texels": float(check["min_gutter_texels"]),
+            "refined_charts": int(len(np.unique(lmrefine.find_charts(refined, layout.triangles,
+                                                                      lmrefine.CHART_TOLERANCE)))),
+            "source_charts": int(len(np.unique(lmrefine.find_charts(layout.uvs, layout.triangles,
+                                                                     lmrefine.CHART_TOLERANCE)))),
+            "source_identical": bool(np.array_equal(bridge.read_uv_layer(mesh, "Lightmap"), source_uvs)),
+            "geometry_identical": geometry_digest(mesh) == geometry,
+            "image": _image_stats("Floor_lightmap_direct", refined, layout.triangles),
+        }
+    return facts
+
+
 with open(OUT_JSON, "w", encoding="utf-8") as stream:
     json.dump(results, stream, indent=1, default=str)
