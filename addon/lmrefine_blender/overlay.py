@@ -28,6 +28,7 @@ from bpy.app.handlers import persistent
 
 from . import bridge
 from .errors import UserError
+from .pipeline import REFINED_SUFFIX
 
 # Octaves of density either side of the reference that the colours span.
 OCTAVES = 2.0
@@ -109,7 +110,7 @@ def maps_for(obj, settings):
     source = settings.source_layer.strip() or bridge.default_source_layer(mesh)
     if source is None or source not in mesh.uv_layers:
         return None, None
-    refined = source + "_refined"
+    refined = source + REFINED_SUFFIX
     if settings.density_map == 'REFINED' and refined in mesh.uv_layers:
         return source, refined
     return source, source
