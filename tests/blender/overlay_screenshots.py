@@ -30,7 +30,7 @@ if "--docs" in sys.argv:  # plain Python: crop and join the two screenshots
     height, width = row.shape[0] // 2 * 2, row.shape[1] // 2 * 2
     row = row[:height, :width].reshape(height // 2, 2, width // 2, 2, 3).mean(axis=(1, 3))
     legend = shots[1][775:875, 65:545]
-    panel = mpimg.imread(os.path.join(out, "overlay_panel.png"))[:, :, :3][640:770, 1375:1575]
+    panel = mpimg.imread(os.path.join(out, "overlay_panel.png"))[:, :, :3][395:530, 1375:1575]
     under = np.full((panel.shape[0] + 8, row.shape[1], 3), 1.0, row.dtype)
     under[8:8 + legend.shape[0], :legend.shape[1]] = legend
     under[8:, legend.shape[1] + 16:legend.shape[1] + 16 + panel.shape[1]] = panel
@@ -77,13 +77,13 @@ def xdotool(*args):
 
 
 def show_panel():
-    """The sidebar's Lightmap tab with Second Bake closed and Texel Density open (for this picture
+    """The sidebar's Lightmap tab with Second Bake and Last Result closed and Texel Density open (for this picture
     only: a panel's first open state is its bl_options when it is first drawn)."""
     from lmrefine_blender import panels
     order = (panels.LMREFINE_PT_refine_bake, panels.LMREFINE_PT_refine_result, panels.LMREFINE_PT_density)
     for cls in order:
         bpy.utils.unregister_class(cls)
-    panels.LMREFINE_PT_refine_bake.bl_options = {'DEFAULT_CLOSED'}
+    panels.LMREFINE_PT_refine_bake.bl_options = panels.LMREFINE_PT_refine_result.bl_options = {'DEFAULT_CLOSED'}
     panels.LMREFINE_PT_density.bl_options = set()
     for cls in order:
         bpy.utils.register_class(cls)
