@@ -871,3 +871,24 @@ def test_addon_recharts_a_lightmap_pack_source(facts):
     assert "re-charted from the mesh: Floor" in on["result_message"]
     assert off["panel_recharted"] == 0 and off["refined_charts"] == 64
     assert "re-charted" not in off["result_message"]
+
+
+def test_addon_recharts_a_shared_lightmap_pack_atlas(facts):
+    value = fact(facts, "rechart_shared_lightmap_pack_atlas")
+    assert value["outcome"] == "FINISHED", value["message"]
+    assert value["images"] == 1  # one atlas, one image per pass
+    assert value["panel_recharted"] == 2  # both objects, counted as objects
+    assert "re-charted from the mesh:" in value["result_message"]
+    # 64 floor quads + 6 box faces, one chart each, became a few charts (the floor one, the box's sides).
+    assert value["refined_charts"] < 20
+    assert value["valid"] and value["shared_texels"] == 0 and value["source_identical"]
+
+
+def test_addon_says_tessellate_when_large_triangles_hold_the_light_changes(facts):
+    value = fact(facts, "coarse_floor_suggests_tessellation")
+    off, on = value["tessellate_False"], value["tessellate_True"]
+    assert off["error"] is None and on["error"] is None
+    hint = [w for w in off["warnings"] if "turn on Tessellate" in w]
+    assert len(hint) == 1 and hint[0].startswith("'Floor': light changes cross ")
+    assert off["widening"] < 1.25
+    assert not any("turn on Tessellate" in w for w in on["warnings"])

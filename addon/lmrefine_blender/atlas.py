@@ -57,7 +57,7 @@ class AtlasGroup:
         layouts = [target.layout for target in self.targets]
         self.uvs, self.triangles, self.slices, self.triangle_slices = join_layouts(
             [(layout.uvs, layout.triangles) for layout in layouts])
-        positions = [layout.positions for layout in layouts]
+        positions = [getattr(layout, "positions", None) for layout in layouts]
         self.positions = None if any(p is None for p in positions) else np.concatenate(positions)
         return self.uvs, self.triangles
 

@@ -34,7 +34,9 @@ def _report_outcome(operator, context, outcome, seconds):
     result.shared = "; ".join(f"{name}: {', '.join(objects)}" for name, objects in summary["shared_images"].items())
     result.stages = outcome.stages_asked
     result.stages_kept = summary["stages_kept"]
-    recharted = [name for name, report in outcome.reports.items() if (report.get("rechart") or {}).get("used")]
+    # Reports are per map (an object, or an atlas group of several): count and name objects.
+    recharted_maps = [name for name, report in outcome.reports.items() if (report.get("rechart") or {}).get("used")]
+    recharted = [obj for name in recharted_maps for obj in outcome.atlases.get(name, [name])]
     result.recharted = len(recharted)
     result.stages_stopped = "; ".join(_stage_stop(name, entry) for name, entry in outcome.stages.items()
                                       if not entry["stages"][-1]["kept"])
@@ -56,7 +58,7 @@ def _report_outcome(operator, context, outcome, seconds):
     if outcome.stages:
         why = "; ".join(f"{name}: {entry['stopped']}" for name, entry in outcome.stages.items())
         result.message += f"; stages kept: {summary['stages_kept']} of {result.stages} ({why})"
-    for name in recharted:
+    for name in recharted_maps:
         operator.report({'INFO'}, f"'{name}': " + outcome.reports[name]["notes"][0])
     for warning in outcome.warnings:
         operator.report({'WARNING'}, warning)

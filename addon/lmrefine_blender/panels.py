@@ -25,7 +25,8 @@ class _LightmapTab:
 
 
 # refine_uvs' limit names, short enough for the sidebar (the Info report has the full text).
-LIMIT_NAMES = {"max_magnification": "max growth", "min_shrink": "min shrink", "step_cap": "steps",
+# Short, so three fit the default sidebar width ("Limit: growth/gutter/steps").
+LIMIT_NAMES = {"max_magnification": "growth", "min_shrink": "shrink", "step_cap": "steps",
                "original_gutter": "gutter"}
 
 
@@ -134,8 +135,7 @@ class LMREFINE_PT_refine_result(_LightmapTab, bpy.types.Panel):
     bl_parent_id = "LMREFINE_PT_refine"
 
     def draw(self, context):
-        """Thirteen rows in every state (with one stage) (placeholders greyed out), so the panel keeps its size."""
-        """Twelve rows in every state (with one stage) (placeholders greyed out), so the panel keeps its size."""
+        """The same rows in every state (with one stage; placeholders greyed out), so the panel keeps its size."""
         result = context.scene.lmrefine.result
         column = self.layout.column(align=True)
         rows = []
@@ -153,7 +153,7 @@ class LMREFINE_PT_refine_result(_LightmapTab, bpy.types.Panel):
                     # A triangle's new / old texels, on the output: the repack's chart scale comes on top of
                     # the automaton's bounds (Min Shrink, Max Growth bound its cells), so it can exceed them.
                     (f"Triangles: {result.density_min:.2g}x-{result.density_max:.3g}x", 'MOD_UVPROJECT', True)]
-        limits = ", ".join(LIMIT_NAMES.get(name, name) for name in result.limited_by.split(", ") if name)
+        limits = "/".join(LIMIT_NAMES.get(name, name) for name in result.limited_by.split(", ") if name)
         rows.append((f"Limit: {limits}" if limits else "Limit: none", 'INFO', bool(limits)))
         warnings = result.warnings if result.valid else 0
         rows.append((f"Warnings: {warnings} (Info log)" if warnings else "Warnings: none", 'ERROR' if warnings

@@ -31,6 +31,8 @@ TRANSPORTS = {"direct": {"direct"}, "indirect": {"indirect"}, "combined": {"dire
 # Texels both bakers fill into the gutter around each chart (Blender's default
 # bake margin): bilinear and mipmapped lookups near a chart border stay on it.
 BAKE_MARGIN = 16
+# Below this transition widening a run says when large triangles are why (see _coarse_warning).
+COARSE_WIDENING = 1.25
 
 
 @dataclass
@@ -383,6 +385,8 @@ def run(context, targets, options, journal, image_dir=None):
         if not result.report["moved"] and not any(w.startswith(black) for w in outcome.warnings):
             why = next((n for n in result.report["notes"] if n.startswith("nothing moved")), "nothing moved")
             outcome.warnings.append(f"{label}: {why}")
+        if options.get("tessellate") is None and result.report["transition_widening"] < COARSE_WIDENING:
+            _coarse_warning(lmrefine, label, lightmaps[name], group, result.report, outcome)
         report = {key: value for key, value in result.report.items() if key != "triangle_density"}
         report["check_layout"] = dict(check)
         report["source_check_layout"] = dict(source_check)
@@ -487,6 +491,19 @@ def _check_refined(lmrefine, label, uvs, layout, reference_uvs, resolution, padd
                            f"({', '.join(worse)}: {dict(check)}); this is a bug in lmrefine, please report "
                            "it with the .blend")
     return check, reference_check
+
+
+def _coarse_warning(lmrefine, label, lightmap, group, report, outcome):
+    """Edges hardly gained and light changes cross large triangles: say that tessellation is the fix
+    (a warp moves vertices; inside a triangle the mapping stays affine)."""
+    from lmrefine.tessellation import DEFAULT_MIN_TEXELS, coarse_transitions
+    coarse = coarse_transitions(lightmap, group.uvs, group.triangles)
+    if coarse["triangles"]:
+        outcome.warnings.append(
+            f"{label}: light changes cross {coarse['triangles']} triangle(s) of more than "
+            f"{DEFAULT_MIN_TEXELS:g} texels, and moving UVs cannot put more texels inside a triangle "
+            f"(edges {report['transition_widening']:.2f}x): turn on Tessellate (Stages and Tessellation) "
+            "to split them in the mesh, as one undo step")
 
 
 def _tessellate(lmrefine, target, lightmap, budget, journal, outcome, start, span):
