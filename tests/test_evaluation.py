@@ -194,9 +194,30 @@ def test_tessellation_lets_a_coarse_floor_gather_texels_at_the_shadow_edge(tmp_p
     assert split["transition_widening"] > plain["transition_widening"] + 0.2
     # Each run compares with its own uniform baseline at the same points: the ratio rose (1.42x -> 1.99x).
     assert split["equal_error_resolution_ratio"] > plain["equal_error_resolution_ratio"] + 0.3
+    # The split run measures the plain refinement itself at its own points (the errors move by ~20% with the
+    # points here, the ratios much less): close to the plain run's ratio.
+    assert t["plain_equal_error_resolution_ratio"] == pytest.approx(plain["equal_error_resolution_ratio"], abs=0.15)
+    assert t["gain_over_plain"] == pytest.approx(split["equal_error_resolution_ratio"]
+                                                 / t["plain_equal_error_resolution_ratio"])
+    assert t["gain_over_plain"] > 1.2
     layout = np.load(tmp_path / "t" / "refined_layout.npz")
     assert lmrefine.check_layout(layout["uvs"], layout["triangles"], 48)["valid"]
-    assert "Tessellated along transitions" in (tmp_path / "t" / "report.md").read_text()
+    text = (tmp_path / "t" / "report.md").read_text()
+    assert "Tessellated along transitions" in text and "ratio over it" in text
+
+
+def test_tessellation_without_splits_measures_the_plain_refinement_itself(tmp_path):
+    """Budget 0 splits nothing: the plain refinement measured beside the
+    tessellated one is the same refinement at the same points."""
+    from lmrefine.evaluation import EvaluationOptions, evaluate_sample
+
+    report = evaluate_sample(tiny_scene(3), EvaluationOptions(resolution=48, points=1000, samples=4, truth_samples=16,
+                                                              multipliers=(1.0, 2.0), tessellate=0.0, view_width=0))
+    t = report["tessellation"]
+    assert t["vertices_added"] == 0
+    assert t["plain_rmse"] == pytest.approx(report["rmse_refined"], rel=1e-9)
+    assert t["plain_transition_rmse"] == pytest.approx(report["transition_rmse_refined"], rel=1e-9)
+    assert t["gain_over_plain"] == pytest.approx(1.0)
 
 
 def test_rechart_and_tessellation_combine(tmp_path):

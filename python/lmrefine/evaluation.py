@@ -124,14 +124,20 @@ def _bake_passes(sample, uvs, resolution, options, progress, passes):
 def _tessellated(sample, variant, baseline, budget):
     """The scene with its triangles split along the transitions of `baseline`
     (baked on `variant`): the same surface, every UV variant keeping its
-    mapping (lmrefine.tessellation). Returns (scene, tessellation report)."""
+    mapping (lmrefine.tessellation). Returns (scene, tessellation report,
+    (parent triangle per output triangle, (3T', 3) barycentric coordinates of
+    every output corner in its parent))."""
     from .tessellation import tessellate, transition_strength_of
 
     uvs, corner_triangles = sample.layout(variant)
     strength = transition_strength_of(baseline, uvs, corner_triangles)
     others = {name: values for name, values in sample.uvs.items() if name != variant}
+    # Each output corner's barycentric coordinates in its input triangle: a
+    # point of the split mesh is then a point of the input mesh too.
+    identity = np.tile(np.eye(3), (len(sample.triangles), 1))
     result = tessellate(sample.positions, sample.triangles, uvs, strength, budget=budget,
-                        corner_attributes={"normals": sample.normals, **{f"uv:{k}": v for k, v in others.items()}})
+                        corner_attributes={"normals": sample.normals, "parent_bary": identity,
+                                           **{f"uv:{k}": v for k, v in others.items()}})
     normals = result.corner_attributes["normals"].astype(np.float64)
     normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-30)
     layouts = {variant: result.uvs}
@@ -140,7 +146,35 @@ def _tessellated(sample, variant, baseline, budget):
                     triangles=result.triangles.astype(np.int32), normals=normals.astype(np.float32),
                     uvs={name: layouts[name] for name in sample.uvs}, base_color=sample.base_color[result.parent],
                     object_id=sample.object_id[result.parent])
-    return scene, result.report
+    return scene, result.report, (result.parent, result.corner_attributes["parent_bary"])
+
+
+def _plain_refinement(unsplit, variant, baseline, to_unsplit, points, truth, transitions, sweep, resolution,
+                      padding, options, stages, result):
+    """The plain refinement (the same scene without the tessellation, refined
+    from the same bake at the same resolution) measured at the same points
+    against the same truth and uniform bakes as the tessellated one: the
+    tessellation's own gain, free of the points' sampling noise."""
+    uvs, triangles = unsplit.layout(variant)
+    refined = stages.run("refine unsplit", lambda p: refine_uvs(baseline, uvs, triangles, resolution,
+                                                                padding=padding, progress=p,
+                                                                **options.refine_options))
+    refined_map = stages.run("bake unsplit", lambda p: _bake_map(unsplit, refined.uvs, resolution, options, p))
+    parent, parent_bary = to_unsplit
+    bary = metrics.interpolate_corners(parent_bary, points.triangle, points.bary)
+    lookup = metrics.bilinear_lookup(refined_map, metrics.interpolate_corners(refined.uvs, parent[points.triangle],
+                                                                              bary))
+    out = {}
+    for where, prefix in ((np.ones(len(truth), bool), ""), (transitions, "transition_")):
+        errors = [metrics.error_stats(s["lookup"], truth, where)["rmse"] for s in sweep]
+        rmse = metrics.error_stats(lookup, truth, where)["rmse"]
+        ratio, status = metrics.equal_error_resolution(options.multipliers, errors, rmse)
+        split_ratio = result[f"{prefix}equal_error_resolution_ratio"]
+        out[f"plain_{prefix}rmse"] = rmse
+        out[f"plain_{prefix}equal_error_resolution_ratio"] = ratio
+        out[f"plain_{prefix}equal_error_status"] = status
+        out[f"{prefix}gain_over_plain"] = (split_ratio / ratio if ratio and split_ratio and ratio > 0 else None)
+    return out
 
 
 # The stop rule of further stages is shared with the add-on (lmrefine.metrics).
@@ -375,12 +409,13 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
         first_bakes = {name: (first, second) for name, first, second in zip(EFFECTS, maps[1:], again)}
     else:
         baseline = stages.run("bake baseline", lambda p: _bake_map(sample, uvs, resolution, options, p))
-    tessellation = None
+    tessellation = unsplit = None
     if options.tessellate is not None:
         # Same surface, same lightmap mapping: the baseline bake stays valid and
         # every later bake and the ground truth use the split triangles.
-        sample, tessellation = stages.run("tessellate", lambda p: _tessellated(sample, variant, baseline,
-                                                                                options.tessellate))
+        unsplit = sample
+        sample, tessellation, to_unsplit = stages.run("tessellate", lambda p: _tessellated(
+            sample, variant, baseline, options.tessellate))
         uvs, triangles = sample.layout(variant)
     original_check = check_layout(uvs, triangles, resolution, options.padding)
     padding = min(float(options.padding), float(original_check["min_gutter_texels"]))
@@ -547,7 +582,9 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
         uniform["signal_gain"] = (refined_ratio / ratio if ratio and refined_ratio and ratio > 0 else None)
         result["uniform_repack"] = uniform
     if tessellation is not None:
-        result["tessellation"] = tessellation
+        result["tessellation"] = {**tessellation, **_plain_refinement(
+            unsplit, variant, baseline, to_unsplit, points, truth, transitions, sweep, resolution, padding,
+            options, stages, result)}
     if stage_history is not None:
         result["stages"] = stage_history
     if per_effect is not None:

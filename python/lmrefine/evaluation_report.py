@@ -390,6 +390,12 @@ def scene_markdown(result):
                         f"{t['vertices_after']} vertices (+{t['vertices_added']}, budget {t['vertex_budget']}), "
                         f"{t['triangles_before']} -> {t['triangles_after']} triangles in {t['rounds']} rounds; "
                         f"stopped: {t['stopped']}."]
+        if "plain_equal_error_resolution_ratio" in t:
+            gain = f"{t['gain_over_plain']:.2f}x" if t.get("gain_over_plain") else "n/a"
+            lines[-1:-1] = [f"- The plain refinement (the same scene unsplit, refined from the same bake) at the same "
+                            f"points: RMSE {_number(t['plain_rmse'])}, equal-error "
+                            f"{equal_error_text(t['plain_equal_error_resolution_ratio'], t['plain_equal_error_status'])}"
+                            f"; the tessellated refinement's ratio over it: {gain}."]
     if r["gain"]:
         lines.append(f"**Gain**: transition-point RMSE {_change(r['transition_rmse_baseline'], r['transition_rmse_refined'])}.")
         lines += [f"- {note}" for note in r["notes"]]
