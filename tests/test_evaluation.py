@@ -218,6 +218,7 @@ def test_tessellation_without_splits_measures_the_plain_refinement_itself(tmp_pa
     assert t["plain_rmse"] == pytest.approx(report["rmse_refined"], rel=1e-9)
     assert t["plain_transition_rmse"] == pytest.approx(report["transition_rmse_refined"], rel=1e-9)
     assert t["gain_over_plain"] == pytest.approx(1.0)
+    assert t["plain_refine"]["backoff"] == report["refine"]["backoff"]
 
 
 def test_rechart_and_tessellation_combine(tmp_path):

@@ -164,7 +164,8 @@ def _plain_refinement(unsplit, variant, baseline, to_unsplit, points, truth, tra
     bary = metrics.interpolate_corners(parent_bary, points.triangle, points.bary)
     lookup = metrics.bilinear_lookup(refined_map, metrics.interpolate_corners(refined.uvs, parent[points.triangle],
                                                                               bary))
-    out = {}
+    out = {"plain_refine": {k: refined.report[k] for k in ("backoff", "backoff_area", "limited_by")
+                            if k in refined.report}}
     for where, prefix in ((np.ones(len(truth), bool), ""), (transitions, "transition_")):
         errors = [metrics.error_stats(s["lookup"], truth, where)["rmse"] for s in sweep]
         rmse = metrics.error_stats(lookup, truth, where)["rmse"]
