@@ -124,9 +124,13 @@ def _bake_passes(sample, uvs, resolution, options, progress, passes):
 def _tessellated(sample, variant, baseline, budget):
     """The scene with its triangles split along the transitions of `baseline`
     (baked on `variant`): the same surface, every UV variant keeping its
-    mapping (lmrefine.tessellation). Returns (scene, tessellation report,
-    (parent triangle per output triangle, (3T', 3) barycentric coordinates of
-    every output corner in its parent))."""
+    mapping (lmrefine.tessellation). The budget holds per object, as in the
+    add-on: each object gets at most `budget` x its own vertices (objects
+    that share vertices are one mesh here: split together, on their joint
+    budget, so a split edge they share stays conforming).
+    Returns (scene, tessellation report, (parent triangle per output
+    triangle, (3T', 3) barycentric coordinates of every output corner in its
+    parent))."""
     from .tessellation import tessellate, transition_strength_of
 
     uvs, corner_triangles = sample.layout(variant)
@@ -134,19 +138,63 @@ def _tessellated(sample, variant, baseline, budget):
     others = {name: values for name, values in sample.uvs.items() if name != variant}
     # Each output corner's barycentric coordinates in its input triangle: a
     # point of the split mesh is then a point of the input mesh too.
-    identity = np.tile(np.eye(3), (len(sample.triangles), 1))
-    result = tessellate(sample.positions, sample.triangles, uvs, strength, budget=budget,
-                        corner_attributes={"normals": sample.normals, "parent_bary": identity,
-                                           **{f"uv:{k}": v for k, v in others.items()}})
-    normals = result.corner_attributes["normals"].astype(np.float64)
+    attributes = {"normals": sample.normals, "parent_bary": np.tile(np.eye(3), (len(sample.triangles), 1)),
+                  **{f"uv:{k}": v for k, v in others.items()}}
+    pieces, reports, new_positions = [], [], [sample.positions]
+    vertex_count = len(sample.positions)
+    groups = _connected_objects(sample.triangles, sample.object_id)
+    for members in groups:
+        rows = np.nonzero(np.isin(sample.object_id, members))[0]
+        corners = (3 * rows[:, None] + np.arange(3)).ravel()
+        used, local = np.unique(sample.triangles[rows], return_inverse=True)
+        result = tessellate(sample.positions[used], local.reshape(-1, 3), uvs[corners], strength, budget=budget,
+                            corner_attributes={name: values[corners] for name, values in attributes.items()})
+        # The objects' own vertices keep their scene index; new ones follow.
+        to_scene = np.concatenate([used, vertex_count + np.arange(len(result.positions) - len(used))])
+        vertex_count += len(result.positions) - len(used)
+        new_positions.append(result.positions[len(used):])
+        pieces.append((result, rows, to_scene[result.triangles]))
+        reports.append({"objects": [sample.objects[i] for i in members], **result.report})
+    corner = {name: np.concatenate([r.corner_attributes[name] for r, _, _ in pieces]) for name in attributes}
+    parent = np.concatenate([rows[r.parent] for r, rows, _ in pieces])
+    normals = corner["normals"].astype(np.float64)
     normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-30)
-    layouts = {variant: result.uvs}
-    layouts.update({name: result.corner_attributes[f"uv:{name}"].astype(np.float32) for name in others})
-    scene = replace(sample, positions=result.positions.astype(np.float32),
-                    triangles=result.triangles.astype(np.int32), normals=normals.astype(np.float32),
-                    uvs={name: layouts[name] for name in sample.uvs}, base_color=sample.base_color[result.parent],
-                    object_id=sample.object_id[result.parent])
-    return scene, result.report, (result.parent, result.corner_attributes["parent_bary"])
+    layouts = {variant: np.concatenate([r.uvs for r, _, _ in pieces])}
+    layouts.update({name: corner[f"uv:{name}"].astype(np.float32) for name in others})
+    scene = replace(sample, positions=np.concatenate(new_positions).astype(np.float32),
+                    triangles=np.concatenate([t for _, _, t in pieces]).astype(np.int32),
+                    normals=normals.astype(np.float32), uvs={name: layouts[name] for name in sample.uvs},
+                    base_color=sample.base_color[parent], object_id=sample.object_id[parent])
+    report = {key: sum(r[key] for r in reports) for key in ("vertices_added", "vertex_budget", "triangles_before",
+                                                           "triangles_after", "candidates_left")}
+    report.update(vertices_before=len(sample.positions), vertices_after=vertex_count)
+    report.update(rounds=max(r["rounds"] for r in reports), stopped="; ".join(sorted({r["stopped"] for r in reports})),
+                  min_texels=reports[0]["min_texels"], threshold=reports[0]["threshold"], objects=reports)
+    return scene, report, (parent, corner["parent_bary"])
+
+
+def _connected_objects(triangles, object_id):
+    """Lists of object ids whose triangles share vertices (transitively), in
+    order of their first object."""
+    objects = np.unique(object_id)
+    root = {int(o): int(o) for o in objects}
+
+    def find(o):
+        while root[o] != o:
+            root[o] = root[root[o]]
+            o = root[o]
+        return o
+
+    owner = np.full(int(triangles.max()) + 1 if triangles.size else 0, -1, np.int64)
+    for vertex, obj in zip(triangles.ravel().tolist(), np.repeat(object_id, 3).tolist()):
+        if owner[vertex] < 0:
+            owner[vertex] = obj
+        elif find(int(owner[vertex])) != find(obj):
+            root[find(obj)] = find(int(owner[vertex]))
+    groups = {}
+    for o in objects.tolist():
+        groups.setdefault(find(o), []).append(o)
+    return sorted(groups.values())
 
 
 def _plain_refinement(unsplit, variant, baseline, to_unsplit, points, truth, transitions, sweep, resolution,
