@@ -239,6 +239,18 @@ def test_the_tessellation_budget_holds_per_object_and_points_map_to_their_input_
     np.testing.assert_array_equal(split.object_id, scene.object_id[parent])
 
 
+def test_the_summary_gives_the_tessellation_gain_over_plain(tmp_path):
+    tiny_scene(3).save(tmp_path / "tiny.npz")
+    out = tmp_path / "out"
+    assert cli.main(["evaluate", str(tmp_path / "tiny.npz"), "--resolution", "48", "--points", "1000", "--samples",
+                     "4", "--truth-samples", "16", "--multipliers", "1,2", "--tessellate", "2", "--view-width", "0",
+                     "--out", str(out)]) == 0
+    scene = json.loads((out / "report.json").read_text())["scenes"][0]
+    line = next(row for row in (out / "report.md").read_text().splitlines() if "over plain" in row)
+    assert f"+{scene['tessellation']['vertices_added']} vertices" in line
+    assert f"**{scene['tessellation']['gain_over_plain']:.2f}x** over plain" in line
+
+
 def test_objects_that_share_vertices_are_split_together():
     from lmrefine.evaluation import _connected_objects
 

@@ -506,6 +506,15 @@ def write_summary(out_dir, summary):
                 "refined.")
     lines += per_effect_summary(summary)
     for r in summary["scenes"]:
+        t = r.get("tessellation") or {}
+        if "plain_equal_error_resolution_ratio" in t:
+            gain = f"{t['gain_over_plain']:.2f}x" if t.get("gain_over_plain") else "n/a"
+            lines.append(f"- {r['scene']} ({r['variant']}) tessellated (+{t['vertices_added']} vertices): equal-error "
+                         f"ratio {_ratio_text(r['equal_error_resolution_ratio'], r['equal_error_status'])} against "
+                         f"the plain refinement's "
+                         f"{_ratio_text(t['plain_equal_error_resolution_ratio'], t['plain_equal_error_status'])} at "
+                         f"the same points: **{gain}** over plain.")
+    for r in summary["scenes"]:
         if not r["gain"]:
             lines.append(f"- **{r['scene']} ({r['variant']}) shows no gain**: " + "; ".join(r["notes"]) + ".")
         elif r["notes"]:
