@@ -94,7 +94,7 @@ def test_the_pipeline_reports_every_figure_with_sensible_values(tmp_path):
     assert "Second baseline" in (out / "tiny_smart" / "report.md").read_text()
     assert report["timings"]["total"] == pytest.approx(sum(v for k, v in report["timings"].items() if k != "total"))
     # Per object: both halves, each with the same figures.
-    assert [o["objects"] for o in report["objects"]] == [["West"], ["East"]]
+    assert [o["object"] for o in report["objects"]] == ["West", "East"]
     assert sum(o["points"] for o in report["objects"]) == 3000
     for o in report["objects"]:
         assert o["rmse_baseline"] > 0 and "transition_widening" in o and "equal_error_resolution_ratio" in o
