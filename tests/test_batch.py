@@ -157,6 +157,9 @@ def test_batch_runs_every_level_then_skips_them_then_redoes_a_changed_one(level_
     manifest = load(out / "manifest.json")["levels"]
     assert {name: record["status"] for name, record in manifest.items()} == {"a": "done", "b": "done", "c": "done"}
     assert all(record["attempts"] == 1 and record["objects"] == 2 for record in manifest.values())
+    # Each level's two objects have a lightmap each: two atlas groups of one, an image each.
+    assert all(len(record["outputs"]["atlases"]) == 2 for record in manifest.values())
+    assert all(objects == [name] for record in manifest.values() for name, objects in record["outputs"]["atlases"].items())
     assert manifest["a"]["options"] == FLAGS
     assert not os.path.exists(out / ".work")
     assert load(out / "summary.json")["counts"] == {"done": 3}

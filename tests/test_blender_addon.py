@@ -301,6 +301,86 @@ def test_two_objects_in_one_run(facts):
     assert value["Floor"]["image"]["min"] < 0.05 and value["Floor"]["image"]["max"] > 0.5
 
 
+ATLAS = ("Blocker", "Floor", "Post")
+
+
+def test_a_shared_atlas_gets_one_image_per_pass_that_every_member_shows(facts):
+    value = fact(facts, "shared_atlas_one_image_per_pass")
+    assert value["outcome"] == "FINISHED", value["message"]
+    # Two maps: the atlas of three (named after its largest member) and Lonely's own lightmap.
+    shared = "Blocker, Floor, Post"
+    assert value["images"] == {"Floor_atlas_lightmap_ao": shared, "Floor_atlas_lightmap_before": shared,
+                               "Floor_atlas_lightmap_direct": shared, "Lonely_lightmap_ao": "Lonely",
+                               "Lonely_lightmap_before": "Lonely", "Lonely_lightmap_direct": "Lonely"}
+    assert value["result_images"] == 2
+    assert "2 image(s) per pass for 4 object(s) (Floor_atlas_lightmap_*: Blocker, Floor, Post)" in value["message"]
+    for name in ATLAS:
+        member = value["objects"][name]
+        assert member["preview_image"] == "Floor_atlas_lightmap_direct" and member["preview_uv"] == "Lightmap_refined"
+        assert member["before_image"] == "Floor_atlas_lightmap_before"
+        # The shared image holds this object's light where its refined charts lie.
+        assert member["texels"] > 100 and member["light_max"] > 0.5
+    assert value["objects"]["Lonely"]["preview_image"] == "Lonely_lightmap_direct"
+    # One refinement of the joined layout: no two members' charts share a texel, gutters kept.
+    assert value["shared_texels"] == {"Blocker/Floor": 0, "Blocker/Post": 0, "Floor/Post": 0}
+    assert value["joined_check"]["valid"] and value["joined_check"]["min_gutter_texels"] >= 2
+    assert value["joined_repacked"]
+    assert value["changed_after_undo"] == [] and value["can_undo_further"] is False
+
+
+@pytest.mark.parametrize("name", ["shared_atlas_cycles", "shared_atlas_stages_and_tessellation"])
+def test_a_shared_atlas_with_cycles_and_with_stages(facts, name):
+    value = fact(facts, name)
+    assert value["outcome"] == "FINISHED", value["message"]
+    assert sorted(value["images"]) == ["Floor_atlas_lightmap_before", "Floor_atlas_lightmap_direct",
+                                       "Lonely_lightmap_before", "Lonely_lightmap_direct"]
+    for name in ATLAS:
+        member = value["objects"][name]
+        assert member["preview_image"] == "Floor_atlas_lightmap_direct"
+        assert member["texels"] > 100 and member["light_max"] > 0.5
+    assert set(value["shared_texels"].values()) == {0}
+    assert value["joined_check"]["valid"] and value["joined_check"]["min_gutter_texels"] >= 2
+    assert value["changed_after_undo"] == [] and value["can_undo_further"] is False
+
+
+def test_a_shared_atlas_driven_by_an_existing_atlas_image(facts):
+    value = fact(facts, "shared_atlas_from_an_existing_image")
+    assert value["first"] == ["FINISHED", None]
+    assert value["outcome"] == "FINISHED", value["message"]
+    # The members' one image drove one refinement; it stays their "before", no new one is stored.
+    assert value["images"] == ["Floor_atlas_lightmap_before", "Floor_atlas_lightmap_direct"]
+    assert set(value["before_images"].values()) == {"Floor_atlas_lightmap_before"}
+    assert set(value["after_images"].values()) == {"Floor_atlas_lightmap_direct"}
+    assert value["result_images"] == 1 and value["moved"]["Floor"] > 0.01
+
+
+def test_removing_a_shared_atlas_preview_restores_every_member(facts):
+    value = fact(facts, "shared_atlas_preview_removal")
+    assert value["outcome"] == "FINISHED", value["message"]
+    assert value["removed"] == ["FINISHED"] and value["previews_left"] == []
+    # The meshes keep their new refined map, the images stay; every material is as it was.
+    assert value["changed"] == ["images", "mesh:Cube", "mesh:Cube.001", "mesh:FloorMesh", "mesh:Plane", "result"]
+
+
+def test_shared_atlas_off_gives_one_image_per_object(facts):
+    value = fact(facts, "shared_atlas_off_one_image_per_object")
+    assert value["outcome"] == "FINISHED", value["message"]
+    assert sorted(value["images"]) == sorted(f"{name}_lightmap_{kind}" for name in ATLAS + ("Lonely",)
+                                             for kind in ("ao", "before", "direct"))
+    assert value["result_images"] == 4
+    for name in ATLAS + ("Lonely",):
+        assert value["objects"][name]["preview_image"] == f"{name}_lightmap_direct"
+    # Each object refined on its own fills its own map: the members now cover the same texels.
+    assert value["shared_texels"]["Blocker/Post"] > 0 and not value["joined_check"]["valid"]
+    assert value["changed_after_undo"] == []
+
+
+def test_atlas_groups_do_not_depend_on_the_selection_order(facts):
+    groups = fact(facts, "shared_atlas_grouping_ignores_selection_order")["groups"]
+    expected = [["Floor_atlas", ["Blocker", "Floor", "Post"]], ["Lonely", ["Lonely"]]]
+    assert groups == [expected, expected]
+
+
 def test_black_first_lightmap_warns_and_keeps_the_layout(facts):
     value = fact(facts, "black_first_lightmap_warns")
     assert len(value["warnings"]) == 1 and "the first lightmap is black" in value["warnings"][0]
@@ -360,6 +440,12 @@ def test_progress_moves_per_map_and_per_stage(facts):
                         if label.startswith("Second bake") and "map 1/2" in label)
     assert first_map_end == pytest.approx(2 / 3 + 1 / 6, abs=1e-6)
     assert any("map 2/2" in label for label in value["real_labels"] if label.startswith("First bake"))
+    # A shared atlas is one map: 4 objects in 2 maps give 6 units (first bake, refinement, second bake
+    # 2 each), the atlas's one refinement the third unit, Lonely's the fourth.
+    atlas = value["atlas_fractions"]
+    assert all(b >= a - 1e-9 for a, b in zip(atlas, atlas[1:])) and atlas[-1] == pytest.approx(1.0)
+    assert value["atlas_refining"] == {"Refining Floor_atlas": [pytest.approx(2 / 6), pytest.approx(3 / 6)],
+                                       "Refining Lonely": [pytest.approx(3 / 6), pytest.approx(4 / 6)]}
 
 
 def test_preview_is_wired_through_the_refined_map_in_every_viewport_mode(facts):
@@ -654,6 +740,35 @@ def test_batch_refines_bakes_and_reports(facts, work_dir):
     }
 
 
+def test_batch_writes_one_image_per_shared_atlas_and_reports_who_shares_it(facts, work_dir):
+    blend = fact(facts, "save_atlas_scene_for_batch")["path"]
+    out = work_dir / "batch_atlas"
+    process = run_batch(blend, "--objects", "all", "--resolution", "64", "--samples", "4", "--out", str(out))
+    assert process.returncode == 0, process.stderr[-3000:]
+    report = json.loads((out / "report.json").read_text())
+    assert sorted(os.listdir(out)) == ["Floor_atlas_lightmap_before.exr", "Floor_atlas_lightmap_direct.exr",
+                                       "Lonely_lightmap_before.exr", "Lonely_lightmap_direct.exr", "atlas.blend",
+                                       "report.json"]
+    atlas = report["atlases"]["Floor_atlas"]
+    assert atlas["objects"] == ["Blocker", "Floor", "Post"]
+    assert atlas["images"]["direct"] == str(out / "Floor_atlas_lightmap_direct.exr")
+    assert report["atlases"]["Lonely"]["objects"] == ["Lonely"]
+    for name in ("Blocker", "Floor", "Post"):
+        assert report["objects"][name]["atlas"] == "Floor_atlas"
+        assert report["objects"][name]["images"] == atlas["images"]
+        assert "report" not in report["objects"][name]  # the one refinement's report is the atlas's
+    assert atlas["report"]["check_layout"]["valid"] is True
+    assert report["objects"]["Lonely"]["report"] == report["atlases"]["Lonely"]["report"]
+    assert report["summary"]["images_per_pass"] == 2 and report["summary"]["objects"] == 4
+    assert report["summary"]["shared_images"] == {"Floor_atlas": ["Blocker", "Floor", "Post"]}
+    out_off = work_dir / "batch_atlas_off"
+    process = run_batch(blend, "--objects", "all", "--resolution", "64", "--samples", "4", "--no-preview",
+                        "--no-shared-atlas", "--out", str(out_off))
+    assert process.returncode == 0, process.stderr[-3000:]
+    assert sorted(name for name in os.listdir(out_off) if name.endswith(".exr")) == [
+        f"{name}_lightmap_direct.exr" for name in ("Blocker", "Floor", "Lonely", "Post")]
+
+
 def test_batch_float32_writes_32_bit_exrs(facts, work_dir):
     blend = fact(facts, "save_scene_for_batch")["path"]
     out = work_dir / "batch_float32"
@@ -686,6 +801,23 @@ def test_batch_stages_and_tessellate(facts, work_dir):
     assert saved == "PROBE 37"  # the saved copy holds the tessellated mesh
     process = run_batch(blend, "--objects", "Floor", "--tessellate", "--no-tessellate", "--out", str(out))
     assert process.returncode == 1 and "contradict" in process.stderr
+
+
+def test_batch_rechart_flag(facts, work_dir):
+    """The coarse floor's Lightmap map has one chart per quad: re-charted by default, not with --no-rechart."""
+    blend = fact(facts, "save_coarse_scene_for_batch")["path"]
+    used = {}
+    for flag in ("--rechart", "--no-rechart"):
+        out = work_dir / f"batch{flag}"
+        process = run_batch(blend, "--objects", "Floor", "--resolution", "64", "--samples", "4",
+                            "--bake-passes", "direct", "--no-preview", flag, "--out", str(out))
+        assert process.returncode == 0, process.stderr[-3000:]
+        report = json.loads((out / "report.json").read_text())
+        floor = report["objects"]["Floor"]["report"]
+        assert floor["check_layout"]["valid"] is True
+        used[flag] = floor["rechart"]["used"]
+        assert floor["rechart"]["room"]["no_room"] is True
+    assert used == {"--rechart": True, "--no-rechart": False}
 
 
 # -------------------------------------------------------------- packaging
@@ -721,3 +853,40 @@ def test_zip_installs_enables_and_carries_the_core(tmp_path):
     enabled, location, idname = line.split()[1:]
     assert enabled == "True" and idname == "OBJECT_OT_lmrefine_refine_uvs"
     assert location.startswith(str(tmp_path / "scripts" / "addons" / "lmrefine_blender" / "lib"))
+
+
+def test_addon_recharts_a_lightmap_pack_source(facts):
+    value = fact(facts, "rechart_lightmap_pack_source")
+    on, off = value["rechart_True"], value["rechart_False"]
+    for run in (on, off):
+        assert run["outcome"] == "FINISHED", run["message"]
+        assert run["valid"] and run["min_gutter_texels"] >= 2.0 - 1e-3
+        assert run["source_identical"] and run["geometry_identical"]
+        assert run["image"] is not None and run["image"]["std"] > 0
+    # 64 quads, one chart each: the flat floor re-charts to one chart.
+    assert on["source_charts"] == 64
+    assert on["panel_recharted"] == 1 and on["refined_charts"] == 1
+    assert "re-charted from the mesh: Floor" in on["result_message"]
+    assert off["panel_recharted"] == 0 and off["refined_charts"] == 64
+    assert "re-charted" not in off["result_message"]
+
+
+def test_addon_recharts_a_shared_lightmap_pack_atlas(facts):
+    value = fact(facts, "rechart_shared_lightmap_pack_atlas")
+    assert value["outcome"] == "FINISHED", value["message"]
+    assert value["images"] == 1  # one atlas, one image per pass
+    assert value["panel_recharted"] == 2  # both objects, counted as objects
+    assert "re-charted from the mesh:" in value["result_message"]
+    # 64 floor quads + 6 box faces, one chart each, became a few charts (the floor one, the box's sides).
+    assert value["refined_charts"] < 20
+    assert value["valid"] and value["shared_texels"] == 0 and value["source_identical"]
+
+
+def test_addon_says_tessellate_when_large_triangles_hold_the_light_changes(facts):
+    value = fact(facts, "coarse_floor_suggests_tessellation")
+    off, on = value["tessellate_False"], value["tessellate_True"]
+    assert off["error"] is None and on["error"] is None
+    hint = [w for w in off["warnings"] if "turn on Tessellate" in w]
+    assert len(hint) == 1 and hint[0].startswith("'Floor': light changes cross ")
+    assert off["widening"] < 1.25
+    assert not any("turn on Tessellate" in w for w in on["warnings"])

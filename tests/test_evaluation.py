@@ -310,3 +310,26 @@ def test_multi_stage_refinement_reports_every_stage_and_stops_when_the_layout_se
     assert "stage 1 kept" in still["stages"]["stopped"]
     with pytest.raises(ValueError, match="stages must be an integer from 1 to 16"):
         evaluate_sample(scene, EvaluationOptions(**common, stages=0))
+
+
+def test_evaluate_recharts_a_source_with_no_room_and_measures_against_it(tmp_path):
+    """A Lightmap Pack-like source (a chart per quad): refine_uvs re-charts the floor (the route the add-on
+    takes); the baseline and the sweep stay the source layout baked plain; --no-rechart refines the source."""
+    from layouts import lightmap_pack
+    from lmrefine.evaluation import EvaluationOptions, evaluate_sample
+
+    scene = tiny_scene(6)
+    per_quad, _ = lightmap_pack(charts_across=6, margin_texels=3, resolution=48)
+    scene.uvs["lightmap"] = per_quad.astype(np.float32)
+    common = dict(resolution=48, points=1000, samples=4, truth_samples=16, multipliers=(1.0, 2.0),
+                  variant="lightmap", view_width=0)
+    report = evaluate_sample(scene, EvaluationOptions(**common), out_dir=str(tmp_path / "on"))
+    rechart = report["refine"]["rechart"]
+    assert rechart["used"] and rechart["room"]["no_room"] and rechart["charts"] == 1  # the flat floor
+    assert report["layout"] == {"source": "scene", "variant": "lightmap"}
+    layout = np.load(tmp_path / "on" / "refined_layout.npz")
+    np.testing.assert_array_equal(layout["original_uvs"], per_quad)  # the baseline's layout: the source
+    assert lmrefine.check_layout(layout["uvs"], layout["triangles"], 48)["valid"]
+    assert "re-charted from the mesh** by refine_uvs" in (tmp_path / "on" / "report.md").read_text()
+    off = evaluate_sample(scene, EvaluationOptions(**common, auto_rechart=False))
+    assert off["refine"]["rechart"] is None

@@ -84,11 +84,18 @@ def build_parser():
                              "BUDGET: most vertices added, as a fraction of each object's (default 0.25)")
     parser.add_argument("--no-tessellate", action="store_true", help="turn tessellation off (when the .blend "
                         "has it on)")
+    parser.add_argument("--rechart", action=argparse.BooleanOptionalAction, default=None,
+                        help="re-chart an object whose source map gives the refiner no room (one chart per face, "
+                             "as Lightmap Pack makes) from its mesh; --no-rechart refines the source map as it is")
     parser.add_argument("--backend", choices=("embree", "cycles"), help="baker of the final lightmaps")
     parser.add_argument("--bake-passes", type=_passes, help=f"comma-separated, of: {', '.join(PASSES)}")
     parser.add_argument("--samples", type=int, help="samples per texel")
     parser.add_argument("--float32", action=argparse.BooleanOptionalAction, default=None,
                         help="write 32-bit float EXRs (default: half float; both ZIP-compressed)")
+    parser.add_argument("--shared-atlas", action=argparse.BooleanOptionalAction, default=None,
+                        help="objects whose lightmap UV maps share one atlas are refined together and baked into "
+                             "one image per pass, <first object>_atlas_lightmap_<pass>.exr (default: on); "
+                             "--no-shared-atlas writes one image per object")
     parser.add_argument("--preview", action=argparse.BooleanOptionalAction, default=None,
                         help="hook the lightmap into the materials of the saved .blend")
     parser.add_argument("--report", help="JSON report path (default: OUT/report.json)")
@@ -102,6 +109,8 @@ def apply_flags(settings, args):
         "strength": args.strength, "max_magnification": args.max_magnification, "min_shrink": args.min_shrink,
         "delta": args.delta, "passes": args.passes, "directional": args.directional, "samples": args.samples,
         "preview": args.preview, "exr_float32": args.float32, "stages": args.stages,
+        "shared_atlas": args.shared_atlas,
+        "rechart": args.rechart,
     }
     upper = {"first_lightmap": args.first_lightmap, "driving_pass": args.driving_pass, "border": args.border,
              "wavelet": args.wavelet, "backend": args.backend}
@@ -221,16 +230,28 @@ def run(args):
     return {
         "ok": True,
         "blend": blend_copy,
-        "objects": {name: {"source_layer": t.source, "refined_layer": t.refined,
-                           "report": outcome.reports[name],
-                           "tessellation": outcome.tessellation.get(name),
-                           "images": {p: outcome.image_files[i] for p, i in outcome.images[name].items()}}
-                    for name, t in ((t.obj.name, t) for t in targets)},
+        "objects": {name: _object_entry(outcome, name, t) for name, t in ((t.obj.name, t) for t in targets)
+                    if name in outcome.objects},
+        "atlases": {group: {"objects": objects, "report": outcome.reports[group],
+                            "images": {p: outcome.image_files[i] for p, i in outcome.images[group].items()}}
+                    for group, objects in outcome.atlases.items()},
         "summary": outcome.summary(),
         "warnings": outcome.warnings,
         "timings": outcome.timings,
         "settings": {key: value for key, value in options.items() if key != "lightmap_image"},
     }
+
+
+def _object_entry(outcome, name, target):
+    """One object of the report: its maps, its atlas group and that group's images. The refinement
+    report is the group's (atlases[group]["report"]); an object alone in its group carries it here too."""
+    group = outcome.atlas_of(name)
+    entry = {"source_layer": target.source, "refined_layer": target.refined, "atlas": group,
+             "tessellation": outcome.tessellation.get(name),
+             "images": {p: outcome.image_files[i] for p, i in outcome.images[group].items()}}
+    if len(outcome.atlases[group]) == 1:
+        entry["report"] = outcome.reports[group]
+    return entry
 
 
 def main(argv):

@@ -30,8 +30,14 @@ def _report_outcome(operator, context, outcome, seconds):
     result.timings = "  ".join(f"{stage} {value:.2f}s" for stage, value in outcome.timings.items())
     result.tessellated = bool(outcome.tessellation)
     result.vertices_added = summary["vertices_added"]
+    result.images = summary["images_per_pass"]
+    result.shared = "; ".join(f"{name}: {', '.join(objects)}" for name, objects in summary["shared_images"].items())
     result.stages = outcome.stages_asked
     result.stages_kept = summary["stages_kept"]
+    # Reports are per map (an object, or an atlas group of several): count and name objects.
+    recharted_maps = [name for name, report in outcome.reports.items() if (report.get("rechart") or {}).get("used")]
+    recharted = [obj for name in recharted_maps for obj in outcome.atlases.get(name, [name])]
+    result.recharted = len(recharted)
     result.stages_stopped = "; ".join(_stage_stop(name, entry) for name, entry in outcome.stages.items()
                                       if not entry["stages"][-1]["kept"])
     if summary["moved"] == 0:
@@ -43,14 +49,30 @@ def _report_outcome(operator, context, outcome, seconds):
                           f"{summary['transition_widening']:.2f}x their area, texel density "
                           f"{summary['density_min']:.2f}x to {summary['density_max']:.2f}x"
                           + (f"; {still} did not move (see warnings)" if still else ""))
+    result.message += "; " + images_sentence(summary)
+    if recharted:
+        result.message += (f"; re-charted from the mesh: {', '.join(recharted)} (the source map gave the "
+                           "refiner no room: one chart per face)")
     if outcome.tessellation:
         result.message += f"; tessellation added {summary['vertices_added']} vertices"
     if outcome.stages:
         why = "; ".join(f"{name}: {entry['stopped']}" for name, entry in outcome.stages.items())
         result.message += f"; stages kept: {summary['stages_kept']} of {result.stages} ({why})"
+    for name in recharted_maps:
+        operator.report({'INFO'}, f"'{name}': " + outcome.reports[name]["notes"][0])
     for warning in outcome.warnings:
         operator.report({'WARNING'}, warning)
     operator.report({'INFO'}, result.message)
+
+
+def images_sentence(summary):
+    """How many images a run wrote for how many objects, and which objects share which."""
+    per_pass, objects = summary["images_per_pass"], summary["objects"]
+    text = f"{per_pass} image(s) per pass for {objects} object(s)"
+    shared = summary["shared_images"]
+    if shared:
+        text += " (" + "; ".join(f"{name}_lightmap_*: {', '.join(names)}" for name, names in shared.items()) + ")"
+    return text
 
 
 def _stage_stop(name, entry):

@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 import bpy
 import numpy as np
 
-from . import bridge, cycles_bake, materials, tessellation
+from . import atlas, bridge, cycles_bake, materials, tessellation
 from .errors import Cancelled, UserError  # noqa: F401  (re-exported for the drivers)
 
 REFINED_SUFFIX = "_refined"
@@ -31,6 +31,8 @@ TRANSPORTS = {"direct": {"direct"}, "indirect": {"indirect"}, "combined": {"dire
 # Texels both bakers fill into the gutter around each chart (Blender's default
 # bake margin): bilinear and mipmapped lookups near a chart border stay on it.
 BAKE_MARGIN = 16
+# Below this transition widening a run says when large triangles are why (see _coarse_warning).
+COARSE_WIDENING = 1.25
 
 
 @dataclass
@@ -63,13 +65,14 @@ class Target:
 @dataclass
 class Outcome:
     objects: list
-    reports: dict = field(default_factory=dict)  # object name -> refine_uvs report (+ check_layout)
-    images: dict = field(default_factory=dict)  # object name -> {pass: image name}
+    reports: dict = field(default_factory=dict)  # atlas group name -> refine_uvs report (+ check_layout)
+    images: dict = field(default_factory=dict)  # atlas group name -> {pass: image name}
+    atlases: dict = field(default_factory=dict)  # atlas group name -> its object names (one image per pass each)
     image_files: dict = field(default_factory=dict)  # image name -> file path ('' when packed)
     timings: dict = field(default_factory=dict)  # stage -> seconds
     warnings: list = field(default_factory=list)  # things the user should know, though the run succeeded
     tessellation: dict = field(default_factory=dict)  # object name -> lmrefine.tessellate report
-    stages: dict = field(default_factory=dict)  # object name -> {"stages": [...], "stopped": why}
+    stages: dict = field(default_factory=dict)  # atlas group name -> {"stages": [...], "stopped": why}
     stages_asked: int = 1
 
     def summary(self):
@@ -78,7 +81,8 @@ class Outcome:
         widening = float(np.mean([r["transition_widening"] for r in reports]))
         low = min(r["density_min"] for r in reports)
         high = max(r["density_max"] for r in reports)
-        moved = sum(1 for r in reports if r.get("moved", True))
+        moved = sum(len(self.atlases.get(name, [name])) for name, report in self.reports.items()
+                    if report.get("moved", True))  # objects, counted by their atlas group's map
         limits = set()
         for report in reports:
             limited_by = report.get("limited_by") or []
@@ -92,7 +96,14 @@ class Outcome:
             "limited_by": ", ".join(sorted(limits)),
             "vertices_added": sum(report["vertices_added"] for report in self.tessellation.values()),
             "stages_kept": max(kept, default=1),
+            "objects": len(self.objects),
+            "images_per_pass": len(self.images),
+            "shared_images": {name: objects for name, objects in self.atlases.items() if len(objects) > 1},
         }
+
+    def atlas_of(self, obj_name):
+        """The name of the atlas group (and of its images) that `obj_name` belongs to."""
+        return next(name for name, objects in self.atlases.items() if obj_name in objects)
 
 
 def settings_snapshot(settings):
@@ -113,6 +124,7 @@ def settings_snapshot(settings):
             "border": settings.border.lower(),
             "directional": settings.directional,
             "wavelet": settings.wavelet.lower(),
+            "rechart": settings.rechart,
         },
         "backend": settings.backend,
         "bake_passes": [name.lower() for name in ("DIRECT", "INDIRECT", "COMBINED", "AO")
@@ -120,6 +132,7 @@ def settings_snapshot(settings):
         "samples": settings.samples,
         "preview": settings.preview,
         "exr_float32": settings.exr_float32,
+        "shared_atlas": settings.shared_atlas,
         "tessellate": settings.tessellate_budget if settings.tessellate else None,
         "stages": settings.stages,
     }
@@ -201,7 +214,7 @@ def _validate_object(obj, options, owners, resolution, depsgraph):
     if refined not in mesh.uv_layers and len(mesh.uv_layers) >= 8:
         raise UserError(f"'{obj.name}' already has 8 UV maps, Blender's limit: remove one to make room "
                         f"for '{refined}'")
-    layout = bridge.read_layout(mesh, source)
+    layout = bridge.read_layout(mesh, source, obj.matrix_world)
     if len(layout.triangles) == 0:
         raise UserError(f"'{obj.name}' has no faces: nothing to lightmap")
     not_finite = int(np.count_nonzero(~np.isfinite(layout.uvs).all(axis=1)))
@@ -261,6 +274,8 @@ def _first_image(obj, source, options):
 def run(context, targets, options, journal, image_dir=None):
     """The job (a generator; see the module doc). Returns an Outcome.
 
+    Targets that share one atlas (atlas.group_targets) are refined and baked
+    as one map: one refinement of their joined layout, one image per pass.
     Every scene change registers its revert in `journal`; the driver rolls
     back on any exception. `image_dir`: where to write the EXR lightmaps
     (default: next to the .blend, or packed into it when it was never saved).
@@ -277,17 +292,29 @@ def run(context, targets, options, journal, image_dir=None):
     resolution = options["resolution"]
     padding = options["padding"]
     backend_first = options["first_lightmap"]
-    # Progress in units of one map's work: every bake one unit per map, every refinement and tessellation one.
-    maps = len(targets)
-    further = options.get("stages", 1) - 1  # each: a bake of all targets and a refinement of each
+    groups = atlas.group_targets(list(targets), resolution, options.get("shared_atlas", True))
+    for group in groups:
+        group.join()
+    group_of = {target.obj.name: group for group in groups for target in group.targets}
+    # Progress in units of one map's work (a map = an atlas group): every bake one unit per map, every
+    # refinement one, the tessellation one per object.
+    maps = len(groups)
+    further = options.get("stages", 1) - 1  # each: a bake of all targets and a refinement of each map
     span = 1.0 / ((0 if backend_first == 'IMAGE' else maps) + maps + maps + further * 2 * maps
-                  + (maps if options.get("tessellate") is not None else 0))
+                  + (len(targets) if options.get("tessellate") is not None else 0))
     done = 0
 
-    # 1. The first lightmap, on the source layout.
+    # 1. The first lightmap, on the source layout: one per atlas group.
     clock = time.perf_counter()
     if backend_first == 'IMAGE':
-        lightmaps = {t.obj.name: bridge.image_to_array(t.image) for t in targets}
+        lightmaps = {}
+        for group in groups:
+            images = {target.image.name: target.image for target in group.targets}
+            if len(images) == 1:  # the members' material shows one atlas image: it is the group's map
+                lightmaps[group.name] = bridge.image_to_array(next(iter(images.values())))
+            else:
+                lightmaps[group.name] = atlas.merge_maps([bridge.image_to_array(t.image) for t in group.targets],
+                                                         group.masks(resolution), BAKE_MARGIN)
     else:
         source_of = {t.obj.name: t.source for t in targets}
         passes = (options["driving_pass"],)
@@ -297,93 +324,101 @@ def run(context, targets, options, journal, image_dir=None):
         else:
             baked = yield from _bake_cycles(context, targets, source_of, passes, options, "First bake",
                                             done * span, maps * span)
-        lightmaps = baked[options["driving_pass"]]
+        lightmaps = _group_maps(groups, baked[options["driving_pass"]], resolution)
         done += maps
         outcome.timings["first bake"] = time.perf_counter() - clock
 
-    for name, lightmap in lightmaps.items():
-        if not np.any(lightmap[..., :3] > 0.0):
-            outcome.warnings.append(f"'{name}': the first lightmap is black (no light reaches it), so there is "
-                                    "nothing to refine for: add lights or a world colour")
+    for group in groups:
+        if not np.any(lightmaps[group.name][..., :3] > 0.0):
+            outcome.warnings.append(f"{group.label()}: the first lightmap is black (no light reaches it), so "
+                                    "there is nothing to refine for: add lights or a world colour")
 
     # 1b. Opt-in: split the triangles that strong transitions of the first lightmap cross, in the mesh.
     if options.get("tessellate") is not None:
         clock = time.perf_counter()
         for target in targets:
-            yield from _tessellate(lmrefine, target, lightmaps[target.obj.name], options["tessellate"], journal,
-                                   outcome, done * span, span)
+            yield from _tessellate(lmrefine, target, lightmaps[group_of[target.obj.name].name],
+                                   options["tessellate"], journal, outcome, done * span, span)
             done += 1
+        for group in groups:
+            group.join()  # the tessellated meshes' layouts (the same charts, more triangles)
         outcome.timings["tessellate"] = time.perf_counter() - clock
 
-    # 2. Refine every layout (native, off the main thread), check it, write it.
+    # 2. Refine every map's layout (native, off the main thread), check it, write it.
     clock = time.perf_counter()
-    refined_uvs = {}
-    for target in list(targets):
-        name = target.obj.name
-        layout = target.layout
+    refined_uvs = {}  # group name -> the joined refined UVs
+    for group in list(groups):
+        name, label = group.name, group.label()
         try:
             result = yield NativeWork(
                 f"Refining {name}",
-                lambda progress, lightmap=lightmaps[name], layout=layout: lmrefine.refine_uvs(
-                    lightmap, layout.uvs, layout.triangles, resolution, padding=padding, progress=progress,
-                    **options["refine_options"]),
+                lambda progress, lightmap=lightmaps[name], group=group: lmrefine.refine_uvs(
+                    lightmap, group.uvs, group.triangles, resolution, padding=padding, progress=progress,
+                    positions=group.positions, **options["refine_options"]),
                 done * span, span, parts=REFINE_STAGES)
         except (ValueError, TypeError, MemoryError) as error:
-            # The core refused this object's input: skip it, refine the others
-            # (nothing of it was written yet).
-            outcome.warnings.append(f"Skipped: '{name}' could not be refined: {error}")
-            targets = [t for t in targets if t is not target]
-            outcome.objects.remove(name)
+            # The core refused this map's input: skip its objects, refine the others
+            # (nothing of them was written yet).
+            outcome.warnings.append(f"Skipped: {label} could not be refined: {error}")
+            groups.remove(group)
+            for obj_name in group.objects:
+                outcome.objects.remove(obj_name)
             done += 1
             continue
         done += 1
-        check, source_check = _check_refined(lmrefine, name, result.uvs, layout, layout.uvs, resolution, padding)
+        joined = bridge.Layout(group.uvs, group.triangles)
+        check, source_check = _check_refined(lmrefine, label, result.uvs, joined, group.uvs, resolution, padding)
+        source = "', '".join(sorted({target.source for target in group.targets}))
         if not source_check["valid"] and (source_check["overlapping"] or source_check["min_gutter_texels"] <= 0.0):
             # Charts that overlap or touch share texels: the layout of a texture, not of a lightmap.
             outcome.warnings.append(
-                f"'{name}': UV map '{target.source}' looks like a texture map, not a lightmap layout "
+                f"{label}: UV map '{source}' looks like a texture map, not a lightmap layout "
                 f"({describe_problems(source_check, padding)}): faces share texels, so light bleeds between "
                 "them whatever the refinement does; add a UV map for the lightmap (Object Data > UV Maps > +, "
                 "then UV > Lightmap Pack) and pick it as Source")
         elif not source_check["valid"]:
             outcome.warnings.append(
-                f"'{name}': UV map '{target.source}' was already invalid at {resolution} texels "
+                f"{label}: UV map '{source}' was already invalid at {resolution} texels "
                 f"({describe_problems(source_check, padding)}); the refined map is no worse, but lightmap "
                 "bleeding may show: repack the source map (UV > Lightmap Pack)")
-        black = f"'{name}': the first lightmap is black"  # already said, with its advice
+        black = f"{label}: the first lightmap is black"  # already said, with its advice
         if not result.report["moved"] and not any(w.startswith(black) for w in outcome.warnings):
             why = next((n for n in result.report["notes"] if n.startswith("nothing moved")), "nothing moved")
-            outcome.warnings.append(f"'{name}': {why}")
+            outcome.warnings.append(f"{label}: {why}")
+        if options.get("tessellate") is None and result.report["transition_widening"] < COARSE_WIDENING:
+            _coarse_warning(lmrefine, label, lightmaps[name], group, result.report, outcome)
         report = {key: value for key, value in result.report.items() if key != "triangle_density"}
         report["check_layout"] = dict(check)
         report["source_check_layout"] = dict(source_check)
         outcome.reports[name] = _plain(report)
         refined_uvs[name] = result.uvs
-    if not targets:
+    if not groups:
         raise UserError(" ".join(w for w in outcome.warnings if w.startswith("Skipped: ")))
-    for target in targets:
-        _write_refined_layer(target, refined_uvs[target.obj.name], journal)
+    outcome.atlases = {group.name: group.objects for group in groups}
+    for group in groups:
+        _write_group_layers(group, refined_uvs[group.name], journal)
     outcome.timings["refine"] = time.perf_counter() - clock
 
     # 2b. Opt-in: further stages, each refining from a bake with the previous stage's layout.
     if further:
         clock = time.perf_counter()
-        done = yield from _further_stages(context, lmrefine, targets, refined_uvs, options, journal, outcome,
+        done = yield from _further_stages(context, lmrefine, groups, refined_uvs, options, journal, outcome,
                                           done, span)
-        for target in targets:
-            name = target.obj.name
+        for group in groups:
+            name = group.name
             if sum(entry["kept"] for entry in outcome.stages[name]["stages"]) > 1:
                 # The figures of the layout the user gets, against the source map, at the first bake's edges.
-                figures = lmrefine.refine.layout_figures(lightmaps[name], target.layout.uvs, refined_uvs[name],
-                                                         target.layout.triangles,
+                figures = lmrefine.refine.layout_figures(lightmaps[name], group.uvs, refined_uvs[name],
+                                                         group.triangles,
                                                          wavelet=options["refine_options"]["wavelet"])
                 figures.pop("triangle_density")
                 outcome.reports[name].update(_plain(figures))
             outcome.reports[name]["stages"] = _plain(outcome.stages[name])
         outcome.timings["stages"] = time.perf_counter() - clock
 
-    # 3. The second bake with the refined layout, one image per pass.
+    # 3. The second bake with the refined layout, one image per map and pass.
     clock = time.perf_counter()
+    targets = [target for group in groups for target in group.targets]
     refined_of = {t.obj.name: t.refined for t in targets}
     passes = tuple(options["bake_passes"])
     if options["backend"] == 'EMBREE':
@@ -393,24 +428,28 @@ def run(context, targets, options, journal, image_dir=None):
         baked = yield from _bake_cycles(context, targets, refined_of, passes, options, "Second bake",
                                         done * span, 1.0 - done * span)
     for pass_name in passes:
-        for target in targets:
-            image = _store_image(target.obj, pass_name, baked[pass_name][target.obj.name], journal)
-            outcome.images.setdefault(target.obj.name, {})[pass_name] = image.name
+        merged = _group_maps(groups, baked[pass_name], resolution, refined_uvs)
+        for group in groups:
+            image = _store_image(group, pass_name, merged[group.name], journal)
+            outcome.images.setdefault(group.name, {})[pass_name] = image.name
     outcome.timings["second bake"] = time.perf_counter() - clock
 
     # 4. Preview in the materials, then write the images (the one step a rollback cannot undo, so last).
     if options["preview"]:
         # Before and after show the same light: the driving pass when it was baked again, else the first pass.
         shown_pass = options["driving_pass"] if options["driving_pass"] in passes else passes[0]
-        for target in targets:
-            name = target.obj.name
-            image = bpy.data.images[outcome.images[name][shown_pass]]
-            if target.image is not None:  # the user's own first lightmap is the "before"
-                before = target.image
-            else:
-                before = _store_image(target.obj, "before", lightmaps[name], journal)
-                outcome.images[name]["before"] = before.name
-            materials.add_preview(target.obj, image, target.refined, before, target.source, journal)
+        for group in groups:
+            image = bpy.data.images[outcome.images[group.name][shown_pass]]
+            stored_before = None
+            for target in group.targets:
+                if target.image is not None:  # the user's own first lightmap is the "before"
+                    before = target.image
+                else:
+                    if stored_before is None:
+                        stored_before = _store_image(group, "before", lightmaps[group.name], journal)
+                        outcome.images[group.name]["before"] = stored_before.name
+                    before = stored_before
+                materials.add_preview(target.obj, image, target.refined, before, target.source, journal)
     for names in outcome.images.values():
         for image_name in names.values():
             image = bpy.data.images[image_name]
@@ -419,18 +458,52 @@ def run(context, targets, options, journal, image_dir=None):
     return outcome
 
 
-def _check_refined(lmrefine, name, uvs, layout, reference_uvs, resolution, padding):
+def _group_maps(groups, per_object, resolution, joined_uvs=None):
+    """{group name: its one map} from each object's own bake: a group of one keeps its object's map,
+    a shared atlas merges its members' maps by their rasterized coverage (atlas.merge_maps) of the
+    layout they were baked with (`joined_uvs[group name]`, default the group's source layout)."""
+    maps = {}
+    for group in groups:
+        members = [per_object[name] for name in group.objects]
+        uvs = joined_uvs[group.name] if joined_uvs is not None else None
+        maps[group.name] = members[0] if not group.shared else atlas.merge_maps(
+            members, group.masks(resolution, uvs), BAKE_MARGIN)
+    return maps
+
+
+def _write_group_layers(group, joined_uvs, journal):
+    """Each object's rows of the group's refined layout into its `<source>_refined` UV map."""
+    own = group.split(joined_uvs)
+    for target in group.targets:
+        _write_refined_layer(target, own[target.obj.name], journal)
+
+
+def _check_refined(lmrefine, label, uvs, layout, reference_uvs, resolution, padding):
     """An independent check of the promise refine_uvs makes: never worse than the layout it started
-    from. Returns (check of `uvs`, check of `reference_uvs`); a worse layout is a bug, raised."""
+    from (the joined layout of an atlas group, `label` naming it). Returns (check of `uvs`, check of
+    `reference_uvs`); a worse layout is a bug, raised."""
     from lmrefine.backoff import worse_than_source
     reference_check = lmrefine.check_layout(reference_uvs, layout.triangles, resolution, padding=padding)
     worse, check = worse_than_source(uvs, reference_uvs, layout.triangles, resolution, padding,
                                      source=reference_check)
     if worse:
-        raise RuntimeError(f"refine_uvs returned a layout for '{name}' that is worse than the one it started from "
+        raise RuntimeError(f"refine_uvs returned a layout for {label} that is worse than the one it started from "
                            f"({', '.join(worse)}: {dict(check)}); this is a bug in lmrefine, please report "
                            "it with the .blend")
     return check, reference_check
+
+
+def _coarse_warning(lmrefine, label, lightmap, group, report, outcome):
+    """Edges hardly gained and light changes cross large triangles: say that tessellation is the fix
+    (a warp moves vertices; inside a triangle the mapping stays affine)."""
+    from lmrefine.tessellation import DEFAULT_MIN_TEXELS, coarse_transitions
+    coarse = coarse_transitions(lightmap, group.uvs, group.triangles)
+    if coarse["triangles"]:
+        outcome.warnings.append(
+            f"{label}: light changes cross {coarse['triangles']} triangle(s) of more than "
+            f"{DEFAULT_MIN_TEXELS:g} texels, and moving UVs cannot put more texels inside a triangle "
+            f"(edges {report['transition_widening']:.2f}x): turn on Tessellate (Stages and Tessellation) "
+            "to split them in the mesh, as one undo step")
 
 
 def _tessellate(lmrefine, target, lightmap, budget, journal, outcome, start, span):
@@ -450,47 +523,49 @@ def _tessellate(lmrefine, target, lightmap, budget, journal, outcome, start, spa
     report["vertices_added"] = added
     outcome.tessellation[obj.name] = report
     if added:
-        target.layout = bridge.read_layout(obj.data, target.source)
+        target.layout = bridge.read_layout(obj.data, target.source, obj.matrix_world)
 
 
-def _further_stages(context, lmrefine, targets, refined_uvs, options, journal, outcome, done, span):
-    """Stages 2..options["stages"]: bake the driving pass with each object's refined map, refine that map
-    from it, write it. An object stops at the first stage that moves its layout by less than
-    lmrefine.metrics.STAGE_MIN_CHANGE (the rule of `evaluate --stages`); its last kept map stays.
-    Updates `refined_uvs` and outcome.stages; returns the progress steps done."""
+def _further_stages(context, lmrefine, groups, refined_uvs, options, journal, outcome, done, span):
+    """Stages 2..options["stages"]: bake the driving pass with each map's refined layout, refine that
+    layout from it, write it. A map stops at the first stage that moves its layout by less than
+    lmrefine.metrics.STAGE_MIN_CHANGE (the rule of `evaluate --stages`); its last kept layout stays.
+    Updates `refined_uvs` (group name -> joined UVs) and outcome.stages; returns the progress steps done."""
     from lmrefine import metrics
     resolution, padding = options["resolution"], options["padding"]
     driving = options["driving_pass"]
-    for target in targets:
-        outcome.stages[target.obj.name] = {
-            "stages": [{"stage": 1, "moved": bool(outcome.reports[target.obj.name]["moved"]), "kept": True}],
+    for group in groups:
+        outcome.stages[group.name] = {
+            "stages": [{"stage": 1, "moved": bool(outcome.reports[group.name]["moved"]), "kept": True}],
             "stopped": f"{options['stages']} stages done"}
-    active = list(targets)
+    active = list(groups)
     # Progress: each stage one unit per map for its bake and one per refinement, as run() counts them.
-    end = done + (options["stages"] - 1) * 2 * len(targets)
+    end = done + (options["stages"] - 1) * 2 * len(groups)
     for stage in range(2, options["stages"] + 1):
         if not active:
             break
-        refined_of = {t.obj.name: t.refined for t in active}
+        targets = [target for group in active for target in group.targets]
+        refined_of = {t.obj.name: t.refined for t in targets}
         label = f"Stage {stage} bake"
         if options["backend"] == 'EMBREE':
-            baked = yield from _bake_embree(context, lmrefine, active, refined_of, (driving,), options, label,
+            baked = yield from _bake_embree(context, lmrefine, targets, refined_of, (driving,), options, label,
                                             done * span, len(active) * span, outcome.warnings)
         else:
-            baked = yield from _bake_cycles(context, active, refined_of, (driving,), options, label, done * span,
+            baked = yield from _bake_cycles(context, targets, refined_of, (driving,), options, label, done * span,
                                             len(active) * span)
         done += len(active)
-        for target in list(active):
-            name = target.obj.name
+        lightmaps = _group_maps(active, baked[driving], resolution, refined_uvs)
+        for group in list(active):
+            name = group.name
             previous = refined_uvs[name]
             result = yield NativeWork(
                 f"Stage {stage}: refining {name}",
-                lambda progress, lightmap=baked[driving][name], previous=previous, layout=target.layout:
-                    lmrefine.refine_uvs(lightmap, previous, layout.triangles, resolution, padding=padding,
+                lambda progress, lightmap=lightmaps[name], previous=previous, group=group:
+                    lmrefine.refine_uvs(lightmap, previous, group.triangles, resolution, padding=padding,
                                         progress=progress, **options["refine_options"]),
                 done * span, span, parts=REFINE_STAGES)
             done += 1
-            change = metrics.layout_change(previous, result.uvs, target.layout.triangles)
+            change = metrics.layout_change(previous, result.uvs, group.triangles)
             moved = bool(result.report["moved"])
             history = outcome.stages[name]
             reason = metrics.stage_stop_reason(stage, moved, change)
@@ -498,12 +573,13 @@ def _further_stages(context, lmrefine, targets, refined_uvs, options, journal, o
                                       "kept": reason is None})
             if reason is not None:
                 history["stopped"] = reason
-                active.remove(target)
+                active.remove(group)
                 continue
-            _check_refined(lmrefine, name, result.uvs, target.layout, previous, resolution, padding)
+            _check_refined(lmrefine, group.label(), result.uvs, bridge.Layout(group.uvs, group.triangles),
+                           previous, resolution, padding)
             refined_uvs[name] = result.uvs
-            _write_refined_layer(target, result.uvs, journal)
-    # Objects that stopped early left their share of the progress undone: catch up.
+            _write_group_layers(group, result.uvs, journal)
+    # Maps that stopped early left their share of the progress undone: catch up.
     return end
 
 
@@ -598,8 +674,9 @@ def _write_refined_layer(target, uvs, journal):
         mesh.uv_layers[render_name].active_render = True
 
 
-def _store_image(obj, pass_name, pixels, journal):
-    """The object's lightmap image for `pass_name` (reused across runs), holding `pixels`.
+def _store_image(group, pass_name, pixels, journal):
+    """The lightmap image of an atlas group for `pass_name` (reused across runs), holding `pixels`:
+    `<group name>_lightmap_<pass>` (atlas.AtlasGroup.name: the object's name, or "<first>_atlas").
 
     Alpha is written as 1 everywhere, like Cycles' bake output: Blender stores
     EXR premultiplied, so an alpha-0 gutter would lose its dilated colour on
@@ -608,17 +685,23 @@ def _store_image(obj, pass_name, pixels, journal):
     """
     pixels = np.array(pixels, dtype=np.float32)  # a copy: never modify the baker's array
     pixels[..., 3] = 1.0
-    name = f"{obj.name}_lightmap_{pass_name}"
+    name = f"{group.name}_lightmap_{pass_name}"
     image = bpy.data.images.get(name)
-    if image is not None and image.get("lmrefine_object") == obj.name and image.library is None:
+    if image is not None and image.get("lmrefine_object") == group.name and image.library is None:
         previous = bridge.image_to_array(image)
-        journal.on_rollback(lambda: bridge.array_to_image(image, previous))
+        previous_objects = image.get("lmrefine_objects", group.name)
+
+        def restore():
+            bridge.array_to_image(image, previous)
+            image["lmrefine_objects"] = previous_objects
+        journal.on_rollback(restore)
     else:
         image = bridge.new_float_image(name, pixels.shape[0])
-        image["lmrefine_object"] = obj.name
+        image["lmrefine_object"] = group.name
         image["lmrefine_pass"] = pass_name
         image.use_fake_user = True
         journal.on_rollback(lambda: bpy.data.images.remove(image))
+    image["lmrefine_objects"] = ", ".join(group.objects)  # who shares it (one object, or an atlas group)
     bridge.array_to_image(image, pixels)
     return image
 

@@ -74,8 +74,13 @@ class LMREFINE_PG_result(bpy.types.PropertyGroup):
     stages: IntProperty(name="Stages", description="Refinement stages asked for in the last run", default=1)
     stages_kept: IntProperty(name="Stages Kept", description="Refinement stages the last run kept (the most of "
                              "any object)", default=1)
+    images: IntProperty(name="Images", description="Images the last run wrote per pass (one per atlas group)")
+    shared: StringProperty(name="Shared Images",
+                           description="Atlas groups of the last run that several objects share ('name: objects; ...')")
     stages_stopped: StringProperty(name="Stages Stopped",
                                    description="Objects whose stages stopped early: the stage that moved too little")
+    recharted: IntProperty(name="Re-charted", description="Objects whose source map gave the refiner no room, "
+                           "re-charted from the mesh and refined", default=0)
 
 
 class LMREFINE_PG_settings(bpy.types.PropertyGroup):
@@ -141,6 +146,14 @@ class LMREFINE_PG_settings(bpy.types.PropertyGroup):
     )
     wavelet: EnumProperty(name="Wavelet", description="Filter of the gradient map", items=WAVELET_ITEMS,
                           default='D4')
+    rechart: BoolProperty(
+        name="Re-chart when the source has no room",
+        description="When the source map gives the refiner no room (one chart per face, as Lightmap Pack makes), "
+                    "re-chart the mesh (charts of faces whose normals are within 20 degrees, conformal unwrap) "
+                    "and refine that layout instead, if the error model predicts less error. The source map is "
+                    "never changed; the refined map gets the new layout",
+        default=True,
+    )
     stages: IntProperty(
         name="Stages",
         description="Bake, refine, bake, refine...: each further stage refines the layout again from a bake "
@@ -174,6 +187,13 @@ class LMREFINE_PG_settings(bpy.types.PropertyGroup):
         description="Write the lightmaps as 32-bit float EXR. Off: half float (16-bit), which holds lighting "
                     "values with about 3 significant digits at half the size; both use lossless ZIP compression",
         default=False,
+    )
+    shared_atlas: BoolProperty(
+        name="Shared Atlas",
+        description="Objects whose lightmap UV maps share one atlas (laid out together, their charts apart) are "
+                    "refined together and baked into one image per pass, named after the first of them "
+                    "('<object>_atlas_lightmap_<pass>'). Off: one image per object",
+        default=True,
     )
     preview: BoolProperty(
         name="Preview",

@@ -44,6 +44,10 @@ class EvaluationOptions:
     # With rechart: the scene's own UV variants whose uniform bakes the
     # re-charted maps are also compared with (a resolution sweep each).
     compare_variants: tuple = ()
+    # refine_uvs' re-chart route (positions=): a source layout with no room
+    # (Lightmap Pack) is re-charted from the mesh inside refine_uvs, as the
+    # add-on and the batch do; False: refine the source layout (--no-rechart).
+    auto_rechart: bool = True
     view_width: int = 480             # pixels across the pictures of the lit surface (0: none)
     tessellate: float = None          # vertex budget (fraction) of a tessellation along transitions; None: off
     stages: int = 1                   # refine + bake stages, each refining from the previous stage's bake
@@ -468,8 +472,11 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
         uvs, triangles = sample.layout(variant)
     original_check = check_layout(uvs, triangles, resolution, options.padding)
     padding = min(float(options.padding), float(original_check["min_gutter_texels"]))
+    # The mesh for refine_uvs' re-chart route: one position per corner UV.
+    positions = (sample.positions[sample.triangles].reshape(-1, 3)
+                 if options.auto_rechart and options.rechart is None else None)
     refined = stages.run("refine", lambda p: refine_uvs(baseline, uvs, triangles, resolution, padding=padding,
-                                                        progress=p, **options.refine_options))
+                                                        progress=p, positions=positions, **options.refine_options))
     refined_map = stages.run("bake refined", lambda p: _bake_map(sample, refined.uvs, resolution, options, p))
 
     # Ground truth at area-uniform points, and at two neighbours each along
@@ -520,6 +527,7 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
     lookup_base = metrics.bilinear_lookup(baseline, uv_base)
     lookup_refined = metrics.bilinear_lookup(refined_map, uv_refined)
     stage_history = None
+    first_rechart = refined.report.get("rechart")  # the first stage chose the layout the later ones refine
     if options.stages > 1:
         refined, refined_map, lookup_refined, stage_history = _further_stages(
             sample, triangles, resolution, padding, options, stages, points, truth, transitions, refined,
@@ -626,6 +634,7 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
     }
     result.update({k: v for k, v in context.items() if k != "refine_report"})
     result["refine"] = {k: v for k, v in refined.report.items() if k != "triangle_density"}
+    result["refine"]["rechart"] = first_rechart
     if uniform is not None:
         ratio, refined_ratio = uniform["equal_error_resolution_ratio"], result["equal_error_resolution_ratio"]
         uniform["signal_gain"] = (refined_ratio / ratio if ratio and refined_ratio and ratio > 0 else None)

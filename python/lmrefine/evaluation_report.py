@@ -255,7 +255,19 @@ def layout_text(r):
     """Which layout the baseline and refined maps were baked on."""
     layout = r.get("layout") or {}
     if layout.get("source") != "rechart":
-        return f"Layout: the scene's own `{layout.get('variant', r['variant'])}` lightmap UVs."
+        text = f"Layout: the scene's own `{layout.get('variant', r['variant'])}` lightmap UVs."
+        rechart = (r.get("refine") or {}).get("rechart") or {}
+        if rechart.get("used"):
+            room = rechart["room"]
+            text += (f" The refined map's layout was **re-charted from the mesh** by refine_uvs (the route a user "
+                     f"gets): the source gives the refiner no room ({room['charts']} charts for "
+                     f"{room['triangles']} triangles, {room['room_fraction']:.0%} of its area in triangles with a "
+                     f"UV inside their chart), so {rechart['charts']} charts at {rechart['angle']:g} degrees were "
+                     f"refined; the model predicted {rechart['predicted_error']:.2f} of the source's error. The "
+                     "baseline is the source layout baked plain.")
+        elif rechart.get("room", {}).get("no_room"):
+            text += f" Not re-charted although the source gives no room: {rechart.get('reason')}."
+        return text
     check = layout.get("layout") or {}
     return (f"Layout: **re-charted from the mesh** (`--rechart {layout['angle']:g}`, `lmrefine.rechart`), not the "
             f"scene's own UVs: {layout['charts']} charts ({layout['split_charts']} split because their unwrap "

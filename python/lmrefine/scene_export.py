@@ -84,34 +84,101 @@ def export_blend(blend, out, objects="all", uv_map=None, blender=None, echo=prin
     return out
 
 
-# Objects evaluated together bake into one atlas: their lightmap UV maps must
-# not cover the same texels (checked at this resolution, with this tolerance
-# for charts that merely touch).
+# Objects that share one atlas: their lightmap UV maps must not cover the same
+# texels (checked at a resolution, with a tolerance for charts that merely
+# touch: a shared texel count up to this fraction of the smaller map's).
 ATLAS_CHECK_RESOLUTION = 256
 ATLAS_OVERLAP_FRACTION = 0.02
+
+
+def atlas_masks(layouts, resolution=ATLAS_CHECK_RESOLUTION):
+    """The texels each layout `(uvs, triangles)` covers at `resolution`
+    (lmrefine.coverage_mask), None for a layout without triangles."""
+    from . import _native
+
+    return [_native.coverage_mask(uvs, triangles, resolution) if len(triangles) else None
+            for uvs, triangles in layouts]
+
+
+def overlaps(shared, count_a, count_b, tolerance=ATLAS_OVERLAP_FRACTION):
+    """The rule: two objects whose maps cover `count_a` and `count_b` texels,
+    `shared` of them in common, cover the same part of the atlas when they
+    share more than `tolerance` times the smaller count (charts that merely
+    touch share a texel column, within the tolerance)."""
+    return shared > tolerance * min(count_a, count_b)
+
+
+def overlap(mask_a, mask_b, tolerance=ATLAS_OVERLAP_FRACTION):
+    """`overlaps` for two coverage masks (None, an empty layout, overlaps nothing)."""
+    if mask_a is None or mask_b is None:
+        return False
+    return overlaps(np.count_nonzero(mask_a & mask_b), np.count_nonzero(mask_a), np.count_nonzero(mask_b),
+                    tolerance)
+
+
+def atlas_groups(layouts, resolution=ATLAS_CHECK_RESOLUTION, tolerance=ATLAS_OVERLAP_FRACTION):
+    """Which objects share one atlas: lists of indices into `layouts` (each
+    `(uvs, triangles)` of one object's lightmap UV map), every index in
+    exactly one list.
+
+    Greedy in the given order: each object joins the first group none of
+    whose members it overlaps (`overlaps`), else starts a group of its own.
+    Objects laid out together (one Lightmap Pack or Smart UV Project of all
+    of them) form one group; objects each laid out on its own lightmap (each
+    map filling [0, 1]) form one group each.
+
+    Each group keeps one map of which member covers each texel, so an object
+    is checked against a group in time proportional to its own texels, not
+    to the group's members (a level of hundreds of objects in one atlas);
+    a texel two members share within the tolerance counts for the first."""
+    from . import _native
+
+    groups = []  # (members, texel owner map (flat, -1 = free), {member: covered texels})
+    for index, (uvs, triangles) in enumerate(layouts):
+        covered = (np.flatnonzero(_native.coverage_mask(uvs, triangles, resolution)) if len(triangles)
+                   else np.zeros(0, dtype=np.intp))
+        home = None
+        for members, owner, counts in groups:
+            # Every 16th texel first: its shared counts are lower bounds, so an overlap they already
+            # show is one (objects each on its own lightmap are told apart at a sixteenth of the cost).
+            if not any(_overlapping(owner, sample, len(covered), counts, members, tolerance)
+                       for sample in (covered[::16], covered)):
+                home = (members, owner, counts)
+                break
+        if home is None:
+            height, width = (resolution, resolution) if np.isscalar(resolution) else resolution
+            label = np.int16 if len(layouts) < np.iinfo(np.int16).max else np.int32
+            home = ([], np.full(int(height) * int(width), -1, dtype=label), {})
+            groups.append(home)
+        members, owner, counts = home
+        members.append(index)
+        counts[index] = len(covered)
+        free = covered[owner[covered] < 0]
+        owner[free] = index
+    return [members for members, _, _ in groups]
+
+
+def _overlapping(owner, texels, count, counts, members, tolerance):
+    """Whether an object covering `count` texels overlaps a member of a group, counting only its `texels`."""
+    hit = owner[texels]
+    hit = hit[hit >= 0]
+    if not len(hit):
+        return False
+    shared = np.bincount(hit)
+    return any(overlaps(shared[member], count, counts[member], tolerance)
+               for member in members if member < len(shared) and shared[member])
 
 
 def shared_atlas_problem(scene):
     """None when the receivers of an exported scene share one atlas, else a
     message naming objects whose lightmap UV maps cover the same part of
     [0, 1] (each object laid out on its own lightmap) and what to do."""
-    from . import _native
-
     uvs, triangles = scene.layout("own")
     if len(scene.objects) < 2:
         return None
-    masks = []
-    for index in range(len(scene.objects)):
-        mine = triangles[scene.object_id == index]
-        masks.append(_native.coverage_mask(uvs, mine, ATLAS_CHECK_RESOLUTION) if len(mine) else None)
-    overlapping = []
-    for a in range(len(masks)):
-        for b in range(a + 1, len(masks)):
-            if masks[a] is None or masks[b] is None:
-                continue
-            shared = np.count_nonzero(masks[a] & masks[b])
-            if shared > ATLAS_OVERLAP_FRACTION * min(masks[a].sum(), masks[b].sum()):
-                overlapping.append((scene.objects[a], scene.objects[b]))
+    masks = atlas_masks([(uvs, triangles[scene.object_id == index]) for index in range(len(scene.objects))])
+    overlapping = [(scene.objects[a], scene.objects[b]) for a in range(len(masks)) for b in range(a + 1, len(masks))
+                   if overlap(masks[a], masks[b])]
     if not overlapping:
         return None
     a, b = overlapping[0]

@@ -21,12 +21,16 @@ import numpy as np  # noqa: E402
 
 import lmrefine  # noqa: E402
 import lmrefine_blender  # noqa: E402
+import lmrefine_blender.atlas  # noqa: E402
 import scenes  # noqa: E402
 from scene_state import _array, _digest, changed, fingerprint  # noqa: E402,F401
 from lmrefine_blender import bridge, cycles_bake, pipeline  # noqa: E402
 from lmrefine_blender.journal import Journal  # noqa: E402
 
 RESOLUTION = 64  # small: the whole group must stay fast
+ATLAS = ("Blocker", "Floor", "Post")  # the objects scenes.atlas_scene lays out in one atlas
+# LMREFINE_CHECKS=name,name runs only those checks (while working on them); pytest runs them all.
+ONLY = set(filter(None, os.environ.get("LMREFINE_CHECKS", "").split(",")))
 
 results = {}
 
@@ -37,6 +41,8 @@ def check(*needs):
     exports = {"refine": ("refine_uvs", "check_layout"), "bake": ("bake", "Scene")}
 
     def run(function):
+        if ONLY and function.__name__ not in ONLY:
+            return function
         missing = [name for need in needs for name in exports[need] if not hasattr(lmrefine, name)]
         if missing:
             results[function.__name__] = {"exception": f"lmrefine lacks {', '.join(missing)}"}
@@ -541,11 +547,7 @@ def _end_to_end(first, backend, passes):
     texture_uvs = bridge.read_uv_layer(mesh, "UVMap")
     source_uvs = bridge.read_uv_layer(mesh, "Lightmap")
     geometry = geometry_digest(mesh)
-    window = bpy.context.window_manager.windows[0]
-    with bpy.context.temp_override(window=window):
-        bpy.ops.ed.undo_push(message="before refine")
-    before = fingerprint()
-    outcome, message = refine(undo=True)
+    before, outcome, message = _refine_as_one_undo_step()
     if outcome != "FINISHED":
         return {"outcome": outcome, "message": message}
     after = fingerprint()
@@ -573,11 +575,27 @@ def _end_to_end(first, backend, passes):
         "density_range": [result.density_min, result.density_max],
         "timings": result.timings,
     }
+    facts.update(_undo_once(before))
+    return facts
+
+
+def _refine_as_one_undo_step():
+    """An undo step, then the operator run as a script with undo: (fingerprint before, outcome, message)."""
+    window = bpy.context.window_manager.windows[0]
     with bpy.context.temp_override(window=window):
-        facts["can_undo"] = bpy.ops.ed.undo.poll()
+        bpy.ops.ed.undo_push(message="before refine")
+    before = fingerprint()
+    outcome, message = refine(undo=True)
+    return before, outcome, message
+
+
+def _undo_once(before):
+    """One Ctrl+Z after _refine_as_one_undo_step: what still differs from `before`, and whether a
+    further step is left (it must not be: the run was exactly one undo step)."""
+    with bpy.context.temp_override(window=bpy.context.window_manager.windows[0]):
+        facts = {"can_undo": bpy.ops.ed.undo.poll()}
         bpy.ops.ed.undo()
         facts["changed_after_undo"] = changed(before, fingerprint())
-        # Only the 'before refine' step is left: the run was exactly one undo step.
         facts["can_undo_further"] = bpy.ops.ed.undo.poll()
     return facts
 
@@ -839,7 +857,20 @@ def progress_moves_per_map_and_stage():
     real = []
     pipeline.run_blocking(pipeline.run(bpy.context, targets, options, Journal()),
                           progress=lambda fraction, label: real.append((fraction, label)))
+    # A shared atlas: four objects, two maps (the atlas of three, Lonely's own).
+    scenes.atlas_scene()
+    settings(resolution=RESOLUTION, padding=2, samples=4, first_lightmap='EMBREE', backend='EMBREE',
+             bake_passes={'DIRECT'})
+    options = pipeline.settings_snapshot(bpy.context.scene.lmrefine)
+    objects = [bpy.data.objects[name] for name in ATLAS + ("Lonely",)]
+    atlas_run = []
+    pipeline.run_blocking(pipeline.run(bpy.context, pipeline.validate(bpy.context, objects, options), options,
+                                       Journal()), progress=lambda fraction, label: atlas_run.append((fraction, label)))
     return {"value": value, "fractions": [f for f, _ in seen], "ends": ends,
+            "atlas_fractions": [f for f, _ in atlas_run],
+            "atlas_refining": {label.split(" (")[0]: [min(f for f, l in atlas_run if l.split(" (")[0] == label.split(" (")[0]),
+                                                      max(f for f, l in atlas_run if l.split(" (")[0] == label.split(" (")[0])]
+                               for _, label in atlas_run if label.startswith("Refining")},
             "real_fractions": [f for f, _ in real],
             "real_labels": sorted({label for _, label in real}),
             "real_at": {label: [min(f for f, l in real if l == label), max(f for f, l in real if l == label)]
@@ -951,6 +982,139 @@ def preview_wiring_toggle_and_removal():
         "changed": changed(before, fingerprint()),
     }
     return facts
+
+
+# -------------------------------------------------------- shared atlas
+
+def _atlas_run(**values):
+    """atlas_scene refined in one undoable run; facts on images, previews, layouts, then one undo."""
+    scenes.atlas_scene()
+    register()
+    settings(**{"resolution": RESOLUTION, "padding": 2, "samples": 4, "first_lightmap": 'EMBREE',
+                "backend": 'EMBREE', "bake_passes": {'DIRECT', 'AO'}, **values})
+    objects = [bpy.data.objects[name] for name in ATLAS + ("Lonely",)]
+    source = {obj.name: bridge.read_layout(obj.data, "Lightmap") for obj in objects}
+    before, outcome, message = _refine_as_one_undo_step()
+    if outcome != "FINISHED":
+        return {"outcome": outcome, "message": message}
+    ours = [image for image in bpy.data.images if image.get("lmrefine_object")]
+    facts = {"outcome": outcome, "message": bpy.context.scene.lmrefine.result.message,
+             "result_images": bpy.context.scene.lmrefine.result.images,
+             "images": {image.name: image["lmrefine_objects"] for image in ours}, "objects": {}}
+    refined = {obj.name: bridge.read_uv_layer(obj.data, "Lightmap_refined") for obj in objects}
+    source = {obj.name: bridge.read_layout(obj.data, "Lightmap") for obj in objects}  # tessellated, maybe
+    masks = {name: lmrefine.coverage_mask(refined[name], source[name].triangles, RESOLUTION) for name in refined}
+    for obj in objects:
+        name = obj.name
+        wiring = _wiring(obj.material_slots[0].material.node_tree, name)
+        shown = bpy.data.images.get(wiring["image"]) if wiring else None
+        light = bridge.image_to_array(shown)[masks[name]][:, :3].mean(axis=1) if shown is not None else None
+        facts["objects"][name] = {
+            "preview_image": wiring and wiring["image"], "preview_uv": wiring and wiring["uv_map"],
+            "before_image": obj.get("lmrefine_preview", {}).get("before_image"),
+            "moved": float(np.abs(refined[name] - source[name].uvs).max()),
+            "texels": int(masks[name].sum()),
+            "light_max": float(light.max()) if light is not None else None,
+        }
+    # The atlas members' refined charts: no two objects share a texel, and the joined layout is valid.
+    facts["shared_texels"] = {f"{a}/{b}": int(np.count_nonzero(masks[a] & masks[b]))
+                              for i, a in enumerate(ATLAS) for b in ATLAS[i + 1:]}
+    uvs, triangles, _, _ = lmrefine_blender.atlas.join_layouts([(refined[n], source[n].triangles) for n in ATLAS])
+    check = lmrefine.check_layout(uvs, triangles, RESOLUTION, padding=2)
+    facts["joined_check"] = {"valid": bool(check["valid"]), "min_gutter_texels": float(check["min_gutter_texels"])}
+    source_uvs, _, _, _ = lmrefine_blender.atlas.join_layouts([(source[n].uvs, source[n].triangles) for n in ATLAS])
+    facts["joined_repacked"] = bool(not np.allclose(uvs, source_uvs))
+    facts.update(_undo_once(before))
+    return facts
+
+
+@check("refine", "bake")
+def shared_atlas_one_image_per_pass():
+    """Floor, Blocker and Post share an atlas: one refinement, one image per pass they all show;
+    Lonely, laid out on its own lightmap, gets its own images."""
+    return _atlas_run()
+
+
+@check("refine", "bake")
+def shared_atlas_off_one_image_per_object():
+    return _atlas_run(shared_atlas=False)
+
+
+@check("refine")
+def shared_atlas_cycles():
+    """The same with Cycles for both bakes: each member baked on its own, merged by its charts' coverage."""
+    return _atlas_run(first_lightmap='CYCLES', backend='CYCLES', bake_passes={'DIRECT'})
+
+
+@check("refine", "bake")
+def shared_atlas_stages_and_tessellation():
+    """Three stages and tessellation: each stage refines the joined layout again; tessellated members
+    rejoin the atlas; one undo puts every mesh back."""
+    return _atlas_run(stages=3, tessellate=True, tessellate_budget=0.5, bake_passes={'DIRECT'})
+
+
+@check("refine", "bake")
+def shared_atlas_from_an_existing_image():
+    """First Map Image: the three members' materials sample one atlas image through 'Lightmap' (the
+    'before' image of an Embree run); it drives the one refinement and stays the preview's 'before'."""
+    scenes.atlas_scene()
+    register()
+    settings(resolution=RESOLUTION, padding=2, samples=4, first_lightmap='EMBREE', backend='EMBREE',
+             bake_passes={'DIRECT'})
+    members = [bpy.data.objects[name] for name in ATLAS]
+    scenes.select_only(*members)
+    first = refine()
+    atlas_image = bpy.data.images["Floor_atlas_lightmap_before"]
+    for obj in members:
+        tree = obj.material_slots[0].material.node_tree
+        uv_node = tree.nodes.new("ShaderNodeUVMap")
+        uv_node.uv_map = "Lightmap"
+        image_node = tree.nodes.new("ShaderNodeTexImage")
+        image_node.image = atlas_image
+        tree.links.new(uv_node.outputs["UV"], image_node.inputs["Vector"])
+    settings(first_lightmap='IMAGE')
+    outcome, message = refine()
+    return {"first": first, "outcome": outcome, "message": message,
+            "images": sorted(image.name for image in bpy.data.images if image.get("lmrefine_object")),
+            "before_images": {obj.name: obj["lmrefine_preview"]["before_image"] for obj in members},
+            "after_images": {obj.name: obj["lmrefine_preview"]["after_image"] for obj in members},
+            "moved": {obj.name: float(np.abs(bridge.read_uv_layer(obj.data, "Lightmap_refined")
+                                             - bridge.read_layout(obj.data, "Lightmap").uvs).max()) for obj in members},
+            "result_images": bpy.context.scene.lmrefine.result.images}
+
+
+@check("refine", "bake")
+def shared_atlas_preview_removal():
+    """Remove Preview on the atlas members puts back every material and active UV map; only the refined
+    maps and the images stay."""
+    scenes.atlas_scene()
+    register()
+    settings(resolution=RESOLUTION, padding=2, samples=4, first_lightmap='EMBREE', backend='EMBREE',
+             bake_passes={'DIRECT'})
+    before = fingerprint()
+    outcome, message = refine()
+    window = bpy.context.window_manager.windows[0]
+    with bpy.context.temp_override(window=window):
+        removed = sorted(bpy.ops.object.lmrefine_remove_preview())
+    return {"outcome": outcome, "message": message, "removed": removed,
+            "previews_left": [obj.name for obj in bpy.data.objects if obj.get("lmrefine_preview") is not None],
+            "changed": changed(before, fingerprint())}
+
+
+@check("refine", "bake")
+def shared_atlas_grouping_ignores_selection_order():
+    """The same groups and names whichever order the objects come in (validate's order is Blender's)."""
+    from lmrefine_blender import atlas
+    scenes.atlas_scene()
+    register()
+    settings(resolution=RESOLUTION)
+    options = pipeline.settings_snapshot(bpy.context.scene.lmrefine)
+    orders = (ATLAS + ("Lonely",), ("Lonely", "Post", "Floor", "Blocker"))
+    found = []
+    for order in orders:
+        targets = pipeline.validate(bpy.context, [bpy.data.objects[name] for name in order], options)
+        found.append([(group.name, group.objects) for group in atlas.group_targets(targets, RESOLUTION)])
+    return {"groups": found}
 
 
 # ------------------------------------------------- tessellation and stages
@@ -1224,22 +1388,116 @@ def menus_and_panel_rows():
     }
 
 
-@check()
-def save_coarse_scene_for_batch():
-    scenes.coarse_shadow_scene()
+def _save_for_batch(make_scene, filename):
+    make_scene()
     register()
-    path = os.path.join(WORK_DIR, "coarse.blend")
+    path = os.path.join(WORK_DIR, filename)
     bpy.ops.wm.save_as_mainfile(filepath=path)
     return {"path": path}
+
+
+@check()
+def save_coarse_scene_for_batch():
+    return _save_for_batch(scenes.coarse_shadow_scene, "coarse.blend")
+
+
+@check()
+def save_atlas_scene_for_batch():
+    return _save_for_batch(scenes.atlas_scene, "atlas.blend")
 
 
 @check()
 def save_scene_for_batch():
-    fresh_shadow_scene()
-    path = os.path.join(WORK_DIR, "shadow.blend")
-    bpy.ops.wm.save_as_mainfile(filepath=path)
-    return {"path": path}
+    return _save_for_batch(fresh_shadow_scene, "shadow.blend")
 
+
+@check("refine", "bake")
+def rechart_lightmap_pack_source():
+    """A source map with one chart per face (Lightmap Pack's kind) gives the refiner no room: the run
+    re-charts the floor from the mesh and writes a valid refined map (the source map, the geometry
+    untouched; the panel and the Info line say so). With the setting off it refines the source layout."""
+    facts = {}
+    for rechart in (True, False):
+        scenes.coarse_shadow_scene(quads=8)
+        register()
+        settings(resolution=RESOLUTION, padding=2, samples=4, first_lightmap='EMBREE', backend='EMBREE',
+                 bake_passes={'DIRECT'}, rechart=rechart)
+        floor = bpy.data.objects["Floor"]
+        mesh = floor.data
+        layout = bridge.read_layout(mesh, "Lightmap")
+        source_uvs = bridge.read_uv_layer(mesh, "Lightmap")
+        geometry = geometry_digest(mesh)
+        outcome, message = refine()
+        result = bpy.context.scene.lmrefine.result
+        refined = bridge.read_uv_layer(mesh, "Lightmap_refined")
+        check = lmrefine.check_layout(refined, layout.triangles, RESOLUTION, padding=2)
+        facts[f"rechart_{rechart}"] = {
+            "outcome": outcome, "message": message, "panel_recharted": result.recharted,
+            "result_message": result.message,
+            "valid": bool(check["valid"]), "min_gutter_texels": float(check["min_gutter_texels"]),
+            "refined_charts": int(len(np.unique(lmrefine.find_charts(refined, layout.triangles,
+                                                                      lmrefine.CHART_TOLERANCE)))),
+            "source_charts": int(len(np.unique(lmrefine.find_charts(layout.uvs, layout.triangles,
+                                                                     lmrefine.CHART_TOLERANCE)))),
+            "source_identical": bool(np.array_equal(bridge.read_uv_layer(mesh, "Lightmap"), source_uvs)),
+            "geometry_identical": geometry_digest(mesh) == geometry,
+            "image": _image_stats("Floor_lightmap_direct", refined, layout.triangles),
+        }
+    return facts
+
+
+
+@check("refine", "bake")
+def rechart_shared_lightmap_pack_atlas():
+    """A floor and a box whose Lightmap maps are one chart per face, packed side by side in one atlas:
+    the joined layout gives no room, so the one refinement re-charts both meshes (their world positions
+    joined like their UVs) into one image; the panel counts objects, not atlases."""
+    scenes.coarse_shadow_scene(quads=8)
+    floor, blocker = bpy.data.objects["Floor"], bpy.data.objects["Blocker"]
+    scenes._fit_layer(floor.data, (0.03, 0.03, 0.6, 0.97))
+    scenes._fit_layer(blocker.data, (0.66, 0.4, 0.97, 0.97))
+    scenes.select_only(floor, blocker)
+    register()
+    settings(resolution=RESOLUTION, padding=2, samples=4, first_lightmap='EMBREE', backend='EMBREE',
+             bake_passes={'DIRECT'}, rechart=True)
+    source = {obj.name: (bridge.read_layout(obj.data, "Lightmap"), bridge.read_uv_layer(obj.data, "Lightmap"))
+              for obj in (floor, blocker)}
+    outcome, message = refine()
+    result = bpy.context.scene.lmrefine.result
+    refined = {name: bridge.read_uv_layer(bpy.data.objects[name].data, "Lightmap_refined") for name in source}
+    masks = {name: lmrefine.coverage_mask(refined[name], source[name][0].triangles, RESOLUTION) for name in source}
+    uvs, triangles, _, _ = lmrefine_blender.atlas.join_layouts(
+        [(refined[name], source[name][0].triangles) for name in source])
+    check = lmrefine.check_layout(uvs, triangles, RESOLUTION, padding=2)
+    return {
+        "outcome": outcome, "message": message, "result_message": result.message,
+        "panel_recharted": result.recharted, "images": result.images,
+        "valid": bool(check["valid"]), "shared_texels": int(np.count_nonzero(masks["Floor"] & masks["Blocker"])),
+        "refined_charts": int(len(np.unique(lmrefine.find_charts(uvs, triangles, lmrefine.CHART_TOLERANCE)))),
+        "source_identical": all(np.array_equal(bridge.read_uv_layer(bpy.data.objects[name].data, "Lightmap"),
+                                               source[name][1]) for name in source),
+    }
+
+
+@check("refine", "bake")
+def coarse_floor_suggests_tessellation():
+    """A floor of 2 x 2 quads (about 29 x 29 texels each), its Lightmap map one chart filling the
+    square, under a box's shadow: the warp can move only the middle vertex and cannot put texels
+    inside those triangles, so the run says Tessellate is the fix; with Tessellate on it does not."""
+    facts = {}
+    for tessellate in (False, True):
+        scenes.coarse_shadow_scene(quads=2)
+        floor = bpy.data.objects["Floor"]
+        floor.data.uv_layers.remove(floor.data.uv_layers["Lightmap"])
+        scenes._set_lightmap_layer(floor.data)
+        register()
+        settings(resolution=RESOLUTION, padding=2, samples=4, first_lightmap='EMBREE', backend='EMBREE',
+                 bake_passes={'DIRECT'}, tessellate=tessellate)
+        outcome, warnings, error = _run_pipeline([bpy.data.objects["Floor"]])
+        facts[f"tessellate_{tessellate}"] = {
+            "error": error, "warnings": warnings,
+            "widening": outcome and outcome.reports["Floor"]["transition_widening"]}
+    return facts
 
 with open(OUT_JSON, "w", encoding="utf-8") as stream:
     json.dump(results, stream, indent=1, default=str)

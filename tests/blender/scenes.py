@@ -162,3 +162,38 @@ def coarse_shadow_scene(quads=4):
     tint.data.foreach_set("color", colors.ravel())
     select_only(floor)
     return scene
+
+
+def _fit_layer(mesh, box, name="Lightmap"):
+    """Squeeze UV map `name` of `mesh` into the rectangle box = (u0, v0, u1, v1)."""
+    layer = mesh.uv_layers[name]
+    uvs = np.empty(len(mesh.loops) * 2, dtype=np.float32)
+    layer.data.foreach_get("uv", uvs)
+    uvs = uvs.reshape(-1, 2)
+    low, high = uvs.min(axis=0), uvs.max(axis=0)
+    corner, size = np.array(box[:2], np.float32), np.array(box[2:], np.float32) - np.array(box[:2], np.float32)
+    layer.data.foreach_set("uv", (corner + (uvs - low) / (high - low) * size).ravel())
+
+
+def atlas_scene():
+    """shadow_scene plus a post 'Post' and a plate 'Lonely', all four with a 'Lightmap' map. Floor,
+    Blocker and Post share one atlas, as one Lightmap Pack of the three would lay them out: the floor
+    in the left half, the box's six charts top right, the post's bottom right, 3+ texels apart at 64^2.
+    Lonely's map fills the square on its own (its own lightmap), overlapping theirs."""
+    scene = shadow_scene()
+    bpy.ops.mesh.primitive_cube_add(size=0.4, location=(-1.0, -0.8, 0.6))
+    post = bpy.context.active_object
+    post.name = "Post"
+    post.scale = (1.0, 1.0, 3.0)
+    _set_face_charts_layer(post.data)
+    post.data.materials.append(_material("PostMaterial", (0.6, 0.6, 0.6)))
+    bpy.ops.mesh.primitive_plane_add(size=1.0, location=(1.4, -1.4, 0.3))
+    lonely = bpy.context.active_object
+    lonely.name = "Lonely"
+    _set_lightmap_layer(lonely.data)
+    lonely.data.materials.append(_material("LonelyMaterial", (0.7, 0.7, 0.7)))
+    _fit_layer(bpy.data.objects["Floor"].data, (0.05, 0.05, 0.5, 0.95))
+    _fit_layer(bpy.data.objects["Blocker"].data, (0.56, 0.53, 0.95, 0.95))
+    _fit_layer(post.data, (0.56, 0.05, 0.95, 0.47))
+    select_only(bpy.data.objects["Floor"], bpy.data.objects["Blocker"], post, lonely)
+    return scene

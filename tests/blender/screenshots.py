@@ -3,11 +3,15 @@
     blender -b --factory-startup --python tests/blender/screenshots.py -- OUT          # writes OUT/shadow.blend
     xvfb-run -a -s "-screen 0 1600x900x24" blender --factory-startup OUT/shadow.blend \\
         --python tests/blender/screenshots.py -- OUT                                   # OUT/*.png, then quits
+    xvfb-run -a -s "-screen 0 1600x900x24" blender --factory-startup OUT/atlas.blend \\
+        --python tests/blender/screenshots.py -- OUT                                   # OUT/atlas_*.png
 
 The second run opens a real window (Xvfb), switches the sidebar to the
 Lightmap tab with xdotool (Blender 3.4 has no API for the tab), runs Refine
 Lightmap UVs on the shadow scene of the tests and takes a screenshot per
-viewport mode and before/after. The docs' pictures are crops of these:
+viewport mode and before/after. On atlas.blend (the tests' shared-atlas
+scene: three objects in one atlas, one with a lightmap of its own) it shows
+Material Preview after and before, the Last Result panel (in those shots) and the atlas image in an Image Editor. The docs' pictures are crops of these:
     convert 5_panel.png -crop 220x820+1380+80 blender_panel.png
     convert 2_material_before.png 1_material_after.png -crop 500x330+500+330 +append -resize 80% ...
 """
@@ -27,6 +31,8 @@ if bpy.app.background:
     os.makedirs(OUT, exist_ok=True)
     scenes.shadow_scene()
     bpy.ops.wm.save_as_mainfile(filepath=os.path.join(OUT, "shadow.blend"))
+    scenes.atlas_scene()
+    bpy.ops.wm.save_as_mainfile(filepath=os.path.join(OUT, "atlas.blend"))
     raise SystemExit(0)
 
 
@@ -101,6 +107,40 @@ PLAN = [
     lambda: shading('SOLID', 'MATERIAL'), lambda: click(1440, 305), park_mouse,  # open Refinement
     lambda: shot("5_panel"), lambda: os._exit(0),
 ]
+
+
+def image_editor(image_name):
+    """Turn the 3D View into an Image Editor showing image `image_name` at 5x (then shot_editor)."""
+    window, area = view3d()
+    area.ui_type = 'IMAGE_EDITOR'
+    area.spaces.active.image = bpy.data.images[image_name]
+    region = next(region for region in area.regions if region.type == 'WINDOW')
+    with bpy.context.temp_override(window=window, area=area, region=region):
+        bpy.ops.image.view_zoom_ratio(ratio=5.0)
+
+
+def shot_editor(name):
+    window = bpy.context.window_manager.windows[0]
+    area = next(area for area in window.screen.areas if area.type == 'IMAGE_EDITOR')
+    with bpy.context.temp_override(window=window, area=area):
+        bpy.ops.screen.screenshot(filepath=os.path.join(OUT, name + ".png"))
+
+
+def atlas_frame():
+    frame()
+    view3d()[1].spaces.active.region_3d.view_distance = 8.5
+
+
+ATLAS_PLAN = [
+    full_screen, atlas_frame, lambda: click(1586, 253), park_mouse, refine,
+    lambda: shading('MATERIAL'), lambda: None, lambda: None,
+    lambda: shot("atlas_1_material_after"), lambda: show('BEFORE'), lambda: shot("atlas_2_material_before"),
+    lambda: show('AFTER'),
+    lambda: image_editor(next(i.name for i in bpy.data.images if i.name.endswith("_atlas_lightmap_direct"))),
+    lambda: shot_editor("atlas_3_image"), lambda: os._exit(0),
+]
+if os.path.basename(bpy.data.filepath) == "atlas.blend":
+    PLAN = ATLAS_PLAN
 
 
 def tick():

@@ -81,8 +81,10 @@ def commit(out_dir, name, result):
     os.replace(source, final)
     shutil.rmtree(work_dir(out_dir, name), ignore_errors=True)
     images = {obj: info.get("images", {}) for obj, info in report.get("objects", {}).items()}
+    # Which objects share which images (one atlas group each: docs/blender.md, "Shared atlas").
+    atlases = {group: info.get("objects", []) for group, info in report.get("atlases", {}).items()}
     return {"dir": final, "blend": report.get("blend"), "report": os.path.join(final, "report.json"),
-            "images": images}
+            "images": images, "atlases": atlases}
 
 
 def _plan(levels, manifest, out_dir, flags, force, say):
