@@ -208,8 +208,11 @@ def _plain_refinement(unsplit, variant, baseline, to_unsplit, points, truth, tra
     against the same truth and uniform bakes as the tessellated one: the
     tessellation's own gain, free of the points' sampling noise."""
     uvs, triangles = unsplit.layout(variant)
+    # refine_uvs' re-chart route as for the tessellated mesh (evaluate_sample).
+    positions = (unsplit.positions[unsplit.triangles].reshape(-1, 3)
+                 if options.auto_rechart and options.rechart is None else None)
     refined = stages.run("refine unsplit", lambda p: refine_uvs(baseline, uvs, triangles, resolution,
-                                                                padding=padding, progress=p,
+                                                                padding=padding, progress=p, positions=positions,
                                                                 **options.refine_options))
     refined_map = stages.run("bake unsplit", lambda p: _bake_map(unsplit, refined.uvs, resolution, options, p))
     parent, parent_bary = to_unsplit
