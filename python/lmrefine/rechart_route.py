@@ -7,8 +7,10 @@ source layout gives the refiner no room (`layout_room`) and the caller gives
 the mesh (`refine_uvs(..., positions=)`), the mesh is re-charted
 (lmrefine.rechart), the first lightmap is carried over to the new layout
 (`resample_lightmap`), and the new layout is refined instead. It is kept only
-when the error model predicts clearly less error than the source layout
-(`predicted_error`). docs/refiner.md, "The re-chart route".
+when the error model (`predicted_error`: light changes and chart borders,
+in world units) predicts clearly less error than the source layout and no
+more than the source layout's own refinement. docs/refiner.md, "The re-chart
+route".
 """
 
 import numpy as np
