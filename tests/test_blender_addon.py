@@ -523,6 +523,8 @@ def test_menu_entries_and_stable_panels(facts):
     labels = value["labels"]
     assert labels["nothing"][0] == "No run yet" and labels["nothing_moved"][1] == "Nothing moved"
     assert labels["after_run"][1] == "Moved: 1 object(s)" and labels["after_run"][2].startswith("Edges: ")
+    # A triangle's texel ratio (the repack scales charts beyond Max Growth), short enough for the sidebar.
+    assert re.fullmatch(r"Triangles: [0-9.e+]+x-[0-9.e+]+x", labels["after_run"][3]) and len(labels["after_run"][3]) <= 24
     assert value["operators_after_run"] == ["object.lmrefine_show_preview"] * 2 + ["object.lmrefine_remove_preview"]
     assert len(value["icons_used"]) >= 8 and value["icons_missing"] == []
 

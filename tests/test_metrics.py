@@ -174,3 +174,62 @@ def test_layout_change_is_the_median_texel_density_change_and_drives_the_stage_r
     assert metrics.stage_stop_reason(2, True, metrics.STAGE_MIN_CHANGE) is None
     assert "stage 1 kept" in metrics.stage_stop_reason(2, True, 0.01)
     assert "stage 2 kept" in metrics.stage_stop_reason(3, False, 0.5)
+
+
+def _quad_plane(size, uv_scale=1.0):
+    """One size x size quad as two triangles (face 0), UVs filling [0, uv_scale]^2."""
+    positions = np.array([(0, 0, 0), (size, 0, 0), (size, size, 0), (0, size, 0)], np.float64)
+    uvs = np.array([(0, 0), (1, 0), (1, 1), (0, 1)], np.float32) * uv_scale
+    return positions, uvs, np.array([(0, 1, 2), (0, 2, 3)])
+
+
+def test_texels_per_metre_of_a_known_plane():
+    """A 2 m x 2 m plane whose UVs fill [0, 1]^2 at 256 x 256 has 256 texels over 2 m: 128 per metre."""
+    positions, uvs, triangles = _quad_plane(2.0)
+    areas = metrics.triangle_areas(positions, triangles)
+    assert metrics.texels_per_metre(uvs, triangles, areas, 256) == pytest.approx([128.0, 128.0])
+    assert metrics.texels_per_metre(uvs, triangles, areas, 256, faces=[7, 7]) == pytest.approx([128.0, 128.0])
+    # Half the UV square in each direction: 64 per metre; a 512 x 256 map: sqrt(2) x 128.
+    assert metrics.texels_per_metre(uvs * 0.5, triangles, areas, 256) == pytest.approx([64.0, 64.0])
+    assert metrics.texels_per_metre(uvs, triangles, areas, (256, 512)) == pytest.approx([128 * 2 ** 0.5] * 2)
+
+
+def test_texels_per_metre_is_the_root_of_texel_density_and_pools_a_face():
+    rng = np.random.default_rng(3)
+    positions = rng.random((30, 3))
+    uvs = rng.random((30, 2)).astype(np.float32)
+    triangles = rng.permutation(30).reshape(10, 3)
+    areas = metrics.triangle_areas(positions, triangles)
+    per_triangle = metrics.texels_per_metre(uvs, triangles, areas, 64)
+    assert per_triangle == pytest.approx(np.sqrt(metrics.texel_density(uvs, triangles, areas, 64)), rel=1e-12)
+    # Triangles 0-2 form one face: they share sqrt(summed texels / summed area).
+    faces = np.array([0, 0, 0, 1, 2, 3, 4, 5, 6, 7])
+    pooled = metrics.texels_per_metre(uvs, triangles, areas, 64, faces=faces)
+    texels = metrics.uv_areas(uvs, triangles)[:3].sum() * 64 * 64
+    assert pooled[:3] == pytest.approx([np.sqrt(texels / areas[:3].sum())] * 3, rel=1e-12)
+    assert pooled[3:] == pytest.approx(per_triangle[3:], rel=1e-12)
+
+
+def test_texels_per_metre_on_messy_faces():
+    """No world area, NaN or huge coordinates give NaN (nothing to show), a zero UV area gives 0 (no texels),
+    and the inputs are left as they were."""
+    positions, uvs, triangles = _quad_plane(2.0)
+    positions = np.concatenate([positions, [(0, 0, 0), (1, 0, 0), (2, 0, 0)], [(0, 0, 0), (1e200, 0, 0),
+                                                                               (0, 1e200, 0)]])
+    uvs = np.concatenate([uvs, [(0, 0), (1, 0), (0, 1)], [(0, 0), (1, 0), (0, 1)]]).astype(np.float32)
+    uvs[1] = np.nan
+    triangles = np.array([(0, 1, 2), (0, 2, 3), (4, 5, 6), (7, 8, 9), (0, 0, 2)])
+    uvs_before, triangles_before = uvs.copy(), triangles.copy()
+    with np.errstate(all="ignore"):
+        areas = metrics.triangle_areas(positions, triangles)  # inf for the huge triangle
+    with np.errstate(all="raise"):  # no warning escapes
+        values = metrics.texels_per_metre(uvs, triangles, areas, 256)
+        pooled = metrics.texels_per_metre(uvs, triangles, areas, 256, faces=[0, 0, 1, 2, 3])
+    assert np.isnan(values[0]) and values[1] == pytest.approx(128.0)  # triangle 0 has a NaN UV
+    assert np.isnan(values[2]) and np.isnan(values[3]) and np.isnan(values[4])  # flat, infinite, degenerate
+    assert np.isnan(pooled[:2]).all()  # a NaN UV spoils its whole face
+    assert np.array_equal(uvs[~np.isnan(uvs)], uvs_before[~np.isnan(uvs_before)]) and np.array_equal(
+        triangles, triangles_before)
+    flat_uvs = uvs.copy()
+    flat_uvs[:4] = 0.5
+    assert metrics.texels_per_metre(flat_uvs, triangles[:2], areas[:2], 256) == pytest.approx([0.0, 0.0])

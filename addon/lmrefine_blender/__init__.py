@@ -2,7 +2,8 @@
 
 A thin layer over the lmrefine package (native C++ core): bridge.py turns the
 scene into numpy arrays, pipeline.py runs the job, operators/panels/properties
-are the UI. The native core (lmrefine) loads when the operator first runs.
+are the UI, overlay.py draws the texel-density overlay. The native core
+(lmrefine) loads when the operator first runs.
 """
 
 bl_info = {
@@ -24,16 +25,18 @@ _LIB = os.path.join(os.path.dirname(__file__), "lib")
 if os.path.isdir(_LIB) and _LIB not in sys.path:
     sys.path.insert(0, _LIB)
 
-from . import operators, panels, properties  # noqa: E402  (after the sys.path set-up)
+from . import operators, overlay, panels, properties  # noqa: E402  (after the sys.path set-up)
 
 
 def register():
     properties.register()
     operators.register()
     panels.register()
+    overlay.register()
 
 
 def unregister():
+    overlay.unregister()
     panels.unregister()
     operators.unregister()
     properties.unregister()

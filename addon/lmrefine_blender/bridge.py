@@ -44,6 +44,7 @@ class MeshExport:
     triangles: np.ndarray  # (T, 3) int32, loop indices
     uvs: np.ndarray | None  # (L, 2) float32 from the requested UV map, or None
     base_color: np.ndarray  # (T, 3) float32, the material's base colour per triangle
+    polygons: np.ndarray | None = None  # (T,) int32, the face each triangle belongs to
 
 
 # ---------------------------------------------------------------- UV layouts
@@ -165,6 +166,8 @@ def export_mesh(obj_eval, matrix_world, uv_name=None, name=None):
         mesh.loop_triangles.foreach_get("loops", triangles)
         material_index = np.empty(len(mesh.loop_triangles), dtype=np.int32)
         mesh.loop_triangles.foreach_get("material_index", material_index)
+        polygons = np.empty(len(mesh.loop_triangles), dtype=np.int32)
+        mesh.loop_triangles.foreach_get("polygon_index", polygons)
 
         vertex_co = np.empty(len(mesh.vertices) * 3, dtype=np.float32)
         mesh.vertices.foreach_get("co", vertex_co)
@@ -200,6 +203,7 @@ def export_mesh(obj_eval, matrix_world, uv_name=None, name=None):
             triangles=triangles.reshape(-1, 3),
             uvs=uvs,
             base_color=base_color,
+            polygons=polygons,
         )
     finally:
         obj_eval.to_mesh_clear()

@@ -46,8 +46,8 @@ def _report_outcome(operator, context, outcome, seconds):
     else:
         still = len(outcome.objects) - summary["moved"]
         result.message = (f"Refined {len(outcome.objects)} object(s) in {seconds:.1f}s: texels at light changes "
-                          f"{summary['transition_widening']:.2f}x their area, texel density "
-                          f"{summary['density_min']:.2f}x to {summary['density_max']:.2f}x"
+                          f"{summary['transition_widening']:.2f}x their area, a triangle's texels "
+                          f"{summary['density_min']:.2f}x to {summary['density_max']:.2f}x (chart repack included)"
                           + (f"; {still} did not move (see warnings)" if still else ""))
     result.message += "; " + images_sentence(summary)
     if recharted:

@@ -7,7 +7,7 @@ what does not apply, so the layout never jumps under the mouse.
 
 import bpy
 
-from . import bridge, materials
+from . import bridge, materials, overlay
 
 
 class _LightmapTab:
@@ -150,7 +150,9 @@ class LMREFINE_PT_refine_result(_LightmapTab, bpy.types.Panel):
             rows = [(f"Objects: {result.objects}", 'OBJECT_DATA', True),
                     (f"Moved: {result.moved} object(s)", 'CHECKMARK', True),
                     (f"Edges: {result.transition_widening:.2f}x texels", 'SHARPCURVE', True),
-                    (f"Density: {result.density_min:.2f}x to {result.density_max:.2f}x", 'MOD_UVPROJECT', True)]
+                    # A triangle's new / old texels, on the output: the repack's chart scale comes on top of
+                    # the automaton's bounds (Min Shrink, Max Growth bound its cells), so it can exceed them.
+                    (f"Triangles: {result.density_min:.2g}x-{result.density_max:.3g}x", 'MOD_UVPROJECT', True)]
         limits = "/".join(LIMIT_NAMES.get(name, name) for name in result.limited_by.split(", ") if name)
         rows.append((f"Limit: {limits}" if limits else "Limit: none", 'INFO', bool(limits)))
         warnings = result.warnings if result.valid else 0
@@ -186,7 +188,39 @@ class LMREFINE_PT_refine_result(_LightmapTab, bpy.types.Panel):
             row.label(text=text, icon=icon)
 
 
+def density_rows(settings):
+    """The Texel Density panel's three rows (text, enabled): the same rows whether the overlay is on or off."""
+    view = overlay.current_view()
+    if view is None:
+        return [("Off: tick the box above", False), ("", False), ("", False)]
+    if not view.drawn:
+        return [("No object with a lightmap map", True), ("", False), ("", False)]
+    number = overlay.format_density
+    return [(f"Median: {number(view.median)} texels/m", True),
+            (f"Range: {number(view.minimum)} to {number(view.maximum)}", True),
+            (f"Green: {number(view.reference)} (source median)", True)]
+
+
+class LMREFINE_PT_density(_LightmapTab, bpy.types.Panel):
+    bl_label = "Texel Density"
+    bl_parent_id = "LMREFINE_PT_refine"
+    bl_options = {'DEFAULT_CLOSED'}
+
+    def draw_header(self, context):
+        self.layout.prop(context.scene.lmrefine, "density_overlay", text="")
+
+    def draw(self, context):
+        settings = context.scene.lmrefine
+        layout = self.layout
+        layout.row().prop(settings, "density_map", expand=True)
+        column = layout.column(align=True)
+        for text, enabled in density_rows(settings):
+            row = column.row()
+            row.enabled = enabled
+            row.label(text=text)
+
+
 CLASSES = (LMREFINE_PT_refine, LMREFINE_PT_refine_options, LMREFINE_PT_refine_stages, LMREFINE_PT_refine_bake,
-           LMREFINE_PT_refine_result)
+           LMREFINE_PT_refine_result, LMREFINE_PT_density)
 
 register, unregister = bpy.utils.register_classes_factory(CLASSES)

@@ -15,6 +15,8 @@ from bpy.props import (
     StringProperty,
 )
 
+from . import overlay
+
 FIRST_LIGHTMAP_ITEMS = (
     ('IMAGE', "Image",
      "Use the lightmap already baked into the object's material (an Image Texture node fed by a UV Map "
@@ -43,6 +45,11 @@ BORDER_ITEMS = (
     ('EXTRA_RING', "Extra Ring", "An extra ring of cells around the grid, removed after convergence (variant 3)"),
 )
 
+DENSITY_MAP_ITEMS = (
+    ('REFINED', "Refined", "Draw the refined map ('<source>_refined'); objects without one show their source map"),
+    ('SOURCE', "Source", "Draw the source map the refinement starts from"),
+)
+
 WAVELET_ITEMS = (
     ('D4', "D4", "Daubechies D4, the thesis' choice: copes with noisy bakes"),
     ('HAAR', "Haar", "Shortest filter: sharpest response, most sensitive to noise"),
@@ -62,8 +69,13 @@ class LMREFINE_PG_result(bpy.types.PropertyGroup):
     transition_widening: FloatProperty(
         name="Transition Widening",
         description="Texel density at light/shadow transitions, relative to before (higher = sharper edges)")
-    density_min: FloatProperty(name="Min Density", description="Smallest texel-density ratio (new / old area)")
-    density_max: FloatProperty(name="Max Density", description="Largest texel-density ratio (new / old area)")
+    density_min: FloatProperty(
+        name="Min Density", description="Smallest new / old texel count of a triangle (its UV area ratio) in the "
+        "refined map. Min Shrink bounds the automaton's cells; the chart repack scales whole charts on top")
+    density_max: FloatProperty(
+        name="Max Density", description="Largest new / old texel count of a triangle (its UV area ratio) in the "
+        "refined map. Max Growth bounds the automaton's cells; the chart repack scales whole charts on top, so "
+        "this can exceed Max Growth")
     limited_by: StringProperty(name="Limited By", description="What kept the refinement from going further")
     warnings: IntProperty(name="Warnings", description="Warnings of the last run (in the Info log)")
     timings: StringProperty(name="Timings", description="Seconds per stage of the last run")
@@ -201,6 +213,21 @@ class LMREFINE_PG_settings(bpy.types.PropertyGroup):
                     "(Solid with Texture colour, Material Preview, Rendered), with a before/after switch. The "
                     "user's nodes are not rewired; 'Remove Preview' puts back the active output, node and UV map",
         default=True,
+    )
+
+    # The texel-density overlay: its on/off state is the overlay's own (handlers
+    # installed or not), never stored in the file.
+    density_overlay: BoolProperty(
+        name="Texel Density",
+        description="Draw the texels per metre of the lightmap UV map on the objects in the 3D viewport, as a "
+                    "heatmap with a legend (blue 1/4x, green 1x, red 4x the source maps' median). Draws only: "
+                    "nothing is written into the meshes or materials",
+        get=lambda self: overlay.enabled(),
+        set=lambda self, value: overlay.set_enabled(value),
+    )
+    density_map: EnumProperty(
+        name="Map", description="Which lightmap UV map the texel-density overlay draws", items=DENSITY_MAP_ITEMS,
+        default='REFINED', update=overlay.settings_changed,
     )
 
     result: PointerProperty(type=LMREFINE_PG_result)

@@ -21,7 +21,9 @@ Definitions (docs/evaluation.md gives the reasoning):
 * **Texel density**: texels per square metre of each triangle, UV area x R^2
   over world area; **transition widening**: refined density over baseline
   density, averaged over the transition points (the thesis' figure of merit,
-  in area; its square root is the widening of an edge in texels).
+  in area; its square root is the widening of an edge in texels). The
+  pictures and the add-on's overlay show its square root, **texels per
+  metre** (:func:`texels_per_metre`, per face).
 * **Equal-error resolution**: the resolution (as a multiple of R) at which the
   uniform baseline's error equals the refined map's error at R, interpolated
   linearly in error against log-resolution (:func:`equal_error_resolution`);
@@ -236,6 +238,29 @@ def texel_density(uvs, triangles, world_areas, resolution):
     height, width = (resolution, resolution) if np.isscalar(resolution) else resolution
     world_areas = np.asarray(world_areas, np.float64)
     return uv_areas(uvs, triangles) * height * width / np.maximum(world_areas, 1e-30)
+
+
+def texels_per_metre(uvs, triangles, world_areas, resolution, faces=None):
+    """(T,) texels per metre along the surface of every triangle's face at
+    `resolution` (int or (height, width)): the square root of the face's
+    texels (UV area x H x W, summed over its triangles) over its world area.
+    `faces` (T,) names the face of each triangle (an n-gon's triangles share
+    one value); None makes every triangle its own face, sqrt(texel_density).
+    NaN where a face has no (or no finite) world area or UV area."""
+    height, width = (resolution, resolution) if np.isscalar(resolution) else resolution
+    world = np.asarray(world_areas, np.float64)
+    with np.errstate(all="ignore"):
+        texels = uv_areas(uvs, triangles) * height * width
+    if faces is not None:
+        _, face = np.unique(np.asarray(faces), return_inverse=True)
+        face = face.ravel()
+        with np.errstate(all="ignore"):
+            texels = np.bincount(face, texels, minlength=face.max(initial=-1) + 1)[face]
+            world = np.bincount(face, world, minlength=face.max(initial=-1) + 1)[face]
+    with np.errstate(all="ignore"):
+        value = np.sqrt(texels / world)
+    value[~(np.isfinite(world) & (world > 0) & np.isfinite(texels))] = np.nan
+    return value
 
 
 def transition_widening(density_baseline, density_refined, point_triangle, transitions):

@@ -1355,11 +1355,15 @@ def menus_and_panel_rows():
     states = {}
     scenes.select_only()
     states["nothing"] = {name: draw(getattr(panels, name)) for name in
-                         ("LMREFINE_PT_refine", "LMREFINE_PT_refine_bake", "LMREFINE_PT_refine_result")}
+                         ("LMREFINE_PT_refine", "LMREFINE_PT_refine_bake", "LMREFINE_PT_refine_result",
+                          "LMREFINE_PT_density")}
     scenes.select_only(bpy.data.objects["Floor"])
     outcome, message = refine()
+    bpy.context.scene.lmrefine.density_overlay = True  # its panel draws the same rows on and off
     states["after_run"] = {name: draw(getattr(panels, name)) for name in
-                           ("LMREFINE_PT_refine", "LMREFINE_PT_refine_bake", "LMREFINE_PT_refine_result")}
+                           ("LMREFINE_PT_refine", "LMREFINE_PT_refine_bake", "LMREFINE_PT_refine_result",
+                            "LMREFINE_PT_density")}
+    bpy.context.scene.lmrefine.density_overlay = False
     bpy.context.scene.lmrefine.result.moved = 0
     states["nothing_moved"] = {"LMREFINE_PT_refine_result": draw(panels.LMREFINE_PT_refine_result)}
     used = {entry[2] for state in states.values() for log in state.values() for entry in log if len(entry) > 2}

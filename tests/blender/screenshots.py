@@ -36,15 +36,12 @@ if bpy.app.background:
     raise SystemExit(0)
 
 
-def view3d():
-    window = bpy.context.window_manager.windows[0]
-    return window, max((a for a in window.screen.areas if a.type == 'VIEW_3D'), key=lambda a: a.width * a.height)
+import window_steps  # noqa: E402
+from window_steps import run_plan, view3d  # noqa: E402
 
 
 def shot(name):
-    window, area = view3d()
-    with bpy.context.temp_override(window=window, area=area):
-        bpy.ops.screen.screenshot(filepath=os.path.join(OUT, name + ".png"))
+    window_steps.shot(OUT, name)
 
 
 def click(x, y):
@@ -143,14 +140,4 @@ if os.path.basename(bpy.data.filepath) == "atlas.blend":
     PLAN = ATLAS_PLAN
 
 
-def tick():
-    step = PLAN.pop(0)
-    try:
-        step()
-    except Exception:  # noqa: BLE001  (a picture tool: say what failed, keep going)
-        import traceback
-        traceback.print_exc()
-    return 6.0 if PLAN else None
-
-
-bpy.app.timers.register(tick, first_interval=2.0)
+run_plan(PLAN, 6.0)
