@@ -29,7 +29,7 @@ from lmrefine_blender import pipeline  # noqa: E402
 from lmrefine_blender.journal import Journal  # noqa: E402
 
 PASSES = ("direct", "indirect", "combined", "ao")
-FLAG_OF = {"tessellate_budget": "tessellate"}  # settings whose flag has another name
+FLAG_OF = {"tessellate_budget": "tessellate", "layouts": "per_effect", "per_effect_rule": "per_effect"}  # settings whose flag has another name
 
 
 def _csv(text):
@@ -84,6 +84,10 @@ def build_parser():
                              "BUDGET: most vertices added, as a fraction of each object's (default 0.25)")
     parser.add_argument("--no-tessellate", action="store_true", help="turn tessellation off (when the .blend "
                         "has it on)")
+    parser.add_argument("--per-effect", nargs="?", const="sqrt", choices=("sqrt", "energy", "equal"),
+                        metavar="RULE", help="Layouts: Per Effect: direct and indirect light each get their own "
+                        "refined UV map and image, RULE (sqrt, energy, equal; default sqrt) splitting the "
+                        "resolution^2 texels between them")
     parser.add_argument("--backend", choices=("embree", "cycles"), help="baker of the final lightmaps")
     parser.add_argument("--bake-passes", type=_passes, help=f"comma-separated, of: {', '.join(PASSES)}")
     parser.add_argument("--samples", type=int, help="samples per texel")
@@ -108,6 +112,8 @@ def apply_flags(settings, args):
         "preview": args.preview, "exr_float32": args.float32, "stages": args.stages,
         "shared_atlas": args.shared_atlas,
     }
+    if args.per_effect is not None:
+        mapping.update(layouts='PER_EFFECT', per_effect_rule=args.per_effect.upper())
     upper = {"first_lightmap": args.first_lightmap, "driving_pass": args.driving_pass, "border": args.border,
              "wavelet": args.wavelet, "backend": args.backend}
     mapping.update({key: value.upper() for key, value in upper.items() if value is not None})

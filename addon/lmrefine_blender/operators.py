@@ -33,6 +33,8 @@ def _report_outcome(operator, context, outcome, seconds):
     result.images = summary["images_per_pass"]
     result.shared = "; ".join(f"{name}: {', '.join(objects)}" for name, objects in summary["shared_images"].items())
     result.stages = outcome.stages_asked
+    result.effects = "; ".join(f"{name} {e['resolution']}px {e['transition_widening']:.2f}x"
+                               for name, e in summary["effects"].items())
     result.stages_kept = summary["stages_kept"]
     result.stages_stopped = "; ".join(_stage_stop(name, entry) for name, entry in outcome.stages.items()
                                       if not entry["stages"][-1]["kept"])

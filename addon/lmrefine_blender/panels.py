@@ -96,6 +96,10 @@ class LMREFINE_PT_refine_stages(_LightmapTab, bpy.types.Panel):
     def draw(self, context):
         settings = context.scene.lmrefine
         column = self.split_layout().column()
+        column.prop(settings, "layouts", expand=True)
+        row = column.row()
+        row.active = settings.layouts == 'PER_EFFECT'
+        row.prop(settings, "per_effect_rule")
         column.prop(settings, "stages")
         column.prop(settings, "tessellate")
         row = column.row()
@@ -170,6 +174,8 @@ class LMREFINE_PT_refine_result(_LightmapTab, bpy.types.Panel):
         if staged:  # more than one stage is a setting: its rows come with it
             # An object whose next stage moved its texels too little (under 5%).
             rows += [(entry, 'BLANK1', True) for entry in result.stages_stopped.split("; ") if entry]
+        if result.valid and result.effects:  # Layouts: Per Effect: a row per effect, its map and its edges
+            rows += [(f"Effect: {entry}", 'LIGHT', True) for entry in result.effects.split("; ")]
         timings = dict(entry.rsplit(" ", 1) for entry in result.timings.split("  ") if entry)
         for stage in ("first bake", "refine", "second bake"):
             seconds = timings.get(stage)

@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 import bpy
 import numpy as np
 
-from . import atlas, bridge, cycles_bake, materials, tessellation
+from . import atlas, bridge, cycles_bake, effects, materials, tessellation
 from .errors import Cancelled, UserError  # noqa: F401  (re-exported for the drivers)
 
 REFINED_SUFFIX = "_refined"
@@ -72,6 +72,7 @@ class Outcome:
     tessellation: dict = field(default_factory=dict)  # object name -> lmrefine.tessellate report
     stages: dict = field(default_factory=dict)  # atlas group name -> {"stages": [...], "stopped": why}
     stages_asked: int = 1
+    effects: dict = field(default_factory=dict)  # Layouts: Per Effect: group -> effect -> resolution, image, report
 
     def summary(self):
         reports = list(self.reports.values())
@@ -97,7 +98,22 @@ class Outcome:
             "objects": len(self.objects),
             "images_per_pass": len(self.images),
             "shared_images": {name: objects for name, objects in self.atlases.items() if len(objects) > 1},
+            "effects": self.effects_summary(),
         }
+
+    def effects_summary(self):
+        """Layouts: Per Effect: {effect: its resolution and its figures over the maps} ({} otherwise),
+        measured on each effect's own refined layout."""
+        by_effect = {}
+        for entries in self.effects.values():
+            for name, entry in entries.items():
+                by_effect.setdefault(name, []).append(entry)
+        return {name: {"resolution": entries[0]["resolution"],
+                       "transition_widening": float(np.mean([e["report"]["transition_widening"] for e in entries])),
+                       "density_min": float(min(e["report"]["density_min"] for e in entries)),
+                       "density_max": float(max(e["report"]["density_max"] for e in entries)),
+                       "images": [e["image"] for e in entries]}
+                for name, entries in by_effect.items()}
 
     def atlas_of(self, obj_name):
         """The name of the atlas group (and of its images) that `obj_name` belongs to."""
@@ -132,6 +148,7 @@ def settings_snapshot(settings):
         "shared_atlas": settings.shared_atlas,
         "tessellate": settings.tessellate_budget if settings.tessellate else None,
         "stages": settings.stages,
+        "per_effect": settings.per_effect_rule.lower() if settings.layouts == 'PER_EFFECT' else None,
     }
 
 
@@ -277,15 +294,11 @@ def run(context, targets, options, journal, image_dir=None):
     back on any exception. `image_dir`: where to write the EXR lightmaps
     (default: next to the .blend, or packed into it when it was never saved).
     """
+    if options.get("per_effect"):  # Layouts: Per Effect, its own job
+        return (yield from effects.run(context, targets, options, journal, image_dir))
     lmrefine = import_core()
     from lmrefine.layout_input import describe_problems
-    outcome = Outcome(objects=[t.obj.name for t in targets], stages_asked=options.get("stages", 1))
-    outcome.warnings += [f"Skipped: {message}" for message in getattr(targets, "skipped", [])]
-    for target in targets:
-        if target.zero_area:
-            outcome.warnings.append(f"'{target.obj.name}': {target.zero_area} triangles of zero area in 3-D "
-                                    "were skipped (they need no texels); Mesh > Clean Up > Degenerate "
-                                    "Dissolve removes them")
+    outcome = new_outcome(targets, options)
     resolution = options["resolution"]
     padding = options["padding"]
     backend_first = options["first_lightmap"]
@@ -450,6 +463,18 @@ def run(context, targets, options, journal, image_dir=None):
             image = bpy.data.images[image_name]
             outcome.image_files[image_name] = _save_image(lmrefine, image, image_dir,
                                                           "float" if options["exr_float32"] else "half")
+    return outcome
+
+
+def new_outcome(targets, options):
+    """An Outcome for `targets`, with the warnings validation left: skipped objects, zero-area triangles."""
+    outcome = Outcome(objects=[t.obj.name for t in targets], stages_asked=options.get("stages", 1))
+    outcome.warnings += [f"Skipped: {message}" for message in getattr(targets, "skipped", [])]
+    for target in targets:
+        if target.zero_area:
+            outcome.warnings.append(f"'{target.obj.name}': {target.zero_area} triangles of zero area in 3-D "
+                                    "were skipped (they need no texels); Mesh > Clean Up > Degenerate "
+                                    "Dissolve removes them")
     return outcome
 
 

@@ -1388,6 +1388,159 @@ def menus_and_panel_rows():
     }
 
 
+# ------------------------------------------------------- per-effect layouts
+
+EFFECTS = ("direct", "indirect")
+
+
+def _terms_wiring(tree, owner):
+    """What reaches the preview's Emission of `owner`: [(image, UV map of the UV node feeding it)], found by
+    walking the links from the active output back (Add nodes added up, each image through its UV node)."""
+    output = tree.get_output_node('EEVEE')
+    emission = output.inputs["Surface"].links[0].from_node
+    terms, adds = [], []
+
+    def walk(node):
+        if node.type == 'VECT_MATH':
+            adds.append(node.operation)
+            for socket in node.inputs[:2]:
+                walk(socket.links[0].from_node)
+        elif node.type == 'TEX_IMAGE':
+            uv_node = node.inputs["Vector"].links[0].from_node
+            terms.append([node.image.name if node.image else None, uv_node.uv_map, node.get("lmrefine_object"),
+                          uv_node.get("lmrefine_object")])
+
+    walk(emission.inputs["Color"].links[0].from_node)
+    return {"output_is_ours": output.get("lmrefine_object") == owner, "emission": emission.type,
+            "adds": adds, "terms": terms,
+            "active_node": tree.nodes.active.name if tree.nodes.active else None}
+
+
+def _per_effect_facts(objects, groups):
+    facts = {"result_effects": bpy.context.scene.lmrefine.result.effects,
+             "result_message": bpy.context.scene.lmrefine.result.message, "layers": {}, "images": {},
+             "wiring": {}, "preview_terms": {}}
+    for obj in objects:
+        facts["layers"][obj.name] = [layer.name for layer in obj.data.uv_layers]
+        facts["wiring"][obj.name] = _terms_wiring(obj.material_slots[0].material.node_tree, obj.name)
+        facts["active_uv"] = facts.get("active_uv", {})
+        facts["active_uv"][obj.name] = obj.data.uv_layers.active.name
+    for image in bpy.data.images:
+        if image.get("lmrefine_object"):
+            facts["images"][image.name] = {"size": list(image.size), "objects": image["lmrefine_objects"],
+                                           "pass": image["lmrefine_pass"]}
+    # Each effect's layout, as written, against its own resolution.
+    facts["checks"] = {}
+    for group, members in groups.items():
+        for effect in EFFECTS:
+            image = bpy.data.images[f"{group}_lightmap_{effect}_effect"]
+            side = image.size[0]
+            layouts = [(bridge.read_uv_layer(bpy.data.objects[n].data, f"Lightmap_refined_{effect}"),
+                        bridge.read_layout(bpy.data.objects[n].data, "Lightmap").triangles) for n in members]
+            uvs, triangles, _, _ = lmrefine_blender.atlas.join_layouts(layouts)
+            source = lmrefine_blender.atlas.join_layouts(
+                [(bridge.read_layout(bpy.data.objects[n].data, "Lightmap").uvs, t) for n, (_, t) in
+                 zip(members, layouts)])[0]
+            check = lmrefine.check_layout(uvs, triangles, side, padding=0)
+            facts["checks"][f"{group}/{effect}"] = {"side": side, "overlapping": int(check["overlapping"]),
+                                                    "moved": float(np.abs(uvs - source).max())}
+    return facts
+
+
+@check("refine", "bake")
+def per_effect_layouts_images_and_preview():
+    """Layouts: Per Effect on the shadow scene (Floor and Blocker apart): one UV map and one image per
+    effect at the split resolutions, the preview adding them, before/after, then Remove Preview."""
+    fresh_shadow_scene(first_lightmap='EMBREE', backend='EMBREE', bake_passes={'DIRECT', 'AO'},
+                       layouts='PER_EFFECT', shared_atlas=False)
+    floor, box = bpy.data.objects["Floor"], bpy.data.objects["Blocker"]
+    floor.data.uv_layers.active = floor.data.uv_layers["UVMap"]
+    scenes.select_only(floor, box)
+    before = fingerprint()
+    outcome, message = refine()
+    if outcome != "FINISHED":
+        return {"outcome": outcome, "message": message}
+    facts = {"outcome": outcome, "message": message, **_per_effect_facts([floor, box], {"Floor": ["Floor"],
+                                                                                         "Blocker": ["Blocker"]})}
+    facts["preview_terms"] = {obj.name: pipeline.materials.preview_terms(obj) for obj in (floor, box)}
+    tree = floor.material_slots[0].material.node_tree
+    window = bpy.context.window_manager.windows[0]
+    with bpy.context.temp_override(window=window):
+        facts["show_before"] = sorted(bpy.ops.object.lmrefine_show_preview(shown='BEFORE'))
+        facts["before_wiring"] = _terms_wiring(tree, "Floor")
+        facts["before_active_uv"] = floor.data.uv_layers.active.name
+        facts["show_after"] = sorted(bpy.ops.object.lmrefine_show_preview(shown='AFTER'))
+        facts["after_again"] = _terms_wiring(tree, "Floor")
+        facts["removed"] = sorted(bpy.ops.object.lmrefine_remove_preview())
+    facts["restored_active_uv"] = floor.data.uv_layers.active.name
+    # Only the UV maps (mesh) and the images stay: every material is as it was.
+    facts["changed"] = changed(before, fingerprint())
+    return facts
+
+
+@check("refine", "bake")
+def per_effect_split_matches_the_rule():
+    """The run's effect resolutions are lmrefine.per_effect's split of R^2 for the energies it measured."""
+    fresh_shadow_scene(first_lightmap='EMBREE', backend='EMBREE', bake_passes={'DIRECT'}, layouts='PER_EFFECT',
+                       per_effect_rule='ENERGY')
+    floor = bpy.data.objects["Floor"]
+    scenes.select_only(floor)
+    options = pipeline.settings_snapshot(bpy.context.scene.lmrefine)
+    journal = Journal()
+    outcome = pipeline.run_blocking(pipeline.run(bpy.context, pipeline.validate(bpy.context, [floor], options),
+                                                 options, journal))
+    journal.commit()
+    from lmrefine.per_effect import split_fractions, split_resolutions
+    effects = outcome.effects["Floor"]
+    energies = {name: effects[name]["report"]["energy"] for name in EFFECTS}
+    return {"rule": options["per_effect"], "sides": {name: effects[name]["resolution"] for name in EFFECTS},
+            "expected": split_resolutions(RESOLUTION, split_fractions("energy", energies)),
+            "energies": energies, "summary_effects": outcome.summary()["effects"],
+            "report_effects": sorted(outcome.reports["Floor"]["effects"]),
+            "image_sizes": {name: list(bpy.data.images[effects[name]["image"]].size) for name in EFFECTS}}
+
+
+@check("refine", "bake")
+def per_effect_is_one_undo_step():
+    fresh_shadow_scene(first_lightmap='EMBREE', backend='EMBREE', bake_passes={'DIRECT'}, layouts='PER_EFFECT')
+    scenes.select_only(bpy.data.objects["Floor"])
+    before, outcome, message = _refine_as_one_undo_step()
+    facts = {"outcome": outcome, "message": message,
+             "layers": [layer.name for layer in bpy.data.objects["Floor"].data.uv_layers]}
+    facts.update(_undo_once(before))
+    return facts
+
+
+@check("refine", "bake")
+def per_effect_shared_atlas():
+    """Per Effect on the atlas scene: one image per effect per atlas group, every member's preview adding
+    its group's effect images through its own per-effect UV maps."""
+    scenes.atlas_scene()
+    register()
+    settings(resolution=RESOLUTION, padding=2, samples=4, first_lightmap='EMBREE', backend='EMBREE',
+             bake_passes={'DIRECT'}, layouts='PER_EFFECT')
+    objects = [bpy.data.objects[name] for name in ATLAS + ("Lonely",)]
+    before = fingerprint()
+    outcome, message = refine()
+    if outcome != "FINISHED":
+        return {"outcome": outcome, "message": message}
+    facts = {"outcome": outcome, **_per_effect_facts(objects, {"Floor_atlas": list(ATLAS), "Lonely": ["Lonely"]})}
+    with bpy.context.temp_override(window=bpy.context.window_manager.windows[0]):
+        facts["removed"] = sorted(bpy.ops.object.lmrefine_remove_preview())
+    facts["changed"] = changed(before, fingerprint())
+    return facts
+
+
+@check("refine", "bake")
+def per_effect_refuses_an_existing_image():
+    """An existing lightmap holds one light, not its effects: a user error naming the fix, nothing changed."""
+    fresh_shadow_scene(first_lightmap='IMAGE', layouts='PER_EFFECT')
+    settings(lightmap_image=bpy.data.images.new("Given", RESOLUTION, RESOLUTION, float_buffer=True))
+    before = fingerprint()
+    outcome, message = refine()
+    return {"outcome": outcome, "message": message, "changed": changed(before, fingerprint())}
+
+
 def _save_for_batch(make_scene, filename):
     make_scene()
     register()
