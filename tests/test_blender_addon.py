@@ -836,3 +836,118 @@ def test_zip_installs_enables_and_carries_the_core(tmp_path):
     enabled, location, idname = line.split()[1:]
     assert enabled == "True" and idname == "OBJECT_OT_lmrefine_refine_uvs"
     assert location.startswith(str(tmp_path / "scripts" / "addons" / "lmrefine_blender" / "lib"))
+
+
+# ------------------------------------------------------ per-effect layouts
+
+EFFECTS = ("direct", "indirect")
+
+
+def _assert_adds_effects(wiring, images, uv_maps, owner):
+    """The preview of `owner`: its own output, an Emission fed by one Add of the effects' images, each
+    image sampled through its own UV node set to its own UV map."""
+    assert wiring["output_is_ours"] and wiring["emission"] == "EMISSION"
+    assert wiring["adds"] == ["ADD"]
+    assert wiring["terms"] == [[image, uv, owner, owner] for image, uv in zip(images, uv_maps)]
+
+
+def test_per_effect_writes_a_map_and_an_image_per_effect_at_the_split_resolutions(facts):
+    value = fact(facts, "per_effect_layouts_images_and_preview")
+    assert value["outcome"] == "FINISHED", value["message"]
+    for name in ("Floor", "Blocker"):
+        assert value["layers"][name] == ["UVMap", "Lightmap", "Lightmap_refined_direct", "Lightmap_refined_indirect"]
+        sides = {effect: value["images"][f"{name}_lightmap_{effect}_effect"]["size"] for effect in EFFECTS}
+        for effect in EFFECTS:
+            side = value["checks"][f"{name}/{effect}"]["side"]
+            assert sides[effect] == [side, side]
+            # The first bake on the source map at the same side is the preview's Before.
+            assert value["images"][f"{name}_lightmap_before_{effect}"]["size"] == [side, side]
+            assert value["checks"][f"{name}/{effect}"]["overlapping"] == 0
+            assert value["checks"][f"{name}/{effect}"]["moved"] > 0.0
+        # Together the effects hold at most the texels of one 64 x 64 map, and nearly all of them.
+        texels = sum(side[0] * side[1] for side in sides.values())
+        assert 0.9 * 64 * 64 <= texels <= 64 * 64
+    # AO is no effect here (it multiplies the light): not baked, and the run says so.
+    assert not any("_ao" in image for image in value["images"])
+    effects = value["result_effects"].split("; ")
+    assert [entry.split()[0] for entry in effects] == list(EFFECTS)
+    assert all(re.fullmatch(r"\w+ \d+px \d+\.\d\dx", entry) for entry in effects)
+
+
+def test_per_effect_resolutions_follow_the_split_rule(facts):
+    value = fact(facts, "per_effect_split_matches_the_rule")
+    assert value["rule"] == "energy"
+    assert value["sides"] == value["expected"]
+    assert value["sides"]["direct"] != value["sides"]["indirect"]  # the energies differ: so do the maps
+    for effect in EFFECTS:
+        side = value["sides"][effect]
+        assert value["image_sizes"][effect] == [side, side]
+        assert value["summary_effects"][effect]["resolution"] == side
+        assert value["summary_effects"][effect]["transition_widening"] > 1.0
+    assert value["report_effects"] == list(EFFECTS)
+
+
+def test_per_effect_preview_adds_the_effects_through_their_own_maps_and_toggles(facts):
+    value = fact(facts, "per_effect_layouts_images_and_preview")
+    for name in ("Floor", "Blocker"):
+        _assert_adds_effects(value["wiring"][name], [f"{name}_lightmap_{e}_effect" for e in EFFECTS],
+                             [f"Lightmap_refined_{e}" for e in EFFECTS], name)
+        assert value["active_uv"][name] == "Lightmap_refined_direct"  # Solid draws the first term
+    _assert_adds_effects(value["before_wiring"], [f"Floor_lightmap_before_{e}" for e in EFFECTS],
+                         ["Lightmap", "Lightmap"], "Floor")
+    assert value["before_active_uv"] == "Lightmap"
+    assert value["after_again"] == value["wiring"]["Floor"]
+    assert value["show_before"] == value["show_after"] == value["removed"] == ["FINISHED"]
+    # Remove Preview put back the materials and the active UV map: only the new maps and images stay.
+    assert value["restored_active_uv"] == "UVMap"
+    assert value["changed"] == ["images", "mesh:Cube", "mesh:FloorMesh", "result"]
+
+
+def test_per_effect_run_is_one_undo_step(facts):
+    value = fact(facts, "per_effect_is_one_undo_step")
+    assert value["outcome"] == "FINISHED", value["message"]
+    assert value["layers"] == ["UVMap", "Lightmap", "Lightmap_refined_direct", "Lightmap_refined_indirect"]
+    assert value["can_undo"] and value["changed_after_undo"] == [] and not value["can_undo_further"]
+
+
+def test_per_effect_with_a_shared_atlas_one_image_per_effect_per_group(facts):
+    value = fact(facts, "per_effect_shared_atlas")
+    assert value["outcome"] == "FINISHED", value.get("message")
+    assert sorted(value["images"]) == sorted(f"{group}_lightmap_{kind}" for group in ("Floor_atlas", "Lonely")
+                                             for kind in ("direct_effect", "indirect_effect", "before_direct",
+                                                          "before_indirect"))
+    for effect in EFFECTS:
+        assert value["images"][f"Floor_atlas_lightmap_{effect}_effect"]["objects"] == "Blocker, Floor, Post"
+        assert value["checks"][f"Floor_atlas/{effect}"]["overlapping"] == 0  # the members' joined layout
+    for name in ("Blocker", "Floor", "Post"):
+        _assert_adds_effects(value["wiring"][name], [f"Floor_atlas_lightmap_{e}_effect" for e in EFFECTS],
+                             [f"Lightmap_refined_{e}" for e in EFFECTS], name)
+    _assert_adds_effects(value["wiring"]["Lonely"], [f"Lonely_lightmap_{e}_effect" for e in EFFECTS],
+                         [f"Lightmap_refined_{e}" for e in EFFECTS], "Lonely")
+    assert value["removed"] == ["FINISHED"]
+    assert value["changed"] == ["images", "mesh:Cube", "mesh:Cube.001", "mesh:FloorMesh", "mesh:Plane", "result"]
+
+
+def test_per_effect_refuses_an_existing_first_image(facts):
+    value = fact(facts, "per_effect_refuses_an_existing_image")
+    assert value["outcome"] == "CANCELLED" and "Layouts: Per Effect bakes each effect's first map" in value["message"]
+    assert value["changed"] == []
+
+
+def test_batch_per_effect(facts, work_dir):
+    blend = fact(facts, "save_scene_for_batch")["path"]
+    out = work_dir / "batch_per_effect"
+    process = run_batch(blend, "--objects", "Floor", "--resolution", "64", "--samples", "4", "--per-effect",
+                        "equal", "--out", str(out))
+    assert process.returncode == 0, process.stderr[-3000:]
+    report = json.loads((out / "report.json").read_text())
+    assert report["settings"]["per_effect"] == "equal"
+    floor = report["objects"]["Floor"]
+    assert floor["refined_layers"] == {e: f"Lightmap_refined_{e}" for e in EFFECTS}
+    effects = floor["report"]["effects"]
+    # equal: half the texels each, 45 x 45 (2 x 45^2 <= 64^2).
+    assert [effects[e]["resolution"] for e in EFFECTS] == [45, 45]
+    for effect in EFFECTS:
+        path = floor["images"][effect]
+        assert path == str(out / f"Floor_lightmap_{effect}_effect.exr")
+        assert lmrefine_read(path).shape[:2] == (45, 45)

@@ -253,6 +253,9 @@ def _object_entry(outcome, name, target):
              "images": {p: outcome.image_files[i] for p, i in outcome.images[group].items()}}
     if len(outcome.atlases[group]) == 1:
         entry["report"] = outcome.reports[group]
+    if outcome.effects:  # Layouts: Per Effect: one refined map per effect instead of one
+        del entry["refined_layer"]
+        entry["refined_layers"] = {effect: f"{target.refined}_{effect}" for effect in outcome.effects[group]}
     return entry
 
 
