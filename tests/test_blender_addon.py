@@ -951,3 +951,35 @@ def test_batch_per_effect(facts, work_dir):
         path = floor["images"][effect]
         assert path == str(out / f"Floor_lightmap_{effect}_effect.exr")
         assert lmrefine_read(path).shape[:2] == (45, 45)
+
+
+def test_per_effect_progress_counts_each_effect_map(facts):
+    value = fact(facts, "per_effect_split_matches_the_rule")
+    fractions = value["fractions"]
+    assert fractions == sorted(fractions) and fractions[0] == 0.0 and fractions[-1] > 0.95
+    at = value["at"]
+    # One map, seven units, one after another: the split bake; per effect its first bake and its
+    # refinement; per effect its second bake.
+    order = ["First bake (effects", "First bake (direct", "Refining Floor (direct)", "First bake (indirect",
+             "Refining Floor (indirect)", "Second bake (direct", "Second bake (indirect"]
+    assert [at[label][0] for label in order] == pytest.approx([unit / 7 for unit in range(7)])
+    for label, following in zip(order, order[1:]):
+        assert at[label][1] <= at[following][0] + 1e-9, (label, at)
+
+
+def test_per_effect_cancel_rolls_back(facts):
+    value = fact(facts, "per_effect_cancel_rolls_back")
+    assert value["raised"] == "Cancelled"
+    assert value["layers_when_cancelled"] == ["UVMap", "Lightmap", "Lightmap_refined_direct",
+                                              "Lightmap_refined_indirect"]
+    assert value["changed"] == []
+
+
+def test_per_effect_panel_rows(facts):
+    value = fact(facts, "menus_and_panel_rows")
+    assert value["per_effect_outcome"][0] == "FINISHED", value["per_effect_outcome"]
+    assert value["per_effect_props"][:2] == ["layouts", "per_effect_rule"]
+    labels = value["labels"]["per_effect"]
+    effects = [label for label in labels if label.startswith(("Direct: ", "Indirect: "))]
+    assert len(effects) == 2
+    assert all(re.fullmatch(r"(Direct|Indirect): \d+px, edges \d+\.\d\dx", label) for label in effects)

@@ -48,6 +48,8 @@ def _report_outcome(operator, context, outcome, seconds):
                           f"{summary['density_min']:.2f}x to {summary['density_max']:.2f}x"
                           + (f"; {still} did not move (see warnings)" if still else ""))
     result.message += "; " + images_sentence(summary)
+    if result.effects:
+        result.message += f"; per effect (map side, edges): {result.effects}"
     if outcome.tessellation:
         result.message += f"; tessellation added {summary['vertices_added']} vertices"
     if outcome.stages:

@@ -161,6 +161,9 @@ class LMREFINE_PT_refine_result(_LightmapTab, bpy.types.Panel):
         images = result.images if result.valid else 0
         rows.append((f"Images: {images} for {len(result.objects.split(', '))} objects" if images else "Images: -",
                      'IMAGE_DATA', bool(images)))
+        if result.valid and result.effects:  # Layouts: Per Effect: a row per effect, its map side and its edges
+            rows += [(f"{entry.split()[0].capitalize()}: {entry.split()[1]}, edges {entry.split()[2]}", 'LIGHT', True)
+                     for entry in result.effects.split("; ")]
         shared = [entry.split(": ", 1) for entry in result.shared.split("; ") if entry] if result.valid else []
         rows.append((f"Atlas: {shared[0][0]} ({len(shared[0][1].split(', '))})"  # (objects sharing it)
                      + (f" +{len(shared) - 1}" if len(shared) > 1 else "") if shared else "Atlas: none",
@@ -174,8 +177,6 @@ class LMREFINE_PT_refine_result(_LightmapTab, bpy.types.Panel):
         if staged:  # more than one stage is a setting: its rows come with it
             # An object whose next stage moved its texels too little (under 5%).
             rows += [(entry, 'BLANK1', True) for entry in result.stages_stopped.split("; ") if entry]
-        if result.valid and result.effects:  # Layouts: Per Effect: a row per effect, its map and its edges
-            rows += [(f"Effect: {entry}", 'LIGHT', True) for entry in result.effects.split("; ")]
         timings = dict(entry.rsplit(" ", 1) for entry in result.timings.split("  ") if entry)
         for stage in ("first bake", "refine", "second bake"):
             seconds = timings.get(stage)

@@ -1362,6 +1362,11 @@ def menus_and_panel_rows():
                            ("LMREFINE_PT_refine", "LMREFINE_PT_refine_bake", "LMREFINE_PT_refine_result")}
     bpy.context.scene.lmrefine.result.moved = 0
     states["nothing_moved"] = {"LMREFINE_PT_refine_result": draw(panels.LMREFINE_PT_refine_result)}
+    settings(layouts='PER_EFFECT')
+    per_effect_outcome = refine()
+    states["per_effect"] = {name: draw(getattr(panels, name)) for name in
+                            ("LMREFINE_PT_refine_stages", "LMREFINE_PT_refine_result")}
+    settings(layouts='ONE')
     used = {entry[2] for state in states.values() for log in state.values() for entry in log if len(entry) > 2}
     menus = {}
     for menu in operators.MENUS:
@@ -1385,6 +1390,9 @@ def menus_and_panel_rows():
         "icons_used": sorted(used - {'NONE'}), "icons_missing": sorted(used - icons - {'NONE'}),
         "menus": menus, "menus_after_unregister": menus_after_unregister,
         "show_operator": hasattr(bpy.ops.object, "lmrefine_show_preview"),
+        "per_effect_outcome": per_effect_outcome,
+        "per_effect_props": [entry[1] for entry in states["per_effect"]["LMREFINE_PT_refine_stages"]
+                             if entry[0] == "prop"],
     }
 
 
@@ -1487,8 +1495,10 @@ def per_effect_split_matches_the_rule():
     scenes.select_only(floor)
     options = pipeline.settings_snapshot(bpy.context.scene.lmrefine)
     journal = Journal()
+    progress = []
     outcome = pipeline.run_blocking(pipeline.run(bpy.context, pipeline.validate(bpy.context, [floor], options),
-                                                 options, journal))
+                                                 options, journal),
+                                    progress=lambda fraction, label: progress.append((fraction, label)))
     journal.commit()
     from lmrefine.per_effect import split_fractions, split_resolutions
     effects = outcome.effects["Floor"]
@@ -1497,6 +1507,12 @@ def per_effect_split_matches_the_rule():
             "expected": split_resolutions(RESOLUTION, split_fractions("energy", energies)),
             "energies": energies, "summary_effects": outcome.summary()["effects"],
             "report_effects": sorted(outcome.reports["Floor"]["effects"]),
+            "fractions": [fraction for fraction, _ in progress],
+            "at": {label: [min(f for f, l in progress if l.startswith(label)),
+                           max(f for f, l in progress if l.startswith(label))]
+                   for label in ("First bake (effects", "First bake (direct", "First bake (indirect",
+                                 "Refining Floor (direct)", "Refining Floor (indirect)", "Second bake (direct",
+                                 "Second bake (indirect")},
             "image_sizes": {name: list(bpy.data.images[effects[name]["image"]].size) for name in EFFECTS}}
 
 
@@ -1509,6 +1525,33 @@ def per_effect_is_one_undo_step():
              "layers": [layer.name for layer in bpy.data.objects["Floor"].data.uv_layers]}
     facts.update(_undo_once(before))
     return facts
+
+
+@check("refine", "bake")
+def per_effect_cancel_rolls_back():
+    """Cancelled in the second bake of the last effect (every per-effect map written), with Cycles: the
+    scene is as before."""
+    fresh_shadow_scene(first_lightmap='CYCLES', backend='CYCLES', bake_passes={'DIRECT'}, layouts='PER_EFFECT')
+    mesh = bpy.data.objects["Floor"].data
+    options = pipeline.settings_snapshot(bpy.context.scene.lmrefine)
+    before = fingerprint()
+    targets = pipeline.validate(bpy.context, [bpy.data.objects["Floor"]], options)
+    journal = Journal()
+    seen = {"layers": None}
+
+    def stop():
+        if "Lightmap_refined_indirect" in mesh.uv_layers:
+            seen["layers"] = [layer.name for layer in mesh.uv_layers]
+            return True
+        return False
+
+    try:
+        pipeline.run_blocking(pipeline.run(bpy.context, targets, options, journal), should_stop=stop)
+        raised = None
+    except Exception as error:
+        raised = type(error).__name__
+        journal.rollback()
+    return {"raised": raised, "layers_when_cancelled": seen["layers"], "changed": changed(before, fingerprint())}
 
 
 @check("refine", "bake")
