@@ -758,6 +758,17 @@ def rerun_failure_restores_previous_run():
     }
 
 
+def _run_until(targets, options, journal, stop):
+    """Run the job until `stop()` says so (as Esc does); the exception's name (None if it ran to the
+    end), the journal rolled back after a failure."""
+    try:
+        pipeline.run_blocking(pipeline.run(bpy.context, targets, options, journal), should_stop=stop)
+    except Exception as error:
+        journal.rollback()
+        return type(error).__name__
+    return None
+
+
 @check("refine")
 def rollback_on_failure():
     """A Cycles second bake that fails after the refined layer was written leaves nothing behind."""
@@ -779,13 +790,7 @@ def rollback_on_cancel():
     targets = pipeline.validate(bpy.context, [bpy.data.objects["Floor"]], options)
     journal = Journal()
     stop = lambda: "Lightmap_refined" in mesh.uv_layers  # noqa: E731
-    job = pipeline.run(bpy.context, targets, options, journal)
-    try:
-        pipeline.run_blocking(job, should_stop=stop)
-        raised = None
-    except Exception as error:
-        raised = type(error).__name__
-        journal.rollback()
+    raised = _run_until(targets, options, journal, stop)
     return {"raised": raised, "changed": changed(before, fingerprint())}
 
 
@@ -1235,12 +1240,7 @@ def tessellation_rolls_back_exactly():
         seen.setdefault("vertices_when_stopped", len(floor.data.vertices))
         return True
 
-    try:
-        pipeline.run_blocking(pipeline.run(bpy.context, targets, options, journal), should_stop=stop)
-        raised = None
-    except Exception as error:
-        raised = type(error).__name__
-        journal.rollback()
+    raised = _run_until(targets, options, journal, stop)
     mesh = bpy.data.objects["Floor"].data
     return {"raised": raised, "vertices_when_stopped": seen.get("vertices_when_stopped"),
             "vertices": len(mesh.vertices), "vertices_before": len(vertices_before),
@@ -1545,12 +1545,7 @@ def per_effect_cancel_rolls_back():
             return True
         return False
 
-    try:
-        pipeline.run_blocking(pipeline.run(bpy.context, targets, options, journal), should_stop=stop)
-        raised = None
-    except Exception as error:
-        raised = type(error).__name__
-        journal.rollback()
+    raised = _run_until(targets, options, journal, stop)
     return {"raised": raised, "layers_when_cancelled": seen["layers"], "changed": changed(before, fingerprint())}
 
 
