@@ -983,3 +983,15 @@ def test_per_effect_panel_rows(facts):
     effects = [label for label in labels if label.startswith(("Direct: ", "Indirect: "))]
     assert len(effects) == 2
     assert all(re.fullmatch(r"(Direct|Indirect): \d+px, edges \d+\.\d\dx", label) for label in effects)
+
+
+def test_per_effect_maps_add_up_to_the_combined_light(facts):
+    """Each effect's image through its own refined map, added, is the combined light of a bake at R with
+    the source map, within the bakes' noise (32 samples), at the floor's triangle centroids."""
+    value = fact(facts, "per_effect_adds_up_to_the_combined_light")
+    assert value["outcome"] == "FINISHED", value["message"]
+    assert value["points"] > 1000
+    for key in ("after", "before"):
+        assert abs(value[key]["mean"]) < 0.02, value
+        assert value[key]["rmse"] < 0.06, value
+    assert value["wrong_map"]["rmse"] > 0.2, value  # the lookup sees a wrong wiring
