@@ -995,3 +995,10 @@ def test_per_effect_maps_add_up_to_the_combined_light(facts):
         assert abs(value[key]["mean"]) < 0.02, value
         assert value[key]["rmse"] < 0.06, value
     assert value["wrong_map"]["rmse"] > 0.2, value  # the lookup sees a wrong wiring
+
+
+def test_per_effect_map_that_did_not_move_warns(facts):
+    value = fact(facts, "per_effect_nothing_moved_warns")
+    assert value["moved"] == 0
+    for effect in EFFECTS:
+        assert any(w.startswith(f"'Floor' ({effect}): nothing moved") for w in value["warnings"]), value

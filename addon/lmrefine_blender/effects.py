@@ -107,6 +107,9 @@ def run(context, targets, options, journal, image_dir=None):
             done += 1
             check, _ = pipeline._check_refined(lmrefine, label, result.uvs, bridge.Layout(group.uvs, group.triangles),
                                                group.uvs, side, pad)
+            if not result.report["moved"]:  # say why, as a One run does
+                why = next((n for n in result.report["notes"] if n.startswith("nothing moved")), "nothing moved")
+                outcome.warnings.append(f"{label}: {why}")
             own = group.split(result.uvs)
             for target in group.targets:
                 pipeline._write_refined_layer(_effect_target(target, name), own[target.obj.name], journal)

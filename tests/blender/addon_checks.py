@@ -1589,6 +1589,20 @@ def per_effect_adds_up_to_the_combined_light():
 
 
 @check("refine", "bake")
+def per_effect_nothing_moved_warns():
+    """Strength 0: neither effect's map moves, and each says so."""
+    fresh_shadow_scene(first_lightmap='EMBREE', backend='EMBREE', bake_passes={'DIRECT'}, layouts='PER_EFFECT',
+                       strength=0.0)
+    floor = bpy.data.objects["Floor"]
+    options = pipeline.settings_snapshot(bpy.context.scene.lmrefine)
+    journal = Journal()
+    outcome = pipeline.run_blocking(pipeline.run(bpy.context, pipeline.validate(bpy.context, [floor], options),
+                                                 options, journal))
+    journal.commit()
+    return {"warnings": outcome.warnings, "moved": outcome.summary()["moved"]}
+
+
+@check("refine", "bake")
 def per_effect_shared_atlas():
     """Per Effect on the atlas scene: one image per effect per atlas group, every member's preview adding
     its group's effect images through its own per-effect UV maps."""
