@@ -418,6 +418,8 @@ def test_a_texture_map_as_source_is_named_with_the_fix(facts):
     assert len(texture) == 1 and "'Blocker': UV map 'Tex'" in texture[0]
     assert "overlapping" in texture[0] and "UV > Lightmap Pack) and pick it as Source" in texture[0]
     assert value["panel_warnings"] == len(value["warnings"]) >= 1
+    texture = [w for w in value["per_effect_warnings"] if "looks like a texture map" in w]
+    assert [w.split(":")[0] for w in texture] == ["'Blocker' (direct)", "'Blocker' (indirect)"]
 
 
 def test_progress_moves_per_map_and_per_stage(facts):

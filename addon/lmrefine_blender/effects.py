@@ -105,8 +105,12 @@ def run(context, targets, options, journal, image_dir=None):
             except (ValueError, TypeError, MemoryError) as error:
                 raise UserError(f"{label} could not be refined at {side} x {side} texels: {error}") from error
             done += 1
-            check, _ = pipeline._check_refined(lmrefine, label, result.uvs, bridge.Layout(group.uvs, group.triangles),
-                                               group.uvs, side, pad)
+            check, source_check = pipeline._check_refined(lmrefine, label, result.uvs,
+                                                          bridge.Layout(group.uvs, group.triangles), group.uvs, side,
+                                                          pad)
+            warning = pipeline.source_warning(label, group, source_check, pad, side)
+            if warning is not None:
+                outcome.warnings.append(warning)
             if not result.report["moved"]:  # say why, as a One run does
                 why = next((n for n in result.report["notes"] if n.startswith("nothing moved")), "nothing moved")
                 outcome.warnings.append(f"{label}: {why}")
@@ -114,7 +118,7 @@ def run(context, targets, options, journal, image_dir=None):
             for target in group.targets:
                 pipeline._write_refined_layer(_effect_target(target, name), own[target.obj.name], journal)
             report = {key: value for key, value in result.report.items() if key != "triangle_density"}
-            report.update(check_layout=dict(check), resolution=side, fraction=fractions[name],
+            report.update(check_layout=dict(check), source_check_layout=dict(source_check), resolution=side, fraction=fractions[name],
                           energy=energies[name], uv_maps=[_effect_target(t, name).refined for t in group.targets])
             reports[group.name][name] = pipeline._plain(report)
             refined_uvs[name][group.name] = result.uvs

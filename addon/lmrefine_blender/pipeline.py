@@ -297,7 +297,6 @@ def run(context, targets, options, journal, image_dir=None):
     if options.get("per_effect"):  # Layouts: Per Effect, its own job
         return (yield from effects.run(context, targets, options, journal, image_dir))
     lmrefine = import_core()
-    from lmrefine.layout_input import describe_problems
     outcome = new_outcome(targets, options)
     resolution = options["resolution"]
     padding = options["padding"]
@@ -378,19 +377,9 @@ def run(context, targets, options, journal, image_dir=None):
         done += 1
         joined = bridge.Layout(group.uvs, group.triangles)
         check, source_check = _check_refined(lmrefine, label, result.uvs, joined, group.uvs, resolution, padding)
-        source = "', '".join(sorted({target.source for target in group.targets}))
-        if not source_check["valid"] and (source_check["overlapping"] or source_check["min_gutter_texels"] <= 0.0):
-            # Charts that overlap or touch share texels: the layout of a texture, not of a lightmap.
-            outcome.warnings.append(
-                f"{label}: UV map '{source}' looks like a texture map, not a lightmap layout "
-                f"({describe_problems(source_check, padding)}): faces share texels, so light bleeds between "
-                "them whatever the refinement does; add a UV map for the lightmap (Object Data > UV Maps > +, "
-                "then UV > Lightmap Pack) and pick it as Source")
-        elif not source_check["valid"]:
-            outcome.warnings.append(
-                f"{label}: UV map '{source}' was already invalid at {resolution} texels "
-                f"({describe_problems(source_check, padding)}); the refined map is no worse, but lightmap "
-                "bleeding may show: repack the source map (UV > Lightmap Pack)")
+        warning = source_warning(label, group, source_check, padding, resolution)
+        if warning is not None:
+            outcome.warnings.append(warning)
         black = f"{label}: the first lightmap is black"  # already said, with its advice
         if not result.report["moved"] and not any(w.startswith(black) for w in outcome.warnings):
             why = next((n for n in result.report["notes"] if n.startswith("nothing moved")), "nothing moved")
@@ -464,6 +453,24 @@ def run(context, targets, options, journal, image_dir=None):
             outcome.image_files[image_name] = _save_image(lmrefine, image, image_dir,
                                                           "float" if options["exr_float32"] else "half")
     return outcome
+
+
+def source_warning(label, group, source_check, padding, resolution):
+    """What the user should know about a group's source map that fails check_layout at `resolution`
+    (`source_check`), or None when it passes."""
+    from lmrefine.layout_input import describe_problems
+    if source_check["valid"]:
+        return None
+    source = "', '".join(sorted({target.source for target in group.targets}))
+    if source_check["overlapping"] or source_check["min_gutter_texels"] <= 0.0:
+        # Charts that overlap or touch share texels: the layout of a texture, not of a lightmap.
+        return (f"{label}: UV map '{source}' looks like a texture map, not a lightmap layout "
+                f"({describe_problems(source_check, padding)}): faces share texels, so light bleeds between "
+                "them whatever the refinement does; add a UV map for the lightmap (Object Data > UV Maps > +, "
+                "then UV > Lightmap Pack) and pick it as Source")
+    return (f"{label}: UV map '{source}' was already invalid at {resolution} texels "
+            f"({describe_problems(source_check, padding)}); the refined map is no worse, but lightmap "
+            "bleeding may show: repack the source map (UV > Lightmap Pack)")
 
 
 def new_outcome(targets, options):

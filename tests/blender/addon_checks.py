@@ -897,7 +897,10 @@ def texture_map_as_source_warns():
     options = pipeline.settings_snapshot(bpy.context.scene.lmrefine)
     targets = pipeline.validate(bpy.context, [box], options)
     run = pipeline.run_blocking(pipeline.run(bpy.context, targets, options, Journal()))
-    return {"outcome": outcome, "message": message, "warnings": run.warnings, "panel_warnings": result.warnings}
+    options["per_effect"] = "sqrt"  # Layouts: Per Effect says it per effect
+    per_effect = pipeline.run_blocking(pipeline.run(bpy.context, targets, options, Journal()))
+    return {"outcome": outcome, "message": message, "warnings": run.warnings, "panel_warnings": result.warnings,
+            "per_effect_warnings": per_effect.warnings}
 
 
 # ---------------------------------------------------------------- preview
