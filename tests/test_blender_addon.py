@@ -558,6 +558,11 @@ def test_threaded_driver_runs_and_cancels(facts):
     # job stopped before its next step (Cancelled); the scene is untouched either way.
     assert cancel["kind"] == "error" and cancel["value"] in ("Cancelled", "CancelledError")
     assert cancel["changed"] == [] and not cancel["has_layer"]
+    # Layouts: Per Effect, Esc while the indirect map is refined: the direct map, written by then, goes too.
+    per_effect = value["per_effect_cancel"]
+    assert value["per_effect_cancel_layers_at_cancel"] == ["UVMap", "Lightmap", "Lightmap_refined_direct"]
+    assert per_effect["kind"] == "error" and per_effect["value"] in ("Cancelled", "CancelledError")
+    assert per_effect["changed"] == [] and per_effect["layers"] == ["UVMap", "Lightmap"]
 
 
 # --------------------------------------------------- tessellation and stages

@@ -800,8 +800,14 @@ def threaded_driver_runs_and_cancels():
     import time as clock
 
     facts = {}
-    for mode in ("run", "cancel"):
-        fresh_shadow_scene(first_lightmap='CYCLES', backend='CYCLES', bake_passes={'DIRECT'})
+    # per_effect_cancel: Esc while the indirect map is refined, the direct map already written.
+    cancel_at = {"cancel": "Refining", "per_effect_cancel": "Refining Floor (indirect)"}
+    for mode in ("run", "cancel", "per_effect_cancel"):
+        if mode == "per_effect_cancel":
+            fresh_shadow_scene(first_lightmap='EMBREE', backend='EMBREE', bake_passes={'DIRECT'},
+                               layouts='PER_EFFECT')
+        else:
+            fresh_shadow_scene(first_lightmap='CYCLES', backend='CYCLES', bake_passes={'DIRECT'})
         floor = bpy.data.objects["Floor"]
         options = pipeline.settings_snapshot(bpy.context.scene.lmrefine)
         before = fingerprint()
@@ -814,7 +820,8 @@ def threaded_driver_runs_and_cancels():
             if state is not None:
                 break
             labels.append(driver.label)
-            if mode == "cancel" and driver.label.startswith("Refining"):
+            if mode in cancel_at and driver.label.startswith(cancel_at[mode]):
+                facts.setdefault(f"{mode}_layers_at_cancel", [layer.name for layer in floor.data.uv_layers])
                 driver.cancel()  # what Esc does, while the native refinement runs on the worker thread
             clock.sleep(0.01)
         kind, value = state
@@ -822,6 +829,7 @@ def threaded_driver_runs_and_cancels():
             journal.rollback()
         facts[mode] = {"kind": kind, "value": type(value).__name__, "labels": sorted(set(labels)),
                        "has_layer": "Lightmap_refined" in floor.data.uv_layers,
+                       "layers": [layer.name for layer in floor.data.uv_layers],
                        "changed": changed(before, fingerprint())}
     return facts
 
