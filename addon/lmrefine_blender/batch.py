@@ -29,7 +29,8 @@ from lmrefine_blender import pipeline  # noqa: E402
 from lmrefine_blender.journal import Journal  # noqa: E402
 
 PASSES = ("direct", "indirect", "combined", "ao")
-FLAG_OF = {"tessellate_budget": "tessellate", "layouts": "per_effect", "per_effect_rule": "per_effect"}  # settings whose flag has another name
+# Settings whose flag has another name.
+FLAG_OF = {"tessellate_budget": "tessellate", "layouts": "per_effect", "per_effect_rule": "per_effect"}
 
 
 def _csv(text):

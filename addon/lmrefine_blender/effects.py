@@ -70,7 +70,8 @@ def run(context, targets, options, journal, image_dir=None):
 
     # 1. The split: both effects at R on the source layout.
     clock = time.perf_counter()
-    baked = yield from bake(options["first_lightmap"], source_of, EFFECTS, resolution, "First bake (effects at full resolution)")
+    baked = yield from bake(options["first_lightmap"], source_of, EFFECTS, resolution,
+                            "First bake (effects at full resolution)")
     done += len(groups)
     at_full = {name: pipeline._group_maps(groups, baked[name], resolution) for name in EFFECTS}
     energies = {name: sum(gradient_energy(image) for image in at_full[name].values()) for name in EFFECTS}
@@ -86,7 +87,8 @@ def run(context, targets, options, journal, image_dir=None):
         if side == resolution:
             firsts[name] = at_full[name]
         else:
-            baked = yield from bake(options["first_lightmap"], source_of, (name,), side, f"First bake ({name} at {side})")
+            baked = yield from bake(options["first_lightmap"], source_of, (name,), side,
+                                    f"First bake ({name} at {side})")
             firsts[name] = pipeline._group_maps(groups, baked[name], side)
         done += len(groups)
         refined_uvs[name] = {}
@@ -118,8 +120,9 @@ def run(context, targets, options, journal, image_dir=None):
             for target in group.targets:
                 pipeline._write_refined_layer(_effect_target(target, name), own[target.obj.name], journal)
             report = {key: value for key, value in result.report.items() if key != "triangle_density"}
-            report.update(check_layout=dict(check), source_check_layout=dict(source_check), resolution=side, fraction=fractions[name],
-                          energy=energies[name], uv_maps=[_effect_target(t, name).refined for t in group.targets])
+            report.update(check_layout=dict(check), source_check_layout=dict(source_check), resolution=side,
+                          fraction=fractions[name], energy=energies[name],
+                          uv_maps=[_effect_target(t, name).refined for t in group.targets])
             reports[group.name][name] = pipeline._plain(report)
             refined_uvs[name][group.name] = result.uvs
     outcome.timings["refine"] = time.perf_counter() - clock
