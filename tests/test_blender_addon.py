@@ -810,6 +810,23 @@ def test_batch_stages_and_tessellate(facts, work_dir):
     assert process.returncode == 1 and "contradict" in process.stderr
 
 
+def test_batch_rechart_flag(facts, work_dir):
+    """The coarse floor's Lightmap map has one chart per quad: re-charted by default, not with --no-rechart."""
+    blend = fact(facts, "save_coarse_scene_for_batch")["path"]
+    used = {}
+    for flag in ("--rechart", "--no-rechart"):
+        out = work_dir / f"batch{flag}"
+        process = run_batch(blend, "--objects", "Floor", "--resolution", "64", "--samples", "4",
+                            "--bake-passes", "direct", "--no-preview", flag, "--out", str(out))
+        assert process.returncode == 0, process.stderr[-3000:]
+        report = json.loads((out / "report.json").read_text())
+        floor = report["objects"]["Floor"]["report"]
+        assert floor["check_layout"]["valid"] is True
+        used[flag] = floor["rechart"]["used"]
+        assert floor["rechart"]["room"]["no_room"] is True
+    assert used == {"--rechart": True, "--no-rechart": False}
+
+
 # -------------------------------------------------------------- packaging
 
 def test_zip_installs_enables_and_carries_the_core(tmp_path):
@@ -1009,3 +1026,40 @@ def test_per_effect_map_that_did_not_move_warns(facts):
     assert value["moved"] == 0
     for effect in EFFECTS:
         assert any(w.startswith(f"'Floor' ({effect}): nothing moved") for w in value["warnings"]), value
+
+
+def test_addon_recharts_a_lightmap_pack_source(facts):
+    value = fact(facts, "rechart_lightmap_pack_source")
+    on, off = value["rechart_True"], value["rechart_False"]
+    for run in (on, off):
+        assert run["outcome"] == "FINISHED", run["message"]
+        assert run["valid"] and run["min_gutter_texels"] >= 2.0 - 1e-3
+        assert run["source_identical"] and run["geometry_identical"]
+        assert run["image"] is not None and run["image"]["std"] > 0
+    # 64 quads, one chart each: the flat floor re-charts to one chart.
+    assert on["source_charts"] == 64
+    assert on["panel_recharted"] == 1 and on["refined_charts"] == 1
+    assert "re-charted from the mesh: Floor" in on["result_message"]
+    assert off["panel_recharted"] == 0 and off["refined_charts"] == 64
+    assert "re-charted" not in off["result_message"]
+
+
+def test_addon_recharts_a_shared_lightmap_pack_atlas(facts):
+    value = fact(facts, "rechart_shared_lightmap_pack_atlas")
+    assert value["outcome"] == "FINISHED", value["message"]
+    assert value["images"] == 1  # one atlas, one image per pass
+    assert value["panel_recharted"] == 2  # both objects, counted as objects
+    assert "re-charted from the mesh:" in value["result_message"]
+    # 64 floor quads + 6 box faces, one chart each, became a few charts (the floor one, the box's sides).
+    assert value["refined_charts"] < 20
+    assert value["valid"] and value["shared_texels"] == 0 and value["source_identical"]
+
+
+def test_addon_says_tessellate_when_large_triangles_hold_the_light_changes(facts):
+    value = fact(facts, "coarse_floor_suggests_tessellation")
+    off, on = value["tessellate_False"], value["tessellate_True"]
+    assert off["error"] is None and on["error"] is None
+    hint = [w for w in off["warnings"] if "turn on Tessellate" in w]
+    assert len(hint) == 1 and hint[0].startswith("'Floor': light changes cross ")
+    assert off["widening"] < 1.25
+    assert not any("turn on Tessellate" in w for w in on["warnings"])

@@ -2,6 +2,7 @@
 ground truth, metrics, report), and its CLI."""
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -194,9 +195,83 @@ def test_tessellation_lets_a_coarse_floor_gather_texels_at_the_shadow_edge(tmp_p
     assert split["transition_widening"] > plain["transition_widening"] + 0.2
     # Each run compares with its own uniform baseline at the same points: the ratio rose (1.42x -> 1.99x).
     assert split["equal_error_resolution_ratio"] > plain["equal_error_resolution_ratio"] + 0.3
+    # The split run measures the plain refinement itself at its own points (the errors move by ~20% with the
+    # points here, the ratios much less): close to the plain run's ratio.
+    assert t["plain_equal_error_resolution_ratio"] == pytest.approx(plain["equal_error_resolution_ratio"], abs=0.15)
+    assert t["gain_over_plain"] == pytest.approx(split["equal_error_resolution_ratio"]
+                                                 / t["plain_equal_error_resolution_ratio"])
+    assert t["gain_over_plain"] > 1.2
     layout = np.load(tmp_path / "t" / "refined_layout.npz")
     assert lmrefine.check_layout(layout["uvs"], layout["triangles"], 48)["valid"]
-    assert "Tessellated along transitions" in (tmp_path / "t" / "report.md").read_text()
+    text = (tmp_path / "t" / "report.md").read_text()
+    assert "Tessellated along transitions" in text and "ratio over it" in text
+
+
+def test_the_tessellation_budget_holds_per_object_and_points_map_to_their_input_triangle():
+    """evaluate's tessellation gives each object its own budget (as the
+    add-on does), keeps the scene's vertices and maps every output corner
+    back into its input triangle."""
+    from lmrefine.evaluation import _tessellated
+
+    scene = tiny_scene(6)
+    # Apart: the east half gets its own vertices (tiny_scene's halves share the middle column).
+    middle = np.unique(scene.triangles[scene.object_id == 1])
+    middle = middle[np.isin(middle, scene.triangles[scene.object_id == 0])]
+    copies = {int(v): 49 + i for i, v in enumerate(middle)}
+    east = scene.object_id == 1
+    triangles = scene.triangles.copy()
+    triangles[east] = np.vectorize(lambda v: copies.get(int(v), v))(triangles[east])
+    scene = replace(scene, positions=np.concatenate([scene.positions, scene.positions[middle]]), triangles=triangles)
+    # A light step across both halves (u = 0.3 and u = 0.7 in the atlas): both objects want splits.
+    u = (np.arange(64) + 0.5) / 64
+    baseline = np.repeat(np.where((u < 0.3) | (u > 0.7), 1.0, 0.1)[None, :, None], 64, axis=0).repeat(3, axis=2)
+    split, report, (parent, parent_bary) = _tessellated(scene, "smart", baseline.astype(np.float32), 0.25)
+    assert [o["objects"] for o in report["objects"]] == [["West"], ["East"]]
+    for entry, index in zip(report["objects"], (0, 1)):
+        own = len(np.unique(scene.triangles[scene.object_id == index]))
+        assert entry["vertices_before"] == own and 0 < entry["vertices_added"] <= int(0.25 * own)
+    assert report["vertices_before"] == len(scene.positions) == 56
+    assert report["vertices_after"] == len(split.positions) == 56 + report["vertices_added"]
+    np.testing.assert_array_equal(split.positions[:56], scene.positions)
+    # Every output corner is its input triangle's point at the carried barycentric coordinates.
+    expected = np.einsum("ck,ckd->cd", parent_bary, scene.positions[scene.triangles[np.repeat(parent, 3)]])
+    np.testing.assert_allclose(split.positions[split.triangles.reshape(-1)], expected, atol=1e-5)
+    np.testing.assert_array_equal(split.object_id, scene.object_id[parent])
+
+
+def test_the_summary_gives_the_tessellation_gain_over_plain(tmp_path):
+    tiny_scene(3).save(tmp_path / "tiny.npz")
+    out = tmp_path / "out"
+    assert cli.main(["evaluate", str(tmp_path / "tiny.npz"), "--resolution", "48", "--points", "1000", "--samples",
+                     "4", "--truth-samples", "16", "--multipliers", "1,2", "--tessellate", "2", "--view-width", "0",
+                     "--out", str(out)]) == 0
+    scene = json.loads((out / "report.json").read_text())["scenes"][0]
+    line = next(row for row in (out / "report.md").read_text().splitlines() if "over plain" in row)
+    assert f"+{scene['tessellation']['vertices_added']} vertices" in line
+    assert f"**{scene['tessellation']['gain_over_plain']:.2f}x** over plain" in line
+
+
+def test_objects_that_share_vertices_are_split_together():
+    from lmrefine.evaluation import _connected_objects
+
+    triangles = np.array([(0, 1, 2), (2, 3, 4), (5, 6, 7), (7, 8, 9), (10, 11, 12)])
+    assert _connected_objects(triangles, np.array([0, 3, 1, 2, 4])) == [[0, 3], [1, 2], [4]]
+    assert _connected_objects(triangles, np.array([2, 2, 0, 1, 2])) == [[0, 1], [2]]
+
+
+def test_tessellation_without_splits_measures_the_plain_refinement_itself(tmp_path):
+    """Budget 0 splits nothing: the plain refinement measured beside the
+    tessellated one is the same refinement at the same points."""
+    from lmrefine.evaluation import EvaluationOptions, evaluate_sample
+
+    report = evaluate_sample(tiny_scene(3), EvaluationOptions(resolution=48, points=1000, samples=4, truth_samples=16,
+                                                              multipliers=(1.0, 2.0), tessellate=0.0, view_width=0))
+    t = report["tessellation"]
+    assert t["vertices_added"] == 0
+    assert t["plain_rmse"] == pytest.approx(report["rmse_refined"], rel=1e-9)
+    assert t["plain_transition_rmse"] == pytest.approx(report["transition_rmse_refined"], rel=1e-9)
+    assert t["gain_over_plain"] == pytest.approx(1.0)
+    assert t["plain_refine"]["backoff"] == report["refine"]["backoff"]
 
 
 def test_rechart_and_tessellation_combine(tmp_path):
@@ -235,3 +310,26 @@ def test_multi_stage_refinement_reports_every_stage_and_stops_when_the_layout_se
     assert "stage 1 kept" in still["stages"]["stopped"]
     with pytest.raises(ValueError, match="stages must be an integer from 1 to 16"):
         evaluate_sample(scene, EvaluationOptions(**common, stages=0))
+
+
+def test_evaluate_recharts_a_source_with_no_room_and_measures_against_it(tmp_path):
+    """A Lightmap Pack-like source (a chart per quad): refine_uvs re-charts the floor (the route the add-on
+    takes); the baseline and the sweep stay the source layout baked plain; --no-rechart refines the source."""
+    from layouts import lightmap_pack
+    from lmrefine.evaluation import EvaluationOptions, evaluate_sample
+
+    scene = tiny_scene(6)
+    per_quad, _ = lightmap_pack(charts_across=6, margin_texels=3, resolution=48)
+    scene.uvs["lightmap"] = per_quad.astype(np.float32)
+    common = dict(resolution=48, points=1000, samples=4, truth_samples=16, multipliers=(1.0, 2.0),
+                  variant="lightmap", view_width=0)
+    report = evaluate_sample(scene, EvaluationOptions(**common), out_dir=str(tmp_path / "on"))
+    rechart = report["refine"]["rechart"]
+    assert rechart["used"] and rechart["room"]["no_room"] and rechart["charts"] == 1  # the flat floor
+    assert report["layout"] == {"source": "scene", "variant": "lightmap"}
+    layout = np.load(tmp_path / "on" / "refined_layout.npz")
+    np.testing.assert_array_equal(layout["original_uvs"], per_quad)  # the baseline's layout: the source
+    assert lmrefine.check_layout(layout["uvs"], layout["triangles"], 48)["valid"]
+    assert "re-charted from the mesh** by refine_uvs" in (tmp_path / "on" / "report.md").read_text()
+    off = evaluate_sample(scene, EvaluationOptions(**common, auto_rechart=False))
+    assert off["refine"]["rechart"] is None

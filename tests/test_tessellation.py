@@ -4,7 +4,7 @@ where it splits, and that the surface and every UV map keep their mapping."""
 import numpy as np
 import pytest
 
-from lmrefine.tessellation import peak_strength, tessellate
+from lmrefine.tessellation import coarse_transitions, peak_strength, tessellate, transition_strength_of
 
 R = 64
 
@@ -199,3 +199,29 @@ def test_a_triangle_that_repeats_a_vertex_is_left_alone_with_its_edges():
     assert result.report["vertices_added"] > 0  # the rest is split
     # Its edge (a, b) is never split (the triangle would then lose b).
     assert {(a, b), (b, a)}.isdisjoint((p, q) for p, q, _ in result.splits)
+
+
+def _step_lightmap(position=0.4):
+    """A lightmap with a hard shadow edge along u = position (dark left, lit right)."""
+    lightmap = np.ones((R, R, 3), np.float32)
+    lightmap[:, :int(position * R)] = 0.05
+    return lightmap
+
+
+def test_coarse_transitions_counts_what_tessellation_would_split():
+    lightmap = _step_lightmap()
+    # A 2 x 2 grid at 64^2: 8 triangles of ~260 texels; the edge at u = 0.4 crosses the left column's 4
+    # (triangles 0, 1, 4, 5).
+    positions, triangles, uvs = bent_grid(n=2)
+    corner_triangles = np.arange(3 * len(triangles)).reshape(-1, 3)
+    coarse = coarse_transitions(lightmap, uvs, corner_triangles)
+    assert coarse["triangles"] == 4 and coarse["texels"] > 4 * 200
+    strength = transition_strength_of(lightmap, uvs, corner_triangles)
+    first_round = tessellate(positions, triangles, uvs, strength, budget=16.0)
+    assert {0, 1, 4, 5} <= set(first_round.parent[len(triangles):])  # the left column's four are split
+    # The same light on a fine grid (triangles of ~2 texels): nothing is coarse.
+    positions, triangles, uvs = bent_grid(n=40)
+    assert coarse_transitions(lightmap, uvs, np.arange(3 * len(triangles)).reshape(-1, 3))["triangles"] == 0
+    # No light change: nothing either.
+    assert coarse_transitions(np.ones((R, R, 3), np.float32), uvs,
+                              np.arange(3 * len(triangles)).reshape(-1, 3))["triangles"] == 0

@@ -32,7 +32,7 @@ class AtlasGroup:
         areas = [uv_area(target.layout.uvs, target.layout.triangles) for target in self.targets]
         main = self.targets[int(np.argmax(areas))].obj.name  # argmax: the first of equal areas
         self.name = main if len(self.targets) == 1 else main + ATLAS_SUFFIX
-        self.uvs = self.triangles = None
+        self.uvs = self.triangles = self.positions = None
         self.slices = []  # per target: its rows of the joined UVs
         self.triangle_slices = []  # per target: its rows of the joined triangles
 
@@ -51,10 +51,14 @@ class AtlasGroup:
         return f"atlas '{self.name}' ({', '.join(self.objects)})"
 
     def join(self):
-        """Concatenate the targets' layouts (triangle indices offset); returns (uvs, triangles)."""
+        """Concatenate the targets' layouts (triangle indices offset); returns (uvs, triangles).
+        `positions` joins the loops' world positions the same way (refine_uvs' re-chart route), or is
+        None when a layout has none."""
         layouts = [target.layout for target in self.targets]
         self.uvs, self.triangles, self.slices, self.triangle_slices = join_layouts(
             [(layout.uvs, layout.triangles) for layout in layouts])
+        positions = [getattr(layout, "positions", None) for layout in layouts]
+        self.positions = None if any(p is None for p in positions) else np.concatenate(positions)
         return self.uvs, self.triangles
 
     def split(self, uvs):

@@ -89,6 +89,9 @@ def build_parser():
                         metavar="RULE", help="Layouts: Per Effect: direct and indirect light each get their own "
                         "refined UV map and image, RULE (sqrt, energy, equal; default sqrt) splitting the "
                         "resolution^2 texels between them")
+    parser.add_argument("--rechart", action=argparse.BooleanOptionalAction, default=None,
+                        help="re-chart an object whose source map gives the refiner no room (one chart per face, "
+                             "as Lightmap Pack makes) from its mesh; --no-rechart refines the source map as it is")
     parser.add_argument("--backend", choices=("embree", "cycles"), help="baker of the final lightmaps")
     parser.add_argument("--bake-passes", type=_passes, help=f"comma-separated, of: {', '.join(PASSES)}")
     parser.add_argument("--samples", type=int, help="samples per texel")
@@ -112,6 +115,7 @@ def apply_flags(settings, args):
         "delta": args.delta, "passes": args.passes, "directional": args.directional, "samples": args.samples,
         "preview": args.preview, "exr_float32": args.float32, "stages": args.stages,
         "shared_atlas": args.shared_atlas,
+        "rechart": args.rechart,
     }
     if args.per_effect is not None:
         mapping.update(layouts='PER_EFFECT', per_effect_rule=args.per_effect.upper())

@@ -31,6 +31,7 @@ class Layout:
 
     uvs: np.ndarray  # (L, 2) float32, per loop
     triangles: np.ndarray  # (T, 3) int32, loop indices
+    positions: np.ndarray = None  # (L, 3) float64, per loop, world space: the mesh for refine_uvs' re-chart route
 
 
 @dataclass
@@ -63,8 +64,9 @@ def default_source_layer(mesh):
     return names[0] if names else None
 
 
-def read_layout(mesh, uv_name):
-    """The loop UVs of `uv_name` and the loop triangles of an (original) mesh, welded.
+def read_layout(mesh, uv_name, matrix_world=None):
+    """The loop UVs of `uv_name` and the loop triangles of an (original) mesh, welded,
+    and each loop's position (times `matrix_world`, when given).
 
     Blender stores one UV per face corner, and corners of one vertex that a
     user sees as connected often differ in the last bits (even in Blender's
@@ -82,7 +84,13 @@ def read_layout(mesh, uv_name):
     uvs = read_uv_layer(mesh, uv_name)
     loop_vertex = np.empty(len(mesh.loops), dtype=np.int32)
     mesh.loops.foreach_get("vertex_index", loop_vertex)
-    return Layout(weld_uvs(uvs, loop_vertex), triangles.reshape(-1, 3))
+    vertices = np.empty(len(mesh.vertices) * 3, dtype=np.float32)
+    mesh.vertices.foreach_get("co", vertices)
+    vertices = vertices.reshape(-1, 3).astype(np.float64)
+    if matrix_world is not None:
+        matrix = np.array(matrix_world, dtype=np.float64)
+        vertices = vertices @ matrix[:3, :3].T + matrix[:3, 3]
+    return Layout(weld_uvs(uvs, loop_vertex), triangles.reshape(-1, 3), vertices[loop_vertex])
 
 
 def read_uv_layer(mesh, uv_name):

@@ -102,7 +102,8 @@ def run(context, targets, options, journal, image_dir=None):
                     f"Refining {group.name} ({name})",
                     lambda progress, lightmap=firsts[name][group.name], group=group, side=side, pad=pad:
                         lmrefine.refine_uvs(lightmap, group.uvs, group.triangles, side, padding=pad,
-                                            progress=progress, **options["refine_options"]),
+                                            progress=progress, positions=group.positions,
+                                            **options["refine_options"]),
                     done * span, span, parts=pipeline.REFINE_STAGES)
             except (ValueError, TypeError, MemoryError) as error:
                 raise UserError(f"{label} could not be refined at {side} x {side} texels: {error}") from error
@@ -183,4 +184,13 @@ def _combined_report(effects, rule):
             "transition_widening": float(np.mean([report["transition_widening"] for report in values])),
             "density_min": min(report["density_min"] for report in values),
             "density_max": max(report["density_max"] for report in values),
-            "limited_by": sorted(limits), "split_rule": rule, "effects": effects}
+            "limited_by": sorted(limits), "split_rule": rule, "effects": effects,
+            # Re-charted (the source gave no room) for any effect: the operator counts these maps and
+            # reports their first note (an effect whose map was re-charted first).
+            "rechart": {"used": any(_recharted(report) for report in values)},
+            "notes": [f"{name}: {note}" for name, report in sorted(effects.items(), key=lambda e: not _recharted(e[1]))
+                      for note in report.get("notes", [])]}
+
+
+def _recharted(report):
+    return bool((report.get("rechart") or {}).get("used"))

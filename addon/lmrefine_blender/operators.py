@@ -36,6 +36,10 @@ def _report_outcome(operator, context, outcome, seconds):
     result.effects = "; ".join(f"{name} {e['resolution']}px {e['transition_widening']:.2f}x"
                                for name, e in summary["effects"].items())
     result.stages_kept = summary["stages_kept"]
+    # Reports are per map (an object, or an atlas group of several): count and name objects.
+    recharted_maps = [name for name, report in outcome.reports.items() if (report.get("rechart") or {}).get("used")]
+    recharted = [obj for name in recharted_maps for obj in outcome.atlases.get(name, [name])]
+    result.recharted = len(recharted)
     result.stages_stopped = "; ".join(_stage_stop(name, entry) for name, entry in outcome.stages.items()
                                       if not entry["stages"][-1]["kept"])
     if summary["moved"] == 0:
@@ -50,11 +54,16 @@ def _report_outcome(operator, context, outcome, seconds):
     result.message += "; " + images_sentence(summary)
     if result.effects:
         result.message += f"; per effect (map side, edges): {result.effects}"
+    if recharted:
+        result.message += (f"; re-charted from the mesh: {', '.join(recharted)} (the source map gave the "
+                           "refiner no room: one chart per face)")
     if outcome.tessellation:
         result.message += f"; tessellation added {summary['vertices_added']} vertices"
     if outcome.stages:
         why = "; ".join(f"{name}: {entry['stopped']}" for name, entry in outcome.stages.items())
         result.message += f"; stages kept: {summary['stages_kept']} of {result.stages} ({why})"
+    for name in recharted_maps:
+        operator.report({'INFO'}, f"'{name}': " + outcome.reports[name]["notes"][0])
     for warning in outcome.warnings:
         operator.report({'WARNING'}, warning)
     operator.report({'INFO'}, result.message)

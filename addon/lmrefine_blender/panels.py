@@ -25,7 +25,8 @@ class _LightmapTab:
 
 
 # refine_uvs' limit names, short enough for the sidebar (the Info report has the full text).
-LIMIT_NAMES = {"max_magnification": "max growth", "min_shrink": "min shrink", "step_cap": "steps",
+# Short, so three fit the default sidebar width ("Limit: growth/gutter/steps").
+LIMIT_NAMES = {"max_magnification": "growth", "min_shrink": "shrink", "step_cap": "steps",
                "original_gutter": "gutter"}
 
 
@@ -86,6 +87,7 @@ class LMREFINE_PT_refine_options(_LightmapTab, bpy.types.Panel):
         for name in ("strength", "max_magnification", "min_shrink", "delta", "passes", "border", "wavelet",
                      "directional"):
             column.prop(settings, name)
+        column.prop(settings, "rechart", text="Re-chart if No Room")
 
 
 class LMREFINE_PT_refine_stages(_LightmapTab, bpy.types.Panel):
@@ -137,7 +139,7 @@ class LMREFINE_PT_refine_result(_LightmapTab, bpy.types.Panel):
     bl_parent_id = "LMREFINE_PT_refine"
 
     def draw(self, context):
-        """Thirteen rows in every state (with one stage) (placeholders greyed out), so the panel keeps its size."""
+        """The same rows in every state (with one stage; placeholders greyed out), so the panel keeps its size."""
         result = context.scene.lmrefine.result
         column = self.layout.column(align=True)
         rows = []
@@ -153,7 +155,7 @@ class LMREFINE_PT_refine_result(_LightmapTab, bpy.types.Panel):
                     (f"Moved: {result.moved} object(s)", 'CHECKMARK', True),
                     (f"Edges: {result.transition_widening:.2f}x texels", 'SHARPCURVE', True),
                     (f"Density: {result.density_min:.2f}x to {result.density_max:.2f}x", 'MOD_UVPROJECT', True)]
-        limits = ", ".join(LIMIT_NAMES.get(name, name) for name in result.limited_by.split(", ") if name)
+        limits = "/".join(LIMIT_NAMES.get(name, name) for name in result.limited_by.split(", ") if name)
         rows.append((f"Limit: {limits}" if limits else "Limit: none", 'INFO', bool(limits)))
         warnings = result.warnings if result.valid else 0
         rows.append((f"Warnings: {warnings} (Info log)" if warnings else "Warnings: none", 'ERROR' if warnings
@@ -168,6 +170,9 @@ class LMREFINE_PT_refine_result(_LightmapTab, bpy.types.Panel):
         rows.append((f"Atlas: {shared[0][0]} ({len(shared[0][1].split(', '))})"  # (objects sharing it)
                      + (f" +{len(shared) - 1}" if len(shared) > 1 else "") if shared else "Atlas: none",
                      'LINKED' if shared else 'UNLINKED', bool(shared)))
+        recharted = result.valid and result.recharted > 0
+        rows.append((f"Re-charted: {result.recharted} (no room)" if recharted else "Re-charted: none", 'UV_DATA',
+                     recharted))
         tessellated = result.valid and result.tessellated
         rows.append((f"Tessellation: +{result.vertices_added} vertices" if tessellated else "Tessellation: off",
                      'MOD_TRIANGULATE', tessellated))

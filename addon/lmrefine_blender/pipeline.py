@@ -31,6 +31,8 @@ TRANSPORTS = {"direct": {"direct"}, "indirect": {"indirect"}, "combined": {"dire
 # Texels both bakers fill into the gutter around each chart (Blender's default
 # bake margin): bilinear and mipmapped lookups near a chart border stay on it.
 BAKE_MARGIN = 16
+# Below this transition widening a run says when large triangles are why (see _coarse_warning).
+COARSE_WIDENING = 1.25
 
 
 @dataclass
@@ -138,6 +140,7 @@ def settings_snapshot(settings):
             "border": settings.border.lower(),
             "directional": settings.directional,
             "wavelet": settings.wavelet.lower(),
+            "rechart": settings.rechart,
         },
         "backend": settings.backend,
         "bake_passes": [name.lower() for name in ("DIRECT", "INDIRECT", "COMBINED", "AO")
@@ -228,7 +231,7 @@ def _validate_object(obj, options, owners, resolution, depsgraph):
     if refined not in mesh.uv_layers and len(mesh.uv_layers) >= 8:
         raise UserError(f"'{obj.name}' already has 8 UV maps, Blender's limit: remove one to make room "
                         f"for '{refined}'")
-    layout = bridge.read_layout(mesh, source)
+    layout = bridge.read_layout(mesh, source, obj.matrix_world)
     if len(layout.triangles) == 0:
         raise UserError(f"'{obj.name}' has no faces: nothing to lightmap")
     not_finite = int(np.count_nonzero(~np.isfinite(layout.uvs).all(axis=1)))
@@ -363,7 +366,7 @@ def run(context, targets, options, journal, image_dir=None):
                 f"Refining {name}",
                 lambda progress, lightmap=lightmaps[name], group=group: lmrefine.refine_uvs(
                     lightmap, group.uvs, group.triangles, resolution, padding=padding, progress=progress,
-                    **options["refine_options"]),
+                    positions=group.positions, **options["refine_options"]),
                 done * span, span, parts=REFINE_STAGES)
         except (ValueError, TypeError, MemoryError) as error:
             # The core refused this map's input: skip its objects, refine the others
@@ -384,6 +387,8 @@ def run(context, targets, options, journal, image_dir=None):
         if not result.report["moved"] and not any(w.startswith(black) for w in outcome.warnings):
             why = next((n for n in result.report["notes"] if n.startswith("nothing moved")), "nothing moved")
             outcome.warnings.append(f"{label}: {why}")
+        if options.get("tessellate") is None and result.report["transition_widening"] < COARSE_WIDENING:
+            _coarse_warning(lmrefine, label, lightmaps[name], group, result.report, outcome)
         report = {key: value for key, value in result.report.items() if key != "triangle_density"}
         report["check_layout"] = dict(check)
         report["source_check_layout"] = dict(source_check)
@@ -520,6 +525,19 @@ def _check_refined(lmrefine, label, uvs, layout, reference_uvs, resolution, padd
     return check, reference_check
 
 
+def _coarse_warning(lmrefine, label, lightmap, group, report, outcome):
+    """Edges hardly gained and light changes cross large triangles: say that tessellation is the fix
+    (a warp moves vertices; inside a triangle the mapping stays affine)."""
+    from lmrefine.tessellation import DEFAULT_MIN_TEXELS, coarse_transitions
+    coarse = coarse_transitions(lightmap, group.uvs, group.triangles)
+    if coarse["triangles"]:
+        outcome.warnings.append(
+            f"{label}: light changes cross {coarse['triangles']} triangle(s) of more than "
+            f"{DEFAULT_MIN_TEXELS:g} texels, and moving UVs cannot put more texels inside a triangle "
+            f"(edges {report['transition_widening']:.2f}x): turn on Tessellate (Stages and Tessellation) "
+            "to split them in the mesh, as one undo step")
+
+
 def _tessellate(lmrefine, target, lightmap, budget, journal, outcome, start, span):
     """Split the triangles of `target` that the transitions of `lightmap` (baked on its source map)
     cross, in its mesh (journalled); its layout becomes the tessellated mesh's."""
@@ -537,7 +555,7 @@ def _tessellate(lmrefine, target, lightmap, budget, journal, outcome, start, spa
     report["vertices_added"] = added
     outcome.tessellation[obj.name] = report
     if added:
-        target.layout = bridge.read_layout(obj.data, target.source)
+        target.layout = bridge.read_layout(obj.data, target.source, obj.matrix_world)
 
 
 def _further_stages(context, lmrefine, groups, refined_uvs, options, journal, outcome, done, span):

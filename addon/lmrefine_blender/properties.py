@@ -81,6 +81,8 @@ class LMREFINE_PG_result(bpy.types.PropertyGroup):
                             "widening ('direct 181px 1.42x; indirect 181px 1.05x'), empty otherwise")
     stages_stopped: StringProperty(name="Stages Stopped",
                                    description="Objects whose stages stopped early: the stage that moved too little")
+    recharted: IntProperty(name="Re-charted", description="Objects whose source map gave the refiner no room, "
+                           "re-charted from the mesh and refined", default=0)
 
 
 class LMREFINE_PG_settings(bpy.types.PropertyGroup):
@@ -163,6 +165,14 @@ class LMREFINE_PG_settings(bpy.types.PropertyGroup):
                ('ENERGY', "Energy", "In proportion to each effect's gradient energy"),
                ('EQUAL', "Equal", "Half each")),
         default='SQRT',
+    )
+    rechart: BoolProperty(
+        name="Re-chart when the source has no room",
+        description="When the source map gives the refiner no room (one chart per face, as Lightmap Pack makes), "
+                    "re-chart the mesh (charts of faces whose normals are within 20 degrees, conformal unwrap) "
+                    "and refine that layout instead, if the error model predicts less error. The source map is "
+                    "never changed; the refined map gets the new layout",
+        default=True,
     )
     stages: IntProperty(
         name="Stages",

@@ -46,15 +46,20 @@ def worse_than_source(uvs, source_uvs, triangles, resolution, padding, source=No
     """The promise refine_uvs makes, checked from the outside: what makes the
     refined layout `uvs` worse than `source_uvs` (an empty list: nothing), and
     the refined layout's check_layout report. Moved inside charts, each chart
-    pair keeps its own distance (relative gutter); repacked, the charts sit
-    anew, and the gutter is held to the padding or the source's narrowest.
+    pair keeps its own distance (relative gutter) and no triangle turns over;
+    repacked or re-charted, the charts sit anew (a re-charted chart may be
+    mirrored against the source), the gutter is held to the padding or the
+    source's narrowest and flips are counted within each chart.
     `source`: the source layout's check_layout report, if the caller has it."""
     if source is None:
         source = _native.check_layout(source_uvs, triangles, resolution, padding)
     check = _native.check_layout(uvs, triangles, resolution, padding, reference_uvs=source_uvs,
                                  relative_gutter=True)
     worse = failures(check, source, padding)
-    if worse == ["gutter"]:
+    if worse and set(worse) <= {"gutter", "flipped"}:
+        # Repacked or re-charted (refine_uvs(positions=)), charts sit anew and
+        # a re-charted one may be mirrored against the source: flips then
+        # count against the chart's own orientation.
         check = _native.check_layout(uvs, triangles, resolution, padding)
         worse = failures(check, source, padding)
     return worse, check

@@ -77,7 +77,8 @@ def evaluation_options(args):
                              padding=args.padding, denoise=args.denoise, bake_pass=args.bake_pass,
                              refine_options=refine_options, view_width=args.view_width,
                              tessellate=args.tessellate, rechart=rechart, compare_variants=compare,
-                             stages=args.stages, per_effect=getattr(args, "per_effect", None))
+                             stages=args.stages, per_effect=getattr(args, "per_effect", None),
+                             auto_rechart=not getattr(args, "no_rechart", False))
 
 
 def load_scenes(names, args=None):
@@ -193,6 +194,10 @@ def add_evaluation_arguments(parser, resolution, points):
                         help="re-chart the scene's mesh (lmrefine.rechart: charts of faces whose normals are within "
                              f"ANGLE degrees, default {DEFAULT_ANGLE:g}, conformal unwrap, uniform texel density, "
                              "packed) and use that layout instead of the scene's own UVs; put scene names before it")
+    parser.add_argument("--no-rechart", action="store_true",
+                        help="refine the scene's own layout even when it gives the refiner no room (refine_uvs "
+                             "rechart=False); by default a Lightmap Pack layout is re-charted from the mesh, as in "
+                             "the add-on")
     parser.add_argument("--compare", action="store_true",
                         help="with --rechart: also bake the scene's own --variant layout(s) uniformly at every "
                              "multiplier and report the equal-error ratio of the re-charted maps against them")

@@ -44,6 +44,10 @@ class EvaluationOptions:
     # With rechart: the scene's own UV variants whose uniform bakes the
     # re-charted maps are also compared with (a resolution sweep each).
     compare_variants: tuple = ()
+    # refine_uvs' re-chart route (positions=): a source layout with no room
+    # (Lightmap Pack) is re-charted from the mesh inside refine_uvs, as the
+    # add-on and the batch do; False: refine the source layout (--no-rechart).
+    auto_rechart: bool = True
     view_width: int = 480             # pixels across the pictures of the lit surface (0: none)
     tessellate: float = None          # vertex budget (fraction) of a tessellation along transitions; None: off
     stages: int = 1                   # refine + bake stages, each refining from the previous stage's bake
@@ -124,23 +128,109 @@ def _bake_passes(sample, uvs, resolution, options, progress, passes):
 def _tessellated(sample, variant, baseline, budget):
     """The scene with its triangles split along the transitions of `baseline`
     (baked on `variant`): the same surface, every UV variant keeping its
-    mapping (lmrefine.tessellation). Returns (scene, tessellation report)."""
+    mapping (lmrefine.tessellation). The budget holds per object, as in the
+    add-on: each object gets at most `budget` x its own vertices (objects
+    that share vertices are one mesh here: split together, on their joint
+    budget, so a split edge they share stays conforming).
+    Returns (scene, tessellation report, (parent triangle per output
+    triangle, (3T', 3) barycentric coordinates of every output corner in its
+    parent))."""
     from .tessellation import tessellate, transition_strength_of
 
     uvs, corner_triangles = sample.layout(variant)
     strength = transition_strength_of(baseline, uvs, corner_triangles)
     others = {name: values for name, values in sample.uvs.items() if name != variant}
-    result = tessellate(sample.positions, sample.triangles, uvs, strength, budget=budget,
-                        corner_attributes={"normals": sample.normals, **{f"uv:{k}": v for k, v in others.items()}})
-    normals = result.corner_attributes["normals"].astype(np.float64)
+    # Each output corner's barycentric coordinates in its input triangle: a
+    # point of the split mesh is then a point of the input mesh too.
+    attributes = {"normals": sample.normals, "parent_bary": np.tile(np.eye(3), (len(sample.triangles), 1)),
+                  **{f"uv:{k}": v for k, v in others.items()}}
+    pieces, reports, new_positions = [], [], [sample.positions]
+    vertex_count = len(sample.positions)
+    groups = _connected_objects(sample.triangles, sample.object_id)
+    for members in groups:
+        rows = np.nonzero(np.isin(sample.object_id, members))[0]
+        corners = (3 * rows[:, None] + np.arange(3)).ravel()
+        used, local = np.unique(sample.triangles[rows], return_inverse=True)
+        result = tessellate(sample.positions[used], local.reshape(-1, 3), uvs[corners], strength, budget=budget,
+                            corner_attributes={name: values[corners] for name, values in attributes.items()})
+        # The objects' own vertices keep their scene index; new ones follow.
+        to_scene = np.concatenate([used, vertex_count + np.arange(len(result.positions) - len(used))])
+        vertex_count += len(result.positions) - len(used)
+        new_positions.append(result.positions[len(used):])
+        pieces.append((result, rows, to_scene[result.triangles]))
+        reports.append({"objects": [sample.objects[i] for i in members], **result.report})
+    corner = {name: np.concatenate([r.corner_attributes[name] for r, _, _ in pieces]) for name in attributes}
+    parent = np.concatenate([rows[r.parent] for r, rows, _ in pieces])
+    normals = corner["normals"].astype(np.float64)
     normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-30)
-    layouts = {variant: result.uvs}
-    layouts.update({name: result.corner_attributes[f"uv:{name}"].astype(np.float32) for name in others})
-    scene = replace(sample, positions=result.positions.astype(np.float32),
-                    triangles=result.triangles.astype(np.int32), normals=normals.astype(np.float32),
-                    uvs={name: layouts[name] for name in sample.uvs}, base_color=sample.base_color[result.parent],
-                    object_id=sample.object_id[result.parent])
-    return scene, result.report
+    layouts = {variant: np.concatenate([r.uvs for r, _, _ in pieces])}
+    layouts.update({name: corner[f"uv:{name}"].astype(np.float32) for name in others})
+    scene = replace(sample, positions=np.concatenate(new_positions).astype(np.float32),
+                    triangles=np.concatenate([t for _, _, t in pieces]).astype(np.int32),
+                    normals=normals.astype(np.float32), uvs={name: layouts[name] for name in sample.uvs},
+                    base_color=sample.base_color[parent], object_id=sample.object_id[parent])
+    report = {key: sum(r[key] for r in reports) for key in ("vertices_added", "vertex_budget", "triangles_before",
+                                                           "triangles_after", "candidates_left")}
+    report.update(vertices_before=len(sample.positions), vertices_after=vertex_count)
+    report.update(rounds=max(r["rounds"] for r in reports), stopped="; ".join(sorted({r["stopped"] for r in reports})),
+                  min_texels=reports[0]["min_texels"], threshold=reports[0]["threshold"], objects=reports)
+    return scene, report, (parent, corner["parent_bary"])
+
+
+def _connected_objects(triangles, object_id):
+    """Lists of object ids whose triangles share vertices (transitively), in
+    order of their first object."""
+    objects = np.unique(object_id)
+    root = {int(o): int(o) for o in objects}
+
+    def find(o):
+        while root[o] != o:
+            root[o] = root[root[o]]
+            o = root[o]
+        return o
+
+    owner = np.full(int(triangles.max()) + 1 if triangles.size else 0, -1, np.int64)
+    for vertex, obj in zip(triangles.ravel().tolist(), np.repeat(object_id, 3).tolist()):
+        if owner[vertex] < 0:
+            owner[vertex] = obj
+        elif find(int(owner[vertex])) != find(obj):
+            root[find(obj)] = find(int(owner[vertex]))
+    groups = {}
+    for o in objects.tolist():
+        groups.setdefault(find(o), []).append(o)
+    return sorted(groups.values())
+
+
+def _plain_refinement(unsplit, variant, baseline, to_unsplit, points, truth, transitions, sweep, resolution,
+                      padding, options, stages, result):
+    """The plain refinement (the same scene without the tessellation, refined
+    from the same bake at the same resolution) measured at the same points
+    against the same truth and uniform bakes as the tessellated one: the
+    tessellation's own gain, free of the points' sampling noise."""
+    uvs, triangles = unsplit.layout(variant)
+    # refine_uvs' re-chart route as for the tessellated mesh (evaluate_sample).
+    positions = (unsplit.positions[unsplit.triangles].reshape(-1, 3)
+                 if options.auto_rechart and options.rechart is None else None)
+    refined = stages.run("refine unsplit", lambda p: refine_uvs(baseline, uvs, triangles, resolution,
+                                                                padding=padding, progress=p, positions=positions,
+                                                                **options.refine_options))
+    refined_map = stages.run("bake unsplit", lambda p: _bake_map(unsplit, refined.uvs, resolution, options, p))
+    parent, parent_bary = to_unsplit
+    bary = metrics.interpolate_corners(parent_bary, points.triangle, points.bary)
+    lookup = metrics.bilinear_lookup(refined_map, metrics.interpolate_corners(refined.uvs, parent[points.triangle],
+                                                                              bary))
+    out = {"plain_refine": {k: refined.report[k] for k in ("backoff", "backoff_area", "limited_by")
+                            if k in refined.report}}
+    for where, prefix in ((np.ones(len(truth), bool), ""), (transitions, "transition_")):
+        errors = [metrics.error_stats(s["lookup"], truth, where)["rmse"] for s in sweep]
+        rmse = metrics.error_stats(lookup, truth, where)["rmse"]
+        ratio, status = metrics.equal_error_resolution(options.multipliers, errors, rmse)
+        split_ratio = result[f"{prefix}equal_error_resolution_ratio"]
+        out[f"plain_{prefix}rmse"] = rmse
+        out[f"plain_{prefix}equal_error_resolution_ratio"] = ratio
+        out[f"plain_{prefix}equal_error_status"] = status
+        out[f"{prefix}gain_over_plain"] = (split_ratio / ratio if ratio and split_ratio and ratio > 0 else None)
+    return out
 
 
 # The stop rule of further stages is shared with the add-on (lmrefine.metrics).
@@ -375,17 +465,21 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
         first_bakes = {name: (first, second) for name, first, second in zip(EFFECTS, maps[1:], again)}
     else:
         baseline = stages.run("bake baseline", lambda p: _bake_map(sample, uvs, resolution, options, p))
-    tessellation = None
+    tessellation = unsplit = None
     if options.tessellate is not None:
         # Same surface, same lightmap mapping: the baseline bake stays valid and
         # every later bake and the ground truth use the split triangles.
-        sample, tessellation = stages.run("tessellate", lambda p: _tessellated(sample, variant, baseline,
-                                                                                options.tessellate))
+        unsplit = sample
+        sample, tessellation, to_unsplit = stages.run("tessellate", lambda p: _tessellated(
+            sample, variant, baseline, options.tessellate))
         uvs, triangles = sample.layout(variant)
     original_check = check_layout(uvs, triangles, resolution, options.padding)
     padding = min(float(options.padding), float(original_check["min_gutter_texels"]))
+    # The mesh for refine_uvs' re-chart route: one position per corner UV.
+    positions = (sample.positions[sample.triangles].reshape(-1, 3)
+                 if options.auto_rechart and options.rechart is None else None)
     refined = stages.run("refine", lambda p: refine_uvs(baseline, uvs, triangles, resolution, padding=padding,
-                                                        progress=p, **options.refine_options))
+                                                        progress=p, positions=positions, **options.refine_options))
     refined_map = stages.run("bake refined", lambda p: _bake_map(sample, refined.uvs, resolution, options, p))
 
     # Ground truth at area-uniform points, and at two neighbours each along
@@ -436,6 +530,7 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
     lookup_base = metrics.bilinear_lookup(baseline, uv_base)
     lookup_refined = metrics.bilinear_lookup(refined_map, uv_refined)
     stage_history = None
+    first_rechart = refined.report.get("rechart")  # the first stage chose the layout the later ones refine
     if options.stages > 1:
         refined, refined_map, lookup_refined, stage_history = _further_stages(
             sample, triangles, resolution, padding, options, stages, points, truth, transitions, refined,
@@ -542,12 +637,15 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
     }
     result.update({k: v for k, v in context.items() if k != "refine_report"})
     result["refine"] = {k: v for k, v in refined.report.items() if k != "triangle_density"}
+    result["refine"]["rechart"] = first_rechart
     if uniform is not None:
         ratio, refined_ratio = uniform["equal_error_resolution_ratio"], result["equal_error_resolution_ratio"]
         uniform["signal_gain"] = (refined_ratio / ratio if ratio and refined_ratio and ratio > 0 else None)
         result["uniform_repack"] = uniform
     if tessellation is not None:
-        result["tessellation"] = tessellation
+        result["tessellation"] = {**tessellation, **_plain_refinement(
+            unsplit, variant, baseline, to_unsplit, points, truth, transitions, sweep, resolution, padding,
+            options, stages, result)}
     if stage_history is not None:
         result["stages"] = stage_history
     if per_effect is not None:

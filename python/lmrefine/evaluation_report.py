@@ -255,7 +255,19 @@ def layout_text(r):
     """Which layout the baseline and refined maps were baked on."""
     layout = r.get("layout") or {}
     if layout.get("source") != "rechart":
-        return f"Layout: the scene's own `{layout.get('variant', r['variant'])}` lightmap UVs."
+        text = f"Layout: the scene's own `{layout.get('variant', r['variant'])}` lightmap UVs."
+        rechart = (r.get("refine") or {}).get("rechart") or {}
+        if rechart.get("used"):
+            room = rechart["room"]
+            text += (f" The refined map's layout was **re-charted from the mesh** by refine_uvs (the route a user "
+                     f"gets): the source gives the refiner no room ({room['charts']} charts for "
+                     f"{room['triangles']} triangles, {room['room_fraction']:.0%} of its area in triangles with a "
+                     f"UV inside their chart), so {rechart['charts']} charts at {rechart['angle']:g} degrees were "
+                     f"refined; the model predicted {rechart['predicted_error']:.2f} of the source's error. The "
+                     "baseline is the source layout baked plain.")
+        elif rechart.get("room", {}).get("no_room"):
+            text += f" Not re-charted although the source gives no room: {rechart.get('reason')}."
+        return text
     check = layout.get("layout") or {}
     return (f"Layout: **re-charted from the mesh** (`--rechart {layout['angle']:g}`, `lmrefine.rechart`), not the "
             f"scene's own UVs: {layout['charts']} charts ({layout['split_charts']} split because their unwrap "
@@ -390,6 +402,12 @@ def scene_markdown(result):
                         f"{t['vertices_after']} vertices (+{t['vertices_added']}, budget {t['vertex_budget']}), "
                         f"{t['triangles_before']} -> {t['triangles_after']} triangles in {t['rounds']} rounds; "
                         f"stopped: {t['stopped']}."]
+        if "plain_equal_error_resolution_ratio" in t:
+            gain = f"{t['gain_over_plain']:.2f}x" if t.get("gain_over_plain") else "n/a"
+            lines[-1:-1] = [f"- The plain refinement (the same scene unsplit, refined from the same bake) at the same "
+                            f"points: RMSE {_number(t['plain_rmse'])}, equal-error "
+                            f"{equal_error_text(t['plain_equal_error_resolution_ratio'], t['plain_equal_error_status'])}"
+                            f"; the tessellated refinement's ratio over it: {gain}."]
     if r["gain"]:
         lines.append(f"**Gain**: transition-point RMSE {_change(r['transition_rmse_baseline'], r['transition_rmse_refined'])}.")
         lines += [f"- {note}" for note in r["notes"]]
@@ -499,6 +517,15 @@ def write_summary(out_dir, summary):
                 f"plain, {_ratio_text(c['equal_error_resolution_ratio_refined'], c['equal_error_status_refined'])} "
                 "refined.")
     lines += per_effect_summary(summary)
+    for r in summary["scenes"]:
+        t = r.get("tessellation") or {}
+        if "plain_equal_error_resolution_ratio" in t:
+            gain = f"{t['gain_over_plain']:.2f}x" if t.get("gain_over_plain") else "n/a"
+            lines.append(f"- {r['scene']} ({r['variant']}) tessellated (+{t['vertices_added']} vertices): equal-error "
+                         f"ratio {_ratio_text(r['equal_error_resolution_ratio'], r['equal_error_status'])} against "
+                         f"the plain refinement's "
+                         f"{_ratio_text(t['plain_equal_error_resolution_ratio'], t['plain_equal_error_status'])} at "
+                         f"the same points: **{gain}** over plain.")
     for r in summary["scenes"]:
         if not r["gain"]:
             lines.append(f"- **{r['scene']} ({r['variant']}) shows no gain**: " + "; ".join(r["notes"]) + ".")

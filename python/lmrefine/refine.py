@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import _native, allocation, backoff
+from . import _native, allocation, backoff, rechart_route
 
 BORDER_MODES = ("same", "border_rule", "extra_ring")
 
@@ -151,7 +151,7 @@ def identity_grid(resolution):
 def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gradient=None, strength=24.0,
                max_magnification=8.0, min_shrink=0.25, edge_shrink=0.8, delta=0.02, passes=1, border="same",
                directional=False, wavelet="d4", diffusion=0.05, max_steps=8, progress=None, repack=True,
-               min_chart_scale=0.5, max_chart_scale=2.0):
+               min_chart_scale=0.5, max_chart_scale=2.0, positions=None, rechart=True):
     """Refine a lightmap UV layout: more texels where light changes fast.
 
     Args:
@@ -196,6 +196,23 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
             in-chart deformation, before the charts are scaled and moved.
         min_chart_scale, max_chart_scale: bounds on a chart's linear scale
             relative to the median chart, for repack.
+        positions: (N, 3) the 3-D position of each UV (the uvs' indexing),
+            or None. With positions and rechart, a source layout that gives
+            the refiner no room (rechart_route.layout_room: one chart per
+            face or nearly, as Lightmap Pack makes) is re-charted from the
+            mesh (lmrefine.rechart), the lightmap carried over to the new
+            layout and that layout refined; kept when the error model
+            predicts clearly less error than the source layout (below
+            rechart_route.REQUIRED_GAIN; docs/refiner.md, "The re-chart
+            route"), else the source layout's own refinement is returned.
+            report["rechart"] says what happened: used, room (the rule's
+            figures), reason when not used, the new layout's charts and
+            the model's predicted_error when re-charted (None without
+            positions).
+            The result keeps the input's indexing: result.uvs (N, 2) for
+            the same triangles.
+        rechart: False turns the re-chart route off (the source layout
+            is refined as without positions).
 
     Returns:
         RefineResult with uvs, grid and report. Its figures are measured on
@@ -222,6 +239,75 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
         ValueError: bad shapes, indices out of range, NaN UVs, UVs outside
             [0, 1], zero resolution, bad options.
     """
+    options = {"strength": strength, "max_magnification": max_magnification, "min_shrink": min_shrink,
+               "edge_shrink": edge_shrink, "delta": delta, "passes": passes, "border": border,
+               "directional": directional, "wavelet": wavelet, "diffusion": diffusion, "max_steps": max_steps,
+               "repack": repack, "min_chart_scale": min_chart_scale, "max_chart_scale": max_chart_scale}
+    if not isinstance(rechart, (bool, np.bool_)):
+        raise TypeError(f"rechart must be True or False, got {type(rechart).__name__}")
+    if positions is None:
+        result, _, _ = _refine(lightmap, uvs, triangles, resolution, padding, mask, gradient, progress, options)
+        result.report["rechart"] = None
+        return result
+    start = time.perf_counter()
+    uvs, triangles = _layout(uvs, triangles)
+    positions = rechart_route.positions_array(positions, len(uvs))
+    room = rechart_route.layout_room(uvs, triangles)
+    result, energy, source_mask = _refine(lightmap, uvs, triangles, resolution, padding, mask, gradient, progress,
+                                          options)
+    if not rechart:
+        info = {"used": False, "room": room, "reason": "re-charting is off (rechart=False)"}
+    elif not room["no_room"]:
+        info = {"used": False, "room": room, "reason": f"the source layout has room: "
+                f"{room['room_fraction']:.0%} of its area is in triangles with a UV inside their chart"}
+    elif gradient is not None or lightmap is None:
+        info = {"used": False, "room": room, "reason": "re-charting needs the lightmap (not a gradient map)"}
+    elif strength == 0:
+        info = {"used": False, "room": room, "reason": "strength is 0"}
+    else:
+        shape = _resolution(resolution)
+        recharted, info = rechart_route.refine_recharted(
+            lambda carried, new_uvs, new_mask, new_padding: _refine(carried, new_uvs, triangles, shape, new_padding,
+                                                                    new_mask, None, progress, options)[0],
+            lightmap, uvs, triangles, shape, padding, positions, room, energy, result, progress)
+        if recharted is not None:
+            result = _recharted_result(recharted, result, uvs, triangles, energy, source_mask, info)
+    if not info["used"] and room["no_room"] and rechart:
+        result.report["notes"].append(f"not re-charted: {info['reason']}")
+    result.report["rechart"] = info
+    result.report["seconds"] = time.perf_counter() - start
+    return result
+
+
+def _recharted_result(recharted, source_result, uvs, triangles, energy, mask, info):
+    """The re-charted refinement's result, its figures measured against the
+    source layout (the user's), its notes saying why it was re-charted."""
+    report = recharted.report
+    report.update(_layout_figures(uvs, recharted.uvs, triangles, energy, mask))
+    room = info["room"]
+    notes = [note.replace("nothing moved:", "the re-charted layout's own refinement moved nothing:")
+             for note in report["notes"]]
+    notes.insert(0, f"re-charted: the source layout gives the refiner no room ({room['charts']} charts for "
+                    f"{room['triangles']} triangles, {room['room_fraction']:.0%} of its area in triangles with a "
+                    f"UV inside their chart), so the mesh was re-charted ({info['charts']} charts at "
+                    f"{info['angle']:g} degrees) and refined; the error model predicts "
+                    f"{info['predicted_error']:.2f} of the source layout's error "
+                    f"(refining the source layout: {info['predicted_error_source_route']:.2f})")
+    report.update({"moved": True, "notes": notes, "original_check": source_result.report["original_check"]})
+    return recharted
+
+
+def _refine(lightmap, uvs, triangles, resolution, padding, mask, gradient, progress, options):
+    """refine_uvs without the re-chart route: (RefineResult, the first bake's
+    gradient energy per texel (H, W), the source layout's coverage)."""
+    strength, max_magnification, min_shrink = options["strength"], options["max_magnification"], \
+        options["min_shrink"]
+    edge_shrink, delta, passes, border = options["edge_shrink"], options["delta"], options["passes"], \
+        options["border"]
+    directional, wavelet, diffusion, max_steps = options["directional"], options["wavelet"], \
+        options["diffusion"], options["max_steps"]
+    repack, min_chart_scale, max_chart_scale = options["repack"], options["min_chart_scale"], \
+        options["max_chart_scale"]
     start = time.perf_counter()
     shape = _resolution(resolution)
     uvs, triangles = _layout(uvs, triangles)
@@ -366,7 +452,7 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
         "check": check,
         "repack": repack_report,
     }
-    return RefineResult(uvs=new_uvs, grid=grid, report=report)
+    return RefineResult(uvs=new_uvs, grid=grid, report=report), scalar_energy, mask
 
 
 def layout_figures(lightmap, old_uvs, new_uvs, triangles, wavelet="d4"):

@@ -70,6 +70,28 @@ def peak_strength(corner_uvs, strength):
     return peak
 
 
+def _candidates(corner_uvs, strength, min_texels, threshold):
+    """The triangles to split (indices): more than `min_texels` texels, peak strength >= `threshold`;
+    with every triangle's peak strength (0 where not looked at) and texel area."""
+    texels = _texel_areas(corner_uvs, strength.shape)
+    large = np.nonzero(texels > min_texels)[0]
+    peak = np.zeros(len(corner_uvs))
+    if large.size:
+        peak[large] = peak_strength(corner_uvs[large], strength)
+    return large[peak[large] >= threshold], peak, texels
+
+
+def coarse_transitions(lightmap, uvs, triangles, *, min_texels=DEFAULT_MIN_TEXELS, threshold=DEFAULT_THRESHOLD,
+                       wavelet="d4"):
+    """What a refinement without tessellation cannot reach: the triangles `tessellate` would split
+    first, given `lightmap` baked on (uvs, triangles). Returns {"triangles": how many, "texels": the
+    texels they cover}. A warp moves vertices; inside such a triangle the mapping stays affine."""
+    strength = transition_strength_of(lightmap, uvs, triangles, wavelet=wavelet)
+    corner_uvs = np.asarray(uvs, dtype=np.float64)[np.asarray(triangles, dtype=np.int64)]
+    candidates, _, texels = _candidates(corner_uvs, strength, min_texels, threshold)
+    return {"triangles": int(candidates.size), "texels": float(texels[candidates].sum())}
+
+
 def _texel_areas(corner_uvs, shape):
     a, b, c = corner_uvs[:, 0], corner_uvs[:, 1], corner_uvs[:, 2]
     cross = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
@@ -167,12 +189,7 @@ def tessellate(positions, triangles, uvs, strength, *, budget=DEFAULT_BUDGET, mi
     next_vertex = vertex_count
     candidates_left = 0
     while rounds < MAX_ROUNDS:
-        texels = _texel_areas(corner["uv"], strength.shape)
-        large = np.nonzero(texels > min_texels)[0]
-        peak = np.zeros(len(triangles))
-        if large.size:
-            peak[large] = peak_strength(corner["uv"][large], strength)
-        candidates = large[peak[large] >= threshold]
+        candidates, peak, texels = _candidates(corner["uv"], strength, min_texels, threshold)
         candidates_left = int(candidates.size)
         if not candidates.size:
             break

@@ -1666,5 +1666,93 @@ def save_scene_for_batch():
     return _save_for_batch(fresh_shadow_scene, "shadow.blend")
 
 
+@check("refine", "bake")
+def rechart_lightmap_pack_source():
+    """A source map with one chart per face (Lightmap Pack's kind) gives the refiner no room: the run
+    re-charts the floor from the mesh and writes a valid refined map (the source map, the geometry
+    untouched; the panel and the Info line say so). With the setting off it refines the source layout."""
+    facts = {}
+    for rechart in (True, False):
+        scenes.coarse_shadow_scene(quads=8)
+        register()
+        settings(resolution=RESOLUTION, padding=2, samples=4, first_lightmap='EMBREE', backend='EMBREE',
+                 bake_passes={'DIRECT'}, rechart=rechart)
+        floor = bpy.data.objects["Floor"]
+        mesh = floor.data
+        layout = bridge.read_layout(mesh, "Lightmap")
+        source_uvs = bridge.read_uv_layer(mesh, "Lightmap")
+        geometry = geometry_digest(mesh)
+        outcome, message = refine()
+        result = bpy.context.scene.lmrefine.result
+        refined = bridge.read_uv_layer(mesh, "Lightmap_refined")
+        check = lmrefine.check_layout(refined, layout.triangles, RESOLUTION, padding=2)
+        facts[f"rechart_{rechart}"] = {
+            "outcome": outcome, "message": message, "panel_recharted": result.recharted,
+            "result_message": result.message,
+            "valid": bool(check["valid"]), "min_gutter_texels": float(check["min_gutter_texels"]),
+            "refined_charts": int(len(np.unique(lmrefine.find_charts(refined, layout.triangles,
+                                                                      lmrefine.CHART_TOLERANCE)))),
+            "source_charts": int(len(np.unique(lmrefine.find_charts(layout.uvs, layout.triangles,
+                                                                     lmrefine.CHART_TOLERANCE)))),
+            "source_identical": bool(np.array_equal(bridge.read_uv_layer(mesh, "Lightmap"), source_uvs)),
+            "geometry_identical": geometry_digest(mesh) == geometry,
+            "image": _image_stats("Floor_lightmap_direct", refined, layout.triangles),
+        }
+    return facts
+
+
+
+@check("refine", "bake")
+def rechart_shared_lightmap_pack_atlas():
+    """A floor and a box whose Lightmap maps are one chart per face, packed side by side in one atlas:
+    the joined layout gives no room, so the one refinement re-charts both meshes (their world positions
+    joined like their UVs) into one image; the panel counts objects, not atlases."""
+    scenes.coarse_shadow_scene(quads=8)
+    floor, blocker = bpy.data.objects["Floor"], bpy.data.objects["Blocker"]
+    scenes._fit_layer(floor.data, (0.03, 0.03, 0.6, 0.97))
+    scenes._fit_layer(blocker.data, (0.66, 0.4, 0.97, 0.97))
+    scenes.select_only(floor, blocker)
+    register()
+    settings(resolution=RESOLUTION, padding=2, samples=4, first_lightmap='EMBREE', backend='EMBREE',
+             bake_passes={'DIRECT'}, rechart=True)
+    source = {obj.name: (bridge.read_layout(obj.data, "Lightmap"), bridge.read_uv_layer(obj.data, "Lightmap"))
+              for obj in (floor, blocker)}
+    outcome, message = refine()
+    result = bpy.context.scene.lmrefine.result
+    refined = {name: bridge.read_uv_layer(bpy.data.objects[name].data, "Lightmap_refined") for name in source}
+    masks = {name: lmrefine.coverage_mask(refined[name], source[name][0].triangles, RESOLUTION) for name in source}
+    uvs, triangles, _, _ = lmrefine_blender.atlas.join_layouts(
+        [(refined[name], source[name][0].triangles) for name in source])
+    check = lmrefine.check_layout(uvs, triangles, RESOLUTION, padding=2)
+    return {
+        "outcome": outcome, "message": message, "result_message": result.message,
+        "panel_recharted": result.recharted, "images": result.images,
+        "valid": bool(check["valid"]), "shared_texels": int(np.count_nonzero(masks["Floor"] & masks["Blocker"])),
+        "refined_charts": int(len(np.unique(lmrefine.find_charts(uvs, triangles, lmrefine.CHART_TOLERANCE)))),
+        "source_identical": all(np.array_equal(bridge.read_uv_layer(bpy.data.objects[name].data, "Lightmap"),
+                                               source[name][1]) for name in source),
+    }
+
+
+@check("refine", "bake")
+def coarse_floor_suggests_tessellation():
+    """A floor of 2 x 2 quads (about 29 x 29 texels each), its Lightmap map one chart filling the
+    square, under a box's shadow: the warp can move only the middle vertex and cannot put texels
+    inside those triangles, so the run says Tessellate is the fix; with Tessellate on it does not."""
+    facts = {}
+    for tessellate in (False, True):
+        scenes.coarse_shadow_scene(quads=2)
+        floor = bpy.data.objects["Floor"]
+        floor.data.uv_layers.remove(floor.data.uv_layers["Lightmap"])
+        scenes._set_lightmap_layer(floor.data)
+        register()
+        settings(resolution=RESOLUTION, padding=2, samples=4, first_lightmap='EMBREE', backend='EMBREE',
+                 bake_passes={'DIRECT'}, tessellate=tessellate)
+        outcome, warnings, error = _run_pipeline([bpy.data.objects["Floor"]])
+        facts[f"tessellate_{tessellate}"] = {
+            "error": error, "warnings": warnings,
+            "widening": outcome and outcome.reports["Floor"]["transition_widening"]}
+    return facts
+
 with open(OUT_JSON, "w", encoding="utf-8") as stream:
     json.dump(results, stream, indent=1, default=str)

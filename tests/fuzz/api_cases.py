@@ -335,6 +335,30 @@ def case_rechart(lm, rng):
                 description=f"rechart hostile: {chosen}")
 
 
+def case_refine_uvs_rechart(lm, rng):
+    """refine_uvs' re-chart route: a small mesh with one chart per triangle (no room), its positions."""
+    positions, triangles = random_mesh(rng)
+    r = int(rng.choice([16, 32, 64]))
+    count = len(triangles)
+    across = int(np.ceil(np.sqrt(max(count, 1))))
+    cell = 1.0 / across
+    inset = np.array([(0.2, 0.2), (0.8, 0.2), (0.2, 0.8)])
+    if rng.random() < 0.5:
+        inset = inset[::-1]  # mirrored charts, as Lightmap Pack leaves some
+    uvs = np.concatenate([(np.array([k % across, k // across]) + inset) * cell for k in range(count)])
+    corner_positions = positions[triangles.ravel() % len(positions)] if len(positions) else positions
+    kwargs = {"lightmap": lightmap(rng, r), "uvs": uvs.astype(np.float32),
+              "triangles": np.arange(3 * count, dtype=np.int32).reshape(-1, 3), "resolution": r,
+              "padding": float(rng.choice([0, 1, 2])), "positions": corner_positions, "max_steps": 2,
+              "progress": None}
+    makers = {"lightmap": as_array, "positions": as_array, "rechart": as_number, "resolution": as_resolution,
+              "padding": as_number, "progress": as_progress, "strength": as_number}
+    kwargs, chosen = mutate(kwargs, rng, makers)
+    layout = (kwargs["uvs"], kwargs["triangles"], kwargs["resolution"], kwargs["padding"])
+    return Case("refine_uvs", _call(lm.refine_uvs, dict(kwargs)), list(kwargs.values()), layout=layout,
+                description=f"refine_uvs (re-chart route) hostile: {chosen}")
+
+
 # ---------------------------------------------------------------- images
 
 PNG_HUGE_HEADER = (b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR" + (100000).to_bytes(4, "big") * 2
@@ -574,7 +598,7 @@ BUILDERS = (
     case_layout_function("find_charts"), case_layout_function("LayoutChecker"),
     case_grid_cell_areas, case_warp_uvs, case_identity_grid, case_run_automaton,
     case_refine_uvs, case_refine_uvs,  # the whole pipeline gets twice the share
-    case_pack_charts, case_rechart,
+    case_pack_charts, case_rechart, case_refine_uvs_rechart,
     case_write_image, case_read_image, case_scene, case_bake, case_evaluate, case_trace_rays,
     case_tessellate, case_transition_strength_of,
 )

@@ -12,7 +12,8 @@ from .runner import BatchOptions, run_batch
 VALUE_FLAGS = ("--objects", "--source-layer", "--resolution", "--padding", "--first-lightmap", "--lightmap-image",
                "--driving-pass", "--strength", "--max-magnification", "--min-shrink", "--delta", "--passes",
                "--border", "--wavelet", "--backend", "--bake-passes", "--samples", "--stages")
-SWITCH_FLAGS = ("--directional", "--no-directional", "--preview", "--no-preview", "--no-tessellate")
+SWITCH_FLAGS = ("--directional", "--no-directional", "--preview", "--no-preview", "--no-tessellate", "--rechart",
+                "--no-rechart")
 OPTIONAL_VALUE_FLAGS = ("--tessellate",)  # a value may follow
 
 

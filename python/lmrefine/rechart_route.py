@@ -1,0 +1,279 @@
+"""The re-chart route of refine_uvs: a source layout with no room is re-charted from the mesh.
+
+The automaton moves UVs inside charts; a UV on a chart's border keeps its
+place. Lightmap Pack cuts one chart per face, so every UV is on a border and
+only the chart repack can gain (docs/refiner.md, "Chart scaling"). When the
+source layout gives the refiner no room (`layout_room`) and the caller gives
+the mesh (`refine_uvs(..., positions=)`), the mesh is re-charted
+(lmrefine.rechart), the first lightmap is carried over to the new layout
+(`resample_lightmap`), and the new layout is refined instead. It is kept only
+when the error model predicts clearly less error than the source layout
+(`predicted_error`). docs/refiner.md, "The re-chart route".
+"""
+
+import numpy as np
+
+from . import _native, allocation, backoff, metrics
+from .charting import rechart
+from .packer import CHART_TOLERANCE
+
+# A layout has no room when less than this fraction of its UV area lies in
+# triangles with a corner strictly inside their chart. Lightmap Pack layouts
+# measure 0 on every bundled scene, Smart UV layouts 0.78-0.99 (plaza's 120
+# triangles lowest): docs/refiner.md.
+MIN_ROOM_FRACTION = 0.25
+# The re-charted layout is kept when the model predicts at most this
+# fraction of the source layout's error (as allocation.REQUIRED_GAIN).
+REQUIRED_GAIN = allocation.REQUIRED_GAIN
+# The re-chart angle of the route, in degrees. Chosen on courtyard, the only
+# tuning scene whose charts change with it: 5-17 degrees (231 charts)
+# measured 2.35x / 1.59x at 256^2 / 512^2, 20 (201 charts) 2.40x / 2.27x,
+# 30 2.31x / 1.97x, 45 2.22x / 1.92x (docs/evaluation.md, "The re-chart
+# route"). lmrefine.rechart keeps its own default for evaluate --rechart.
+ANGLE = 20.0
+# Texels at least between the re-charted charts (more when the caller's
+# padding asks): the new layout is not held to the source's gutter, and a
+# re-charted courtyard (tuning) measured 2.00x at the source's 1.03-texel
+# gutter against 2.35x at 2 (docs/evaluation.md, "The re-chart route").
+PADDING = 2.0
+# UVs closer than this (a power of two near CHART_TOLERANCE) are one vertex
+# of a chart when telling border corners from inner ones.
+_VERTEX_GRID = float(1 << 17)
+
+
+def layout_room(uvs, triangles):
+    """How much room a layout gives the refiner: where its UVs can move.
+
+    A corner is on its chart's border when one of its chart's border edges
+    (an edge only one triangle of the chart uses; UVs of a chart equal to
+    1/2^17 are one vertex) ends at it. `room_fraction` is the UV area of the
+    triangles with a corner off the border, over the layout's UV area.
+    Returns {charts, triangles, triangles_per_chart, room_fraction, no_room}
+    with no_room = room_fraction < MIN_ROOM_FRACTION.
+    """
+    uvs = np.asarray(uvs)
+    triangles = np.asarray(triangles)
+    count = len(triangles)
+    charts, vertex, border = _chart_borders(uvs, triangles)
+    chart_count = int(charts.max()) + 1 if count else 0
+    fraction = 0.0
+    if count:
+        inner = np.ones(int(vertex.max()) + 1, bool)
+        inner[vertex[border]] = False  # the start of a border edge (its end starts the next one)
+        area = np.abs(allocation.signed_areas(uvs, triangles))
+        total = float(area.sum())
+        fraction = float(area[inner[vertex].any(axis=1)].sum() / total) if total > 0 else 0.0
+    return {"charts": chart_count, "triangles": int(count),
+            "triangles_per_chart": float(count / chart_count) if chart_count else 0.0,
+            "room_fraction": fraction, "no_room": bool(count and fraction < MIN_ROOM_FRACTION)}
+
+
+def _chart_borders(uvs, triangles):
+    """(charts (T,), vertex (T, 3) ids of the corners' chart vertices, border
+    (T, 3) bool: the edge from corner k to corner k + 1 is a border edge of
+    its chart)."""
+    count = len(triangles)
+    if not count:
+        return np.zeros(0, np.int32), np.zeros((0, 3), np.int64), np.zeros((0, 3), bool)
+    charts = _native.find_charts(uvs, triangles, tolerance=CHART_TOLERANCE)
+    snapped = np.round(np.asarray(uvs, np.float64)[triangles.ravel()] * _VERTEX_GRID).astype(np.int64)
+    _, vertex = np.unique(np.column_stack([np.repeat(charts, 3), snapped]), axis=0, return_inverse=True)
+    vertex = vertex.reshape(count, 3)
+    edges = np.sort(np.stack([vertex, np.roll(vertex, -1, axis=1)], axis=2).reshape(-1, 2), axis=1)
+    _, edge_id, uses = np.unique(edges, axis=0, return_inverse=True, return_counts=True)
+    return charts, vertex, (uses[edge_id.ravel()] == 1).reshape(count, 3)
+
+
+def resample_lightmap(lightmap, source_uvs, source_triangles, uvs, triangles, mask):
+    """The lightmap baked on (source_uvs, source_triangles) carried over to
+    the layout (uvs, triangles) of the same triangles: each texel of `mask`
+    takes the bilinear value of the source map at the same surface point (the
+    texel centre in the triangle that holds it, or the nearest point of the
+    nearest triangle for a texel a triangle only grazes). Other texels are 0.
+    Returns float32 with the lightmap's shape."""
+    lightmap = np.asarray(lightmap, np.float32)
+    shape = lightmap.shape[:2]
+    triangle, bary = _texel_points(np.asarray(uvs, np.float64), triangles, shape, mask)
+    source = np.asarray(source_uvs, np.float64)[np.asarray(source_triangles)[triangle]]  # (P, 3, 2)
+    values = metrics.bilinear_lookup(lightmap, np.einsum("pk,pkd->pd", bary, source))
+    out = np.zeros(lightmap.shape[:2] + (values.shape[1],), np.float32)
+    out[mask] = values
+    return out.reshape(lightmap.shape)
+
+
+def _texel_points(uvs, triangles, shape, mask, chunk=1 << 22):
+    """For every texel of `mask` in row-major order: the triangle holding its
+    centre (the one it lies deepest in) and the centre's barycentrics there,
+    clamped into the triangle for texels no centre of which lies inside."""
+    height, width = shape
+    corners = uvs[triangles] * (width, height)  # texel units, v up
+    corners[..., 1] = height - corners[..., 1]  # rows down
+    low = np.clip(np.floor(corners.min(axis=1)).astype(np.int64), 0, (width - 1, height - 1))
+    high = np.clip(np.floor(corners.max(axis=1)).astype(np.int64), 0, (width - 1, height - 1))
+    sizes = (high - low + 1).prod(axis=1)
+    best_score = np.full(height * width, -np.inf)
+    best_triangle = np.zeros(height * width, np.int64)
+    best_bary = np.zeros((height * width, 3))
+    start = 0
+    ends = np.searchsorted(np.cumsum(sizes), np.arange(chunk, int(sizes.sum()) + chunk, chunk), side="right")
+    for end in np.unique(np.append(np.maximum(ends, 1), len(triangles))):
+        if end <= start:
+            continue
+        part = np.arange(start, end)
+        start = end
+        counts = sizes[part]
+        which = np.repeat(part, counts)
+        offset = np.arange(int(counts.sum())) - np.repeat(np.cumsum(counts) - counts, counts)
+        span = (high[which, 0] - low[which, 0] + 1)
+        col = low[which, 0] + offset % span
+        row = low[which, 1] + offset // span
+        point = np.column_stack([col + 0.5, row + 0.5])
+        a, b, c = corners[which, 0], corners[which, 1], corners[which, 2]
+        ab, ac, ap = b - a, c - a, point - a
+        det = ab[:, 0] * ac[:, 1] - ab[:, 1] * ac[:, 0]
+        safe = np.where(det != 0, det, 1.0)
+        beta = (ap[:, 0] * ac[:, 1] - ap[:, 1] * ac[:, 0]) / safe
+        gamma = (ab[:, 0] * ap[:, 1] - ab[:, 1] * ap[:, 0]) / safe
+        bary = np.column_stack([1 - beta - gamma, beta, gamma])
+        score = np.where(det != 0, bary.min(axis=1), -np.inf)
+        texel = row * width + col
+        order = np.lexsort((-score, texel))
+        first = np.ones(len(order), bool)
+        first[1:] = texel[order][1:] != texel[order][:-1]
+        pick = order[first]
+        better = score[pick] > best_score[texel[pick]]
+        pick = pick[better]
+        best_score[texel[pick]] = score[pick]
+        best_triangle[texel[pick]] = which[pick]
+        best_bary[texel[pick]] = bary[pick]
+    where = np.flatnonzero(np.asarray(mask).ravel())
+    bary = np.clip(best_bary[where], 0.0, None)
+    bary /= np.maximum(bary.sum(axis=1, keepdims=True), 1e-300)
+    bary[~np.isfinite(best_score[where])] = 1.0 / 3.0  # a texel only degenerate triangles touch
+    return best_triangle[where], bary
+
+
+def predicted_error(source_uvs, uvs, triangles, energy, positions=None, lightmap=None, mask=None):
+    """The error model's prediction for layout `uvs` relative to the source
+    layout `source_uvs` (same triangles; 1.0 = the same), from the first
+    bake on the source layout: its gradient `energy` (H, W) and, with
+    `positions` and `lightmap`, its luminance slope.
+
+    Both terms of docs/refiner.md "Chart scaling", in world units so that
+    layouts with different charts compare: the edge term, each triangle's
+    gradient energy times its texel size in the source and in `uvs`
+    (EDGE_ERROR); the border term, each chart border edge's world length
+    times the luminance slope of its triangle (per world unit) times the
+    squared texel size there (BORDER_ERROR: the border texels, filled by
+    dilation, miss the slope over a quarter texel). Without positions the
+    edge term alone, by the linear texel scale sqrt(new / source UV area)."""
+    source_uvs, uvs = np.asarray(source_uvs), np.asarray(uvs)
+    shape = energy.shape
+    edge = allocation.triangle_energy(source_uvs, triangles, energy)
+    before = np.abs(allocation.signed_areas(source_uvs, triangles))
+    after = np.abs(allocation.signed_areas(uvs, triangles))
+    if positions is None or lightmap is None:
+        keep = (before > 0) & (edge > 0)
+        total = float(edge[keep].sum())
+        if total <= 0:
+            return 1.0
+        return float((edge[keep] / np.sqrt(np.maximum(after[keep], 1e-300) / before[keep])).sum() / total)
+    corners = np.asarray(positions, np.float64)[triangles]
+    world = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
+    texels = float(shape[0] * shape[1])
+    keep = (before > 0) & (after > 0) & (world > 0)
+    # Texel size in world units per triangle, in each layout.
+    size_before = np.where(keep, np.sqrt(world / np.maximum(before * texels, 1e-300)), 0.0)
+    size_after = np.where(keep, np.sqrt(world / np.maximum(after * texels, 1e-300)), 0.0)
+    # Slope per world unit: the source bake's slope per texel over its texel size.
+    if mask is None:
+        mask = _native.coverage_mask(source_uvs, triangles, shape)
+    slope = allocation.opening(allocation.luminance_slope(lightmap, mask), mask)
+    rows, cols = allocation.triangle_texels(source_uvs, triangles, shape)
+    slope_world = np.where(keep, slope[rows, cols].mean(axis=1) / np.maximum(size_before, 1e-300), 0.0)
+    lengths = np.linalg.norm(corners - np.roll(corners, -1, axis=1), axis=2)  # edge k: corner k to k + 1
+
+    def error(layout, size):
+        border = (_chart_borders(layout, triangles)[2] * lengths).sum(axis=1)
+        return (allocation.EDGE_ERROR * (edge * size_before * size)[keep].sum()
+                + allocation.BORDER_ERROR * (slope_world * border * size * size)[keep].sum())
+
+    source_error = error(source_uvs, size_before)
+    return float(error(uvs, size_after) / source_error) if source_error > 0 else 1.0
+
+
+def _per_index(recharted, uvs, triangles):
+    """The per-corner re-charted UVs (3T, 2) in the source's indexing (N, 2),
+    or None when one UV index would need two places (faces sharing a UV whose
+    corners land in different new charts). Unused UVs keep their value."""
+    out = np.asarray(uvs, np.float32).copy()
+    flat = triangles.ravel()
+    out[flat] = recharted
+    if not np.array_equal(out[flat], recharted):
+        return None
+    return out
+
+
+def positions_array(positions, count):
+    """`positions` validated: (count, 3) float64, finite."""
+    if isinstance(positions, (str, bytes)) or not hasattr(positions, "__len__"):
+        raise TypeError(f"positions must be an (N, 3) array of the UVs' 3-D positions, got "
+                        f"{type(positions).__name__}")
+    array = np.asarray(positions)
+    if not (np.issubdtype(array.dtype, np.integer) or np.issubdtype(array.dtype, np.floating)):
+        raise TypeError(f"positions must hold real numbers, got dtype {array.dtype}")
+    if array.ndim != 2 or array.shape != (count, 3):
+        raise ValueError(f"positions must have shape ({count}, 3), one 3-D position per UV (the uvs' indexing), "
+                         f"got {array.shape}")
+    array = array.astype(np.float64)
+    if not np.isfinite(array).all():
+        bad = int(np.flatnonzero(~np.isfinite(array).all(axis=1))[0])
+        raise ValueError(f"positions[{bad}] is NaN or Inf; fix the mesh's vertices (or pass positions=None "
+                         f"to refine without re-charting)")
+    return array
+
+
+def refine_recharted(refine, lightmap, uvs, triangles, shape, padding, positions, room, energy, source_result,
+                     progress):
+    """The re-chart route: `refine(lightmap, uvs, mask, padding)` (refine_uvs without
+    positions, with the caller's options) on the re-charted mesh, from
+    `lightmap` carried over to it. `source_result` is
+    the source layout's own refinement, `energy` the first bake's gradient
+    energy on the source layout. Returns (result or None, rechart report)."""
+    info = {"used": False, "room": room, "angle": float(ANGLE)}
+    original = source_result.report["original_check"]
+    # The new layout is not held to the source's gutter: at least PADDING.
+    pack_padding = max(float(padding), PADDING)
+    try:
+        recharted = rechart(positions, triangles, ANGLE, shape, pack_padding, progress=progress)
+    except ValueError as error:
+        info["reason"] = f"the mesh could not be re-charted: {error}"
+        return None, info
+    info.update({key: recharted.report[key] for key in ("charts", "split_charts", "degenerate_triangles",
+                                                        "utilisation", "area_utilisation")})
+    new_uvs = _per_index(recharted.uvs, uvs, triangles)
+    if new_uvs is None:
+        info["reason"] = ("the re-charted layout puts corners that share a UV into different charts "
+                          "(a face that is not flat within the re-chart angle)")
+        return None, info
+    new_mask = _native.coverage_mask(new_uvs, triangles, shape)
+    carried = resample_lightmap(lightmap, uvs, triangles, new_uvs, triangles, new_mask)
+    result = refine(carried, new_uvs, new_mask, pack_padding)
+    worse, check = backoff.worse_than_source(result.uvs, uvs, triangles, shape, padding, source=original)
+    if worse:
+        info["reason"] = f"the re-charted layout failed {', '.join(worse)} against the source layout"
+        return None, info
+    info["predicted_error"] = predicted_error(uvs, result.uvs, triangles, energy, positions, lightmap)
+    info["predicted_error_source_route"] = predicted_error(uvs, source_result.uvs, triangles, energy, positions,
+                                                           lightmap)
+    # Both against the source layout; the lower prediction wins (the source
+    # layout's own refinement is never worse than the source by its checks).
+    if not (info["predicted_error"] < REQUIRED_GAIN
+            and info["predicted_error"] <= info["predicted_error_source_route"]):
+        info["reason"] = (f"the error model predicts {info['predicted_error']:.3f} of the source layout's error "
+                          f"re-charted and {info['predicted_error_source_route']:.3f} refining the source layout "
+                          f"(re-charting needs below {REQUIRED_GAIN} and below the other)")
+        return None, info
+    info["used"] = True
+    result.report["check"] = check
+    return result, info

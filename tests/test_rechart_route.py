@@ -1,0 +1,268 @@
+"""refine_uvs' re-chart route (positions=, docs/refiner.md "The re-chart
+route"): the no-room rule on the source layout's charts, the lightmap carried
+over to the re-charted layout (checked against a plain reference beside it),
+the model's prediction, and the route itself: valid, deterministic, inputs
+untouched, off when asked."""
+
+import numpy as np
+import pytest
+
+import lmrefine
+from lmrefine import rechart_route
+from layouts import floor_grid, grid_chart, lightmap_pack, smart_uv
+
+CELLS = 12
+RESOLUTION = 128
+
+
+def _floor_layouts():
+    """A floor of CELLS x CELLS quads with per-corner positions (3T, 3), and
+    two layouts of it: one chart per quad (Lightmap Pack's kind) and one
+    chart for the whole floor (Smart UV's kind), both (3T, 2) per corner."""
+    positions, triangles = floor_grid(CELLS, 1.0)
+    corners = positions[triangles].reshape(-1, 3).astype(np.float64)
+    per_face = lightmap_pack(charts_across=CELLS, margin_texels=2, resolution=RESOLUTION)
+    one_chart = grid_chart(CELLS, (0.05, 0.05), (0.95, 0.95))
+    return corners, per_face, one_chart
+
+
+def _shadowed_floor(uvs, triangles):
+    """The floor under a sun, half of it in the shadow of a roof (a hard
+    edge across the quads), baked on the layout (uvs, triangles)."""
+    scene = lmrefine.Scene()
+    scene.add_mesh(_corner_positions(), triangles, uvs=uvs)
+    roof = np.array([(-2, -2, 1), (0.13, -2, 1), (0.13, 2, 1), (-2, 2, 1)], np.float32)
+    scene.add_mesh(roof, np.array([(0, 1, 2), (0, 2, 3)], np.int32), receiver=False)
+    scene.add_light("sun", energy=3.0, angle=0.01, direction=(0.25, 0.1, -1.0))
+    return np.ascontiguousarray(lmrefine.bake(scene, RESOLUTION, passes=("direct",), samples=8, seed=0)[0][..., :3])
+
+
+def _corner_positions():
+    positions, triangles = floor_grid(CELLS, 1.0)
+    return positions[triangles].reshape(-1, 3).astype(np.float32)
+
+
+@pytest.fixture(scope="module")
+def lightmap_pack_case():
+    corners, (uvs, triangles), _ = _floor_layouts()
+    return corners, uvs, triangles, _shadowed_floor(uvs, triangles)
+
+
+# --- the no-room rule ---------------------------------------------------------
+
+def test_no_room_on_a_lightmap_pack_layout():
+    uvs, triangles = lightmap_pack(charts_across=8, quads=1)
+    room = rechart_route.layout_room(uvs, triangles)
+    assert room["charts"] == 64 and room["triangles_per_chart"] == 2.0
+    assert room["room_fraction"] == 0.0 and room["no_room"]
+    # Charts of 2 x 2 quads: one inner UV each, which 6 of the 8 triangles (two per quad, split
+    # along the same diagonal) touch.
+    uvs, triangles = lightmap_pack(charts_across=8, quads=2)
+    room = rechart_route.layout_room(uvs, triangles)
+    assert room["room_fraction"] == pytest.approx(0.75) and not room["no_room"]
+
+
+def test_room_on_a_smart_uv_layout():
+    uvs, triangles = smart_uv()
+    room = rechart_route.layout_room(uvs, triangles)
+    assert room["charts"] == 5 and not room["no_room"]
+    # Only the triangles on the charts' outer ring of quads touch no inner UV... except at their inner
+    # corner: every triangle of a 24 x 24-quad chart but those of its four corner quads has one.
+    assert room["room_fraction"] > 0.95
+
+
+def test_room_counts_area_not_triangles():
+    # One big chart with inner UVs and many tiny one-face charts: the big chart's area decides.
+    big = grid_chart(4, (0.02, 0.02), (0.7, 0.7))
+    small = [grid_chart(1, (0.75 + 0.02 * (k % 10), 0.02 + 0.02 * (k // 10)),
+                        (0.76 + 0.02 * (k % 10), 0.03 + 0.02 * (k // 10))) for k in range(60)]
+    from layouts import merge
+    uvs, triangles = merge(big, *small)
+    room = rechart_route.layout_room(uvs, triangles)
+    assert room["triangles_per_chart"] < 3 and not room["no_room"]
+    assert room["room_fraction"] > 0.9
+
+
+# --- carrying the lightmap over -----------------------------------------------
+
+def _resample_reference(lightmap, source_uvs, source_triangles, uvs, triangles, mask):
+    """Plain loops: every covered texel's centre in the triangle it lies
+    deepest in (barycentrics clamped), read bilinearly in the source map."""
+    height, width = mask.shape
+    out = np.zeros(lightmap.shape, np.float32)
+    for i in range(height):
+        for j in range(width):
+            if not mask[i, j]:
+                continue
+            point = np.array([(j + 0.5) / width, 1 - (i + 0.5) / height])
+            best, best_score = None, -np.inf
+            for t, (a, b, c) in enumerate(np.asarray(uvs, np.float64)[triangles]):
+                matrix = np.array([b - a, c - a]).T
+                if abs(np.linalg.det(matrix)) < 1e-300:
+                    continue
+                beta, gamma = np.linalg.solve(matrix, point - a)
+                bary = np.array([1 - beta - gamma, beta, gamma])
+                if bary.min() > best_score:
+                    best, best_score = (t, bary), bary.min()
+            t, bary = best
+            bary = np.clip(bary, 0, None) / np.clip(bary, 0, None).sum()
+            at = bary @ np.asarray(source_uvs, np.float64)[source_triangles[t]]
+            out[i, j] = lmrefine.metrics.bilinear_lookup(lightmap, at[None])[0]
+    return out
+
+
+def test_resample_lightmap_matches_the_reference(rng):
+    positions, triangles = floor_grid(3, 1.0)
+    source = lightmap_pack(charts_across=3, margin_texels=2, resolution=32)
+    target = grid_chart(3, (0.1, 0.1), (0.9, 0.9))
+    lightmap = rng.uniform(0, 1, (32, 32, 3)).astype(np.float32)
+    mask = lmrefine.coverage_mask(*target, 32)
+    fast = rechart_route.resample_lightmap(lightmap, *source, *target, mask)
+    slow = _resample_reference(lightmap, *source, *target, mask)
+    assert fast.dtype == np.float32 and fast.shape == lightmap.shape
+    np.testing.assert_allclose(fast, slow, atol=1e-5)
+    assert not fast[~mask].any()
+
+
+def test_resample_lightmap_carries_a_linear_light_exactly():
+    # Light linear in the source's UVs inside each chart is read back at the same surface points.
+    source_uvs, triangles = lightmap_pack(charts_across=4, margin_texels=4, resolution=64)
+    target_uvs, _ = grid_chart(4, (0.05, 0.05), (0.95, 0.95))
+    y, x = np.mgrid[0:64, 0:64] + 0.5
+    lightmap = (x / 64).astype(np.float32)  # u at each texel centre
+    mask = lmrefine.coverage_mask(target_uvs, triangles, 64)
+    carried = rechart_route.resample_lightmap(lightmap, source_uvs, triangles, target_uvs, triangles, mask)
+    # Where a target texel's centre lies inside a triangle, the value is that point's source u.
+    triangle, bary = rechart_route._texel_points(target_uvs.astype(np.float64), triangles, (64, 64), mask)
+    expected = np.einsum("pk,pk->p", bary, source_uvs[triangles[triangle], 0])
+    inside = np.abs(carried[mask] - expected) < 1e-4
+    assert inside.mean() > 0.6  # texels whose bilinear footprint stays inside their source chart
+
+
+# --- the model's prediction ---------------------------------------------------
+
+def test_predicted_error_of_scaled_layouts():
+    uvs, triangles = smart_uv()
+    energy = np.ones((256, 256), np.float32)
+    assert rechart_route.predicted_error(uvs, uvs, triangles, energy) == pytest.approx(1.0)
+    half = uvs * 0.5  # a quarter of the texels: twice the edge error
+    assert rechart_route.predicted_error(uvs, half, triangles, energy) == pytest.approx(2.0, rel=1e-6)
+    assert rechart_route.predicted_error(half, uvs, triangles, energy) == pytest.approx(0.5, rel=1e-6)
+
+
+def test_predicted_error_counts_chart_borders():
+    # A smooth light ramp (no edges): the same floor at the same texel density costs less with
+    # one chart than with a chart per quad, whose borders the dilation fills.
+    corners, (per_face, triangles), (one_chart, _) = _floor_layouts()
+    y, x = np.mgrid[0:RESOLUTION, 0:RESOLUTION] + 0.5
+    ramp = (x / RESOLUTION).astype(np.float32)
+    energy = np.zeros((RESOLUTION, RESOLUTION), np.float32)
+    mask = lmrefine.coverage_mask(per_face, triangles, RESOLUTION)
+    # Scale the one-chart layout to the per-face layout's UV area: only the borders differ.
+    area = lambda u: np.abs(lmrefine.allocation.signed_areas(u, triangles)).sum()
+    centre = one_chart.mean(axis=0)
+    same_density = (centre + (one_chart - centre) * np.sqrt(area(per_face) / area(one_chart))).astype(np.float32)
+    ratio = rechart_route.predicted_error(per_face, same_density, triangles, energy, corners, ramp, mask)
+    # Border length: 4 sides per quad against the floor's 4 sides; the ramp's slope is the same.
+    assert ratio == pytest.approx(4 * CELLS / (4 * CELLS * CELLS), rel=0.05)
+    assert rechart_route.predicted_error(per_face, per_face, triangles, energy, corners, ramp, mask) == \
+        pytest.approx(1.0)
+
+
+# --- the route ----------------------------------------------------------------
+
+def test_route_recharts_a_lightmap_pack_source(lightmap_pack_case):
+    corners, uvs, triangles, lightmap = lightmap_pack_case
+    copies = [a.copy() for a in (corners, uvs, triangles, lightmap)]
+    result = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, positions=corners)
+    for before, after in zip(copies, (corners, uvs, triangles, lightmap)):
+        assert np.array_equal(before, after)  # inputs untouched
+    info = result.report["rechart"]
+    assert info["used"], info
+    assert info["room"]["no_room"] and info["charts"] == 1  # the flat floor: one chart
+    assert info["predicted_error"] < rechart_route.REQUIRED_GAIN
+    assert result.uvs.shape == uvs.shape and result.uvs.dtype == np.float32
+    check = lmrefine.check_layout(result.uvs, triangles, RESOLUTION, padding=2)
+    assert check["valid"], check
+    assert len(np.unique(lmrefine.find_charts(result.uvs, triangles, lmrefine.CHART_TOLERANCE))) == 1
+    # Figures against the user's layout: the shadow edge's triangles gained texels.
+    assert result.report["moved"] and result.report["transition_widening"] > 1.5
+    assert result.report["notes"][0].startswith("re-charted: the source layout gives the refiner no room")
+    from lmrefine.backoff import worse_than_source
+    assert worse_than_source(result.uvs, uvs, triangles, RESOLUTION, 2)[0] == []
+    again = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, positions=corners)
+    assert np.array_equal(again.uvs, result.uvs)  # deterministic
+
+
+def test_route_off_switch(lightmap_pack_case):
+    corners, uvs, triangles, lightmap = lightmap_pack_case
+    plain = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2)
+    off = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, positions=corners, rechart=False)
+    assert plain.report["rechart"] is None
+    assert not off.report["rechart"]["used"] and "off" in off.report["rechart"]["reason"]
+    assert np.array_equal(plain.uvs, off.uvs)
+    assert len(np.unique(lmrefine.find_charts(off.uvs, triangles, lmrefine.CHART_TOLERANCE))) == CELLS ** 2
+
+
+def test_route_keeps_a_layout_with_room():
+    corners, _, (uvs, triangles) = _floor_layouts()
+    lightmap = _shadowed_floor(uvs, triangles)
+    plain = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2)
+    routed = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, positions=corners)
+    info = routed.report["rechart"]
+    assert not info["used"] and not info["room"]["no_room"] and "has room" in info["reason"]
+    assert np.array_equal(plain.uvs, routed.uvs)
+
+
+def test_route_needs_the_lightmap(lightmap_pack_case):
+    corners, uvs, triangles, lightmap = lightmap_pack_case
+    gradient = lmrefine.gradient_map(lightmap, lmrefine.coverage_mask(uvs, triangles, RESOLUTION))
+    result = lmrefine.refine_uvs(None, uvs, triangles, RESOLUTION, padding=2, gradient=gradient,
+                                 positions=corners)
+    assert not result.report["rechart"]["used"]
+    assert "not re-charted: re-charting needs the lightmap" in " ".join(result.report["notes"])
+
+
+def test_route_refuses_a_uv_shared_across_new_charts():
+    # Quads folded 60 degrees along their diagonal, one chart each, the two triangles of a quad
+    # sharing the diagonal's two UVs (as Blender's loops of one face): the re-chart angle cuts each
+    # quad in two charts, and one UV cannot sit in both.
+    n = 4
+    positions, uvs, triangles = [], [], []
+    for k in range(n * n):
+        x, y = k % n, k // n
+        lift = np.sin(np.radians(60))
+        quad = [(x, y, 0), (x + 1, y, 0), (x + 1, y + 1, 0), (x, y + 1, lift)]
+        base = len(positions)
+        positions += quad
+        cell = 1.0 / n
+        uvs += [(x * cell + 0.02, y * cell + 0.02), ((x + 1) * cell - 0.02, y * cell + 0.02),
+                ((x + 1) * cell - 0.02, (y + 1) * cell - 0.02), (x * cell + 0.02, (y + 1) * cell - 0.02)]
+        triangles += [(base, base + 1, base + 2), (base, base + 2, base + 3)]
+    positions, uvs = np.array(positions, np.float64), np.array(uvs, np.float32)
+    triangles = np.array(triangles, np.int32)
+    y, x = np.mgrid[0:64, 0:64]
+    lightmap = np.where(x > 27, 1.0, 0.1).astype(np.float32)
+    result = lmrefine.refine_uvs(lightmap, uvs, triangles, 64, padding=2, positions=positions)
+    info = result.report["rechart"]
+    assert info["room"]["no_room"] and not info["used"]
+    assert "corners that share a UV" in info["reason"]
+    assert lmrefine.check_layout(result.uvs, triangles, 64, padding=2)["valid"]
+
+
+@pytest.mark.parametrize("positions, error, match", [
+    (np.zeros((5, 3)), ValueError, r"positions must have shape \(\d+, 3\)"),
+    (np.full((CELLS * CELLS * 6, 3), np.nan), ValueError, r"positions\[0\] is NaN or Inf"),
+    ("mesh", TypeError, "positions must be an"),
+    (np.zeros((CELLS * CELLS * 6, 3), object), TypeError, "positions must hold real numbers"),
+])
+def test_route_bad_positions(lightmap_pack_case, positions, error, match):
+    _, uvs, triangles, lightmap = lightmap_pack_case
+    with pytest.raises(error, match=match):
+        lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, positions=positions)
+
+
+def test_route_bad_switch(lightmap_pack_case):
+    corners, uvs, triangles, lightmap = lightmap_pack_case
+    with pytest.raises(TypeError, match="rechart must be True or False"):
+        lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, positions=corners, rechart="yes")
