@@ -418,6 +418,8 @@ def test_a_texture_map_as_source_is_named_with_the_fix(facts):
     assert len(texture) == 1 and "'Blocker': UV map 'Tex'" in texture[0]
     assert "overlapping" in texture[0] and "UV > Lightmap Pack) and pick it as Source" in texture[0]
     assert value["panel_warnings"] == len(value["warnings"]) >= 1
+    texture = [w for w in value["per_effect_warnings"] if "looks like a texture map" in w]
+    assert [w.split(":")[0] for w in texture] == ["'Blocker' (direct)", "'Blocker' (indirect)"]
 
 
 def test_progress_moves_per_map_and_per_stage(facts):
@@ -558,6 +560,11 @@ def test_threaded_driver_runs_and_cancels(facts):
     # job stopped before its next step (Cancelled); the scene is untouched either way.
     assert cancel["kind"] == "error" and cancel["value"] in ("Cancelled", "CancelledError")
     assert cancel["changed"] == [] and not cancel["has_layer"]
+    # Layouts: Per Effect, Esc while the indirect map is refined: the direct map, written by then, goes too.
+    per_effect = value["per_effect_cancel"]
+    assert value["per_effect_cancel_layers_at_cancel"] == ["UVMap", "Lightmap", "Lightmap_refined_direct"]
+    assert per_effect["kind"] == "error" and per_effect["value"] in ("Cancelled", "CancelledError")
+    assert per_effect["changed"] == [] and per_effect["layers"] == ["UVMap", "Lightmap"]
 
 
 # --------------------------------------------------- tessellation and stages
@@ -855,6 +862,172 @@ def test_zip_installs_enables_and_carries_the_core(tmp_path):
     enabled, location, idname = line.split()[1:]
     assert enabled == "True" and idname == "OBJECT_OT_lmrefine_refine_uvs"
     assert location.startswith(str(tmp_path / "scripts" / "addons" / "lmrefine_blender" / "lib"))
+
+
+# ------------------------------------------------------ per-effect layouts
+
+EFFECTS = ("direct", "indirect")
+
+
+def _assert_adds_effects(wiring, images, uv_maps, owner):
+    """The preview of `owner`: its own output, an Emission fed by one Add of the effects' images, each
+    image sampled through its own UV node set to its own UV map."""
+    assert wiring["output_is_ours"] and wiring["emission"] == "EMISSION"
+    assert wiring["adds"] == ["ADD"]
+    assert wiring["terms"] == [[image, uv, owner, owner] for image, uv in zip(images, uv_maps)]
+
+
+def test_per_effect_writes_a_map_and_an_image_per_effect_at_the_split_resolutions(facts):
+    value = fact(facts, "per_effect_layouts_images_and_preview")
+    assert value["outcome"] == "FINISHED", value["message"]
+    for name in ("Floor", "Blocker"):
+        assert value["layers"][name] == ["UVMap", "Lightmap", "Lightmap_refined_direct", "Lightmap_refined_indirect"]
+        sides = {effect: value["images"][f"{name}_lightmap_{effect}_effect"]["size"] for effect in EFFECTS}
+        for effect in EFFECTS:
+            side = value["checks"][f"{name}/{effect}"]["side"]
+            assert sides[effect] == [side, side]
+            # The first bake on the source map at the same side is the preview's Before.
+            assert value["images"][f"{name}_lightmap_before_{effect}"]["size"] == [side, side]
+            assert value["checks"][f"{name}/{effect}"]["overlapping"] == 0
+            assert value["checks"][f"{name}/{effect}"]["moved"] > 0.0
+        # Together the effects hold at most the texels of one 64 x 64 map, and nearly all of them.
+        texels = sum(side[0] * side[1] for side in sides.values())
+        assert 0.9 * 64 * 64 <= texels <= 64 * 64
+    # AO is no effect here (it multiplies the light): not baked, and the run says so.
+    assert not any("_ao" in image for image in value["images"])
+    effects = value["result_effects"].split("; ")
+    assert [entry.split()[0] for entry in effects] == list(EFFECTS)
+    assert all(re.fullmatch(r"\w+ \d+px \d+\.\d\dx", entry) for entry in effects)
+
+
+def test_per_effect_resolutions_follow_the_split_rule(facts):
+    value = fact(facts, "per_effect_split_matches_the_rule")
+    assert value["rule"] == "energy"
+    assert value["sides"] == value["expected"]
+    assert value["sides"]["direct"] != value["sides"]["indirect"]  # the energies differ: so do the maps
+    for effect in EFFECTS:
+        side = value["sides"][effect]
+        assert value["image_sizes"][effect] == [side, side]
+        assert value["summary_effects"][effect]["resolution"] == side
+        assert value["summary_effects"][effect]["transition_widening"] > 1.0
+    assert value["report_effects"] == list(EFFECTS)
+
+
+def test_per_effect_preview_adds_the_effects_through_their_own_maps_and_toggles(facts):
+    value = fact(facts, "per_effect_layouts_images_and_preview")
+    for name in ("Floor", "Blocker"):
+        _assert_adds_effects(value["wiring"][name], [f"{name}_lightmap_{e}_effect" for e in EFFECTS],
+                             [f"Lightmap_refined_{e}" for e in EFFECTS], name)
+        assert value["active_uv"][name] == "Lightmap_refined_direct"  # Solid draws the first term
+    _assert_adds_effects(value["before_wiring"], [f"Floor_lightmap_before_{e}" for e in EFFECTS],
+                         ["Lightmap", "Lightmap"], "Floor")
+    assert value["before_active_uv"] == "Lightmap"
+    assert value["after_again"] == value["wiring"]["Floor"]
+    assert value["show_before"] == value["show_after"] == value["removed"] == ["FINISHED"]
+    # Remove Preview put back the materials and the active UV map: only the new maps and images stay.
+    assert value["restored_active_uv"] == "UVMap"
+    assert value["changed"] == ["images", "mesh:Cube", "mesh:FloorMesh", "result"]
+
+
+def test_per_effect_run_is_one_undo_step(facts):
+    value = fact(facts, "per_effect_is_one_undo_step")
+    assert value["outcome"] == "FINISHED", value["message"]
+    assert value["layers"] == ["UVMap", "Lightmap", "Lightmap_refined_direct", "Lightmap_refined_indirect"]
+    assert value["can_undo"] and value["changed_after_undo"] == [] and not value["can_undo_further"]
+
+
+def test_per_effect_with_a_shared_atlas_one_image_per_effect_per_group(facts):
+    value = fact(facts, "per_effect_shared_atlas")
+    assert value["outcome"] == "FINISHED", value.get("message")
+    assert sorted(value["images"]) == sorted(f"{group}_lightmap_{kind}" for group in ("Floor_atlas", "Lonely")
+                                             for kind in ("direct_effect", "indirect_effect", "before_direct",
+                                                          "before_indirect"))
+    for effect in EFFECTS:
+        assert value["images"][f"Floor_atlas_lightmap_{effect}_effect"]["objects"] == "Blocker, Floor, Post"
+        assert value["checks"][f"Floor_atlas/{effect}"]["overlapping"] == 0  # the members' joined layout
+    for name in ("Blocker", "Floor", "Post"):
+        _assert_adds_effects(value["wiring"][name], [f"Floor_atlas_lightmap_{e}_effect" for e in EFFECTS],
+                             [f"Lightmap_refined_{e}" for e in EFFECTS], name)
+    _assert_adds_effects(value["wiring"]["Lonely"], [f"Lonely_lightmap_{e}_effect" for e in EFFECTS],
+                         [f"Lightmap_refined_{e}" for e in EFFECTS], "Lonely")
+    assert value["removed"] == ["FINISHED"]
+    assert value["changed"] == ["images", "mesh:Cube", "mesh:Cube.001", "mesh:FloorMesh", "mesh:Plane", "result"]
+
+
+def test_per_effect_refuses_an_existing_first_image(facts):
+    value = fact(facts, "per_effect_refuses_an_existing_image")
+    assert value["outcome"] == "CANCELLED" and "Layouts: Per Effect bakes each effect's first map" in value["message"]
+    assert value["changed"] == []
+
+
+def test_batch_per_effect(facts, work_dir):
+    blend = fact(facts, "save_scene_for_batch")["path"]
+    out = work_dir / "batch_per_effect"
+    process = run_batch(blend, "--objects", "Floor", "--resolution", "64", "--samples", "4", "--per-effect",
+                        "equal", "--out", str(out))
+    assert process.returncode == 0, process.stderr[-3000:]
+    report = json.loads((out / "report.json").read_text())
+    assert report["settings"]["per_effect"] == "equal"
+    floor = report["objects"]["Floor"]
+    assert floor["refined_layers"] == {e: f"Lightmap_refined_{e}" for e in EFFECTS}
+    effects = floor["report"]["effects"]
+    # equal: half the texels each, 45 x 45 (2 x 45^2 <= 64^2).
+    assert [effects[e]["resolution"] for e in EFFECTS] == [45, 45]
+    for effect in EFFECTS:
+        path = floor["images"][effect]
+        assert path == str(out / f"Floor_lightmap_{effect}_effect.exr")
+        assert lmrefine_read(path).shape[:2] == (45, 45)
+
+
+def test_per_effect_progress_counts_each_effect_map(facts):
+    value = fact(facts, "per_effect_split_matches_the_rule")
+    fractions = value["fractions"]
+    assert fractions == sorted(fractions) and fractions[0] == 0.0 and fractions[-1] > 0.95
+    at = value["at"]
+    # One map, seven units, one after another: the split bake; per effect its first bake and its
+    # refinement; per effect its second bake.
+    order = ["First bake (effects", "First bake (direct", "Refining Floor (direct)", "First bake (indirect",
+             "Refining Floor (indirect)", "Second bake (direct", "Second bake (indirect"]
+    assert [at[label][0] for label in order] == pytest.approx([unit / 7 for unit in range(7)])
+    for label, following in zip(order, order[1:]):
+        assert at[label][1] <= at[following][0] + 1e-9, (label, at)
+
+
+def test_per_effect_cancel_rolls_back(facts):
+    value = fact(facts, "per_effect_cancel_rolls_back")
+    assert value["raised"] == "Cancelled"
+    assert value["layers_when_cancelled"] == ["UVMap", "Lightmap", "Lightmap_refined_direct",
+                                              "Lightmap_refined_indirect"]
+    assert value["changed"] == []
+
+
+def test_per_effect_panel_rows(facts):
+    value = fact(facts, "menus_and_panel_rows")
+    assert value["per_effect_outcome"][0] == "FINISHED", value["per_effect_outcome"]
+    assert value["per_effect_props"][:2] == ["layouts", "per_effect_rule"]
+    labels = value["labels"]["per_effect"]
+    effects = [label for label in labels if label.startswith(("Direct: ", "Indirect: "))]
+    assert len(effects) == 2
+    assert all(re.fullmatch(r"(Direct|Indirect): \d+px, edges \d+\.\d\dx", label) for label in effects)
+
+
+def test_per_effect_maps_add_up_to_the_combined_light(facts):
+    """Each effect's image through its own refined map, added, is the combined light of a bake at R with
+    the source map, within the bakes' noise (32 samples), at the floor's triangle centroids."""
+    value = fact(facts, "per_effect_adds_up_to_the_combined_light")
+    assert value["outcome"] == "FINISHED", value["message"]
+    assert value["points"] > 1000
+    for key in ("after", "before"):
+        assert abs(value[key]["mean"]) < 0.02, value
+        assert value[key]["rmse"] < 0.06, value
+    assert value["wrong_map"]["rmse"] > 0.2, value  # the lookup sees a wrong wiring
+
+
+def test_per_effect_map_that_did_not_move_warns(facts):
+    value = fact(facts, "per_effect_nothing_moved_warns")
+    assert value["moved"] == 0
+    for effect in EFFECTS:
+        assert any(w.startswith(f"'Floor' ({effect}): nothing moved") for w in value["warnings"]), value
 
 
 def test_addon_recharts_a_lightmap_pack_source(facts):

@@ -29,7 +29,8 @@ from lmrefine_blender import pipeline  # noqa: E402
 from lmrefine_blender.journal import Journal  # noqa: E402
 
 PASSES = ("direct", "indirect", "combined", "ao")
-FLAG_OF = {"tessellate_budget": "tessellate"}  # settings whose flag has another name
+# Settings whose flag has another name.
+FLAG_OF = {"tessellate_budget": "tessellate", "layouts": "per_effect", "per_effect_rule": "per_effect"}
 
 
 def _csv(text):
@@ -84,6 +85,10 @@ def build_parser():
                              "BUDGET: most vertices added, as a fraction of each object's (default 0.25)")
     parser.add_argument("--no-tessellate", action="store_true", help="turn tessellation off (when the .blend "
                         "has it on)")
+    parser.add_argument("--per-effect", nargs="?", const="sqrt", choices=("sqrt", "energy", "equal"),
+                        metavar="RULE", help="Layouts: Per Effect: direct and indirect light each get their own "
+                        "refined UV map and image, RULE (sqrt, energy, equal; default sqrt) splitting the "
+                        "resolution^2 texels between them")
     parser.add_argument("--rechart", action=argparse.BooleanOptionalAction, default=None,
                         help="re-chart an object whose source map gives the refiner no room (one chart per face, "
                              "as Lightmap Pack makes) from its mesh; --no-rechart refines the source map as it is")
@@ -112,6 +117,8 @@ def apply_flags(settings, args):
         "shared_atlas": args.shared_atlas,
         "rechart": args.rechart,
     }
+    if args.per_effect is not None:
+        mapping.update(layouts='PER_EFFECT', per_effect_rule=args.per_effect.upper())
     upper = {"first_lightmap": args.first_lightmap, "driving_pass": args.driving_pass, "border": args.border,
              "wavelet": args.wavelet, "backend": args.backend}
     mapping.update({key: value.upper() for key, value in upper.items() if value is not None})
@@ -251,6 +258,9 @@ def _object_entry(outcome, name, target):
              "images": {p: outcome.image_files[i] for p, i in outcome.images[group].items()}}
     if len(outcome.atlases[group]) == 1:
         entry["report"] = outcome.reports[group]
+    if outcome.effects:  # Layouts: Per Effect: one refined map per effect instead of one
+        del entry["refined_layer"]
+        entry["refined_layers"] = {effect: f"{target.refined}_{effect}" for effect in outcome.effects[group]}
     return entry
 
 

@@ -141,14 +141,23 @@ class BakeTarget:
 # object; the last one added is shown, and removing one shows the next.
 # The before/after toggle only swaps the image and the UV map of the
 # preview's own nodes (and the active UV map).
+#
+# A per-effect run (Layouts: Per Effect) shows several terms: one UV Map and
+# Image Texture node per effect, each image sampled through its own UV map,
+# added up (Vector Math Add) into the one Emission: direct + indirect is the
+# combined light. Solid shading draws one image through one UV map, so there
+# the first term (direct) is shown. The state keeps the terms' image and UV
+# names joined by TERM_SEPARATOR.
 
 PREVIEW = "lmrefine_preview"  # on the object: what the preview shows and what it replaced
 PREVIOUS_OUTPUTS = "lmrefine_previous_outputs"  # on a preview image node: the output that was active
 PREVIOUS_TARGETS = "lmrefine_previous_targets"  # on a preview image node: {output name: target} changed to 'All'
 OWNED_MATERIAL = "lmrefine preview"
+TERM = "lmrefine_term"  # on a preview UV or image node: which term (effect) it samples, from 0
+TERM_SEPARATOR = "\n"  # image and UV names never hold a newline
 NODE_NAMES = {  # explicit names: a preview put back by a rollback gets the same ones
     "preview_uv": "lmrefine UV", "preview_image": "lmrefine Lightmap", "preview_emission": "lmrefine Emission",
-    "preview_output": "lmrefine Output",
+    "preview_output": "lmrefine Output", "preview_add": "lmrefine Add",
 }
 
 
@@ -176,6 +185,25 @@ def add_preview(obj, after_image, after_uv, before_image, before_uv, journal, sh
     journal.on_rollback(lambda: remove_preview(obj))
 
 
+def add_terms_preview(obj, after_images, after_uvs, before_images, before_uvs, journal, shown='AFTER'):
+    """Like add_preview, for a light that is the sum of terms (the effects of a per-effect run): each
+    after image sampled through its UV map, all added; `before_images` (baked with `before_uvs`, or
+    None: no toggle) are added the same way."""
+    remove_preview(obj, journal)
+    before = TERM_SEPARATOR.join(image.name for image in before_images) if before_images else ""
+    _apply_preview(obj, TERM_SEPARATOR.join(image.name for image in after_images), TERM_SEPARATOR.join(after_uvs),
+                   before, TERM_SEPARATOR.join(before_uvs) if before_images else "", shown)
+    journal.on_rollback(lambda: remove_preview(obj))
+
+
+def preview_terms(obj):
+    """{"after": [(image name, UV map)...], "before": [...]} of the preview of `obj` (one pair per term)."""
+    state = obj.get(PREVIEW) or {}
+    return {key: list(zip(state.get(f"{key}_image", "").split(TERM_SEPARATOR),
+                          state.get(f"{key}_uv", "").split(TERM_SEPARATOR))) if state.get(f"{key}_image") else []
+            for key in ("after", "before")}
+
+
 def _preview_params(obj):
     state = obj.get(PREVIEW)
     if state is None:
@@ -199,12 +227,13 @@ def _apply_preview(obj, after_image, after_uv, before_image, before_uv, shown):
             obj.material_slots[0].material = material
             state["owned_material"] = 2  # filled the empty first slot: removal empties it
     obj[PREVIEW] = state
+    terms = len(after_image.split(TERM_SEPARATOR))
     for material in _node_trees(obj):
-        _add_preview_nodes(material.node_tree, obj.name)
+        _add_preview_nodes(material.node_tree, obj.name, terms)
     _show(obj, shown)
 
 
-def _add_preview_nodes(tree, owner):
+def _add_preview_nodes(tree, owner, terms=1):
     nodes = tree.nodes
     others = [node for node in nodes if node.get(ROLE) == "preview_image" and node.get(OWNER) != owner]
     if others:  # a shared material: what the first preview replaced is what this one replaces
@@ -221,26 +250,39 @@ def _add_preview_nodes(tree, owner):
     left = min((node.location.x for node in nodes), default=0.0)
     top = max((node.location.y for node in nodes), default=0.0) + 360.0
 
-    def new(kind, role, x):
+    def new(kind, role, x, term=0):
         node = nodes.new(kind)
         node[ROLE], node[OWNER] = role, owner
-        node.name = NODE_NAMES[role]
+        node.name = NODE_NAMES[role] + (f" {term + 1}" if term else "")
         node.label = node.name
-        node.location = (left + x, top)
+        node.location = (left + x, top - 300.0 * term)
         return node
 
-    uv_node = new("ShaderNodeUVMap", "preview_uv", -600.0)
-    image_node = new("ShaderNodeTexImage", "preview_image", -400.0)
-    image_node[PREVIOUS_ACTIVE] = previous_active
-    image_node[PREVIOUS_OUTPUTS] = previous_output
-    image_node[PREVIOUS_TARGETS] = previous_targets
+    light = None  # the output socket of the light so far: the first term, then the running sum
+    first_image = None
+    for term in range(terms):
+        uv_node = new("ShaderNodeUVMap", "preview_uv", -800.0, term)
+        image_node = new("ShaderNodeTexImage", "preview_image", -600.0, term)
+        uv_node[TERM] = image_node[TERM] = term
+        # Every image node records what the preview replaced: removal reads it from any of them.
+        image_node[PREVIOUS_ACTIVE] = previous_active
+        image_node[PREVIOUS_OUTPUTS] = previous_output
+        image_node[PREVIOUS_TARGETS] = previous_targets
+        tree.links.new(uv_node.outputs["UV"], image_node.inputs["Vector"])
+        if light is None:
+            light, first_image = image_node.outputs["Color"], image_node
+        else:
+            add = new("ShaderNodeVectorMath", "preview_add", -300.0, term)
+            add.operation = 'ADD'
+            tree.links.new(light, add.inputs[0])
+            tree.links.new(image_node.outputs["Color"], add.inputs[1])
+            light = add.outputs["Vector"]
     emission = new("ShaderNodeEmission", "preview_emission", -100.0)
     output = new("ShaderNodeOutputMaterial", "preview_output", 100.0)
-    tree.links.new(uv_node.outputs["UV"], image_node.inputs["Vector"])
-    tree.links.new(image_node.outputs["Color"], emission.inputs["Color"])
+    tree.links.new(light, emission.inputs["Color"])
     tree.links.new(emission.outputs["Emission"], output.inputs["Surface"])
     output.is_active_output = True  # Blender keeps one active output per tree: this clears the user's
-    nodes.active = image_node
+    nodes.active = first_image
 
 
 def show_preview(obj, shown):
@@ -256,14 +298,15 @@ def show_preview(obj, shown):
 def _show(obj, shown):
     state = obj[PREVIEW]
     key = "before" if shown == 'BEFORE' else "after"
-    image = bpy.data.images.get(state[f"{key}_image"])
-    uv_name = state[f"{key}_uv"]
+    images = [bpy.data.images.get(name) for name in state[f"{key}_image"].split(TERM_SEPARATOR)]
+    uv_names = state[f"{key}_uv"].split(TERM_SEPARATOR)
     for material in _node_trees(obj):
         for node in _preview_nodes(material.node_tree, obj.name):
             if node[ROLE] == "preview_image":
-                node.image = image
+                node.image = images[node.get(TERM, 0)]
             elif node[ROLE] == "preview_uv":
-                node.uv_map = uv_name
+                node.uv_map = uv_names[node.get(TERM, 0)]
+    uv_name = uv_names[0]  # Solid shading draws the active UV map: the first term's
     layers = obj.data.uv_layers
     if uv_name in layers:
         layers.active = layers[uv_name]

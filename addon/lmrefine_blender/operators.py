@@ -33,6 +33,8 @@ def _report_outcome(operator, context, outcome, seconds):
     result.images = summary["images_per_pass"]
     result.shared = "; ".join(f"{name}: {', '.join(objects)}" for name, objects in summary["shared_images"].items())
     result.stages = outcome.stages_asked
+    result.effects = "; ".join(f"{name} {e['resolution']}px {e['transition_widening']:.2f}x"
+                               for name, e in summary["effects"].items())
     result.stages_kept = summary["stages_kept"]
     # Reports are per map (an object, or an atlas group of several): count and name objects.
     recharted_maps = [name for name, report in outcome.reports.items() if (report.get("rechart") or {}).get("used")]
@@ -50,6 +52,8 @@ def _report_outcome(operator, context, outcome, seconds):
                           f"{summary['density_min']:.2f}x to {summary['density_max']:.2f}x (chart repack included)"
                           + (f"; {still} did not move (see warnings)" if still else ""))
     result.message += "; " + images_sentence(summary)
+    if result.effects:
+        result.message += f"; per effect (map side, edges): {result.effects}"
     if recharted:
         result.message += (f"; re-charted from the mesh: {', '.join(recharted)} (the source map gave the "
                            "refiner no room: one chart per face)")

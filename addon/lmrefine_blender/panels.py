@@ -98,6 +98,10 @@ class LMREFINE_PT_refine_stages(_LightmapTab, bpy.types.Panel):
     def draw(self, context):
         settings = context.scene.lmrefine
         column = self.split_layout().column()
+        column.prop(settings, "layouts", expand=True)
+        row = column.row()
+        row.active = settings.layouts == 'PER_EFFECT'
+        row.prop(settings, "per_effect_rule")
         column.prop(settings, "stages")
         column.prop(settings, "tessellate")
         row = column.row()
@@ -161,6 +165,9 @@ class LMREFINE_PT_refine_result(_LightmapTab, bpy.types.Panel):
         images = result.images if result.valid else 0
         rows.append((f"Images: {images} for {len(result.objects.split(', '))} objects" if images else "Images: -",
                      'IMAGE_DATA', bool(images)))
+        if result.valid and result.effects:  # Layouts: Per Effect: a row per effect, its map side and its edges
+            rows += [(f"{entry.split()[0].capitalize()}: {entry.split()[1]}, edges {entry.split()[2]}", 'LIGHT', True)
+                     for entry in result.effects.split("; ")]
         shared = [entry.split(": ", 1) for entry in result.shared.split("; ") if entry] if result.valid else []
         rows.append((f"Atlas: {shared[0][0]} ({len(shared[0][1].split(', '))})"  # (objects sharing it)
                      + (f" +{len(shared) - 1}" if len(shared) > 1 else "") if shared else "Atlas: none",

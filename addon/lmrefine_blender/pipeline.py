@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 import bpy
 import numpy as np
 
-from . import atlas, bridge, cycles_bake, materials, tessellation
+from . import atlas, bridge, cycles_bake, effects, materials, tessellation
 from .errors import Cancelled, UserError  # noqa: F401  (re-exported for the drivers)
 
 REFINED_SUFFIX = "_refined"
@@ -74,6 +74,7 @@ class Outcome:
     tessellation: dict = field(default_factory=dict)  # object name -> lmrefine.tessellate report
     stages: dict = field(default_factory=dict)  # atlas group name -> {"stages": [...], "stopped": why}
     stages_asked: int = 1
+    effects: dict = field(default_factory=dict)  # Layouts: Per Effect: group -> effect -> resolution, image, report
 
     def summary(self):
         reports = list(self.reports.values())
@@ -99,7 +100,22 @@ class Outcome:
             "objects": len(self.objects),
             "images_per_pass": len(self.images),
             "shared_images": {name: objects for name, objects in self.atlases.items() if len(objects) > 1},
+            "effects": self.effects_summary(),
         }
+
+    def effects_summary(self):
+        """Layouts: Per Effect: {effect: its resolution and its figures over the maps} ({} otherwise),
+        measured on each effect's own refined layout."""
+        by_effect = {}
+        for entries in self.effects.values():
+            for name, entry in entries.items():
+                by_effect.setdefault(name, []).append(entry)
+        return {name: {"resolution": entries[0]["resolution"],
+                       "transition_widening": float(np.mean([e["report"]["transition_widening"] for e in entries])),
+                       "density_min": float(min(e["report"]["density_min"] for e in entries)),
+                       "density_max": float(max(e["report"]["density_max"] for e in entries)),
+                       "images": [e["image"] for e in entries]}
+                for name, entries in by_effect.items()}
 
     def atlas_of(self, obj_name):
         """The name of the atlas group (and of its images) that `obj_name` belongs to."""
@@ -135,6 +151,7 @@ def settings_snapshot(settings):
         "shared_atlas": settings.shared_atlas,
         "tessellate": settings.tessellate_budget if settings.tessellate else None,
         "stages": settings.stages,
+        "per_effect": settings.per_effect_rule.lower() if settings.layouts == 'PER_EFFECT' else None,
     }
 
 
@@ -280,15 +297,10 @@ def run(context, targets, options, journal, image_dir=None):
     back on any exception. `image_dir`: where to write the EXR lightmaps
     (default: next to the .blend, or packed into it when it was never saved).
     """
+    if options.get("per_effect"):  # Layouts: Per Effect, its own job
+        return (yield from effects.run(context, targets, options, journal, image_dir))
     lmrefine = import_core()
-    from lmrefine.layout_input import describe_problems
-    outcome = Outcome(objects=[t.obj.name for t in targets], stages_asked=options.get("stages", 1))
-    outcome.warnings += [f"Skipped: {message}" for message in getattr(targets, "skipped", [])]
-    for target in targets:
-        if target.zero_area:
-            outcome.warnings.append(f"'{target.obj.name}': {target.zero_area} triangles of zero area in 3-D "
-                                    "were skipped (they need no texels); Mesh > Clean Up > Degenerate "
-                                    "Dissolve removes them")
+    outcome = new_outcome(targets, options)
     resolution = options["resolution"]
     padding = options["padding"]
     backend_first = options["first_lightmap"]
@@ -368,19 +380,9 @@ def run(context, targets, options, journal, image_dir=None):
         done += 1
         joined = bridge.Layout(group.uvs, group.triangles)
         check, source_check = _check_refined(lmrefine, label, result.uvs, joined, group.uvs, resolution, padding)
-        source = "', '".join(sorted({target.source for target in group.targets}))
-        if not source_check["valid"] and (source_check["overlapping"] or source_check["min_gutter_texels"] <= 0.0):
-            # Charts that overlap or touch share texels: the layout of a texture, not of a lightmap.
-            outcome.warnings.append(
-                f"{label}: UV map '{source}' looks like a texture map, not a lightmap layout "
-                f"({describe_problems(source_check, padding)}): faces share texels, so light bleeds between "
-                "them whatever the refinement does; add a UV map for the lightmap (Object Data > UV Maps > +, "
-                "then UV > Lightmap Pack) and pick it as Source")
-        elif not source_check["valid"]:
-            outcome.warnings.append(
-                f"{label}: UV map '{source}' was already invalid at {resolution} texels "
-                f"({describe_problems(source_check, padding)}); the refined map is no worse, but lightmap "
-                "bleeding may show: repack the source map (UV > Lightmap Pack)")
+        warning = source_warning(label, group, source_check, padding, resolution)
+        if warning is not None:
+            outcome.warnings.append(warning)
         black = f"{label}: the first lightmap is black"  # already said, with its advice
         if not result.report["moved"] and not any(w.startswith(black) for w in outcome.warnings):
             why = next((n for n in result.report["notes"] if n.startswith("nothing moved")), "nothing moved")
@@ -455,6 +457,36 @@ def run(context, targets, options, journal, image_dir=None):
             image = bpy.data.images[image_name]
             outcome.image_files[image_name] = _save_image(lmrefine, image, image_dir,
                                                           "float" if options["exr_float32"] else "half")
+    return outcome
+
+
+def source_warning(label, group, source_check, padding, resolution):
+    """What the user should know about a group's source map that fails check_layout at `resolution`
+    (`source_check`), or None when it passes."""
+    from lmrefine.layout_input import describe_problems
+    if source_check["valid"]:
+        return None
+    source = "', '".join(sorted({target.source for target in group.targets}))
+    if source_check["overlapping"] or source_check["min_gutter_texels"] <= 0.0:
+        # Charts that overlap or touch share texels: the layout of a texture, not of a lightmap.
+        return (f"{label}: UV map '{source}' looks like a texture map, not a lightmap layout "
+                f"({describe_problems(source_check, padding)}): faces share texels, so light bleeds between "
+                "them whatever the refinement does; add a UV map for the lightmap (Object Data > UV Maps > +, "
+                "then UV > Lightmap Pack) and pick it as Source")
+    return (f"{label}: UV map '{source}' was already invalid at {resolution} texels "
+            f"({describe_problems(source_check, padding)}); the refined map is no worse, but lightmap "
+            "bleeding may show: repack the source map (UV > Lightmap Pack)")
+
+
+def new_outcome(targets, options):
+    """An Outcome for `targets`, with the warnings validation left: skipped objects, zero-area triangles."""
+    outcome = Outcome(objects=[t.obj.name for t in targets], stages_asked=options.get("stages", 1))
+    outcome.warnings += [f"Skipped: {message}" for message in getattr(targets, "skipped", [])]
+    for target in targets:
+        if target.zero_area:
+            outcome.warnings.append(f"'{target.obj.name}': {target.zero_area} triangles of zero area in 3-D "
+                                    "were skipped (they need no texels); Mesh > Clean Up > Degenerate "
+                                    "Dissolve removes them")
     return outcome
 
 

@@ -758,6 +758,17 @@ def rerun_failure_restores_previous_run():
     }
 
 
+def _run_until(targets, options, journal, stop):
+    """Run the job until `stop()` says so (as Esc does); the exception's name (None if it ran to the
+    end), the journal rolled back after a failure."""
+    try:
+        pipeline.run_blocking(pipeline.run(bpy.context, targets, options, journal), should_stop=stop)
+    except Exception as error:
+        journal.rollback()
+        return type(error).__name__
+    return None
+
+
 @check("refine")
 def rollback_on_failure():
     """A Cycles second bake that fails after the refined layer was written leaves nothing behind."""
@@ -779,13 +790,7 @@ def rollback_on_cancel():
     targets = pipeline.validate(bpy.context, [bpy.data.objects["Floor"]], options)
     journal = Journal()
     stop = lambda: "Lightmap_refined" in mesh.uv_layers  # noqa: E731
-    job = pipeline.run(bpy.context, targets, options, journal)
-    try:
-        pipeline.run_blocking(job, should_stop=stop)
-        raised = None
-    except Exception as error:
-        raised = type(error).__name__
-        journal.rollback()
+    raised = _run_until(targets, options, journal, stop)
     return {"raised": raised, "changed": changed(before, fingerprint())}
 
 
@@ -795,8 +800,14 @@ def threaded_driver_runs_and_cancels():
     import time as clock
 
     facts = {}
-    for mode in ("run", "cancel"):
-        fresh_shadow_scene(first_lightmap='CYCLES', backend='CYCLES', bake_passes={'DIRECT'})
+    # per_effect_cancel: Esc while the indirect map is refined, the direct map already written.
+    cancel_at = {"cancel": "Refining", "per_effect_cancel": "Refining Floor (indirect)"}
+    for mode in ("run", "cancel", "per_effect_cancel"):
+        if mode == "per_effect_cancel":
+            fresh_shadow_scene(first_lightmap='EMBREE', backend='EMBREE', bake_passes={'DIRECT'},
+                               layouts='PER_EFFECT')
+        else:
+            fresh_shadow_scene(first_lightmap='CYCLES', backend='CYCLES', bake_passes={'DIRECT'})
         floor = bpy.data.objects["Floor"]
         options = pipeline.settings_snapshot(bpy.context.scene.lmrefine)
         before = fingerprint()
@@ -809,7 +820,8 @@ def threaded_driver_runs_and_cancels():
             if state is not None:
                 break
             labels.append(driver.label)
-            if mode == "cancel" and driver.label.startswith("Refining"):
+            if mode in cancel_at and driver.label.startswith(cancel_at[mode]):
+                facts.setdefault(f"{mode}_layers_at_cancel", [layer.name for layer in floor.data.uv_layers])
                 driver.cancel()  # what Esc does, while the native refinement runs on the worker thread
             clock.sleep(0.01)
         kind, value = state
@@ -817,6 +829,7 @@ def threaded_driver_runs_and_cancels():
             journal.rollback()
         facts[mode] = {"kind": kind, "value": type(value).__name__, "labels": sorted(set(labels)),
                        "has_layer": "Lightmap_refined" in floor.data.uv_layers,
+                       "layers": [layer.name for layer in floor.data.uv_layers],
                        "changed": changed(before, fingerprint())}
     return facts
 
@@ -892,7 +905,10 @@ def texture_map_as_source_warns():
     options = pipeline.settings_snapshot(bpy.context.scene.lmrefine)
     targets = pipeline.validate(bpy.context, [box], options)
     run = pipeline.run_blocking(pipeline.run(bpy.context, targets, options, Journal()))
-    return {"outcome": outcome, "message": message, "warnings": run.warnings, "panel_warnings": result.warnings}
+    options["per_effect"] = "sqrt"  # Layouts: Per Effect says it per effect
+    per_effect = pipeline.run_blocking(pipeline.run(bpy.context, targets, options, Journal()))
+    return {"outcome": outcome, "message": message, "warnings": run.warnings, "panel_warnings": result.warnings,
+            "per_effect_warnings": per_effect.warnings}
 
 
 # ---------------------------------------------------------------- preview
@@ -1235,12 +1251,7 @@ def tessellation_rolls_back_exactly():
         seen.setdefault("vertices_when_stopped", len(floor.data.vertices))
         return True
 
-    try:
-        pipeline.run_blocking(pipeline.run(bpy.context, targets, options, journal), should_stop=stop)
-        raised = None
-    except Exception as error:
-        raised = type(error).__name__
-        journal.rollback()
+    raised = _run_until(targets, options, journal, stop)
     mesh = bpy.data.objects["Floor"].data
     return {"raised": raised, "vertices_when_stopped": seen.get("vertices_when_stopped"),
             "vertices": len(mesh.vertices), "vertices_before": len(vertices_before),
@@ -1366,6 +1377,11 @@ def menus_and_panel_rows():
     bpy.context.scene.lmrefine.density_overlay = False
     bpy.context.scene.lmrefine.result.moved = 0
     states["nothing_moved"] = {"LMREFINE_PT_refine_result": draw(panels.LMREFINE_PT_refine_result)}
+    settings(layouts='PER_EFFECT')
+    per_effect_outcome = refine()
+    states["per_effect"] = {name: draw(getattr(panels, name)) for name in
+                            ("LMREFINE_PT_refine_stages", "LMREFINE_PT_refine_result")}
+    settings(layouts='ONE')
     used = {entry[2] for state in states.values() for log in state.values() for entry in log if len(entry) > 2}
     menus = {}
     for menu in operators.MENUS:
@@ -1389,7 +1405,246 @@ def menus_and_panel_rows():
         "icons_used": sorted(used - {'NONE'}), "icons_missing": sorted(used - icons - {'NONE'}),
         "menus": menus, "menus_after_unregister": menus_after_unregister,
         "show_operator": hasattr(bpy.ops.object, "lmrefine_show_preview"),
+        "per_effect_outcome": per_effect_outcome,
+        "per_effect_props": [entry[1] for entry in states["per_effect"]["LMREFINE_PT_refine_stages"]
+                             if entry[0] == "prop"],
     }
+
+
+# ------------------------------------------------------- per-effect layouts
+
+EFFECTS = ("direct", "indirect")
+
+
+def _terms_wiring(tree, owner):
+    """What reaches the preview's Emission of `owner`: [(image, UV map of the UV node feeding it)], found by
+    walking the links from the active output back (Add nodes added up, each image through its UV node)."""
+    output = tree.get_output_node('EEVEE')
+    emission = output.inputs["Surface"].links[0].from_node
+    terms, adds = [], []
+
+    def walk(node):
+        if node.type == 'VECT_MATH':
+            adds.append(node.operation)
+            for socket in node.inputs[:2]:
+                walk(socket.links[0].from_node)
+        elif node.type == 'TEX_IMAGE':
+            uv_node = node.inputs["Vector"].links[0].from_node
+            terms.append([node.image.name if node.image else None, uv_node.uv_map, node.get("lmrefine_object"),
+                          uv_node.get("lmrefine_object")])
+
+    walk(emission.inputs["Color"].links[0].from_node)
+    return {"output_is_ours": output.get("lmrefine_object") == owner, "emission": emission.type,
+            "adds": adds, "terms": terms,
+            "active_node": tree.nodes.active.name if tree.nodes.active else None}
+
+
+def _per_effect_facts(objects, groups):
+    facts = {"result_effects": bpy.context.scene.lmrefine.result.effects,
+             "result_message": bpy.context.scene.lmrefine.result.message, "layers": {}, "images": {},
+             "wiring": {}, "preview_terms": {}}
+    for obj in objects:
+        facts["layers"][obj.name] = [layer.name for layer in obj.data.uv_layers]
+        facts["wiring"][obj.name] = _terms_wiring(obj.material_slots[0].material.node_tree, obj.name)
+        facts["active_uv"] = facts.get("active_uv", {})
+        facts["active_uv"][obj.name] = obj.data.uv_layers.active.name
+    for image in bpy.data.images:
+        if image.get("lmrefine_object"):
+            facts["images"][image.name] = {"size": list(image.size), "objects": image["lmrefine_objects"],
+                                           "pass": image["lmrefine_pass"]}
+    # Each effect's layout, as written, against its own resolution.
+    facts["checks"] = {}
+    for group, members in groups.items():
+        for effect in EFFECTS:
+            image = bpy.data.images[f"{group}_lightmap_{effect}_effect"]
+            side = image.size[0]
+            layouts = [(bridge.read_uv_layer(bpy.data.objects[n].data, f"Lightmap_refined_{effect}"),
+                        bridge.read_layout(bpy.data.objects[n].data, "Lightmap").triangles) for n in members]
+            uvs, triangles, _, _ = lmrefine_blender.atlas.join_layouts(layouts)
+            source = lmrefine_blender.atlas.join_layouts(
+                [(bridge.read_layout(bpy.data.objects[n].data, "Lightmap").uvs, t) for n, (_, t) in
+                 zip(members, layouts)])[0]
+            check = lmrefine.check_layout(uvs, triangles, side, padding=0)
+            facts["checks"][f"{group}/{effect}"] = {"side": side, "overlapping": int(check["overlapping"]),
+                                                    "moved": float(np.abs(uvs - source).max())}
+    return facts
+
+
+@check("refine", "bake")
+def per_effect_layouts_images_and_preview():
+    """Layouts: Per Effect on the shadow scene (Floor and Blocker apart): one UV map and one image per
+    effect at the split resolutions, the preview adding them, before/after, then Remove Preview."""
+    fresh_shadow_scene(first_lightmap='EMBREE', backend='EMBREE', bake_passes={'DIRECT', 'AO'},
+                       layouts='PER_EFFECT', shared_atlas=False)
+    floor, box = bpy.data.objects["Floor"], bpy.data.objects["Blocker"]
+    floor.data.uv_layers.active = floor.data.uv_layers["UVMap"]
+    scenes.select_only(floor, box)
+    before = fingerprint()
+    outcome, message = refine()
+    if outcome != "FINISHED":
+        return {"outcome": outcome, "message": message}
+    facts = {"outcome": outcome, "message": message, **_per_effect_facts([floor, box], {"Floor": ["Floor"],
+                                                                                         "Blocker": ["Blocker"]})}
+    facts["preview_terms"] = {obj.name: pipeline.materials.preview_terms(obj) for obj in (floor, box)}
+    tree = floor.material_slots[0].material.node_tree
+    window = bpy.context.window_manager.windows[0]
+    with bpy.context.temp_override(window=window):
+        facts["show_before"] = sorted(bpy.ops.object.lmrefine_show_preview(shown='BEFORE'))
+        facts["before_wiring"] = _terms_wiring(tree, "Floor")
+        facts["before_active_uv"] = floor.data.uv_layers.active.name
+        facts["show_after"] = sorted(bpy.ops.object.lmrefine_show_preview(shown='AFTER'))
+        facts["after_again"] = _terms_wiring(tree, "Floor")
+        facts["removed"] = sorted(bpy.ops.object.lmrefine_remove_preview())
+    facts["restored_active_uv"] = floor.data.uv_layers.active.name
+    # Only the UV maps (mesh) and the images stay: every material is as it was.
+    facts["changed"] = changed(before, fingerprint())
+    return facts
+
+
+@check("refine", "bake")
+def per_effect_split_matches_the_rule():
+    """The run's effect resolutions are lmrefine.per_effect's split of R^2 for the energies it measured."""
+    fresh_shadow_scene(first_lightmap='EMBREE', backend='EMBREE', bake_passes={'DIRECT'}, layouts='PER_EFFECT',
+                       per_effect_rule='ENERGY')
+    floor = bpy.data.objects["Floor"]
+    scenes.select_only(floor)
+    options = pipeline.settings_snapshot(bpy.context.scene.lmrefine)
+    journal = Journal()
+    progress = []
+    outcome = pipeline.run_blocking(pipeline.run(bpy.context, pipeline.validate(bpy.context, [floor], options),
+                                                 options, journal),
+                                    progress=lambda fraction, label: progress.append((fraction, label)))
+    journal.commit()
+    from lmrefine.per_effect import split_fractions, split_resolutions
+    effects = outcome.effects["Floor"]
+    energies = {name: effects[name]["report"]["energy"] for name in EFFECTS}
+    return {"rule": options["per_effect"], "sides": {name: effects[name]["resolution"] for name in EFFECTS},
+            "expected": split_resolutions(RESOLUTION, split_fractions("energy", energies)),
+            "energies": energies, "summary_effects": outcome.summary()["effects"],
+            "report_effects": sorted(outcome.reports["Floor"]["effects"]),
+            "fractions": [fraction for fraction, _ in progress],
+            "at": {label: [min(f for f, l in progress if l.startswith(label)),
+                           max(f for f, l in progress if l.startswith(label))]
+                   for label in ("First bake (effects", "First bake (direct", "First bake (indirect",
+                                 "Refining Floor (direct)", "Refining Floor (indirect)", "Second bake (direct",
+                                 "Second bake (indirect")},
+            "image_sizes": {name: list(bpy.data.images[effects[name]["image"]].size) for name in EFFECTS}}
+
+
+@check("refine", "bake")
+def per_effect_is_one_undo_step():
+    fresh_shadow_scene(first_lightmap='EMBREE', backend='EMBREE', bake_passes={'DIRECT'}, layouts='PER_EFFECT')
+    scenes.select_only(bpy.data.objects["Floor"])
+    before, outcome, message = _refine_as_one_undo_step()
+    facts = {"outcome": outcome, "message": message,
+             "layers": [layer.name for layer in bpy.data.objects["Floor"].data.uv_layers]}
+    facts.update(_undo_once(before))
+    return facts
+
+
+@check("refine", "bake")
+def per_effect_cancel_rolls_back():
+    """Cancelled in the second bake of the last effect (every per-effect map written), with Cycles: the
+    scene is as before."""
+    fresh_shadow_scene(first_lightmap='CYCLES', backend='CYCLES', bake_passes={'DIRECT'}, layouts='PER_EFFECT')
+    mesh = bpy.data.objects["Floor"].data
+    options = pipeline.settings_snapshot(bpy.context.scene.lmrefine)
+    before = fingerprint()
+    targets = pipeline.validate(bpy.context, [bpy.data.objects["Floor"]], options)
+    journal = Journal()
+    seen = {"layers": None}
+
+    def stop():
+        if "Lightmap_refined_indirect" in mesh.uv_layers:
+            seen["layers"] = [layer.name for layer in mesh.uv_layers]
+            return True
+        return False
+
+    raised = _run_until(targets, options, journal, stop)
+    return {"raised": raised, "layers_when_cancelled": seen["layers"], "changed": changed(before, fingerprint())}
+
+
+@check("refine", "bake")
+def per_effect_adds_up_to_the_combined_light():
+    """At the floor's triangle centroids: the effects' images, each looked up through its own refined UV
+    map, added, against a combined bake at R with the source map (and the before images likewise)."""
+    from lmrefine.metrics import bilinear_lookup
+    fresh_shadow_scene(first_lightmap='EMBREE', backend='EMBREE', bake_passes={'DIRECT'}, layouts='PER_EFFECT')
+    settings(samples=32)
+    floor = bpy.data.objects["Floor"]
+    scenes.select_only(floor)
+    outcome, message = refine()
+    options = pipeline.settings_snapshot(bpy.context.scene.lmrefine)
+    targets = pipeline.validate(bpy.context, [floor], options)
+    combined = pipeline.run_blocking(pipeline._bake_embree(bpy.context, lmrefine, targets, {"Floor": "Lightmap"},
+                                                           ("combined",), options, "check", 0.0, 1.0, []))
+    triangles = bridge.read_layout(floor.data, "Lightmap").triangles
+
+    def light(image_name, uv_map):
+        centroids = bridge.read_uv_layer(floor.data, uv_map)[triangles].mean(axis=1)
+        return bilinear_lookup(bridge.image_to_array(bpy.data.images[image_name]), centroids)[:, :3]
+
+    truth = bilinear_lookup(combined["combined"]["Floor"], bridge.read_uv_layer(floor.data, "Lightmap")[
+        triangles].mean(axis=1))[:, :3]
+    after = sum(light(f"Floor_lightmap_{e}_effect", f"Lightmap_refined_{e}") for e in EFFECTS)
+    before = sum(light(f"Floor_lightmap_before_{e}", "Lightmap") for e in EFFECTS)
+    scale = float(truth.mean())
+
+    def relative(values):
+        return {"mean": float(values.mean() / scale - 1.0),
+                "rmse": float(np.sqrt(np.mean((values - truth) ** 2)) / scale)}
+
+    return {"outcome": outcome, "message": message, "points": len(truth), "after": relative(after),
+            "before": relative(before),
+            # The control: the direct image through the source map (a preview wired to the wrong map).
+            "wrong_map": relative(light("Floor_lightmap_direct_effect", "Lightmap")
+                                  + light("Floor_lightmap_indirect_effect", "Lightmap_refined_indirect")),
+            "indirect_share": float(light("Floor_lightmap_indirect_effect", "Lightmap_refined_indirect").mean()
+                                    / scale)}
+
+
+@check("refine", "bake")
+def per_effect_nothing_moved_warns():
+    """Strength 0: neither effect's map moves, and each says so."""
+    fresh_shadow_scene(first_lightmap='EMBREE', backend='EMBREE', bake_passes={'DIRECT'}, layouts='PER_EFFECT',
+                       strength=0.0)
+    floor = bpy.data.objects["Floor"]
+    options = pipeline.settings_snapshot(bpy.context.scene.lmrefine)
+    journal = Journal()
+    outcome = pipeline.run_blocking(pipeline.run(bpy.context, pipeline.validate(bpy.context, [floor], options),
+                                                 options, journal))
+    journal.commit()
+    return {"warnings": outcome.warnings, "moved": outcome.summary()["moved"]}
+
+
+@check("refine", "bake")
+def per_effect_shared_atlas():
+    """Per Effect on the atlas scene: one image per effect per atlas group, every member's preview adding
+    its group's effect images through its own per-effect UV maps."""
+    scenes.atlas_scene()
+    register()
+    settings(resolution=RESOLUTION, padding=2, samples=4, first_lightmap='EMBREE', backend='EMBREE',
+             bake_passes={'DIRECT'}, layouts='PER_EFFECT')
+    objects = [bpy.data.objects[name] for name in ATLAS + ("Lonely",)]
+    before = fingerprint()
+    outcome, message = refine()
+    if outcome != "FINISHED":
+        return {"outcome": outcome, "message": message}
+    facts = {"outcome": outcome, **_per_effect_facts(objects, {"Floor_atlas": list(ATLAS), "Lonely": ["Lonely"]})}
+    with bpy.context.temp_override(window=bpy.context.window_manager.windows[0]):
+        facts["removed"] = sorted(bpy.ops.object.lmrefine_remove_preview())
+    facts["changed"] = changed(before, fingerprint())
+    return facts
+
+
+@check("refine", "bake")
+def per_effect_refuses_an_existing_image():
+    """An existing lightmap holds one light, not its effects: a user error naming the fix, nothing changed."""
+    fresh_shadow_scene(first_lightmap='IMAGE', layouts='PER_EFFECT')
+    settings(lightmap_image=bpy.data.images.new("Given", RESOLUTION, RESOLUTION, float_buffer=True))
+    before = fingerprint()
+    outcome, message = refine()
+    return {"outcome": outcome, "message": message, "changed": changed(before, fingerprint())}
 
 
 def _save_for_batch(make_scene, filename):

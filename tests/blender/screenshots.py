@@ -11,7 +11,9 @@ Lightmap tab with xdotool (Blender 3.4 has no API for the tab), runs Refine
 Lightmap UVs on the shadow scene of the tests and takes a screenshot per
 viewport mode and before/after. On atlas.blend (the tests' shared-atlas
 scene: three objects in one atlas, one with a lightmap of its own) it shows
-Material Preview after and before, the Last Result panel (in those shots) and the atlas image in an Image Editor. The docs' pictures are crops of these:
+Material Preview after and before, the Last Result panel (in those shots) and the atlas image in an Image Editor.
+On effects.blend (the shadow scene again) it runs with Layouts: Per Effect
+and shows Material Preview after and before, Rendered, and the panel. The docs' pictures are crops of these:
     convert 5_panel.png -crop 220x820+1380+80 blender_panel.png
     convert 2_material_before.png 1_material_after.png -crop 500x330+500+330 +append -resize 80% ...
 """
@@ -31,6 +33,7 @@ if bpy.app.background:
     os.makedirs(OUT, exist_ok=True)
     scenes.shadow_scene()
     bpy.ops.wm.save_as_mainfile(filepath=os.path.join(OUT, "shadow.blend"))
+    bpy.ops.wm.save_as_mainfile(filepath=os.path.join(OUT, "effects.blend"))  # the same scene, Per Effect
     scenes.atlas_scene()
     bpy.ops.wm.save_as_mainfile(filepath=os.path.join(OUT, "atlas.blend"))
     raise SystemExit(0)
@@ -136,8 +139,23 @@ ATLAS_PLAN = [
     lambda: image_editor(next(i.name for i in bpy.data.images if i.name.endswith("_atlas_lightmap_direct"))),
     lambda: shot_editor("atlas_3_image"), lambda: os._exit(0),
 ]
+
+
+def per_effect():
+    bpy.context.scene.lmrefine.layouts = 'PER_EFFECT'
+
+
+EFFECTS_PLAN = [
+    full_screen, frame, lambda: click(1586, 253), park_mouse, per_effect, refine,
+    lambda: shading('MATERIAL'), lambda: None, lambda: None,
+    lambda: shot("effects_1_material_after"), lambda: show('BEFORE'), lambda: shot("effects_2_material_before"),
+    lambda: show('AFTER'), lambda: shading('RENDERED'), lambda: shot("effects_3_rendered_after"),
+    lambda: shading('SOLID', 'MATERIAL'), lambda: shot("effects_4_panel"), lambda: os._exit(0),
+]
 if os.path.basename(bpy.data.filepath) == "atlas.blend":
     PLAN = ATLAS_PLAN
+elif os.path.basename(bpy.data.filepath) == "effects.blend":
+    PLAN = EFFECTS_PLAN
 
 
 run_plan(PLAN, 6.0)
