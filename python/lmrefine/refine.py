@@ -151,7 +151,7 @@ def identity_grid(resolution):
 def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gradient=None, strength=24.0,
                max_magnification=8.0, min_shrink=0.25, edge_shrink=0.8, delta=0.02, passes=1, border="same",
                directional=False, wavelet="d4", diffusion=0.05, max_steps=8, progress=None, repack=True,
-               min_chart_scale=0.5, max_chart_scale=2.0):
+               min_chart_scale=0.5, max_chart_scale=2.0, world_areas=None):
     """Refine a lightmap UV layout: more texels where light changes fast.
 
     Args:
@@ -196,6 +196,13 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
             in-chart deformation, before the charts are scaled and moved.
         min_chart_scale, max_chart_scale: bounds on a chart's linear scale
             relative to the median chart, for repack.
+        world_areas: (T,) the triangles' surface areas (any unit), for
+            repack: a chart's light changes count on the surface its
+            texels cover, so a layout whose texel density is not uniform
+            (one refined before: a further stage) is scaled towards the
+            model's optimum instead of compounding the last scaling. None
+            (default): the input's texel density is taken as uniform, as
+            Smart UV Project and Lightmap Pack make it.
 
     Returns:
         RefineResult with uvs, grid and report. Its figures are measured on
@@ -240,6 +247,14 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
         raise ValueError(f"passes must be in [1, 64], got {passes!r}")
     if not 0 < edge_shrink <= 1:
         raise ValueError(f"edge_shrink must be in (0, 1] (1: chart edges keep their size), got {edge_shrink}")
+    if world_areas is not None:
+        world_areas = np.asarray(world_areas)
+        if world_areas.shape != (len(triangles),) or not (np.issubdtype(world_areas.dtype, np.integer)
+                                                           or np.issubdtype(world_areas.dtype, np.floating)):
+            raise ValueError(f"world_areas must hold one number per triangle, shape ({len(triangles)},), got "
+                             f"{world_areas.dtype} {world_areas.shape}; pass the triangles' surface areas or None")
+        if not (np.isfinite(world_areas).all() and (world_areas >= 0).all()):
+            raise ValueError("world_areas must be finite and >= 0 (surface areas of the triangles)")
     # The original is analysed once (charts, rasterization, chart distances)
     # for its coverage, gutter texels and check and every back-off round.
     checker = _native.LayoutChecker(uvs, triangles, shape, padding)
@@ -302,7 +317,8 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
         pack_padding = min(float(padding), max(float(original["min_gutter_texels"]), min(float(padding), 1.0)))
         packed, repack_report = allocation.repack(uvs, new_uvs, triangles, scalar_energy, shape, pack_padding,
                                                   float(min_chart_scale), float(max_chart_scale), progress,
-                                                  lightmap=lightmap if gradient_given is None else None, mask=mask)
+                                                  lightmap=lightmap if gradient_given is None else None, mask=mask,
+                                                  world_areas=world_areas)
         if packed is not None:
             packed_check = _native.check_layout(packed, triangles, shape, padding)
             worse = backoff.failures(packed_check, original, padding)
