@@ -31,9 +31,6 @@ class Layout:
 
     uvs: np.ndarray  # (L, 2) float32, per loop
     triangles: np.ndarray  # (T, 3) int32, loop indices
-    # (T,) surface area of each triangle in the mesh's own coordinates (a
-    # uniform object scale cancels in refine_uvs' chart model), or None.
-    world_areas: np.ndarray | None = None
 
 
 @dataclass
@@ -85,12 +82,7 @@ def read_layout(mesh, uv_name):
     uvs = read_uv_layer(mesh, uv_name)
     loop_vertex = np.empty(len(mesh.loops), dtype=np.int32)
     mesh.loops.foreach_get("vertex_index", loop_vertex)
-    triangles = triangles.reshape(-1, 3)
-    vertex_co = np.empty(len(mesh.vertices) * 3, dtype=np.float64)
-    mesh.vertices.foreach_get("co", vertex_co)
-    corners = vertex_co.reshape(-1, 3)[loop_vertex[triangles]]  # (T, 3, 3)
-    areas = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
-    return Layout(weld_uvs(uvs, loop_vertex), triangles, areas)
+    return Layout(weld_uvs(uvs, loop_vertex), triangles.reshape(-1, 3))
 
 
 def read_uv_layer(mesh, uv_name):

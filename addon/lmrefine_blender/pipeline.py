@@ -326,7 +326,7 @@ def run(context, targets, options, journal, image_dir=None):
                 f"Refining {name}",
                 lambda progress, lightmap=lightmaps[name], layout=layout: lmrefine.refine_uvs(
                     lightmap, layout.uvs, layout.triangles, resolution, padding=padding, progress=progress,
-                    world_areas=layout.world_areas, **options["refine_options"]),
+                    **options["refine_options"]),
                 done * span, span, parts=REFINE_STAGES)
         except (ValueError, TypeError, MemoryError) as error:
             # The core refused this object's input: skip it, refine the others
@@ -487,8 +487,7 @@ def _further_stages(context, lmrefine, targets, refined_uvs, options, journal, o
                 f"Stage {stage}: refining {name}",
                 lambda progress, lightmap=baked[driving][name], previous=previous, layout=target.layout:
                     lmrefine.refine_uvs(lightmap, previous, layout.triangles, resolution, padding=padding,
-                                        progress=progress, world_areas=layout.world_areas,
-                                        **options["refine_options"]),
+                                        progress=progress, **options["refine_options"]),
                 done * span, span, parts=REFINE_STAGES)
             done += 1
             change = metrics.layout_change(previous, result.uvs, target.layout.triangles)

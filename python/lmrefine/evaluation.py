@@ -169,9 +169,7 @@ def _further_stages(sample, triangles, resolution, padding, options, stages, poi
     for stage in range(2, options.stages + 1):
         previous, previous_map = refined, refined_map
         candidate = stages.run("refine", lambda p: refine_uvs(previous_map, previous.uvs, triangles, resolution,
-                                                              padding=padding, progress=p,
-                                                              world_areas=sample.triangle_areas(),
-                                                              **options.refine_options))
+                                                              padding=padding, progress=p, **options.refine_options))
         change = metrics.layout_change(previous.uvs, candidate.uvs, triangles)
         reason = metrics.stage_stop_reason(stage, bool(candidate.report["moved"]), change)
         if reason is not None:
@@ -267,8 +265,7 @@ def _per_effect(sample, uvs, triangles, resolution, options, stages, points, tru
             padding = min(float(options.padding), float(gutter))
             first, plain = lookup(name, uvs, side, "input", keep_map=True)
             refined = stages.run("per-effect refine", lambda p: refine_uvs(
-                first, uvs, triangles, side, padding=padding, progress=p, world_areas=sample.triangle_areas(),
-                **options.refine_options))
+                first, uvs, triangles, side, padding=padding, progress=p, **options.refine_options))
             _, refined_lookup = lookup(name, refined.uvs, side, f"{rule} refined")
             layouts[(rule, name)] = refined.uvs
             # The effect's own uniform bakes at side x multipliers, against its own truth.
@@ -387,11 +384,8 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
         uvs, triangles = sample.layout(variant)
     original_check = check_layout(uvs, triangles, resolution, options.padding)
     padding = min(float(options.padding), float(original_check["min_gutter_texels"]))
-    # The surface each triangle covers: the chart model counts light changes
-    # per surface area, whatever the layout's texel density.
     refined = stages.run("refine", lambda p: refine_uvs(baseline, uvs, triangles, resolution, padding=padding,
-                                                        progress=p, world_areas=sample.triangle_areas(),
-                                                        **options.refine_options))
+                                                        progress=p, **options.refine_options))
     refined_map = stages.run("bake refined", lambda p: _bake_map(sample, refined.uvs, resolution, options, p))
 
     # Ground truth at area-uniform points, and at two neighbours each along

@@ -202,7 +202,8 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
             (one refined before: a further stage) is scaled towards the
             model's optimum instead of compounding the last scaling. None
             (default): the input's texel density is taken as uniform, as
-            Smart UV Project and Lightmap Pack make it.
+            Smart UV Project makes it (the compounding measured better
+            over two stages: docs/refiner.md, "Light changes per surface").
 
     Returns:
         RefineResult with uvs, grid and report. Its figures are measured on
