@@ -373,10 +373,40 @@ def plaza():
     return {"passes": ["direct"]}
 
 
+def alley():
+    """A narrow street (holdout: never used to tune constants) between two
+    house fronts: a low sun from across the roofs puts the street in the
+    west front's shadow, balconies on the sunlit east front throw their
+    shadows down it, beams spanning the street stripe the floor and the
+    walls; canopies over two doors in the shade, two warm wall lamps."""
+    make_object("Street", lambda bm: grid_faces(bm, (-2, -6, 0), (4, 0, 0), (0, 12, 0), 14, 40), (0.55, 0.53, 0.5),
+                closed=False)
+    # House fronts facing the street (u x v points into it).
+    make_object("WestFront", lambda bm: grid_faces(bm, (-2, -6, 0), (0, 12, 0), (0, 0, 4.5), 40, 15),
+                (0.78, 0.7, 0.6), closed=False)
+    make_object("EastFront", lambda bm: grid_faces(bm, (2, -6, 0), (0, 0, 4.5), (0, 12, 0), 15, 40),
+                (0.8, 0.76, 0.68), closed=False)
+    make_object("Balconies", lambda bm: [box_faces(bm, (1.57, y, 2.4), (0.8, 1.5, 0.15)) for y in (-3.5, 0.2, 3.8)],
+                (0.6, 0.6, 0.62))
+    make_object("Canopies", lambda bm: [box_faces(bm, (-1.52, y, 2.6), (0.9, 2.4, 0.08)) for y in (-2.0, 2.5)],
+                (0.5, 0.3, 0.25))
+
+    def beams(bm):
+        for y in (-4.6, -1.5, 1.3, 4.4):
+            box_faces(bm, (0, y, 4.4), (4.0, 0.12, 0.12), cell=9.0)
+    make_object("Beams", beams, (0.4, 0.3, 0.22), receiver=False)
+    add_light("Sun", "SUN", (0, 0, 10), (math.radians(35), 0.0, math.radians(-70)), energy=4.0,
+              angle=math.radians(0.6))
+    for name, y in (("LampSouth", -3.0), ("LampNorth", 3.2)):
+        add_light(name, "POINT", (-1.8, y, 3.0), energy=120.0, shadow_soft_size=0.08, color=(1.0, 0.78, 0.5))
+    set_world((0.05, 0.07, 0.1))
+    return {"passes": ["direct"]}
+
+
 # Which scenes tune the refiner's constants and which only report is in
 # docs/evaluation.md ("Tuning scenes and holdout scenes").
 SCENES = {"courtyard": courtyard, "room": room, "fence_and_tree": fence_and_tree, "game_level": game_level,
-          "atrium": atrium, "plaza": plaza}
+          "atrium": atrium, "plaza": plaza, "alley": alley}
 
 
 # --------------------------------------------------------------------------- UVs and export

@@ -173,3 +173,62 @@ def test_refine_uvs_with_the_smooth_term_returns_a_valid_repacked_layout(monkeyp
     monkeypatch.setattr(allocation, "SMOOTH_TERM", False)
     off = lmrefine.refine_uvs(lightmap, uvs, tris, resolution, padding=2).report["repack"]
     assert off["smooth_fraction"] == 0
+
+
+def two_charts_at_two_densities():
+    """Two square charts of the same surface (world area 1 each), chart 0
+    16 texels across, chart 1 32 (four times the texel density), quads of
+    one texel, each crossed by one hard shadow edge down its middle whose
+    gradient energy is two texels wide: the same light on the surface,
+    twice the edge texels on chart 1."""
+    resolution = 64
+    small = grid_chart(16, (4 / resolution, 4 / resolution), (20 / resolution, 20 / resolution))
+    large = grid_chart(32, (28 / resolution, 4 / resolution), (60 / resolution, 36 / resolution))
+    uvs, tris = merge(small, large)
+    charts = lmrefine.find_charts(uvs, tris, tolerance=1e-5)
+    energy = np.zeros((resolution, resolution))
+    energy[resolution - 20:resolution - 4, 11:13] = 1.0  # chart 0's rows (v up, rows down), its middle columns
+    energy[resolution - 36:resolution - 4, 43:45] = 1.0
+    world = np.where(charts == 0, 1.0 / (2 * 16 ** 2), 1.0 / (2 * 32 ** 2))
+    return uvs, tris, charts, energy, world
+
+
+def test_texel_weights_are_the_surface_a_texel_covers_relative_to_the_mean():
+    uvs, tris, charts, _, world = two_charts_at_two_densities()
+    weights = allocation.texel_weights(uvs, tris, world)
+    small, large = weights[charts == 0], weights[charts == 1]
+    np.testing.assert_allclose(small, small[0], rtol=1e-5)
+    np.testing.assert_allclose(large, large[0], rtol=1e-5)
+    np.testing.assert_allclose(small[0] / large[0], 4.0, rtol=1e-5)  # a quarter of the texel area on chart 1
+    # Surface areas in any unit, and a layout of uniform density: all ones.
+    np.testing.assert_allclose(allocation.texel_weights(uvs, tris, 1e4 * world), weights, rtol=1e-12)
+    uniform = np.abs(allocation.signed_areas(uvs, tris)) * 7.0
+    np.testing.assert_allclose(allocation.texel_weights(uvs, tris, uniform), 1.0, rtol=1e-12)
+
+
+def test_with_surface_areas_a_denser_chart_is_not_scaled_up_again(monkeypatch):
+    # Chart 1 already has twice chart 0's linear texel density (as after a
+    # first refinement): with the same light per surface, the model's
+    # optimum gives both charts the same density again (scale ratio 2),
+    # where counting texels alone would keep chart 1 denser (ratio 2^(1/3)).
+    monkeypatch.setattr(allocation, "ENERGY_FLOOR", 0.0)  # the floor would pull both towards the mean
+    uvs, tris, charts, energy, world = two_charts_at_two_densities()
+    for world_areas, expected in ((world, 2.0), (None, 2.0 ** (1 / 3))):
+        scales, edge, _, _ = allocation.chart_scales(uvs, tris, charts, energy, 0.1, 10.0, world_areas=world_areas)
+        np.testing.assert_allclose(scales[0] / scales[1], expected, rtol=0.02)
+    # The edge error in surface units: chart 1's texels are half as wide, so half the error.
+    _, edge, _, _ = allocation.chart_scales(uvs, tris, charts, energy, world_areas=world)
+    np.testing.assert_allclose(edge[1] / edge[0], 0.5, rtol=0.02)
+
+
+def test_refine_uvs_checks_world_areas():
+    uvs, tris, _, energy, world = two_charts_at_two_densities()
+    gradient = np.repeat(energy[..., None] / 4, 4, axis=2).astype(np.float32)
+    for bad, message in ((world[:-1], "one number per triangle"), (np.full(len(tris), np.nan), "finite"),
+                         (-world, ">= 0"), (np.array(["a"] * len(tris)), "one number per triangle")):
+        with pytest.raises(ValueError, match=message):
+            lmrefine.refine_uvs(None, uvs, tris, 64, gradient=gradient, world_areas=bad)
+    kept = world.copy()
+    result = lmrefine.refine_uvs(None, uvs, tris, 64, gradient=gradient, world_areas=world)
+    np.testing.assert_array_equal(world, kept)
+    assert lmrefine.check_layout(result.uvs, tris, 64, 2)["valid"]

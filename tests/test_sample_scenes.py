@@ -9,7 +9,7 @@ import lmrefine
 from lmrefine import sample_scenes
 
 ROOT = Path(__file__).resolve().parents[1]
-NAMES = ("courtyard", "room", "fence_and_tree", "game_level", "atrium", "plaza")
+NAMES = ("courtyard", "room", "fence_and_tree", "game_level", "atrium", "plaza", "alley")
 # Coarse on purpose (for the tessellation option): its triangles are metres long.
 COARSE = ("plaza",)
 FINE = tuple(name for name in NAMES if name not in COARSE)
@@ -56,6 +56,21 @@ def test_atrium_has_a_sun_a_spot_and_a_rectangular_area_light_over_valid_layouts
         report = lmrefine.check_layout(uvs, triangles, resolution, padding=2)
         assert report["valid"] and report["min_gutter_texels"] >= 2.0, (variant, report)
     assert (ROOT / "blend_samples" / "atrium.blend").stat().st_size < 300_000
+
+
+def test_alley_is_a_street_of_walls_under_a_sun_and_two_lamps_over_valid_layouts():
+    scene = sample_scenes.load_sample("alley")
+    assert sorted(light["kind"] for light in scene.lights) == ["point", "point", "sun"]
+    assert len(scene.occluder_triangles) > 0  # the beams across the street cast, are not lightmapped
+    # Most of the receiver area is vertical (the two house fronts), unlike the other scenes' floors.
+    corner_normals = scene.normals.reshape(-1, 3, 3).mean(axis=1)
+    vertical = np.abs(corner_normals[:, 2]) < 0.1
+    assert scene.triangle_areas()[vertical].sum() > 0.5 * scene.triangle_areas().sum()
+    for variant, resolution in (("smart", 256), ("lightmap", 512)):
+        uvs, triangles = scene.layout(variant)
+        report = lmrefine.check_layout(uvs, triangles, resolution, padding=2)
+        assert report["valid"] and report["min_gutter_texels"] >= 2.0, (variant, report)
+    assert (ROOT / "blend_samples" / "alley.blend").stat().st_size < 300_000
 
 
 def test_receivers_are_tessellated_finely_enough_to_move_texels():

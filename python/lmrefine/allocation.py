@@ -128,7 +128,23 @@ def luminance_slope(lightmap, mask):
     return np.where(mask, np.hypot(*slope), np.float32(0))
 
 
-def chart_errors(uvs, triangles, charts, energy, lightmap=None, mask=None, smooth_term=None):
+def texel_weights(uvs, triangles, world_areas):
+    """(T,) the surface a texel of each triangle covers (world area over UV
+    area), relative to the layout's mean (sum of world areas over sum of UV
+    areas): 1 everywhere on a layout of uniform texel density. A texel's
+    error counts on the surface it covers, so a chart whose texels are
+    already small (a layout refined before) earns less from the same
+    gradient energy. Triangles of zero UV area get 1 (they cover no texel)."""
+    uv_area = np.abs(signed_areas(uvs, triangles))
+    world = np.abs(np.asarray(world_areas, np.float64))
+    live = uv_area > 0
+    mean = world[live].sum() / uv_area[live].sum() if live.any() else 0.0
+    if not mean > 0:
+        return np.ones(len(uv_area))
+    return np.where(live, world / np.maximum(uv_area, 1e-300) / mean, 1.0)
+
+
+def chart_errors(uvs, triangles, charts, energy, lightmap=None, mask=None, smooth_term=None, world_areas=None):
     """(edge, smooth, area), each (C,): the error model's terms per chart at
     the input's scale (texel error units) and the chart's UV area.
 
@@ -139,24 +155,29 @@ def chart_errors(uvs, triangles, charts, energy, lightmap=None, mask=None, smoot
     a lightmap the slope term is 0 (the gradient map is blind to linear
     light). Sums over a triangle's texels use its four points
     (`triangle_texels`). smooth_term False (default: SMOOTH_TERM): edge is
-    the whole gradient energy, unscaled, and smooth is 0."""
+    the whole gradient energy, unscaled, and smooth is 0. world_areas (T,)
+    the triangles' surface areas: each triangle's sums count in surface
+    units (times `texel_weights`); None: the input's texel density is taken
+    as uniform (as Smart UV Project and Lightmap Pack make it)."""
     shape = energy.shape
     count = int(charts.max()) + 1 if len(charts) else 0
     area = np.bincount(charts, weights=np.abs(signed_areas(uvs, triangles)), minlength=count)
+    weight = None if world_areas is None else texel_weights(uvs, triangles, world_areas)
+
+    def per_chart(field):
+        sums = triangle_energy(uvs, triangles, field)
+        return np.bincount(charts, weights=sums if weight is None else sums * weight, minlength=count)
     if not (SMOOTH_TERM if smooth_term is None else smooth_term):
-        edge = np.bincount(charts, weights=triangle_energy(uvs, triangles, energy), minlength=count)
-        return edge, np.zeros(count), area
+        return per_chart(energy), np.zeros(count), area
     if mask is None:
         mask = energy > 0
     energy = np.where(mask, energy, 0).astype(np.float32)
     flat = opening(energy, mask)
-    sharp = triangle_energy(uvs, triangles, energy - flat)
-    edge = EDGE_ERROR * np.bincount(charts, weights=sharp, minlength=count)
-    curvature = np.bincount(charts, weights=triangle_energy(uvs, triangles, flat), minlength=count)
-    smooth = CURVATURE_ERROR * curvature
+    edge = EDGE_ERROR * per_chart(energy - flat)
+    smooth = CURVATURE_ERROR * per_chart(flat)
     if lightmap is not None:
         slope = opening(luminance_slope(lightmap, mask), mask)
-        slope_sum = np.bincount(charts, weights=triangle_energy(uvs, triangles, slope), minlength=count)
+        slope_sum = per_chart(slope)
         texels = area * shape[0] * shape[1]
         mean_slope = np.where(texels > 0, slope_sum / np.maximum(texels, 1e-300), 0.0)
         _, perimeter = chart_outlines(uvs, triangles, charts, shape, snap=CHART_TOLERANCE)
@@ -226,10 +247,10 @@ def predicted_error(edge, smooth, scales):
 
 
 def chart_scales(uvs, triangles, charts, energy, min_scale=0.5, max_scale=2.0, lightmap=None, mask=None,
-                 smooth_term=None):
+                 smooth_term=None, world_areas=None):
     """Relative linear scale per chart from the error model above
     (`chart_errors`, `optimal_scales`); also returns (edge, smooth, area)."""
-    edge, smooth, area = chart_errors(uvs, triangles, charts, energy, lightmap, mask, smooth_term)
+    edge, smooth, area = chart_errors(uvs, triangles, charts, energy, lightmap, mask, smooth_term, world_areas)
     return optimal_scales(edge, smooth, area, min_scale, max_scale), edge, smooth, area
 
 
@@ -270,15 +291,16 @@ def padded_utilisation(area, perimeter, padding, shape):
 
 
 def repack(source_uvs, refined_uvs, triangles, energy, resolution, padding, min_scale, max_scale, progress=None,
-           lightmap=None, mask=None):
+           lightmap=None, mask=None, world_areas=None):
     """Scale the charts of `refined_uvs` by their signal (measured on the
     source layout `source_uvs`, where `energy` and `lightmap` were baked;
-    `mask` its coverage) and pack them into one atlas. Returns (uvs,
-    report); uvs is None when the packed layout is not better than
-    `refined_uvs` by the error model (the report says so)."""
+    `mask` its coverage; `world_areas` the triangles' surface areas, or
+    None for a source of uniform texel density) and pack them into one
+    atlas. Returns (uvs, report); uvs is None when the packed layout is not
+    better than `refined_uvs` by the error model (the report says so)."""
     charts = find_charts(source_uvs, triangles, tolerance=CHART_TOLERANCE)
     scales, edge, smooth, _ = chart_scales(source_uvs, triangles, charts, energy, min_scale, max_scale,
-                                           lightmap, mask)
+                                           lightmap, mask, world_areas=world_areas)
     # No packing can scale the charts beyond filling the whole atlas, gutters
     # aside: when the model's error at that scale is no clear gain, the
     # packer need not run (a single chart filling its atlas, for example).

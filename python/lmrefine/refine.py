@@ -151,7 +151,7 @@ def identity_grid(resolution):
 def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gradient=None, strength=24.0,
                max_magnification=8.0, min_shrink=0.25, edge_shrink=0.8, delta=0.02, passes=1, border="same",
                directional=False, wavelet="d4", diffusion=0.05, max_steps=8, progress=None, repack=True,
-               min_chart_scale=0.5, max_chart_scale=2.0, positions=None, rechart=True):
+               min_chart_scale=0.5, max_chart_scale=2.0, positions=None, rechart=True, world_areas=None):
     """Refine a lightmap UV layout: more texels where light changes fast.
 
     Args:
@@ -213,6 +213,14 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
             the same triangles.
         rechart: False turns the re-chart route off (the source layout
             is refined as without positions).
+        world_areas: (T,) the triangles' surface areas (any unit), for
+            repack: a chart's light changes count on the surface its
+            texels cover, so a layout whose texel density is not uniform
+            (one refined before: a further stage) is scaled towards the
+            model's optimum instead of compounding the last scaling. None
+            (default): the input's texel density is taken as uniform, as
+            Smart UV Project makes it (the compounding measured better
+            over two stages: docs/refiner.md, "Light changes per surface").
 
     Returns:
         RefineResult with uvs, grid and report. Its figures are measured on
@@ -242,7 +250,8 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
     options = {"strength": strength, "max_magnification": max_magnification, "min_shrink": min_shrink,
                "edge_shrink": edge_shrink, "delta": delta, "passes": passes, "border": border,
                "directional": directional, "wavelet": wavelet, "diffusion": diffusion, "max_steps": max_steps,
-               "repack": repack, "min_chart_scale": min_chart_scale, "max_chart_scale": max_chart_scale}
+               "repack": repack, "min_chart_scale": min_chart_scale, "max_chart_scale": max_chart_scale,
+               "world_areas": world_areas}
     if not isinstance(rechart, (bool, np.bool_)):
         raise TypeError(f"rechart must be True or False, got {type(rechart).__name__}")
     if positions is None:
@@ -308,6 +317,7 @@ def _refine(lightmap, uvs, triangles, resolution, padding, mask, gradient, progr
         options["diffusion"], options["max_steps"]
     repack, min_chart_scale, max_chart_scale = options["repack"], options["min_chart_scale"], \
         options["max_chart_scale"]
+    world_areas = options["world_areas"]
     start = time.perf_counter()
     shape = _resolution(resolution)
     uvs, triangles = _layout(uvs, triangles)
@@ -326,6 +336,14 @@ def _refine(lightmap, uvs, triangles, resolution, padding, mask, gradient, progr
         raise ValueError(f"passes must be in [1, 64], got {passes!r}")
     if not 0 < edge_shrink <= 1:
         raise ValueError(f"edge_shrink must be in (0, 1] (1: chart edges keep their size), got {edge_shrink}")
+    if world_areas is not None:
+        world_areas = np.asarray(world_areas)
+        if world_areas.shape != (len(triangles),) or not (np.issubdtype(world_areas.dtype, np.integer)
+                                                           or np.issubdtype(world_areas.dtype, np.floating)):
+            raise ValueError(f"world_areas must hold one number per triangle, shape ({len(triangles)},), got "
+                             f"{world_areas.dtype} {world_areas.shape}; pass the triangles' surface areas or None")
+        if not (np.isfinite(world_areas).all() and (world_areas >= 0).all()):
+            raise ValueError("world_areas must be finite and >= 0 (surface areas of the triangles)")
     # The original is analysed once (charts, rasterization, chart distances)
     # for its coverage, gutter texels and check and every back-off round.
     checker = _native.LayoutChecker(uvs, triangles, shape, padding)
@@ -388,7 +406,8 @@ def _refine(lightmap, uvs, triangles, resolution, padding, mask, gradient, progr
         pack_padding = min(float(padding), max(float(original["min_gutter_texels"]), min(float(padding), 1.0)))
         packed, repack_report = allocation.repack(uvs, new_uvs, triangles, scalar_energy, shape, pack_padding,
                                                   float(min_chart_scale), float(max_chart_scale), progress,
-                                                  lightmap=lightmap if gradient_given is None else None, mask=mask)
+                                                  lightmap=lightmap if gradient_given is None else None, mask=mask,
+                                                  world_areas=world_areas)
         if packed is not None:
             packed_check = _native.check_layout(packed, triangles, shape, padding)
             worse = backoff.failures(packed_check, original, padding)
