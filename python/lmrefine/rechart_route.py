@@ -27,6 +27,13 @@ MIN_ROOM_FRACTION = 0.25
 # The re-charted layout is kept when the model predicts at most this
 # fraction of the source layout's error (as allocation.REQUIRED_GAIN).
 REQUIRED_GAIN = allocation.REQUIRED_GAIN
+# A source layout with room is re-charted too when creases sharper than ANGLE
+# inside its charts (lmrefine.folds) hold at least this fraction of the first
+# bake's light changes: below it, cutting them cannot give the keep rule's 5%
+# over refining the source layout, and the route's time (a re-charting and a
+# second refinement) is saved. Smart UV atlases of the bundled scenes: 0 on
+# game_level and fence_and_tree, 0.21 on courtyard (docs/refiner.md).
+MIN_FOLD_ENERGY = 0.05
 # The re-chart angle of the route, in degrees. Chosen on courtyard, the only
 # tuning scene whose charts change with it: 5-17 degrees (231 charts)
 # measured 2.35x / 1.59x at 256^2 / 512^2, 20 (201 charts) 2.40x / 2.27x,
@@ -155,7 +162,7 @@ def _texel_points(uvs, triangles, shape, mask, chunk=1 << 22):
     return best_triangle[where], bary
 
 
-def predicted_error(source_uvs, uvs, triangles, energy, positions=None, lightmap=None, mask=None):
+def predicted_error(source_uvs, uvs, triangles, energy, positions=None, lightmap=None, mask=None, folds=None):
     """The error model's prediction for layout `uvs` relative to the source
     layout `source_uvs` (same triangles; 1.0 = the same), from the first
     bake on the source layout: its gradient `energy` (H, W) and, with
@@ -168,10 +175,17 @@ def predicted_error(source_uvs, uvs, triangles, energy, positions=None, lightmap
     times the luminance slope of its triangle (per world unit) times the
     squared texel size there (BORDER_ERROR: the border texels, filled by
     dilation, miss the slope over a quarter texel). Without positions the
-    edge term alone, by the linear texel scale sqrt(new / source UV area)."""
+    edge term alone, by the linear texel scale sqrt(new / source UV area).
+
+    `folds` (lmrefine.folds.Folds of the source layout): the light changes
+    in a fold's band count in the edge term only for layouts that keep the
+    fold inside a chart, and the band's luminance slope (the bake's blurred
+    step, not smooth light) is left out of the border term."""
     source_uvs, uvs = np.asarray(source_uvs), np.asarray(uvs)
     shape = energy.shape
     edge = allocation.triangle_energy(source_uvs, triangles, energy)
+    if positions is None or lightmap is None:
+        folds = None
     before = np.abs(allocation.signed_areas(source_uvs, triangles))
     after = np.abs(allocation.signed_areas(uvs, triangles))
     if positions is None or lightmap is None:
@@ -190,14 +204,18 @@ def predicted_error(source_uvs, uvs, triangles, energy, positions=None, lightmap
     # Slope per world unit: the source bake's slope per texel over its texel size.
     if mask is None:
         mask = _native.coverage_mask(source_uvs, triangles, shape)
-    slope = allocation.opening(allocation.luminance_slope(lightmap, mask), mask)
+    slope = allocation.luminance_slope(lightmap, mask)
+    if folds is not None:
+        slope = np.where(folds.band, np.float32(0), slope)
+    slope = allocation.opening(slope, mask)
     rows, cols = allocation.triangle_texels(source_uvs, triangles, shape)
     slope_world = np.where(keep, slope[rows, cols].mean(axis=1) / np.maximum(size_before, 1e-300), 0.0)
     lengths = np.linalg.norm(corners - np.roll(corners, -1, axis=1), axis=2)  # edge k: corner k to k + 1
 
     def error(layout, size):
         border = (_chart_borders(layout, triangles)[2] * lengths).sum(axis=1)
-        return (allocation.EDGE_ERROR * (edge * size_before * size)[keep].sum()
+        held = edge if folds is None else np.maximum(edge - folds.energy_removed(layout, triangles), 0.0)
+        return (allocation.EDGE_ERROR * (held * size_before * size)[keep].sum()
                 + allocation.BORDER_ERROR * (slope_world * border * size * size)[keep].sum())
 
     source_error = error(source_uvs, size_before)
@@ -236,13 +254,14 @@ def positions_array(positions, count):
 
 
 def refine_recharted(refine, lightmap, uvs, triangles, shape, padding, positions, room, energy, source_result,
-                     progress):
+                     progress, folds=None):
     """The re-chart route: `refine(lightmap, uvs, mask, padding)` (refine_uvs without
     positions, with the caller's options) on the re-charted mesh, from
     `lightmap` carried over to it. `source_result` is
     the source layout's own refinement, `energy` the first bake's gradient
-    energy on the source layout. Returns (result or None, rechart report)."""
-    info = {"used": False, "room": room, "angle": float(ANGLE)}
+    energy on the source layout, `folds` its charts' folds (lmrefine.folds;
+    None: counted as none). Returns (result or None, rechart report)."""
+    info = {"used": False, "room": room, "angle": float(ANGLE), "folds": fold_report(folds)}
     original = source_result.report["original_check"]
     # The new layout is not held to the source's gutter: at least PADDING.
     pack_padding = max(float(padding), PADDING)
@@ -265,9 +284,9 @@ def refine_recharted(refine, lightmap, uvs, triangles, shape, padding, positions
     if worse:
         info["reason"] = f"the re-charted layout failed {', '.join(worse)} against the source layout"
         return None, info
-    info["predicted_error"] = predicted_error(uvs, result.uvs, triangles, energy, positions, lightmap)
+    info["predicted_error"] = predicted_error(uvs, result.uvs, triangles, energy, positions, lightmap, folds=folds)
     info["predicted_error_source_route"] = predicted_error(uvs, source_result.uvs, triangles, energy, positions,
-                                                           lightmap)
+                                                           lightmap, folds=folds)
     # Both against the source layout; the lower prediction wins (the source
     # layout's own refinement is never worse than the source by its checks).
     if not (info["predicted_error"] < REQUIRED_GAIN
@@ -279,3 +298,11 @@ def refine_recharted(refine, lightmap, uvs, triangles, shape, padding, positions
     info["used"] = True
     result.report["check"] = check
     return result, info
+
+
+def fold_report(folds):
+    """The report's summary of a source layout's folds (None: not looked for)."""
+    if folds is None:
+        return None
+    return {"count": int(len(folds.faces)), "length": float(folds.length.sum()),
+            "energy_fraction": folds.energy_fraction}

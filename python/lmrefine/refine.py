@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import _native, allocation, backoff, rechart_route
+from .folds import find_folds
 
 BORDER_MODES = ("same", "border_rule", "extra_ring")
 
@@ -264,11 +265,18 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
     room = rechart_route.layout_room(uvs, triangles)
     result, energy, source_mask = _refine(lightmap, uvs, triangles, resolution, padding, mask, gradient, progress,
                                           options)
+    folds = None
+    if rechart and not room["no_room"] and gradient is None and lightmap is not None:
+        folds = find_folds(uvs, triangles, positions, rechart_route.ANGLE, energy, source_mask)
+    folded = folds is not None and folds.energy_fraction >= rechart_route.MIN_FOLD_ENERGY
     if not rechart:
         info = {"used": False, "room": room, "reason": "re-charting is off (rechart=False)"}
-    elif not room["no_room"]:
-        info = {"used": False, "room": room, "reason": f"the source layout has room: "
-                f"{room['room_fraction']:.0%} of its area is in triangles with a UV inside their chart"}
+    elif not room["no_room"] and not folded:
+        info = {"used": False, "room": room, "folds": rechart_route.fold_report(folds),
+                "reason": f"the source layout has room ({room['room_fraction']:.0%} of its area is in triangles "
+                f"with a UV inside their chart) and its charts fold over no crease that matters"
+                + ("" if folds is None else f" (creases sharper than {rechart_route.ANGLE:g} degrees inside "
+                   f"its charts hold {folds.energy_fraction:.0%} of the light changes)")}
     elif gradient is not None or lightmap is None:
         info = {"used": False, "room": room, "reason": "re-charting needs the lightmap (not a gradient map)"}
     elif strength == 0:
@@ -278,10 +286,10 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
         recharted, info = rechart_route.refine_recharted(
             lambda carried, new_uvs, new_mask, new_padding: _refine(carried, new_uvs, triangles, shape, new_padding,
                                                                     new_mask, None, progress, options)[0],
-            lightmap, uvs, triangles, shape, padding, positions, room, energy, result, progress)
+            lightmap, uvs, triangles, shape, padding, positions, room, energy, result, progress, folds)
         if recharted is not None:
             result = _recharted_result(recharted, result, uvs, triangles, energy, source_mask, info)
-    if not info["used"] and room["no_room"] and rechart:
+    if not info["used"] and (room["no_room"] or folded) and rechart:
         result.report["notes"].append(f"not re-charted: {info['reason']}")
     result.report["rechart"] = info
     result.report["seconds"] = time.perf_counter() - start
@@ -296,9 +304,15 @@ def _recharted_result(recharted, source_result, uvs, triangles, energy, mask, in
     room = info["room"]
     notes = [note.replace("nothing moved:", "the re-charted layout's own refinement moved nothing:")
              for note in report["notes"]]
-    notes.insert(0, f"re-charted: the source layout gives the refiner no room ({room['charts']} charts for "
-                    f"{room['triangles']} triangles, {room['room_fraction']:.0%} of its area in triangles with a "
-                    f"UV inside their chart), so the mesh was re-charted ({info['charts']} charts at "
+    if room["no_room"]:
+        why = (f"the source layout gives the refiner no room ({room['charts']} charts for {room['triangles']} "
+               f"triangles, {room['room_fraction']:.0%} of its area in triangles with a UV inside their chart)")
+    else:
+        folds = info["folds"]
+        why = (f"the source layout's charts fold over {folds['count']} creases sharper than {info['angle']:g} "
+               f"degrees ({folds['length']:.3g} world units), which hold {folds['energy_fraction']:.0%} of its "
+               f"light changes")
+    notes.insert(0, f"re-charted: {why}, so the mesh was re-charted ({info['charts']} charts at "
                     f"{info['angle']:g} degrees) and refined; the error model predicts "
                     f"{info['predicted_error']:.2f} of the source layout's error "
                     f"(refining the source layout: {info['predicted_error_source_route']:.2f})")

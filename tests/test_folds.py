@@ -1,0 +1,148 @@
+"""Charts folded over creases (lmrefine.folds) and the re-chart route they
+open on a layout with room (docs/refiner.md "The re-chart route"): the
+creases found, the folds' light changes measured in their band, the error
+model counting them only where a layout keeps them inside a chart."""
+
+import numpy as np
+import pytest
+
+import lmrefine
+from lmrefine import folds as folds_module, rechart_route
+from layouts import grid_chart
+
+CELLS = 12
+RESOLUTION = 128
+
+
+def _roof(cells=CELLS):
+    """A ridge roof: cells x cells quads over [-1, 1]^2 with z = -|x| (two
+    slopes 90 degrees apart), per-corner positions (3T, 3), and one
+    unfolded chart of it (Smart UV Project's kind: one chart over the
+    ridge), per-corner UVs (3T, 2) and triangles (T, 3)."""
+    uvs, triangles = grid_chart(cells, (0.05, 0.05), (0.95, 0.95))
+    planar = (uvs.astype(np.float64) - 0.5) / 0.45  # [-1, 1]^2
+    # The chart is the roof unfolded: arc length along x, so texels have the same world size.
+    x = planar[:, 0] / np.sqrt(2.0)
+    positions = np.column_stack([x, planar[:, 1], -np.abs(x)])
+    return positions, uvs, triangles
+
+
+def _cut(uvs):
+    """The same chart cut at the ridge: the half with u > 0.5 moved right."""
+    out = uvs.copy()
+    tri_u = out.reshape(-1, 3, 2)[:, :, 0].mean(axis=1)
+    right = np.repeat(tri_u > 0.5, 3)
+    out[right, 0] = np.minimum(out[right, 0] + 0.02, 0.99)
+    return out
+
+
+def _sunlit(positions, uvs, triangles):
+    scene = lmrefine.Scene()
+    scene.add_mesh(positions.astype(np.float32), triangles, uvs=uvs)
+    scene.add_light("sun", energy=3.0, angle=0.01, direction=(0.8, 0.0, -1.0))  # lights one slope more
+    return np.ascontiguousarray(lmrefine.bake(scene, RESOLUTION, passes=("direct",), samples=8, seed=0)[0][..., :3])
+
+
+@pytest.fixture(scope="module")
+def roof_case():
+    positions, uvs, triangles = _roof()
+    return positions, uvs, triangles, _sunlit(positions, uvs, triangles)
+
+
+def _energy(lightmap, uvs, triangles):
+    mask = lmrefine.coverage_mask(uvs, triangles, RESOLUTION)
+    return lmrefine.gradient_map(lightmap, mask).sum(axis=2), mask
+
+
+def test_creases_finds_the_ridge_only():
+    positions, _, triangles = _roof()
+    faces, corner, length = folds_module.creases(positions, triangles, 20.0)
+    assert len(faces) == CELLS  # one edge per row of quads along the ridge
+    assert length.sum() == pytest.approx(2.0, rel=1e-6)  # the ridge spans y in [-1, 1]
+    corners = positions[triangles]
+    start = corners[faces[:, 0], corner]
+    assert np.allclose(start[:, 0], 0.0)  # on x = 0
+    # A flat floor has none; an angle above the fold's finds none either.
+    flat = positions.copy()
+    flat[:, 2] = 0.0
+    assert len(folds_module.creases(flat, triangles, 20.0)[0]) == 0
+    assert len(folds_module.creases(positions, triangles, 95.0)[0]) == 0
+
+
+def test_creases_survive_degenerate_and_huge_faces():
+    positions, _, triangles = _roof()
+    positions = positions.copy()
+    positions[triangles[0]] = positions[triangles[0][0]]  # a face with no area
+    positions[triangles[-1, 2]] = (1e300, -1e300, 1e300)  # overflows its normal
+    faces, _, length = folds_module.creases(positions, triangles, 20.0)
+    assert np.isfinite(length).all()
+    assert not np.isin(faces, [0, len(triangles) - 1]).any()
+    assert len(folds_module.creases(np.zeros((0, 3)), np.zeros((0, 3), np.int32), 20.0)[0]) == 0
+
+
+def test_folds_inside_a_chart_and_their_light(roof_case):
+    positions, uvs, triangles, lightmap = roof_case
+    energy, mask = _energy(lightmap, uvs, triangles)
+    found = folds_module.find_folds(uvs, triangles, positions, 20.0, energy, mask)
+    assert len(found.faces) == CELLS
+    # The two slopes differ in light, so the ridge's band holds most of the light changes.
+    assert found.band.sum() > 0 and found.energy_fraction > 0.5
+    assert found.energy.sum() == pytest.approx(energy[found.band & mask].sum(), rel=1e-5)
+    # Cut at the ridge, the layout holds no fold; the uncut one gives back nothing.
+    cut = _cut(uvs)
+    assert found.energy_removed(uvs, triangles).sum() == 0.0
+    assert found.energy_removed(cut, triangles).sum() == pytest.approx(found.energy.sum())
+    again = folds_module.find_folds(cut, triangles, positions, 20.0, energy, mask)
+    assert len(again.faces) == 0 and again.energy_fraction == 0.0
+
+
+def test_model_counts_folds_only_inside_charts(roof_case):
+    positions, uvs, triangles, lightmap = roof_case
+    energy, mask = _energy(lightmap, uvs, triangles)
+    found = folds_module.find_folds(uvs, triangles, positions, 20.0, energy, mask)
+    cut = _cut(uvs)
+    keep = rechart_route.predicted_error(uvs, uvs, triangles, energy, positions, lightmap, folds=found)
+    assert keep == pytest.approx(1.0)
+    with_folds = rechart_route.predicted_error(uvs, cut, triangles, energy, positions, lightmap, folds=found)
+    without = rechart_route.predicted_error(uvs, cut, triangles, energy, positions, lightmap)
+    # Cutting the fold removes its light changes from the error: well below the same layout judged blind.
+    assert with_folds < 0.6 * without
+
+
+def test_route_recharts_a_folded_layout_with_room(roof_case):
+    positions, uvs, triangles, lightmap = roof_case
+    copies = [a.copy() for a in (positions, uvs, triangles, lightmap)]
+    result = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, positions=positions)
+    for before, after in zip(copies, (positions, uvs, triangles, lightmap)):
+        assert np.array_equal(before, after)
+    info = result.report["rechart"]
+    assert not info["room"]["no_room"]
+    assert info["folds"]["count"] == CELLS and info["folds"]["energy_fraction"] > 0.5
+    assert info["used"], info
+    assert info["predicted_error"] < min(rechart_route.REQUIRED_GAIN, info["predicted_error_source_route"])
+    assert result.report["notes"][0].startswith("re-charted: the source layout's charts fold over 12 creases")
+    charts = lmrefine.find_charts(result.uvs, triangles, lmrefine.CHART_TOLERANCE)
+    assert len(np.unique(charts)) == 2  # the two slopes
+    check = lmrefine.check_layout(result.uvs, triangles, RESOLUTION, padding=2)
+    assert check["valid"], check
+    again = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, positions=positions)
+    assert np.array_equal(again.uvs, result.uvs)
+    off = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, positions=positions, rechart=False)
+    assert not off.report["rechart"]["used"]
+    assert len(np.unique(lmrefine.find_charts(off.uvs, triangles, lmrefine.CHART_TOLERANCE))) == 1
+
+
+def test_route_skips_folds_in_flat_light():
+    # The sun straight down the ridge's plane of symmetry: both slopes equally lit, the fold holds
+    # no light change, so the route is not tried (the reason says how little the folds hold).
+    positions, uvs, triangles = _roof()
+    scene = lmrefine.Scene()
+    scene.add_mesh(positions.astype(np.float32), triangles, uvs=uvs)
+    scene.add_light("sun", energy=3.0, angle=0.01, direction=(0.0, 0.0, -1.0))
+    lightmap = np.ascontiguousarray(lmrefine.bake(scene, RESOLUTION, passes=("direct",), samples=8,
+                                                  seed=0)[0][..., :3])
+    result = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, positions=positions)
+    info = result.report["rechart"]
+    assert not info["used"] and info["folds"]["count"] == CELLS
+    assert info["folds"]["energy_fraction"] < rechart_route.MIN_FOLD_ENERGY
+    assert "fold over no crease that matters" in info["reason"]
