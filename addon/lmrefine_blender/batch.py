@@ -90,8 +90,9 @@ def build_parser():
                         "refined UV map and image, RULE (sqrt, energy, equal; default sqrt) splitting the "
                         "resolution^2 texels between them")
     parser.add_argument("--rechart", action=argparse.BooleanOptionalAction, default=None,
-                        help="re-chart an object whose source map gives the refiner no room (one chart per face, "
-                             "as Lightmap Pack makes) from its mesh; --no-rechart refines the source map as it is")
+                        help="re-chart an object from its mesh when its source map gives the refiner no room "
+                             "(one chart per face, as Lightmap Pack makes) or its charts fold over sharp edges "
+                             "whose light differs, and the error model predicts less error; --no-rechart refines the source map as it is")
     parser.add_argument("--backend", choices=("embree", "cycles"), help="baker of the final lightmaps")
     parser.add_argument("--bake-passes", type=_passes, help=f"comma-separated, of: {', '.join(PASSES)}")
     parser.add_argument("--samples", type=int, help="samples per texel")

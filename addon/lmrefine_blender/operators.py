@@ -56,7 +56,7 @@ def _report_outcome(operator, context, outcome, seconds):
         result.message += f"; per effect (map side, edges): {result.effects}"
     if recharted:
         result.message += (f"; re-charted from the mesh: {', '.join(recharted)} (the source map gave the "
-                           "refiner no room: one chart per face)")
+                           "refiner no room, or its charts folded over sharp edges; Info has the reason)")
     if outcome.tessellation:
         result.message += f"; tessellation added {summary['vertices_added']} vertices"
     if outcome.stages:

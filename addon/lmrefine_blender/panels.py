@@ -87,7 +87,7 @@ class LMREFINE_PT_refine_options(_LightmapTab, bpy.types.Panel):
         for name in ("strength", "max_magnification", "min_shrink", "delta", "passes", "border", "wavelet",
                      "directional"):
             column.prop(settings, name)
-        column.prop(settings, "rechart", text="Re-chart if No Room")
+        column.prop(settings, "rechart", text="Re-chart if Better")
 
 
 class LMREFINE_PT_refine_stages(_LightmapTab, bpy.types.Panel):
@@ -173,7 +173,7 @@ class LMREFINE_PT_refine_result(_LightmapTab, bpy.types.Panel):
                      + (f" +{len(shared) - 1}" if len(shared) > 1 else "") if shared else "Atlas: none",
                      'LINKED' if shared else 'UNLINKED', bool(shared)))
         recharted = result.valid and result.recharted > 0
-        rows.append((f"Re-charted: {result.recharted} (no room)" if recharted else "Re-charted: none", 'UV_DATA',
+        rows.append((f"Re-charted: {result.recharted}" if recharted else "Re-charted: none", 'UV_DATA',
                      recharted))
         tessellated = result.valid and result.tessellated
         rows.append((f"Tessellation: +{result.vertices_added} vertices" if tessellated else "Tessellation: off",

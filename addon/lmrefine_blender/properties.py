@@ -93,8 +93,8 @@ class LMREFINE_PG_result(bpy.types.PropertyGroup):
                             "widening ('direct 181px 1.42x; indirect 181px 1.05x'), empty otherwise")
     stages_stopped: StringProperty(name="Stages Stopped",
                                    description="Objects whose stages stopped early: the stage that moved too little")
-    recharted: IntProperty(name="Re-charted", description="Objects whose source map gave the refiner no room, "
-                           "re-charted from the mesh and refined", default=0)
+    recharted: IntProperty(name="Re-charted", description="Objects whose source map gave the refiner no room or "
+                           "folded over sharp edges, re-charted from the mesh and refined", default=0)
 
 
 class LMREFINE_PG_settings(bpy.types.PropertyGroup):
@@ -179,8 +179,9 @@ class LMREFINE_PG_settings(bpy.types.PropertyGroup):
         default='SQRT',
     )
     rechart: BoolProperty(
-        name="Re-chart when the source has no room",
-        description="When the source map gives the refiner no room (one chart per face, as Lightmap Pack makes), "
+        name="Re-chart when the source map is a poor start",
+        description="When the source map gives the refiner no room (one chart per face, as Lightmap Pack makes) "
+                    "or its charts fold over sharp edges whose light differs (as Smart UV Project's do), "
                     "re-chart the mesh (charts of faces whose normals are within 20 degrees, conformal unwrap) "
                     "and refine that layout instead, if the error model predicts less error. The source map is "
                     "never changed; the refined map gets the new layout",
