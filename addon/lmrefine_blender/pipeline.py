@@ -26,6 +26,9 @@ from .errors import Cancelled, UserError  # noqa: F401  (re-exported for the dri
 REFINED_SUFFIX = "_refined"
 # The stages refine_uvs reports, each from 0 to 1: gradient map, automaton, pack.
 REFINE_STAGES = 3
+# The further stages of refine_uvs' re-chart route (a source map with no room, the mesh given): the
+# re-charting's unwrap and pack, then the re-charted layout's gradient map, automaton and pack.
+RECHART_STAGES = 5
 # The light transports the baker runs per map for each pass, each a stage of its progress.
 TRANSPORTS = {"direct": {"direct"}, "indirect": {"indirect"}, "combined": {"direct", "indirect"}, "ao": {"ao"}}
 # Texels both bakers fill into the gutter around each chart (Blender's default
@@ -33,6 +36,19 @@ TRANSPORTS = {"direct": {"direct"}, "indirect": {"indirect"}, "combined": {"dire
 BAKE_MARGIN = 16
 # Below this transition widening a run says when large triangles are why (see _coarse_warning).
 COARSE_WIDENING = 1.25
+
+
+def refine_parts(group, options):
+    """The stages refine_uvs(..., positions=group.positions) will report for `group`'s joined layout:
+    REFINE_STAGES, and RECHART_STAGES more when it takes the re-chart route (the rule of refine_uvs:
+    re-charting on, strength above 0, the mesh given and a layout with no room), so the progress
+    fills the refinement's share over all of them rather than standing still through the re-chart."""
+    refine_options = options["refine_options"]
+    if group.positions is None or not refine_options.get("rechart", True) or refine_options.get("strength") == 0:
+        return REFINE_STAGES
+    from lmrefine import rechart_route
+    no_room = rechart_route.layout_room(group.uvs, group.triangles)["no_room"]
+    return REFINE_STAGES + (RECHART_STAGES if no_room else 0)
 
 
 @dataclass
@@ -367,7 +383,7 @@ def run(context, targets, options, journal, image_dir=None):
                 lambda progress, lightmap=lightmaps[name], group=group: lmrefine.refine_uvs(
                     lightmap, group.uvs, group.triangles, resolution, padding=padding, progress=progress,
                     positions=group.positions, **options["refine_options"]),
-                done * span, span, parts=REFINE_STAGES)
+                done * span, span, parts=refine_parts(group, options))
         except (ValueError, TypeError, MemoryError) as error:
             # The core refused this map's input: skip its objects, refine the others
             # (nothing of them was written yet).

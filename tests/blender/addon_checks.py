@@ -1702,6 +1702,14 @@ def rechart_lightmap_pack_source():
             "geometry_identical": geometry_digest(mesh) == geometry,
             "image": _image_stats("Floor_lightmap_direct", refined, layout.triangles),
         }
+        if rechart:  # the progress of the refinement, re-chart route included: (fraction, stage) in order
+            options = pipeline.settings_snapshot(bpy.context.scene.lmrefine)
+            seen = []
+            pipeline.run_blocking(pipeline.run(bpy.context, pipeline.validate(bpy.context, [floor], options),
+                                               options, Journal()),
+                                  progress=lambda fraction, label: seen.append((fraction, label)))
+            facts["rechart_progress"] = [(f, label.split(" (", 1)[1][:-1]) for f, label in seen
+                                         if label.startswith("Refining") and " (" in label]
     return facts
 
 
