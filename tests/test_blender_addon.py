@@ -675,6 +675,10 @@ def test_batch_refuses_numbers_out_of_range_instead_of_clamping(facts, work_dir)
     process = run_batch(blend, "--objects", "Floor", "--out", str(out), "--resolution", "8")
     assert process.returncode == 1
     assert "--resolution 8 is outside 16 to 16384" in process.stderr
+    # A setting without an upper bound (a float's 3.4e38) names only its lower one.
+    process = run_batch(blend, "--objects", "Floor", "--out", str(out), "--strength", "-1")
+    assert process.returncode == 1 and "--strength -1 is below 0: pass 0 or more" in process.stderr
+    assert "e+38" not in process.stderr
     process = run_batch(blend, "--objects", "Floor", "--out", str(out), "--source-layer", "Nope")
     assert process.returncode == 1 and "--source-layer in a batch" in process.stderr
 
@@ -1044,6 +1048,18 @@ def test_addon_recharts_a_lightmap_pack_source(facts):
     assert "re-charted from the mesh: Floor" in on["result_message"]
     assert off["panel_recharted"] == 0 and off["refined_charts"] == 64
     assert "re-charted" not in off["result_message"]
+    # Progress through the re-chart route: the source layout's three stages fill 3/8 of the
+    # refinement's share, the route's five the rest, so it keeps moving (it used to stand at the
+    # share's end from the first pack on).
+    progress = value["rechart_progress"]
+    stages = [stage for _, stage in progress]
+    first = stages.index("rechart: unwrap charts")
+    assert stages[:first] and set(stages[:first]) == {"gradient map", "automaton", "pack"}
+    assert progress[0][0] < progress[first][0] < progress[-1][0]  # it moved before and after the route began
+    assert [stage for stage in dict.fromkeys(stages[first:])] == ["rechart: unwrap charts", "pack", "gradient map",
+                                                                   "automaton"]
+    fractions = [f for f, _ in progress]
+    assert all(b >= a for a, b in zip(fractions, fractions[1:]))
 
 
 def test_addon_recharts_a_shared_lightmap_pack_atlas(facts):
