@@ -525,6 +525,10 @@ def test_menu_entries_and_stable_panels(facts):
     labels = value["labels"]
     assert labels["nothing"][0] == "No run yet" and labels["nothing_moved"][1] == "Nothing moved"
     assert labels["after_run"][1] == "Moved: 1 object(s)" and labels["after_run"][2].startswith("Edges: ")
+    # The default sidebar fits about 23 characters beside an icon: the objects are counted, not named.
+    assert labels["after_run"][0] == "Objects: 1" and labels["nothing_moved"][0] == "Objects: 5"
+    for state in ("nothing", "after_run", "nothing_moved"):
+        assert all(len(text) <= 23 for text in labels[state]), (state, labels[state])
     # A triangle's texel ratio (the repack scales charts beyond Max Growth), short enough for the sidebar.
     assert re.fullmatch(r"Triangles: [0-9.e+]+x-[0-9.e+]+x", labels["after_run"][3]) and len(labels["after_run"][3]) <= 24
     assert value["operators_after_run"] == ["object.lmrefine_show_preview"] * 2 + ["object.lmrefine_remove_preview"]
@@ -1012,7 +1016,8 @@ def test_per_effect_panel_rows(facts):
     labels = value["labels"]["per_effect"]
     effects = [label for label in labels if label.startswith(("Direct: ", "Indirect: "))]
     assert len(effects) == 2
-    assert all(re.fullmatch(r"(Direct|Indirect): \d+px, edges \d+\.\d\dx", label) for label in effects)
+    assert all(re.fullmatch(r"(Direct|Indirect): \d+px, \d+\.\d\dx", label) for label in effects)
+    assert all(len(label) <= 23 for label in labels), labels  # the default sidebar's width beside an icon
 
 
 def test_per_effect_maps_add_up_to_the_combined_light(facts):
@@ -1081,3 +1086,7 @@ def test_addon_says_tessellate_when_large_triangles_hold_the_light_changes(facts
     assert len(hint) == 1 and hint[0].startswith("'Floor': light changes cross ")
     assert off["widening"] < 1.25
     assert not any("turn on Tessellate" in w for w in on["warnings"])
+    # Strength 0 moves nothing whatever the triangles: the run says so, and does not send the user to Tessellate.
+    still = value["tessellate_False_strength_0"]
+    assert still["error"] is None and any("nothing moved: strength is 0" in w for w in still["warnings"])
+    assert not any("Tessellate" in w for w in still["warnings"]), still["warnings"]

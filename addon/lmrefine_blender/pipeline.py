@@ -403,7 +403,9 @@ def run(context, targets, options, journal, image_dir=None):
         if not result.report["moved"] and not any(w.startswith(black) for w in outcome.warnings):
             why = next((n for n in result.report["notes"] if n.startswith("nothing moved")), "nothing moved")
             outcome.warnings.append(f"{label}: {why}")
-        if options.get("tessellate") is None and result.report["transition_widening"] < COARSE_WIDENING:
+        # Strength 0 moves nothing whatever the triangles: the nothing-moved warning says why, Tessellate is no fix.
+        if (options.get("tessellate") is None and options["refine_options"]["strength"] > 0
+                and result.report["transition_widening"] < COARSE_WIDENING):
             _coarse_warning(lmrefine, label, lightmaps[name], group, result.report, outcome)
         report = {key: value for key, value in result.report.items() if key != "triangle_density"}
         report["check_layout"] = dict(check)

@@ -1376,6 +1376,7 @@ def menus_and_panel_rows():
                             "LMREFINE_PT_density")}
     bpy.context.scene.lmrefine.density_overlay = False
     bpy.context.scene.lmrefine.result.moved = 0
+    bpy.context.scene.lmrefine.result.objects = "ArcadeNorth, ArcadeWest, Floor, LowWall, Well"  # five names
     states["nothing_moved"] = {"LMREFINE_PT_refine_result": draw(panels.LMREFINE_PT_refine_result)}
     settings(layouts='PER_EFFECT')
     per_effect_outcome = refine()
@@ -1752,16 +1753,16 @@ def coarse_floor_suggests_tessellation():
     square, under a box's shadow: the warp can move only the middle vertex and cannot put texels
     inside those triangles, so the run says Tessellate is the fix; with Tessellate on it does not."""
     facts = {}
-    for tessellate in (False, True):
+    for tessellate, strength in ((False, 24.0), (True, 24.0), (False, 0.0)):  # strength 0: nothing to tessellate for
         scenes.coarse_shadow_scene(quads=2)
         floor = bpy.data.objects["Floor"]
         floor.data.uv_layers.remove(floor.data.uv_layers["Lightmap"])
         scenes._set_lightmap_layer(floor.data)
         register()
         settings(resolution=RESOLUTION, padding=2, samples=4, first_lightmap='EMBREE', backend='EMBREE',
-                 bake_passes={'DIRECT'}, tessellate=tessellate)
+                 bake_passes={'DIRECT'}, tessellate=tessellate, strength=strength)
         outcome, warnings, error = _run_pipeline([bpy.data.objects["Floor"]])
-        facts[f"tessellate_{tessellate}"] = {
+        facts[f"tessellate_{tessellate}" + ("_strength_0" if strength == 0 else "")] = {
             "error": error, "warnings": warnings,
             "widening": outcome and outcome.reports["Floor"]["transition_widening"]}
     return facts
