@@ -687,6 +687,30 @@ def test_batch_refuses_numbers_out_of_range_instead_of_clamping(facts, work_dir)
     assert process.returncode == 1 and "--source-layer in a batch" in process.stderr
 
 
+def readme_command(prefix):
+    """The README's shell example that starts with `prefix`, its continuation lines joined, as argv."""
+    import shlex
+    text = open(os.path.join(REPO, "README.md"), encoding="utf-8").read().replace("\\\n", " ")
+    line = next(line.strip() for line in text.splitlines() if line.strip().startswith(prefix))
+    return shlex.split(line)
+
+
+def test_the_readme_batch_example_runs_as_written(tmp_path):
+    """README, "One level from the command line": the command as printed, from the checkout's root, on the
+    bundled courtyard (only --out goes to a temporary folder)."""
+    argv = readme_command("blender -b blend_samples/courtyard.blend --python addon/lmrefine_blender/batch.py")
+    assert argv[argv.index("--objects") + 1] == "all" and "--out" in argv
+    argv[argv.index("--out") + 1] = str(tmp_path / "courtyard")
+    env = dict(os.environ)
+    env.pop("PYTHONPATH", None)  # the README sets none: batch.py finds the package in the checkout
+    process = subprocess.run([BLENDER, *argv[1:]], cwd=REPO, env=env, capture_output=True, text=True, timeout=600)
+    assert process.returncode == 0, process.stdout[-2000:] + process.stderr[-2000:]
+    report = json.loads((tmp_path / "courtyard" / "report.json").read_text())
+    assert report["ok"] and report["summary"]["objects"] == 5 and report["summary"]["moved"] == 5
+    assert (tmp_path / "courtyard" / "courtyard.blend").exists()
+    assert all(os.path.exists(path) for path in report["atlases"][next(iter(report["atlases"]))]["images"].values())
+
+
 def test_batch_objects_all_selected_and_collection():
     """--objects all | selected | collection:NAME on a bundled sample, judged in one Blender process."""
     probe = (
