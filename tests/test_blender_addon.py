@@ -151,6 +151,11 @@ def test_a_core_refusal_skips_only_that_object(facts):
     assert value["error"] is None and value["objects"] == ["Floor"] and value["floor_refined"]
     assert len(value["skipped"]) == 1 and "'Blocker' could not be refined: uvs: refused" in value["skipped"][0]
     assert value["box_unchanged"]
+    # No C++ source location in what the user reads (the console keeps the full text).
+    assert "cpp" not in value["skipped"][0] and value["skipped"][0].endswith("refused for the test")
+    assert value["operator_messages"] == [
+        "lmrefine: triangles[0] refers to UV 5",
+        "Refinement failed (RuntimeError: Embree failed); the scene was left unchanged"]
 
 
 def test_a_late_core_failure_leaves_the_scene_unchanged(facts):

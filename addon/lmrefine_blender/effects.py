@@ -106,7 +106,8 @@ def run(context, targets, options, journal, image_dir=None):
                                             **options["refine_options"]),
                     done * span, span, parts=pipeline.refine_parts(group, options))
             except (ValueError, TypeError, MemoryError) as error:
-                raise UserError(f"{label} could not be refined at {side} x {side} texels: {error}") from error
+                raise UserError(f"{label} could not be refined at {side} x {side} texels: "
+                                f"{pipeline.error_text(error)}") from error
             done += 1
             check, source_check = pipeline._check_refined(lmrefine, label, result.uvs,
                                                           bridge.Layout(group.uvs, group.triangles), group.uvs, side,

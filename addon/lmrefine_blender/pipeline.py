@@ -12,6 +12,7 @@ with lmrefine.check_layout; lightmaps come from lmrefine.bake or Cycles.
 """
 
 import os
+import sys
 import tempfile
 import threading
 import time
@@ -36,6 +37,17 @@ TRANSPORTS = {"direct": {"direct"}, "indirect": {"indirect"}, "combined": {"dire
 BAKE_MARGIN = 16
 # Below this transition widening a run says when large triangles are why (see _coarse_warning).
 COARSE_WIDENING = 1.25
+
+
+def error_text(error):
+    """`error` as a user reads it: without the native core's C++ source locations ("[coverage.cpp:127]").
+    When one was dropped, the full text goes to the console (the system console, a batch's stderr)
+    as `lmrefine: details: ...`, for a bug report."""
+    from lmrefine.messages import without_source_location
+    text = without_source_location(error)
+    if text != str(error):
+        print(f"lmrefine: details: {type(error).__name__}: {error}", file=sys.stderr, flush=True)
+    return text
 
 
 def refine_parts(group, options):
@@ -387,7 +399,7 @@ def run(context, targets, options, journal, image_dir=None):
         except (ValueError, TypeError, MemoryError) as error:
             # The core refused this map's input: skip its objects, refine the others
             # (nothing of them was written yet).
-            outcome.warnings.append(f"Skipped: {label} could not be refined: {error}")
+            outcome.warnings.append(f"Skipped: {label} could not be refined: {error_text(error)}")
             groups.remove(group)
             for obj_name in group.objects:
                 outcome.objects.remove(obj_name)

@@ -24,7 +24,7 @@ import lmrefine_blender  # noqa: E402
 import lmrefine_blender.atlas  # noqa: E402
 import scenes  # noqa: E402
 from scene_state import _array, _digest, changed, fingerprint  # noqa: E402,F401
-from lmrefine_blender import bridge, cycles_bake, pipeline  # noqa: E402
+from lmrefine_blender import bridge, cycles_bake, operators, pipeline  # noqa: E402
 from lmrefine_blender.journal import Journal  # noqa: E402
 
 RESOLUTION = 64  # small: the whole group must stay fast
@@ -310,7 +310,7 @@ def core_refusal_skips_the_object():
 
     def refuse_the_box(lightmap, uvs, triangles, *args, **kwargs):
         if len(triangles) == 12:
-            raise ValueError("uvs: refused for the test")
+            raise ValueError("uvs: refused for the test [refine.cpp:42]")  # as the native core words it
         return original(lightmap, uvs, triangles, *args, **kwargs)
 
     box_before = fingerprint()["mesh:Cube"]
@@ -322,7 +322,11 @@ def core_refusal_skips_the_object():
     return {"error": error, "objects": outcome and outcome.objects,
             "skipped": [w for w in warnings if w.startswith("Skipped: ")],
             "box_unchanged": fingerprint()["mesh:Cube"] == box_before,
-            "floor_refined": "Lightmap_refined" in floor.data.uv_layers}
+            "floor_refined": "Lightmap_refined" in floor.data.uv_layers,
+            # The operator's error report of a native failure, as the user reads it.
+            "operator_messages": [operators._failure_message(error) for error in (
+                ValueError("triangles[0] refers to UV 5 [coverage.cpp:127]"),
+                RuntimeError("Embree failed [baker.cpp:231]"))]}
 
 
 @check("refine", "bake")
