@@ -444,9 +444,12 @@ def test_progress_moves_per_map_and_per_stage(facts):
     # Two objects, two passes: the second bake's maps are the last third, map 1 ends half way through it.
     at = value["real_at"]
     first_map_end = max(high for label, (low, high) in at.items()
-                        if label.startswith("Second bake") and "map 1/2" in label)
+                        if label.startswith("Second bake") and "object 1/2" in label)
     assert first_map_end == pytest.approx(2 / 3 + 1 / 6, abs=1e-6)
-    assert any("map 2/2" in label for label in value["real_labels"] if label.startswith("First bake"))
+    assert any("object 2/2" in label for label in value["real_labels"] if label.startswith("First bake"))
+    # The baker's count of its meshes reads as objects: "map" is the add-on's atlas group.
+    assert not any("(map " in label for label in value["real_labels"] + value["atlas_labels"])
+    assert any("(object 4/4)" in label for label in value["atlas_labels"] if label.startswith("Second bake"))
     # A shared atlas is one map: 4 objects in 2 maps give 6 units (first bake, refinement, second bake
     # 2 each), the atlas's one refinement the third unit, Lonely's the fourth.
     atlas = value["atlas_fractions"]

@@ -12,6 +12,7 @@ with lmrefine.check_layout; lightmaps come from lmrefine.bake or Cycles.
 """
 
 import os
+import re
 import sys
 import tempfile
 import threading
@@ -35,6 +36,8 @@ TRANSPORTS = {"direct": {"direct"}, "indirect": {"indirect"}, "combined": {"dire
 # Texels both bakers fill into the gutter around each chart (Blender's default
 # bake margin): bilinear and mipmapped lookups near a chart border stay on it.
 BAKE_MARGIN = 16
+# The baker's own count in its progress stages, "(map 3/5)".
+_BAKER_MAP = re.compile(r"\(map (\d+/\d+)\)")
 # Below this transition widening a run says when large triangles are why (see _coarse_warning).
 COARSE_WIDENING = 1.25
 
@@ -848,6 +851,11 @@ def _progress_callback(work, report, should_stop):
     """
     state = {"stage": None, "done": 0, "furthest": 0.0}
 
+    def shown(stage):
+        # The baker counts the meshes it bakes as maps ("baking direct (map 3/5)"); the add-on gives it one
+        # mesh per object, and a "map" of the add-on is an atlas group (five objects of one atlas: one map).
+        return _BAKER_MAP.sub(r"(object \1)", stage)
+
     def callback(fraction, stage=""):
         if state["stage"] is not None and stage != state["stage"]:
             state["done"] += 1
@@ -855,7 +863,8 @@ def _progress_callback(work, report, should_stop):
         within = (state["done"] + min(max(float(fraction), 0.0), 1.0)) / max(work.parts, 1)
         state["furthest"] = max(state["furthest"], min(within, 1.0))
         if report is not None:
-            report(work.start + work.span * state["furthest"], f"{work.label} ({stage})" if stage else work.label)
+            report(work.start + work.span * state["furthest"],
+                   f"{work.label} ({shown(stage)})" if stage else work.label)
         return not should_stop()
 
     return callback

@@ -864,7 +864,7 @@ def progress_moves_per_map_and_stage():
     seen = []
     value = pipeline.run_blocking(job(), progress=lambda fraction, label: seen.append((fraction, label)))
     # The fraction when each map's last stage ends, per bake.
-    ends = {f"{bake} {m}": max(f for f, label in seen if label.startswith(bake) and f"map {m}/5" in label)
+    ends = {f"{bake} {m}": max(f for f, label in seen if label.startswith(bake) and f"object {m}/5" in label)
             for bake in ("First bake", "Second bake") for m in range(1, 6)}
 
     fresh_shadow_scene(first_lightmap='EMBREE', backend='EMBREE', bake_passes={'DIRECT', 'AO'})
@@ -884,7 +884,7 @@ def progress_moves_per_map_and_stage():
     pipeline.run_blocking(pipeline.run(bpy.context, pipeline.validate(bpy.context, objects, options), options,
                                        Journal()), progress=lambda fraction, label: atlas_run.append((fraction, label)))
     return {"value": value, "fractions": [f for f, _ in seen], "ends": ends,
-            "atlas_fractions": [f for f, _ in atlas_run],
+            "atlas_fractions": [f for f, _ in atlas_run], "atlas_labels": sorted({label for _, label in atlas_run}),
             "atlas_refining": {label.split(" (")[0]: [min(f for f, l in atlas_run if l.split(" (")[0] == label.split(" (")[0]),
                                                       max(f for f, l in atlas_run if l.split(" (")[0] == label.split(" (")[0])]
                                for _, label in atlas_run if label.startswith("Refining")},
