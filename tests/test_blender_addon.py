@@ -113,7 +113,7 @@ ERRORS = {
     "error_image_wrong_size": "is 16x16 but Resolution is 64",
     "error_no_bake_pass": "No bake pass chosen",
     "error_image_from_refined_bake": "was baked with a refined UV map",
-    "error_uvs_outside_unit_square": "has 1 UVs outside [0, 1]",
+    "error_uvs_outside_unit_square": "has 1 UVs outside [0, 1], so it looks like a texture map (tiling)",
 }
 
 

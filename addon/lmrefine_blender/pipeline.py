@@ -271,8 +271,11 @@ def _validate_object(obj, options, owners, resolution, depsgraph):
                         "(UV > Lightmap Pack)")
     outside = int(np.count_nonzero(((layout.uvs < 0.0) | (layout.uvs > 1.0)).any(axis=1)))
     if outside:
-        raise UserError(f"UV map '{source}' of '{obj.name}' has {outside} UVs outside [0, 1]; a lightmap "
-                        "layout must lie inside the unit square: repack it (UV > Lightmap Pack or Pack Islands)")
+        # Tiling UVs are a texture map's: repacking it would break the textures, so a map of its own comes first.
+        raise UserError(f"UV map '{source}' of '{obj.name}' has {outside} UVs outside [0, 1], so it looks like a "
+                        "texture map (tiling), not a lightmap layout, which must lie inside the unit square: add a "
+                        "UV map for the lightmap (Object Data > UV Maps > +, then UV > Lightmap Pack) and pick it "
+                        "as Source, or repack this one if it is the lightmap's (UV > Pack Islands)")
     zero_3d, zero_uv, bad_vertices = bridge.geometry_problems(obj, layout, resolution)
     if bad_vertices:
         raise UserError(f"'{obj.name}' has {bad_vertices} vertices at NaN, Inf or beyond 1e9 units in world "
