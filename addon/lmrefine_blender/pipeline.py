@@ -837,8 +837,10 @@ def run_blocking(job, progress=None, should_stop=None):
                 raise Cancelled()
             value = None
         else:
+            callback = _progress_callback(work, progress, should_stop or (lambda: False))
             try:
-                value = work.call(_progress_callback(work, progress, should_stop or (lambda: False)))
+                value = work.call(callback)
+                callback.finish()
             except Exception as failure:  # noqa: BLE001  (handed to the job, re-raised if it does not handle it)
                 value, error = None, failure
 
@@ -870,6 +872,15 @@ def _progress_callback(work, report, should_stop):
                    f"{work.label} ({shown(stage)})" if stage else work.label)
         return not should_stop()
 
+    def finish():
+        """The call returned: its whole span is done, even when its last stages did not report
+        (a pack with nothing to do, a re-chart route that stopped early)."""
+        state["furthest"] = 1.0
+        if report is not None:
+            stage = state["stage"]
+            report(work.start + work.span, f"{work.label} ({shown(stage)})" if stage else work.label)
+
+    callback.finish = finish
     return callback
 
 
@@ -926,7 +937,9 @@ class ThreadedDriver:
 
         def target():
             try:
-                self._send = ("value", work.call(progress))
+                value = work.call(progress)
+                progress.finish()
+                self._send = ("value", value)
             except BaseException as error:
                 self._send = ("error", error)
 
