@@ -25,7 +25,7 @@ class _LightmapTab:
 
 
 # refine_uvs' limit names, short enough for the sidebar (the Info report has the full text).
-# Short, so three fit the default sidebar width ("Limit: growth/gutter/steps").
+# Short: two fit the default sidebar width, more are counted ("Limit: growth/shrink +1").
 LIMIT_NAMES = {"max_magnification": "growth", "min_shrink": "shrink", "step_cap": "steps",
                "original_gutter": "gutter"}
 
@@ -159,7 +159,10 @@ class LMREFINE_PT_refine_result(_LightmapTab, bpy.types.Panel):
                     # A triangle's new / old texels, on the output: the repack's chart scale comes on top of
                     # the automaton's bounds (Min Shrink, Max Growth bound its cells), so it can exceed them.
                     (f"Triangles: {result.density_min:.2g}x-{result.density_max:.3g}x", 'MOD_UVPROJECT', True)]
-        limits = "/".join(LIMIT_NAMES.get(name, name) for name in result.limited_by.split(", ") if name)
+        names = [LIMIT_NAMES.get(name, name) for name in result.limited_by.split(", ") if name]
+        limits = "/".join(names)
+        if len(limits) > 16 and len(names) > 2:  # "Limit: growth/shrink/steps" is cut: two and a count
+            limits = "/".join(names[:2]) + f" +{len(names) - 2}"
         rows.append((f"Limit: {limits}" if limits else "Limit: none", 'INFO', bool(limits)))
         warnings = result.warnings if result.valid else 0
         rows.append((f"Warnings: {warnings} (Info log)" if warnings else "Warnings: none", 'ERROR' if warnings
