@@ -113,7 +113,7 @@ ERRORS = {
     "error_image_wrong_size": "is 16x16 but Resolution is 64",
     "error_no_bake_pass": "No bake pass chosen",
     "error_image_from_refined_bake": "was baked with a refined UV map",
-    "error_uvs_outside_unit_square": "has 1 UVs outside [0, 1]",
+    "error_uvs_outside_unit_square": "has 1 UVs outside [0, 1], so it looks like a texture map (tiling)",
 }
 
 
@@ -151,6 +151,11 @@ def test_a_core_refusal_skips_only_that_object(facts):
     assert value["error"] is None and value["objects"] == ["Floor"] and value["floor_refined"]
     assert len(value["skipped"]) == 1 and "'Blocker' could not be refined: uvs: refused" in value["skipped"][0]
     assert value["box_unchanged"]
+    # No C++ source location in what the user reads (the console keeps the full text).
+    assert "cpp" not in value["skipped"][0] and value["skipped"][0].endswith("refused for the test")
+    assert value["operator_messages"] == [
+        "lmrefine: triangles[0] refers to UV 5",
+        "Refinement failed (RuntimeError: Embree failed); the scene was left unchanged"]
 
 
 def test_a_late_core_failure_leaves_the_scene_unchanged(facts):
@@ -439,9 +444,12 @@ def test_progress_moves_per_map_and_per_stage(facts):
     # Two objects, two passes: the second bake's maps are the last third, map 1 ends half way through it.
     at = value["real_at"]
     first_map_end = max(high for label, (low, high) in at.items()
-                        if label.startswith("Second bake") and "map 1/2" in label)
+                        if label.startswith("Second bake") and "object 1/2" in label)
     assert first_map_end == pytest.approx(2 / 3 + 1 / 6, abs=1e-6)
-    assert any("map 2/2" in label for label in value["real_labels"] if label.startswith("First bake"))
+    assert any("object 2/2" in label for label in value["real_labels"] if label.startswith("First bake"))
+    # The baker's count of its meshes reads as objects: "map" is the add-on's atlas group.
+    assert not any("(map " in label for label in value["real_labels"] + value["atlas_labels"])
+    assert any("(object 4/4)" in label for label in value["atlas_labels"] if label.startswith("Second bake"))
     # A shared atlas is one map: 4 objects in 2 maps give 6 units (first bake, refinement, second bake
     # 2 each), the atlas's one refinement the third unit, Lonely's the fourth.
     atlas = value["atlas_fractions"]
@@ -525,6 +533,10 @@ def test_menu_entries_and_stable_panels(facts):
     labels = value["labels"]
     assert labels["nothing"][0] == "No run yet" and labels["nothing_moved"][1] == "Nothing moved"
     assert labels["after_run"][1] == "Moved: 1 object(s)" and labels["after_run"][2].startswith("Edges: ")
+    # The default sidebar fits about 23 characters beside an icon: the objects are counted, not named.
+    assert labels["after_run"][0] == "Objects: 1" and labels["nothing_moved"][0] == "Objects: 5"
+    for state in ("nothing", "after_run", "nothing_moved"):
+        assert all(len(text) <= 23 for text in labels[state]), (state, labels[state])
     # A triangle's texel ratio (the repack scales charts beyond Max Growth), short enough for the sidebar.
     assert re.fullmatch(r"Triangles: [0-9.e+]+x-[0-9.e+]+x", labels["after_run"][3]) and len(labels["after_run"][3]) <= 24
     assert value["operators_after_run"] == ["object.lmrefine_show_preview"] * 2 + ["object.lmrefine_remove_preview"]
@@ -675,8 +687,36 @@ def test_batch_refuses_numbers_out_of_range_instead_of_clamping(facts, work_dir)
     process = run_batch(blend, "--objects", "Floor", "--out", str(out), "--resolution", "8")
     assert process.returncode == 1
     assert "--resolution 8 is outside 16 to 16384" in process.stderr
+    # A setting without an upper bound (a float's 3.4e38) names only its lower one.
+    process = run_batch(blend, "--objects", "Floor", "--out", str(out), "--strength", "-1")
+    assert process.returncode == 1 and "--strength -1 is below 0: pass 0 or more" in process.stderr
+    assert "e+38" not in process.stderr
     process = run_batch(blend, "--objects", "Floor", "--out", str(out), "--source-layer", "Nope")
     assert process.returncode == 1 and "--source-layer in a batch" in process.stderr
+
+
+def readme_command(prefix):
+    """The README's shell example that starts with `prefix`, its continuation lines joined, as argv."""
+    import shlex
+    text = open(os.path.join(REPO, "README.md"), encoding="utf-8").read().replace("\\\n", " ")
+    line = next(line.strip() for line in text.splitlines() if line.strip().startswith(prefix))
+    return shlex.split(line)
+
+
+def test_the_readme_batch_example_runs_as_written(tmp_path):
+    """README, "One level from the command line": the command as printed, from the checkout's root, on the
+    bundled courtyard (only --out goes to a temporary folder)."""
+    argv = readme_command("blender -b blend_samples/courtyard.blend --python addon/lmrefine_blender/batch.py")
+    assert argv[argv.index("--objects") + 1] == "all" and "--out" in argv
+    argv[argv.index("--out") + 1] = str(tmp_path / "courtyard")
+    env = dict(os.environ)
+    env.pop("PYTHONPATH", None)  # the README sets none: batch.py finds the package in the checkout
+    process = subprocess.run([BLENDER, *argv[1:]], cwd=REPO, env=env, capture_output=True, text=True, timeout=600)
+    assert process.returncode == 0, process.stdout[-2000:] + process.stderr[-2000:]
+    report = json.loads((tmp_path / "courtyard" / "report.json").read_text())
+    assert report["ok"] and report["summary"]["objects"] == 5 and report["summary"]["moved"] == 5
+    assert (tmp_path / "courtyard" / "courtyard.blend").exists()
+    assert all(os.path.exists(path) for path in report["atlases"][next(iter(report["atlases"]))]["images"].values())
 
 
 def test_batch_objects_all_selected_and_collection():
@@ -1008,7 +1048,8 @@ def test_per_effect_panel_rows(facts):
     labels = value["labels"]["per_effect"]
     effects = [label for label in labels if label.startswith(("Direct: ", "Indirect: "))]
     assert len(effects) == 2
-    assert all(re.fullmatch(r"(Direct|Indirect): \d+px, edges \d+\.\d\dx", label) for label in effects)
+    assert all(re.fullmatch(r"(Direct|Indirect): \d+px, \d+\.\d\dx", label) for label in effects)
+    assert all(len(label) <= 23 for label in labels), labels  # the default sidebar's width beside an icon
 
 
 def test_per_effect_maps_add_up_to_the_combined_light(facts):
@@ -1044,6 +1085,18 @@ def test_addon_recharts_a_lightmap_pack_source(facts):
     assert "re-charted from the mesh: Floor" in on["result_message"]
     assert off["panel_recharted"] == 0 and off["refined_charts"] == 64
     assert "re-charted" not in off["result_message"]
+    # Progress through the re-chart route: the source layout's three stages fill 3/8 of the
+    # refinement's share, the route's five the rest, so it keeps moving (it used to stand at the
+    # share's end from the first pack on).
+    progress = value["rechart_progress"]
+    stages = [stage for _, stage in progress]
+    first = stages.index("rechart: unwrap charts")
+    assert stages[:first] and set(stages[:first]) == {"gradient map", "automaton", "pack"}
+    assert progress[0][0] < progress[first][0] < progress[-1][0]  # it moved before and after the route began
+    assert [stage for stage in dict.fromkeys(stages[first:])] == ["rechart: unwrap charts", "pack", "gradient map",
+                                                                   "automaton"]
+    fractions = [f for f, _ in progress]
+    assert all(b >= a for a, b in zip(fractions, fractions[1:]))
 
 
 def test_addon_recharts_a_shared_lightmap_pack_atlas(facts):
@@ -1065,3 +1118,7 @@ def test_addon_says_tessellate_when_large_triangles_hold_the_light_changes(facts
     assert len(hint) == 1 and hint[0].startswith("'Floor': light changes cross ")
     assert off["widening"] < 1.25
     assert not any("turn on Tessellate" in w for w in on["warnings"])
+    # Strength 0 moves nothing whatever the triangles: the run says so, and does not send the user to Tessellate.
+    still = value["tessellate_False_strength_0"]
+    assert still["error"] is None and any("nothing moved: strength is 0" in w for w in still["warnings"])
+    assert not any("Tessellate" in w for w in still["warnings"]), still["warnings"]

@@ -128,6 +128,12 @@ def test_demo_runs_the_pipeline_on_the_bundled_courtyard(tmp_path, capsys):
     report = json.loads((tmp_path / "courtyard_smart" / "report.json").read_text())
     assert report["scene"] == "courtyard" and all(report[key] is not None for key in FIGURES)
     assert {o["object"] for o in report["objects"]} >= {"Floor", "ArcadeNorth"}
+    # The pictures of the lit surface (plain / refined / ground truth, the close-ups, the texel density),
+    # rendered with lmrefine's own ray tracer, in the demo's output and linked from its report.md.
+    pictures = ("surface.png", "surface_crops.png", "surface_density.png")
+    assert all((tmp_path / "courtyard_smart" / name).stat().st_size > 0 for name in pictures)
+    markdown = (tmp_path / "report.md").read_text()
+    assert all(f"courtyard_smart/{name}" in markdown for name in pictures)
     # Stage 1 pictures: the gradient map of the baseline bake.
     assert (tmp_path / "gradient" / "gradient_direction.png").exists()
     summary = json.loads((tmp_path / "gradient" / "summary.json").read_text())

@@ -153,8 +153,10 @@ def _check_range(settings, key, value):
         return
     low, high = prop.hard_min, prop.hard_max
     if not low <= value <= high:
-        raise pipeline.UserError(f"--{FLAG_OF.get(key, key).replace('_', '-')} {value:g} is outside {low:g} to {high:g}: "
-                                 f"pass a value in that range")
+        flag = f"--{FLAG_OF.get(key, key).replace('_', '-')} {value:g}"
+        if high >= 1e30:  # no upper bound in practice (a float's 3.4e38): do not print it
+            raise pipeline.UserError(f"{flag} is below {low:g}: pass {low:g} or more")
+        raise pipeline.UserError(f"{flag} is outside {low:g} to {high:g}: pass a value in that range")
 
 
 def _progress(fraction, label, state={"shown": None}):

@@ -104,9 +104,10 @@ def run(context, targets, options, journal, image_dir=None):
                         lmrefine.refine_uvs(lightmap, group.uvs, group.triangles, side, padding=pad,
                                             progress=progress, positions=group.positions,
                                             **options["refine_options"]),
-                    done * span, span, parts=pipeline.REFINE_STAGES)
+                    done * span, span, parts=pipeline.refine_parts(group, options))
             except (ValueError, TypeError, MemoryError) as error:
-                raise UserError(f"{label} could not be refined at {side} x {side} texels: {error}") from error
+                raise UserError(f"{label} could not be refined at {side} x {side} texels: "
+                                f"{pipeline.error_text(error)}") from error
             done += 1
             check, source_check = pipeline._check_refined(lmrefine, label, result.uvs,
                                                           bridge.Layout(group.uvs, group.triangles), group.uvs, side,

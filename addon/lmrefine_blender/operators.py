@@ -96,9 +96,10 @@ def _rollback(operator, journal):
 def _failure_message(error):
     if isinstance(error, pipeline.UserError):
         return str(error)
+    text = pipeline.error_text(error)  # no C++ source locations: the console keeps the full text
     if isinstance(error, ValueError):  # lmrefine's own messages name the problem and the fix
-        return f"lmrefine: {error}"
-    return f"Refinement failed ({type(error).__name__}: {error}); the scene was left unchanged"
+        return f"lmrefine: {text}"
+    return f"Refinement failed ({type(error).__name__}: {text}); the scene was left unchanged"
 
 
 def _is_cancel(error):

@@ -25,7 +25,7 @@ class _LightmapTab:
 
 
 # refine_uvs' limit names, short enough for the sidebar (the Info report has the full text).
-# Short, so three fit the default sidebar width ("Limit: growth/gutter/steps").
+# Short: two fit the default sidebar width, more are counted ("Limit: growth/shrink +1").
 LIMIT_NAMES = {"max_magnification": "growth", "min_shrink": "shrink", "step_cap": "steps",
                "original_gutter": "gutter"}
 
@@ -143,30 +143,36 @@ class LMREFINE_PT_refine_result(_LightmapTab, bpy.types.Panel):
         result = context.scene.lmrefine.result
         column = self.layout.column(align=True)
         rows = []
+        # A count, not the names: five names do not fit the sidebar (the operator's report lists them).
+        count = len([name for name in result.objects.split(", ") if name])
         if not result.valid:
             rows = [("No run yet", 'INFO', False)] + [("", 'BLANK1', False)] * 3
         elif result.moved == 0:  # every figure would be 1x: say what happened instead
-            rows = [(f"Objects: {result.objects}", 'OBJECT_DATA', True),
+            rows = [(f"Objects: {count}", 'OBJECT_DATA', True),
                     ("Nothing moved", 'ERROR', True),
-                    ("Refined map = source map", 'BLANK1', True),
+                    ("Refined = source map", 'BLANK1', True),
                     ("The Info log says why", 'BLANK1', True)]
         else:
-            rows = [(f"Objects: {result.objects}", 'OBJECT_DATA', True),
+            rows = [(f"Objects: {count}", 'OBJECT_DATA', True),
                     (f"Moved: {result.moved} object(s)", 'CHECKMARK', True),
                     (f"Edges: {result.transition_widening:.2f}x texels", 'SHARPCURVE', True),
                     # A triangle's new / old texels, on the output: the repack's chart scale comes on top of
                     # the automaton's bounds (Min Shrink, Max Growth bound its cells), so it can exceed them.
                     (f"Triangles: {result.density_min:.2g}x-{result.density_max:.3g}x", 'MOD_UVPROJECT', True)]
-        limits = "/".join(LIMIT_NAMES.get(name, name) for name in result.limited_by.split(", ") if name)
+        names = [LIMIT_NAMES.get(name, name) for name in result.limited_by.split(", ") if name]
+        limits = "/".join(names)
+        if len(limits) > 16 and len(names) > 2:  # "Limit: growth/shrink/steps" is cut: two and a count
+            limits = "/".join(names[:2]) + f" +{len(names) - 2}"
         rows.append((f"Limit: {limits}" if limits else "Limit: none", 'INFO', bool(limits)))
         warnings = result.warnings if result.valid else 0
         rows.append((f"Warnings: {warnings} (Info log)" if warnings else "Warnings: none", 'ERROR' if warnings
                      else 'INFO', bool(warnings)))
         images = result.images if result.valid else 0
-        rows.append((f"Images: {images} for {len(result.objects.split(', '))} objects" if images else "Images: -",
+        rows.append((f"Images: {images} per pass" if images else "Images: -",
                      'IMAGE_DATA', bool(images)))
         if result.valid and result.effects:  # Layouts: Per Effect: a row per effect, its map side and its edges
-            rows += [(f"{entry.split()[0].capitalize()}: {entry.split()[1]}, edges {entry.split()[2]}", 'LIGHT', True)
+            # "Indirect: 125px, 2.39x": its map's side and its edges' widening (23 characters at most)
+            rows += [(f"{entry.split()[0].capitalize()}: {entry.split()[1]}, {entry.split()[2]}", 'LIGHT', True)
                      for entry in result.effects.split("; ")]
         shared = [entry.split(": ", 1) for entry in result.shared.split("; ") if entry] if result.valid else []
         rows.append((f"Atlas: {shared[0][0]} ({len(shared[0][1].split(', '))})"  # (objects sharing it)
@@ -176,7 +182,7 @@ class LMREFINE_PT_refine_result(_LightmapTab, bpy.types.Panel):
         rows.append((f"Re-charted: {result.recharted}" if recharted else "Re-charted: none", 'UV_DATA',
                      recharted))
         tessellated = result.valid and result.tessellated
-        rows.append((f"Tessellation: +{result.vertices_added} vertices" if tessellated else "Tessellation: off",
+        rows.append((f"New vertices: {result.vertices_added}" if tessellated else "Tessellation: off",
                      'MOD_TRIANGULATE', tessellated))
         staged = result.valid and result.stages > 1
         rows.append((f"Stages kept: {result.stages_kept} of {result.stages}" if staged else "Stages: 1", 'SORTTIME',

@@ -12,6 +12,8 @@ with lmrefine.check_layout; lightmaps come from lmrefine.bake or Cycles.
 """
 
 import os
+import re
+import sys
 import tempfile
 import threading
 import time
@@ -26,13 +28,42 @@ from .errors import Cancelled, UserError  # noqa: F401  (re-exported for the dri
 REFINED_SUFFIX = "_refined"
 # The stages refine_uvs reports, each from 0 to 1: gradient map, automaton, pack.
 REFINE_STAGES = 3
+# The further stages of refine_uvs' re-chart route (a source map with no room, the mesh given): the
+# re-charting's unwrap and pack, then the re-charted layout's gradient map, automaton and pack.
+RECHART_STAGES = 5
 # The light transports the baker runs per map for each pass, each a stage of its progress.
 TRANSPORTS = {"direct": {"direct"}, "indirect": {"indirect"}, "combined": {"direct", "indirect"}, "ao": {"ao"}}
 # Texels both bakers fill into the gutter around each chart (Blender's default
 # bake margin): bilinear and mipmapped lookups near a chart border stay on it.
 BAKE_MARGIN = 16
+# The baker's own count in its progress stages, "(map 3/5)".
+_BAKER_MAP = re.compile(r"\(map (\d+/\d+)\)")
 # Below this transition widening a run says when large triangles are why (see _coarse_warning).
 COARSE_WIDENING = 1.25
+
+
+def error_text(error):
+    """`error` as a user reads it: without the native core's C++ source locations ("[coverage.cpp:127]").
+    When one was dropped, the full text goes to the console (the system console, a batch's stderr)
+    as `lmrefine: details: ...`, for a bug report."""
+    from lmrefine.messages import without_source_location
+    text = without_source_location(error)
+    if text != str(error):
+        print(f"lmrefine: details: {type(error).__name__}: {error}", file=sys.stderr, flush=True)
+    return text
+
+
+def refine_parts(group, options):
+    """The stages refine_uvs(..., positions=group.positions) will report for `group`'s joined layout:
+    REFINE_STAGES, and RECHART_STAGES more when it takes the re-chart route (the rule of refine_uvs:
+    re-charting on, strength above 0, the mesh given and a layout with no room), so the progress
+    fills the refinement's share over all of them rather than standing still through the re-chart."""
+    refine_options = options["refine_options"]
+    if group.positions is None or not refine_options.get("rechart", True) or refine_options.get("strength") == 0:
+        return REFINE_STAGES
+    from lmrefine import rechart_route
+    no_room = rechart_route.layout_room(group.uvs, group.triangles)["no_room"]
+    return REFINE_STAGES + (RECHART_STAGES if no_room else 0)
 
 
 @dataclass
@@ -240,8 +271,11 @@ def _validate_object(obj, options, owners, resolution, depsgraph):
                         "(UV > Lightmap Pack)")
     outside = int(np.count_nonzero(((layout.uvs < 0.0) | (layout.uvs > 1.0)).any(axis=1)))
     if outside:
-        raise UserError(f"UV map '{source}' of '{obj.name}' has {outside} UVs outside [0, 1]; a lightmap "
-                        "layout must lie inside the unit square: repack it (UV > Lightmap Pack or Pack Islands)")
+        # Tiling UVs are a texture map's: repacking it would break the textures, so a map of its own comes first.
+        raise UserError(f"UV map '{source}' of '{obj.name}' has {outside} UVs outside [0, 1], so it looks like a "
+                        "texture map (tiling), not a lightmap layout, which must lie inside the unit square: add a "
+                        "UV map for the lightmap (Object Data > UV Maps > +, then UV > Lightmap Pack) and pick it "
+                        "as Source, or repack this one if it is the lightmap's (UV > Pack Islands)")
     zero_3d, zero_uv, bad_vertices = bridge.geometry_problems(obj, layout, resolution)
     if bad_vertices:
         raise UserError(f"'{obj.name}' has {bad_vertices} vertices at NaN, Inf or beyond 1e9 units in world "
@@ -367,11 +401,11 @@ def run(context, targets, options, journal, image_dir=None):
                 lambda progress, lightmap=lightmaps[name], group=group: lmrefine.refine_uvs(
                     lightmap, group.uvs, group.triangles, resolution, padding=padding, progress=progress,
                     positions=group.positions, **options["refine_options"]),
-                done * span, span, parts=REFINE_STAGES)
+                done * span, span, parts=refine_parts(group, options))
         except (ValueError, TypeError, MemoryError) as error:
             # The core refused this map's input: skip its objects, refine the others
             # (nothing of them was written yet).
-            outcome.warnings.append(f"Skipped: {label} could not be refined: {error}")
+            outcome.warnings.append(f"Skipped: {label} could not be refined: {error_text(error)}")
             groups.remove(group)
             for obj_name in group.objects:
                 outcome.objects.remove(obj_name)
@@ -387,7 +421,9 @@ def run(context, targets, options, journal, image_dir=None):
         if not result.report["moved"] and not any(w.startswith(black) for w in outcome.warnings):
             why = next((n for n in result.report["notes"] if n.startswith("nothing moved")), "nothing moved")
             outcome.warnings.append(f"{label}: {why}")
-        if options.get("tessellate") is None and result.report["transition_widening"] < COARSE_WIDENING:
+        # Strength 0 moves nothing whatever the triangles: the nothing-moved warning says why, Tessellate is no fix.
+        if (options.get("tessellate") is None and options["refine_options"]["strength"] > 0
+                and result.report["transition_widening"] < COARSE_WIDENING):
             _coarse_warning(lmrefine, label, lightmaps[name], group, result.report, outcome)
         report = {key: value for key, value in result.report.items() if key != "triangle_density"}
         report["check_layout"] = dict(check)
@@ -801,8 +837,10 @@ def run_blocking(job, progress=None, should_stop=None):
                 raise Cancelled()
             value = None
         else:
+            callback = _progress_callback(work, progress, should_stop or (lambda: False))
             try:
-                value = work.call(_progress_callback(work, progress, should_stop or (lambda: False)))
+                value = work.call(callback)
+                callback.finish()
             except Exception as failure:  # noqa: BLE001  (handed to the job, re-raised if it does not handle it)
                 value, error = None, failure
 
@@ -818,6 +856,11 @@ def _progress_callback(work, report, should_stop):
     """
     state = {"stage": None, "done": 0, "furthest": 0.0}
 
+    def shown(stage):
+        # The baker counts the meshes it bakes as maps ("baking direct (map 3/5)"); the add-on gives it one
+        # mesh per object, and a "map" of the add-on is an atlas group (five objects of one atlas: one map).
+        return _BAKER_MAP.sub(r"(object \1)", stage)
+
     def callback(fraction, stage=""):
         if state["stage"] is not None and stage != state["stage"]:
             state["done"] += 1
@@ -825,9 +868,19 @@ def _progress_callback(work, report, should_stop):
         within = (state["done"] + min(max(float(fraction), 0.0), 1.0)) / max(work.parts, 1)
         state["furthest"] = max(state["furthest"], min(within, 1.0))
         if report is not None:
-            report(work.start + work.span * state["furthest"], f"{work.label} ({stage})" if stage else work.label)
+            report(work.start + work.span * state["furthest"],
+                   f"{work.label} ({shown(stage)})" if stage else work.label)
         return not should_stop()
 
+    def finish():
+        """The call returned: its whole span is done, even when its last stages did not report
+        (a pack with nothing to do, a re-chart route that stopped early)."""
+        state["furthest"] = 1.0
+        if report is not None:
+            stage = state["stage"]
+            report(work.start + work.span, f"{work.label} ({shown(stage)})" if stage else work.label)
+
+    callback.finish = finish
     return callback
 
 
@@ -884,7 +937,9 @@ class ThreadedDriver:
 
         def target():
             try:
-                self._send = ("value", work.call(progress))
+                value = work.call(progress)
+                progress.finish()
+                self._send = ("value", value)
             except BaseException as error:
                 self._send = ("error", error)
 

@@ -24,7 +24,7 @@ import lmrefine_blender  # noqa: E402
 import lmrefine_blender.atlas  # noqa: E402
 import scenes  # noqa: E402
 from scene_state import _array, _digest, changed, fingerprint  # noqa: E402,F401
-from lmrefine_blender import bridge, cycles_bake, pipeline  # noqa: E402
+from lmrefine_blender import bridge, cycles_bake, operators, pipeline  # noqa: E402
 from lmrefine_blender.journal import Journal  # noqa: E402
 
 RESOLUTION = 64  # small: the whole group must stay fast
@@ -310,7 +310,7 @@ def core_refusal_skips_the_object():
 
     def refuse_the_box(lightmap, uvs, triangles, *args, **kwargs):
         if len(triangles) == 12:
-            raise ValueError("uvs: refused for the test")
+            raise ValueError("uvs: refused for the test [refine.cpp:42]")  # as the native core words it
         return original(lightmap, uvs, triangles, *args, **kwargs)
 
     box_before = fingerprint()["mesh:Cube"]
@@ -322,7 +322,11 @@ def core_refusal_skips_the_object():
     return {"error": error, "objects": outcome and outcome.objects,
             "skipped": [w for w in warnings if w.startswith("Skipped: ")],
             "box_unchanged": fingerprint()["mesh:Cube"] == box_before,
-            "floor_refined": "Lightmap_refined" in floor.data.uv_layers}
+            "floor_refined": "Lightmap_refined" in floor.data.uv_layers,
+            # The operator's error report of a native failure, as the user reads it.
+            "operator_messages": [operators._failure_message(error) for error in (
+                ValueError("triangles[0] refers to UV 5 [coverage.cpp:127]"),
+                RuntimeError("Embree failed [baker.cpp:231]"))]}
 
 
 @check("refine", "bake")
@@ -860,7 +864,7 @@ def progress_moves_per_map_and_stage():
     seen = []
     value = pipeline.run_blocking(job(), progress=lambda fraction, label: seen.append((fraction, label)))
     # The fraction when each map's last stage ends, per bake.
-    ends = {f"{bake} {m}": max(f for f, label in seen if label.startswith(bake) and f"map {m}/5" in label)
+    ends = {f"{bake} {m}": max(f for f, label in seen if label.startswith(bake) and f"object {m}/5" in label)
             for bake in ("First bake", "Second bake") for m in range(1, 6)}
 
     fresh_shadow_scene(first_lightmap='EMBREE', backend='EMBREE', bake_passes={'DIRECT', 'AO'})
@@ -880,7 +884,7 @@ def progress_moves_per_map_and_stage():
     pipeline.run_blocking(pipeline.run(bpy.context, pipeline.validate(bpy.context, objects, options), options,
                                        Journal()), progress=lambda fraction, label: atlas_run.append((fraction, label)))
     return {"value": value, "fractions": [f for f, _ in seen], "ends": ends,
-            "atlas_fractions": [f for f, _ in atlas_run],
+            "atlas_fractions": [f for f, _ in atlas_run], "atlas_labels": sorted({label for _, label in atlas_run}),
             "atlas_refining": {label.split(" (")[0]: [min(f for f, l in atlas_run if l.split(" (")[0] == label.split(" (")[0]),
                                                       max(f for f, l in atlas_run if l.split(" (")[0] == label.split(" (")[0])]
                                for _, label in atlas_run if label.startswith("Refining")},
@@ -1376,6 +1380,7 @@ def menus_and_panel_rows():
                             "LMREFINE_PT_density")}
     bpy.context.scene.lmrefine.density_overlay = False
     bpy.context.scene.lmrefine.result.moved = 0
+    bpy.context.scene.lmrefine.result.objects = "ArcadeNorth, ArcadeWest, Floor, LowWall, Well"  # five names
     states["nothing_moved"] = {"LMREFINE_PT_refine_result": draw(panels.LMREFINE_PT_refine_result)}
     settings(layouts='PER_EFFECT')
     per_effect_outcome = refine()
@@ -1702,6 +1707,14 @@ def rechart_lightmap_pack_source():
             "geometry_identical": geometry_digest(mesh) == geometry,
             "image": _image_stats("Floor_lightmap_direct", refined, layout.triangles),
         }
+        if rechart:  # the progress of the refinement, re-chart route included: (fraction, stage) in order
+            options = pipeline.settings_snapshot(bpy.context.scene.lmrefine)
+            seen = []
+            pipeline.run_blocking(pipeline.run(bpy.context, pipeline.validate(bpy.context, [floor], options),
+                                               options, Journal()),
+                                  progress=lambda fraction, label: seen.append((fraction, label)))
+            facts["rechart_progress"] = [(f, label.split(" (", 1)[1][:-1]) for f, label in seen
+                                         if label.startswith("Refining") and " (" in label]
     return facts
 
 
@@ -1744,16 +1757,16 @@ def coarse_floor_suggests_tessellation():
     square, under a box's shadow: the warp can move only the middle vertex and cannot put texels
     inside those triangles, so the run says Tessellate is the fix; with Tessellate on it does not."""
     facts = {}
-    for tessellate in (False, True):
+    for tessellate, strength in ((False, 24.0), (True, 24.0), (False, 0.0)):  # strength 0: nothing to tessellate for
         scenes.coarse_shadow_scene(quads=2)
         floor = bpy.data.objects["Floor"]
         floor.data.uv_layers.remove(floor.data.uv_layers["Lightmap"])
         scenes._set_lightmap_layer(floor.data)
         register()
         settings(resolution=RESOLUTION, padding=2, samples=4, first_lightmap='EMBREE', backend='EMBREE',
-                 bake_passes={'DIRECT'}, tessellate=tessellate)
+                 bake_passes={'DIRECT'}, tessellate=tessellate, strength=strength)
         outcome, warnings, error = _run_pipeline([bpy.data.objects["Floor"]])
-        facts[f"tessellate_{tessellate}"] = {
+        facts[f"tessellate_{tessellate}" + ("_strength_0" if strength == 0 else "")] = {
             "error": error, "warnings": warnings,
             "widening": outcome and outcome.reports["Floor"]["transition_widening"]}
     return facts
