@@ -359,6 +359,29 @@ def case_refine_uvs_rechart(lm, rng):
                 description=f"refine_uvs (re-chart route) hostile: {chosen}")
 
 
+
+def case_refine_uvs_folds(lm, rng):
+    """refine_uvs' re-chart route on a layout with room whose one chart folds over creases: a grid chart
+    whose mesh bends along random lines (sharp or not), its positions, hostile ones."""
+    n = int(rng.integers(2, 9))
+    r = int(rng.choice([16, 32, 64]))
+    ticks = np.linspace(0.1, 0.9, n + 1)
+    quads = [((ticks[j], ticks[i]), (ticks[j + 1], ticks[i]), (ticks[j + 1], ticks[i + 1]), (ticks[j], ticks[i + 1]))
+             for i in range(n) for j in range(n)]
+    uvs = np.array([corner for a, b, c, d in quads for corner in (a, b, c, a, c, d)], np.float64)
+    fold = rng.uniform(0.1, 0.9, 2)
+    height = rng.uniform(-3, 3) * np.abs(uvs[:, 0] - fold[0]) + rng.uniform(-3, 3) * np.abs(uvs[:, 1] - fold[1])
+    positions = np.column_stack([uvs, height]) * rng.choice([1e-6, 1.0, 1e6])
+    kwargs = {"lightmap": lightmap(rng, r), "uvs": uvs.astype(np.float32),
+              "triangles": np.arange(len(uvs), dtype=np.int32).reshape(-1, 3), "resolution": r,
+              "padding": float(rng.choice([0, 1, 2])), "positions": positions, "max_steps": 2, "progress": None}
+    makers = {"lightmap": as_array, "positions": as_array, "rechart": as_number, "resolution": as_resolution,
+              "padding": as_number, "progress": as_progress}
+    kwargs, chosen = mutate(kwargs, rng, makers)
+    layout = (kwargs["uvs"], kwargs["triangles"], kwargs["resolution"], kwargs["padding"])
+    return Case("refine_uvs", _call(lm.refine_uvs, dict(kwargs)), list(kwargs.values()), layout=layout,
+                description=f"refine_uvs (folded chart) hostile: {chosen}")
+
 # ---------------------------------------------------------------- images
 
 PNG_HUGE_HEADER = (b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR" + (100000).to_bytes(4, "big") * 2
@@ -598,7 +621,7 @@ BUILDERS = (
     case_layout_function("find_charts"), case_layout_function("LayoutChecker"),
     case_grid_cell_areas, case_warp_uvs, case_identity_grid, case_run_automaton,
     case_refine_uvs, case_refine_uvs,  # the whole pipeline gets twice the share
-    case_pack_charts, case_rechart, case_refine_uvs_rechart,
+    case_pack_charts, case_rechart, case_refine_uvs_rechart, case_refine_uvs_folds,
     case_write_image, case_read_image, case_scene, case_bake, case_evaluate, case_trace_rays,
     case_tessellate, case_transition_strength_of,
 )
