@@ -4,7 +4,9 @@
    at 256^2, 512^2 and 1024^2 on a finely tessellated plane with a hard
    shadow edge; baseline: the 256^2 run's cost per texel.
 2. The chart repack at 1024^2 on a Smart UV atlas (game_level), against
-   the in-chart refinement alone; and a Lightmap Pack layout at 1024^2.
+   the in-chart refinement alone; a Lightmap Pack layout at 1024^2; and
+   the re-chart route on a Smart UV atlas with folds (courtyard), against
+   the same refinement without the mesh.
 3. Coarse-to-fine against one level at 256^2: steps (and time) one level
    needs to give the shadow edge 90% of the texels the pyramid gives it.
 4. The three border treatments, on an edge across the middle and one near
@@ -106,6 +108,30 @@ def smart_uv_repack(resolution=1024, runs=2):
           f"(input: {before}, a chart that overlaps itself)")
 
 
+def folded_smart_uv(resolution=1024, runs=2):
+    """The re-chart route on a Smart UV atlas whose charts fold over lit
+    creases (courtyard, lmrefine.folds) at 1024^2, its 256^2 direct-light bake
+    scaled up: refine_uvs with the mesh (positions=, as the add-on calls it)
+    against the same call without it (the source layout's refinement alone).
+    The ratio is what the crease search, the re-charting and the second
+    refinement cost."""
+    from lmrefine.sample_scenes import load_sample
+
+    sample = load_sample("courtyard")
+    uvs, tris = sample.layout("smart")
+    positions = sample.positions[sample.triangles].reshape(-1, 3)
+    small = lmrefine.bake(sample.to_scene(uvs), resolution // 4, passes="direct", samples=8, seed=0)[0][..., :3]
+    lightmap = np.ascontiguousarray(np.kron(small, np.ones((4, 4, 1))), dtype=np.float32)
+    t_source, _ = best_of(runs, lambda: lmrefine.refine_uvs(lightmap, uvs, tris, resolution))
+    t_route, routed = best_of(runs, lambda: lmrefine.refine_uvs(lightmap, uvs, tris, resolution,
+                                                                  positions=positions))
+    info = routed.report["rechart"]
+    folds = info.get("folds") or {}
+    print(f"\nSmart UV atlas with folds (courtyard) at {resolution}^2: without the mesh {t_source:.3f} s; "
+          f"with it (re-chart route) {t_route:.3f} s ({t_route / t_source:.2f}x)")
+    print(f"  folds: {folds.get('count', 0)} creases, {folds.get('energy_fraction', 0):.0%} of the light changes; "
+          f"re-charted: {info['used']} ({info.get('charts', 0)} charts), valid {routed.report['check']['valid']}")
+
 def coarse_to_fine_against_one_level(resolution=256):
     energy = np.full((resolution, resolution), 1 / 7, np.float32)
     energy[:, resolution // 2 - 2:resolution // 2 + 2] = 1.0  # a 4-texel band, as strength 6 makes it
@@ -144,5 +170,6 @@ if __name__ == "__main__":
     whole_refinement()
     lightmap_pack_layout()
     smart_uv_repack()
+    folded_smart_uv()
     coarse_to_fine_against_one_level()
     border_modes()

@@ -266,3 +266,57 @@ def test_route_bad_switch(lightmap_pack_case):
     corners, uvs, triangles, lightmap = lightmap_pack_case
     with pytest.raises(TypeError, match="rechart must be True or False"):
         lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, positions=corners, rechart="yes")
+
+
+def _texel_points_reference(uvs, triangles, shape):
+    """texel_points' rule, one triangle at a time over its texel bounding box:
+    a texel keeps the first triangle whose smallest barycentric at its centre
+    is largest."""
+    height, width = shape
+    best = np.full(shape, -np.inf)
+    owner = np.zeros(shape, np.int64)
+    bary_out = np.zeros(shape + (3,))
+    for t, corners in enumerate(np.asarray(uvs, np.float64)[triangles]):
+        p = corners * (width, height)
+        p[:, 1] = height - p[:, 1]
+        ab, ac = p[1] - p[0], p[2] - p[0]
+        det = ab[0] * ac[1] - ab[1] * ac[0]
+        if det == 0:
+            continue
+        c0, r0 = np.clip(np.floor(p.min(axis=0)), 0, (width - 1, height - 1)).astype(int)
+        c1, r1 = np.clip(np.floor(p.max(axis=0)), 0, (width - 1, height - 1)).astype(int)
+        rows, cols = np.mgrid[r0:r1 + 1, c0:c1 + 1]
+        apx, apy = cols + 0.5 - p[0, 0], rows + 0.5 - p[0, 1]
+        beta = (apx * ac[1] - apy * ac[0]) / det
+        gamma = (ab[0] * apy - ab[1] * apx) / det
+        bary = np.stack([1 - beta - gamma, beta, gamma], axis=-1)
+        score = bary.min(axis=-1)
+        better = score > best[rows, cols]
+        best[rows[better], cols[better]] = score[better]
+        owner[rows[better], cols[better]] = t
+        bary_out[rows[better], cols[better]] = bary[better]
+    return owner, bary_out, best
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_texel_points_match_the_reference_bit_for_bit(seed):
+    rng = np.random.default_rng(seed)
+    count = int(rng.integers(1, 40))
+    uvs = rng.uniform(-0.1, 1.1, (3 * count, 2))
+    uvs[:3] = uvs[0]  # a triangle with no area
+    triangles = np.arange(3 * count, dtype=np.int32).reshape(-1, 3)
+    shape = (int(rng.integers(1, 48)), int(rng.integers(1, 48)))
+    fast = lmrefine._native.texel_points(uvs, triangles, shape)
+    slow = _texel_points_reference(uvs, triangles, shape)
+    for a, b in zip(fast, slow):
+        assert a.shape == b.shape and np.array_equal(a, b)
+
+
+def test_texel_points_refuse_bad_input():
+    triangles = np.array([[0, 1, 2]], np.int32)
+    with pytest.raises(ValueError, match=r"triangles\[0\] indexes uv 2"):
+        lmrefine._native.texel_points(np.zeros((2, 2)), triangles, 8)
+    with pytest.raises(ValueError, match=r"uvs\[1\] is NaN"):
+        lmrefine._native.texel_points(np.array([[0, 0], [np.nan, 0], [1, 1]]), triangles, 8)
+    with pytest.raises(ValueError, match="shape"):
+        lmrefine._native.texel_points(np.zeros((3, 3)), triangles, 8)

@@ -14,6 +14,7 @@ namespace py = pybind11;
 namespace lmrefine::bindings {
 void bind_image_io(py::module_& m);
 void bind_coverage(py::module_& m);
+void bind_texel_points(py::module_& m);
 void bind_chart(py::module_& m);
 void bind_rechart(py::module_& m);
 void bind_packer(py::module_& m);
@@ -56,6 +57,7 @@ PYBIND11_MODULE(_native, m) {
 
     lmrefine::bindings::bind_image_io(m);
     lmrefine::bindings::bind_coverage(m);
+    lmrefine::bindings::bind_texel_points(m);
     lmrefine::bindings::bind_chart(m);
     lmrefine::bindings::bind_rechart(m);
     lmrefine::bindings::bind_packer(m);

@@ -110,56 +110,17 @@ def resample_lightmap(lightmap, source_uvs, source_triangles, uvs, triangles, ma
     return out.reshape(lightmap.shape)
 
 
-def _texel_points(uvs, triangles, shape, mask, chunk=1 << 22):
+def _texel_points(uvs, triangles, shape, mask):
     """For every texel of `mask` in row-major order: the triangle holding its
-    centre (the one it lies deepest in) and the centre's barycentrics there,
-    clamped into the triangle for texels no centre of which lies inside."""
-    height, width = shape
-    corners = uvs[triangles] * (width, height)  # texel units, v up
-    corners[..., 1] = height - corners[..., 1]  # rows down
-    low = np.clip(np.floor(corners.min(axis=1)).astype(np.int64), 0, (width - 1, height - 1))
-    high = np.clip(np.floor(corners.max(axis=1)).astype(np.int64), 0, (width - 1, height - 1))
-    sizes = (high - low + 1).prod(axis=1)
-    best_score = np.full(height * width, -np.inf)
-    best_triangle = np.zeros(height * width, np.int64)
-    best_bary = np.zeros((height * width, 3))
-    start = 0
-    ends = np.searchsorted(np.cumsum(sizes), np.arange(chunk, int(sizes.sum()) + chunk, chunk), side="right")
-    for end in np.unique(np.append(np.maximum(ends, 1), len(triangles))):
-        if end <= start:
-            continue
-        part = np.arange(start, end)
-        start = end
-        counts = sizes[part]
-        which = np.repeat(part, counts)
-        offset = np.arange(int(counts.sum())) - np.repeat(np.cumsum(counts) - counts, counts)
-        span = (high[which, 0] - low[which, 0] + 1)
-        col = low[which, 0] + offset % span
-        row = low[which, 1] + offset // span
-        point = np.column_stack([col + 0.5, row + 0.5])
-        a, b, c = corners[which, 0], corners[which, 1], corners[which, 2]
-        ab, ac, ap = b - a, c - a, point - a
-        det = ab[:, 0] * ac[:, 1] - ab[:, 1] * ac[:, 0]
-        safe = np.where(det != 0, det, 1.0)
-        beta = (ap[:, 0] * ac[:, 1] - ap[:, 1] * ac[:, 0]) / safe
-        gamma = (ab[:, 0] * ap[:, 1] - ab[:, 1] * ap[:, 0]) / safe
-        bary = np.column_stack([1 - beta - gamma, beta, gamma])
-        score = np.where(det != 0, bary.min(axis=1), -np.inf)
-        texel = row * width + col
-        order = np.lexsort((-score, texel))
-        first = np.ones(len(order), bool)
-        first[1:] = texel[order][1:] != texel[order][:-1]
-        pick = order[first]
-        better = score[pick] > best_score[texel[pick]]
-        pick = pick[better]
-        best_score[texel[pick]] = score[pick]
-        best_triangle[texel[pick]] = which[pick]
-        best_bary[texel[pick]] = bary[pick]
-    where = np.flatnonzero(np.asarray(mask).ravel())
-    bary = np.clip(best_bary[where], 0.0, None)
+    centre (the one it lies deepest in, lmrefine._native.texel_points) and the
+    centre's barycentrics there, clamped into the triangle for texels no
+    centre of which lies inside."""
+    triangle, bary, score = _native.texel_points(uvs, triangles, shape)
+    where = np.asarray(mask, bool)
+    bary = np.clip(bary[where], 0.0, None)
     bary /= np.maximum(bary.sum(axis=1, keepdims=True), 1e-300)
-    bary[~np.isfinite(best_score[where])] = 1.0 / 3.0  # a texel only degenerate triangles touch
-    return best_triangle[where], bary
+    bary[~np.isfinite(score[where])] = 1.0 / 3.0  # a texel only degenerate triangles touch
+    return triangle[where], bary
 
 
 def predicted_error(source_uvs, uvs, triangles, energy, positions=None, lightmap=None, mask=None, folds=None):

@@ -1,0 +1,30 @@
+// Texel points: the surface point behind each texel of a layout, as the
+// re-chart route needs to carry a lightmap from one layout to another
+// (python/lmrefine/rechart_route.py, resample_lightmap).
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+namespace lmrefine {
+
+// For every texel (row-major, row 0 at the top, v = 1): the triangle whose
+// interior holds the texel's centre deepest (the largest smallest
+// barycentric, negative outside; the first such triangle on a tie) among
+// the triangles whose texel bounding box holds the texel, with the centre's
+// barycentrics there and that score. Texels no such triangle with area
+// reaches keep triangle 0, barycentrics 0 and score -inf. Double precision
+// throughout, in the same order of operations as the numpy reference in
+// tests/test_rechart_route.py, so both give the same bits.
+struct TexelPoints {
+    std::vector<int64_t> triangle;  // (H * W)
+    std::vector<double> bary;       // (H * W, 3)
+    std::vector<double> score;      // (H * W)
+};
+
+// uvs: (uv_count, 2) doubles, finite; triangles: (triangle_count, 3)
+// indices into them, in range (the caller validates both).
+TexelPoints texel_points(const double* uvs, const int32_t* triangles, int64_t triangle_count, int width,
+                         int height);
+
+}  // namespace lmrefine

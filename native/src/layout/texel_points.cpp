@@ -1,0 +1,55 @@
+#include "lmrefine/layout/texel_points.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include <glm/vec2.hpp>
+
+namespace lmrefine {
+
+TexelPoints texel_points(const double* uvs, const int32_t* triangles, int64_t triangle_count, int width,
+                         int height) {
+    const size_t texels = size_t(width) * size_t(height);
+    TexelPoints out;
+    out.triangle.assign(texels, 0);
+    out.bary.assign(texels * 3, 0.0);
+    out.score.assign(texels, -std::numeric_limits<double>::infinity());
+    for (int64_t t = 0; t < triangle_count; ++t) {
+        glm::dvec2 p[3];
+        for (int k = 0; k < 3; ++k) {
+            const int32_t index = triangles[3 * t + k];
+            // Texel units, rows down: x = u W, y = H - v H.
+            p[k] = glm::dvec2(uvs[2 * index] * width, height - uvs[2 * index + 1] * height);
+        }
+        const glm::dvec2 ab = p[1] - p[0], ac = p[2] - p[0];
+        const double det = ab.x * ac.y - ab.y * ac.x;
+        if (det == 0.0) continue;  // no area: its score is -inf, never better
+        const auto clamp_floor = [](double value, int size) {
+            return int(std::clamp(std::floor(value), 0.0, double(size - 1)));
+        };
+        const int c0 = clamp_floor(std::min({p[0].x, p[1].x, p[2].x}), width);
+        const int c1 = clamp_floor(std::max({p[0].x, p[1].x, p[2].x}), width);
+        const int r0 = clamp_floor(std::min({p[0].y, p[1].y, p[2].y}), height);
+        const int r1 = clamp_floor(std::max({p[0].y, p[1].y, p[2].y}), height);
+        for (int row = r0; row <= r1; ++row) {
+            for (int col = c0; col <= c1; ++col) {
+                const glm::dvec2 ap = glm::dvec2(col + 0.5, row + 0.5) - p[0];
+                const double beta = (ap.x * ac.y - ap.y * ac.x) / det;
+                const double gamma = (ab.x * ap.y - ab.y * ap.x) / det;
+                const double alpha = 1.0 - beta - gamma;
+                const double score = std::min({alpha, beta, gamma});
+                const size_t texel = size_t(row) * size_t(width) + size_t(col);
+                if (!(score > out.score[texel])) continue;  // the first deepest triangle wins a tie
+                out.score[texel] = score;
+                out.triangle[texel] = t;
+                out.bary[3 * texel] = alpha;
+                out.bary[3 * texel + 1] = beta;
+                out.bary[3 * texel + 2] = gamma;
+            }
+        }
+    }
+    return out;
+}
+
+}  // namespace lmrefine
