@@ -146,3 +146,17 @@ def test_route_skips_folds_in_flat_light():
     assert not info["used"] and info["folds"]["count"] == CELLS
     assert info["folds"]["energy_fraction"] < rechart_route.MIN_FOLD_ENERGY
     assert "fold over no crease that matters" in info["reason"]
+
+
+def test_folds_of_a_self_overlapping_layout_are_not_searched_at_length(monkeypatch):
+    # Every triangle over the whole atlas (a texture-like layout): the band search would read each
+    # fold's whole bounding box; past MAX_SEARCH_TEXELS atlases the folds count as holding nothing.
+    positions, uvs, triangles = _roof(4)
+    spread = np.tile(np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 0.0], [1.0, 1.0], [0.0, 1.0]],
+                              np.float32), (len(triangles) // 2, 1))
+    energy = np.ones((32, 32), np.float32)
+    found = folds_module.find_folds(spread, triangles, positions, 20.0, energy)
+    assert len(found.faces) > 0 and found.energy_fraction > 0
+    monkeypatch.setattr(folds_module, "MAX_SEARCH_TEXELS", 0.1)
+    capped = folds_module.find_folds(spread, triangles, positions, 20.0, energy)
+    assert len(capped.faces) == len(found.faces) and capped.energy_fraction == 0.0

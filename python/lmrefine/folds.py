@@ -24,6 +24,9 @@ from .packer import CHART_TOLERANCE
 # fold's: the bake's step spreads over the texels that straddle the crease
 # and its neighbours (the gradient map's filter is two texels wide).
 BAND_TEXELS = 1.5
+# The folds' texel bounding boxes searched at most, in atlases: folds inside
+# the charts of a layout that does not overlap itself stay far below.
+MAX_SEARCH_TEXELS = 64
 
 
 @dataclass
@@ -135,6 +138,11 @@ def _band(uvs, triangles, face, corner, energy, chunk=1 << 21):
     low = np.clip(np.floor(np.minimum(start, end) - BAND_TEXELS), 0, (width - 1, height - 1)).astype(np.int64)
     high = np.clip(np.floor(np.maximum(start, end) + BAND_TEXELS), 0, (width - 1, height - 1)).astype(np.int64)
     sizes = (high - low + 1).prod(axis=1)
+    if sizes.sum() > MAX_SEARCH_TEXELS * height * width:
+        # Long folds crossing each other over the atlas: an overlapping
+        # (texture-like) layout, not one to re-chart for its folds. Counted
+        # as holding no light changes rather than searched at length.
+        return np.zeros(count), band
     best = np.full(height * width, np.inf)
     owner = np.full(height * width, -1, np.int64)
     bounds = np.searchsorted(np.cumsum(sizes), np.arange(chunk, int(sizes.sum()) + chunk, chunk), side="right")
