@@ -200,14 +200,18 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
         positions: (N, 3) the 3-D position of each UV (the uvs' indexing),
             or None. With positions and rechart, a source layout that gives
             the refiner no room (rechart_route.layout_room: one chart per
-            face or nearly, as Lightmap Pack makes) is re-charted from the
+            face or nearly, as Lightmap Pack makes), or whose charts fold
+            over creases that hold at least rechart_route.MIN_FOLD_ENERGY
+            of the light changes (lmrefine.folds: Smart UV Project joins
+            faces up to 66 degrees apart), is re-charted from the
             mesh (lmrefine.rechart), the lightmap carried over to the new
             layout and that layout refined; kept when the error model
             predicts clearly less error than the source layout (below
             rechart_route.REQUIRED_GAIN; docs/refiner.md, "The re-chart
             route"), else the source layout's own refinement is returned.
             report["rechart"] says what happened: used, room (the rule's
-            figures), reason when not used, the new layout's charts and
+            figures), folds (count, length, energy_fraction; None when not
+            looked for), reason when not used, the new layout's charts and
             the model's predicted_error when re-charted (None without
             positions).
             The result keeps the input's indexing: result.uvs (N, 2) for
