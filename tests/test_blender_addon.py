@@ -1099,6 +1099,23 @@ def test_addon_recharts_a_lightmap_pack_source(facts):
     assert all(b >= a for a, b in zip(fractions, fractions[1:]))
 
 
+def test_addon_recharts_a_source_folded_over_a_lit_ridge(facts):
+    value = fact(facts, "rechart_folded_source")
+    assert value["outcome"] == "FINISHED", value["message"]
+    assert value["valid"] and value["source_identical"]
+    assert value["source_charts"] == 1 and value["refined_charts"] == 2  # cut at the ridge
+    assert value["panel_recharted"] == 1
+    assert "re-charted from the mesh: Roof" in value["result_message"]
+    assert "folded over sharp edges" in value["result_message"]
+    # The progress counts the route's stages for a folded source too: it moves through them, never back.
+    stages = [stage for _, stage in value["progress"]]
+    assert "rechart: unwrap charts" in stages and stages.index("rechart: unwrap charts") > 0
+    fractions = [f for f, _ in value["progress"]]
+    assert all(b >= a for a, b in zip(fractions, fractions[1:]))
+    first = stages.index("rechart: unwrap charts")
+    assert fractions[first] < fractions[-1]
+
+
 def test_addon_recharts_a_shared_lightmap_pack_atlas(facts):
     value = fact(facts, "rechart_shared_lightmap_pack_atlas")
     assert value["outcome"] == "FINISHED", value["message"]

@@ -160,3 +160,10 @@ def test_folds_of_a_self_overlapping_layout_are_not_searched_at_length(monkeypat
     monkeypatch.setattr(folds_module, "MAX_SEARCH_TEXELS", 0.1)
     capped = folds_module.find_folds(spread, triangles, positions, 20.0, energy)
     assert len(capped.faces) == len(found.faces) and capped.energy_fraction == 0.0
+
+
+def test_fold_faces_need_no_bake():
+    positions, uvs, triangles = _roof()
+    faces, _, length = folds_module.fold_faces(uvs, triangles, positions, 20.0)
+    assert len(faces) == CELLS and length.sum() == pytest.approx(2.0, rel=1e-6)
+    assert len(folds_module.fold_faces(_cut(uvs), triangles, positions, 20.0)[0]) == 0

@@ -55,15 +55,18 @@ def error_text(error):
 
 def refine_parts(group, options):
     """The stages refine_uvs(..., positions=group.positions) will report for `group`'s joined layout:
-    REFINE_STAGES, and RECHART_STAGES more when it takes the re-chart route (the rule of refine_uvs:
-    re-charting on, strength above 0, the mesh given and a layout with no room), so the progress
-    fills the refinement's share over all of them rather than standing still through the re-chart."""
+    REFINE_STAGES, and RECHART_STAGES more when it may take the re-chart route (the rule of refine_uvs:
+    re-charting on, strength above 0, the mesh given, and a layout with no room or charts folded over
+    creases; whether the folds hold enough light to be cut is known only from the bake, and a route
+    not taken ends its share at once), so the progress fills the refinement's share over all of them
+    rather than standing still through the re-chart."""
     refine_options = options["refine_options"]
     if group.positions is None or not refine_options.get("rechart", True) or refine_options.get("strength") == 0:
         return REFINE_STAGES
-    from lmrefine import rechart_route
-    no_room = rechart_route.layout_room(group.uvs, group.triangles)["no_room"]
-    return REFINE_STAGES + (RECHART_STAGES if no_room else 0)
+    from lmrefine import folds, rechart_route
+    route = (rechart_route.layout_room(group.uvs, group.triangles)["no_room"]
+             or len(folds.fold_faces(group.uvs, group.triangles, group.positions, rechart_route.ANGLE)[0]) > 0)
+    return REFINE_STAGES + (RECHART_STAGES if route else 0)
 
 
 @dataclass

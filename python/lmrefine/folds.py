@@ -102,6 +102,19 @@ def creases(positions, triangles, angle):
         return faces, corner, np.linalg.norm(end - start, axis=1)
 
 
+def fold_faces(uvs, triangles, positions, angle):
+    """The creases sharper than `angle` degrees that lie inside a chart of
+    the layout (uvs, triangles): (faces (F, 2), corner (F,), length (F,)) as
+    `creases` gives them. Geometry only, no bake: whether a layout can take
+    the folds route at all."""
+    faces, corner, length = creases(positions, triangles, angle)
+    if len(faces):
+        charts = _native.find_charts(uvs, triangles, tolerance=CHART_TOLERANCE)
+        inside = charts[faces[:, 0]] == charts[faces[:, 1]]
+        faces, corner, length = faces[inside], corner[inside], length[inside]
+    return faces, corner, length
+
+
 def find_folds(uvs, triangles, positions, angle, energy, mask=None):
     """The creases sharper than `angle` degrees that lie inside a chart of
     the layout (uvs, triangles), with the gradient `energy` (H, W) of the
@@ -111,11 +124,7 @@ def find_folds(uvs, triangles, positions, angle, energy, mask=None):
     triangles = np.asarray(triangles, np.int64)
     energy = np.asarray(energy)
     shape = energy.shape
-    faces, corner, length = creases(positions, triangles, angle)
-    if len(faces):
-        charts = _native.find_charts(uvs, triangles, tolerance=CHART_TOLERANCE)
-        inside = charts[faces[:, 0]] == charts[faces[:, 1]]
-        faces, corner, length = faces[inside], corner[inside], length[inside]
+    faces, corner, length = fold_faces(uvs, triangles, positions, angle)
     covered = mask if mask is not None else _native.coverage_mask(uvs, triangles, shape)
     band_energy, band = _band(uvs, triangles, faces[:, 0], corner, np.where(covered, energy, 0.0))
     return Folds(faces=faces, corner=corner, length=length, energy=band_energy, band=band,

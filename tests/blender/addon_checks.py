@@ -1720,6 +1720,39 @@ def rechart_lightmap_pack_source():
 
 
 @check("refine", "bake")
+def rechart_folded_source():
+    """A source map whose one chart folds over a lit ridge (Smart UV Project's kind, with room): the run
+    re-charts the roof into its two slopes (the panel and the message say so, the Info line says why) and
+    the progress runs through the route's stages, never back."""
+    scenes.roof_scene(quads=8)
+    register()
+    settings(resolution=RESOLUTION, padding=2, samples=4, first_lightmap='EMBREE', backend='EMBREE',
+             bake_passes={'DIRECT'})
+    roof = bpy.data.objects["Roof"]
+    mesh = roof.data
+    layout = bridge.read_layout(mesh, "Lightmap")
+    source_uvs = bridge.read_uv_layer(mesh, "Lightmap")
+    outcome, message = refine()
+    result = bpy.context.scene.lmrefine.result
+    refined = bridge.read_uv_layer(mesh, "Lightmap_refined")
+    check_ = lmrefine.check_layout(refined, layout.triangles, RESOLUTION, padding=2)
+    options = pipeline.settings_snapshot(bpy.context.scene.lmrefine)
+    seen = []
+    pipeline.run_blocking(pipeline.run(bpy.context, pipeline.validate(bpy.context, [roof], options), options,
+                                       Journal()),
+                          progress=lambda fraction, label: seen.append((fraction, label)))
+    return {"outcome": outcome, "message": message, "panel_recharted": result.recharted,
+            "result_message": result.message, "valid": bool(check_["valid"]),
+            "source_charts": int(len(np.unique(lmrefine.find_charts(layout.uvs, layout.triangles,
+                                                                     lmrefine.CHART_TOLERANCE)))),
+            "refined_charts": int(len(np.unique(lmrefine.find_charts(refined, layout.triangles,
+                                                                      lmrefine.CHART_TOLERANCE)))),
+            "source_identical": bool(np.array_equal(bridge.read_uv_layer(mesh, "Lightmap"), source_uvs)),
+            "progress": [(f, label.split(" (", 1)[1][:-1]) for f, label in seen
+                         if label.startswith("Refining") and " (" in label]}
+
+
+@check("refine", "bake")
 def rechart_shared_lightmap_pack_atlas():
     """A floor and a box whose Lightmap maps are one chart per face, packed side by side in one atlas:
     the joined layout gives no room, so the one refinement re-charts both meshes (their world positions

@@ -197,3 +197,30 @@ def atlas_scene():
     _fit_layer(post.data, (0.56, 0.05, 0.95, 0.47))
     select_only(bpy.data.objects["Floor"], bpy.data.objects["Blocker"], post, lonely)
     return scene
+
+
+def roof_scene(quads=8):
+    """A ridge roof 'Roof' (two slopes 90 degrees apart, quads x quads faces) under a sun that lights one
+    slope more than the other, with a 'Lightmap' map that is one chart over the ridge, the roof unfolded
+    (as Smart UV Project joins faces up to 66 degrees apart): a layout with room whose chart folds over
+    a lit crease."""
+    scene = reset()
+    bpy.ops.mesh.primitive_grid_add(x_subdivisions=quads, y_subdivisions=quads, size=2.0)
+    roof = bpy.context.active_object
+    roof.name = "Roof"
+    mesh = roof.data
+    flat = np.empty(len(mesh.vertices) * 3, np.float32)
+    mesh.vertices.foreach_get("co", flat)
+    flat = flat.reshape(-1, 3)
+    x = flat[:, 0] / np.sqrt(2.0)  # arc length along x stays the grid's: the unfolded chart keeps texel sizes
+    mesh.vertices.foreach_set("co", np.column_stack([x, flat[:, 1], -np.abs(x)]).astype(np.float32).ravel())
+    mesh.update()
+    _set_lightmap_layer(mesh)
+    mesh.materials.append(_material("RoofMaterial", (0.8, 0.8, 0.8)))
+    sun = bpy.data.lights.new("Sun", 'SUN')
+    sun.energy, sun.angle = 3.0, 0.01
+    light = bpy.data.objects.new("Sun", sun)
+    scene.collection.objects.link(light)
+    light.rotation_euler = (0.0, -0.67, 0.0)  # from -x, 38 degrees off vertical: the -x slope faces it
+    select_only(roof)
+    return scene
