@@ -27,13 +27,6 @@ MIN_ROOM_FRACTION = 0.25
 # The re-charted layout is kept when the model predicts at most this
 # fraction of the source layout's error (as allocation.REQUIRED_GAIN).
 REQUIRED_GAIN = allocation.REQUIRED_GAIN
-# A source layout with room is re-charted too when creases sharper than ANGLE
-# inside its charts (lmrefine.folds) hold at least this fraction of the first
-# bake's light changes: below it, cutting them cannot give the keep rule's 5%
-# over refining the source layout, and the route's time (a re-charting and a
-# second refinement) is saved. Smart UV atlases of the bundled scenes: 0 on
-# game_level and fence_and_tree, 0.21 on courtyard (docs/refiner.md).
-MIN_FOLD_ENERGY = 0.05
 # The re-chart angle of the route, in degrees. Chosen on courtyard, the only
 # tuning scene whose charts change with it: 5-17 degrees (231 charts)
 # measured 2.35x / 1.59x at 256^2 / 512^2, 20 (201 charts) 2.40x / 2.27x,

@@ -201,9 +201,9 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
             or None. With positions and rechart, a source layout that gives
             the refiner no room (rechart_route.layout_room: one chart per
             face or nearly, as Lightmap Pack makes), or whose charts fold
-            over creases that hold at least rechart_route.MIN_FOLD_ENERGY
-            of the light changes (lmrefine.folds: Smart UV Project joins
-            faces up to 66 degrees apart), is re-charted from the
+            over creases sharper than rechart_route.ANGLE (lmrefine.folds:
+            Smart UV Project joins faces up to 66 degrees apart), is
+            re-charted from the
             mesh (lmrefine.rechart), the lightmap carried over to the new
             layout and that layout refined; kept when the error model
             predicts clearly less error than the source layout (below
@@ -272,15 +272,16 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
     folds = None
     if rechart and not room["no_room"] and gradient is None and lightmap is not None:
         folds = find_folds(uvs, triangles, positions, rechart_route.ANGLE, energy, source_mask)
-    folded = folds is not None and folds.energy_fraction >= rechart_route.MIN_FOLD_ENERGY
+    # Any fold opens the route; the keep rule decides (a re-charted layout
+    # also changes charts and packing, so a fold's share alone does not).
+    folded = folds is not None and len(folds.faces) > 0
     if not rechart:
         info = {"used": False, "room": room, "reason": "re-charting is off (rechart=False)"}
     elif not room["no_room"] and not folded:
         info = {"used": False, "room": room, "folds": rechart_route.fold_report(folds),
                 "reason": f"the source layout has room ({room['room_fraction']:.0%} of its area is in triangles "
-                f"with a UV inside their chart) and its charts fold over no crease that matters"
-                + ("" if folds is None else f" (creases sharper than {rechart_route.ANGLE:g} degrees inside "
-                   f"its charts hold {folds.energy_fraction:.0%} of the light changes)")}
+                f"with a UV inside their chart) and its charts fold over no crease sharper than "
+                f"{rechart_route.ANGLE:g} degrees"}
     elif gradient is not None or lightmap is None:
         info = {"used": False, "room": room, "reason": "re-charting needs the lightmap (not a gradient map)"}
     elif strength == 0:
