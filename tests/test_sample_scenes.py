@@ -9,7 +9,7 @@ import lmrefine
 from lmrefine import sample_scenes
 
 ROOT = Path(__file__).resolve().parents[1]
-NAMES = ("courtyard", "room", "fence_and_tree", "game_level", "atrium", "plaza", "alley")
+NAMES = ("courtyard", "room", "fence_and_tree", "game_level", "atrium", "plaza", "alley", "village")
 # Coarse on purpose (for the tessellation option): its triangles are metres long.
 COARSE = ("plaza",)
 FINE = tuple(name for name in NAMES if name not in COARSE)
@@ -71,6 +71,25 @@ def test_alley_is_a_street_of_walls_under_a_sun_and_two_lamps_over_valid_layouts
         report = lmrefine.check_layout(uvs, triangles, resolution, padding=2)
         assert report["valid"] and report["min_gutter_texels"] >= 2.0, (variant, report)
     assert (ROOT / "blend_samples" / "alley.blend").stat().st_size < 300_000
+
+
+def test_village_smart_uv_charts_fold_over_creases_over_valid_layouts():
+    # The holdout of the re-chart route's folds rule: Smart UV Project's charts fold over the pitched
+    # roof's ridge, the octagonal kiosk's sides and the ramp's crest (creases of 25-60 degrees).
+    from lmrefine.folds import fold_faces
+    scene = sample_scenes.load_sample("village")
+    assert [light["kind"] for light in scene.lights] == ["sun"] and len(scene.occluder_triangles) > 0
+    positions = scene.positions[scene.triangles].reshape(-1, 3)
+    uvs, triangles = scene.layout("smart")
+    faces, _, length = fold_faces(uvs, triangles, positions, 20.0)
+    assert len(faces) > 20 and length.sum() > 10.0
+    uvs, triangles = scene.layout("lightmap")
+    assert len(fold_faces(uvs, triangles, positions, 20.0)[0]) == 0  # one chart per face: nothing folds
+    for variant, resolution in (("smart", 256), ("lightmap", 512)):
+        uvs, triangles = scene.layout(variant)
+        report = lmrefine.check_layout(uvs, triangles, resolution, padding=2)
+        assert report["valid"] and report["min_gutter_texels"] >= 2.0, (variant, report)
+    assert (ROOT / "blend_samples" / "village.blend").stat().st_size < 300_000
 
 
 def test_receivers_are_tessellated_finely_enough_to_move_texels():
