@@ -138,8 +138,6 @@ def predicted_error(source_uvs, uvs, triangles, energy, positions=None, lightmap
     source_uvs, uvs = np.asarray(source_uvs), np.asarray(uvs)
     shape = energy.shape
     edge = allocation.triangle_energy(source_uvs, triangles, energy)
-    if positions is None or lightmap is None:
-        folds = None
     before = np.abs(allocation.signed_areas(source_uvs, triangles))
     after = np.abs(allocation.signed_areas(uvs, triangles))
     if positions is None or lightmap is None:
