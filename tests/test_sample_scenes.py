@@ -45,17 +45,23 @@ def test_every_bundled_scene_is_either_for_tuning_or_for_reporting():
     assert tuning | reporting == set(sample_scenes.sample_names()) == set(NAMES)
 
 
+def _assert_valid_small_sample(scene, name):
+    """Both atlases of a bundled holdout pass check_layout with 2-texel gutters at the resolutions they
+    were made for (Smart UV 256^2, Lightmap Pack 512^2), and its .blend stays small."""
+    for variant, resolution in (("smart", 256), ("lightmap", 512)):
+        uvs, triangles = scene.layout(variant)
+        report = lmrefine.check_layout(uvs, triangles, resolution, padding=2)
+        assert report["valid"] and report["min_gutter_texels"] >= 2.0, (variant, report)
+    assert (ROOT / "blend_samples" / f"{name}.blend").stat().st_size < 300_000
+
+
 def test_atrium_has_a_sun_a_spot_and_a_rectangular_area_light_over_valid_layouts():
     scene = sample_scenes.load_sample("atrium")
     lights = {light["kind"]: light for light in scene.lights}
     assert sorted(lights) == ["area", "spot", "sun"]
     assert lights["area"]["shape"].upper() == "RECTANGLE" and lights["area"]["size"] != lights["area"]["size_y"]
     assert len(scene.occluder_triangles) > 0  # the lattice roof casts, is not lightmapped
-    for variant, resolution in (("smart", 256), ("lightmap", 512)):
-        uvs, triangles = scene.layout(variant)
-        report = lmrefine.check_layout(uvs, triangles, resolution, padding=2)
-        assert report["valid"] and report["min_gutter_texels"] >= 2.0, (variant, report)
-    assert (ROOT / "blend_samples" / "atrium.blend").stat().st_size < 300_000
+    _assert_valid_small_sample(scene, "atrium")
 
 
 def test_alley_is_a_street_of_walls_under_a_sun_and_two_lamps_over_valid_layouts():
@@ -66,11 +72,7 @@ def test_alley_is_a_street_of_walls_under_a_sun_and_two_lamps_over_valid_layouts
     corner_normals = scene.normals.reshape(-1, 3, 3).mean(axis=1)
     vertical = np.abs(corner_normals[:, 2]) < 0.1
     assert scene.triangle_areas()[vertical].sum() > 0.5 * scene.triangle_areas().sum()
-    for variant, resolution in (("smart", 256), ("lightmap", 512)):
-        uvs, triangles = scene.layout(variant)
-        report = lmrefine.check_layout(uvs, triangles, resolution, padding=2)
-        assert report["valid"] and report["min_gutter_texels"] >= 2.0, (variant, report)
-    assert (ROOT / "blend_samples" / "alley.blend").stat().st_size < 300_000
+    _assert_valid_small_sample(scene, "alley")
 
 
 def test_village_smart_uv_charts_fold_over_creases_over_valid_layouts():
@@ -85,11 +87,7 @@ def test_village_smart_uv_charts_fold_over_creases_over_valid_layouts():
     assert len(faces) > 20 and length.sum() > 10.0
     uvs, triangles = scene.layout("lightmap")
     assert len(fold_faces(uvs, triangles, positions, 20.0)[0]) == 0  # one chart per face: nothing folds
-    for variant, resolution in (("smart", 256), ("lightmap", 512)):
-        uvs, triangles = scene.layout(variant)
-        report = lmrefine.check_layout(uvs, triangles, resolution, padding=2)
-        assert report["valid"] and report["min_gutter_texels"] >= 2.0, (variant, report)
-    assert (ROOT / "blend_samples" / "village.blend").stat().st_size < 300_000
+    _assert_valid_small_sample(scene, "village")
 
 
 def test_receivers_are_tessellated_finely_enough_to_move_texels():
