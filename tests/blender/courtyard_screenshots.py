@@ -11,7 +11,6 @@ the Texel Density overlay, Material Preview after Remove Preview, and the panel 
 (nothing moved). The EXRs land beside the .blend (blend_samples/Floor_atlas_lightmap_*.exr): delete them.
 """
 import os
-import subprocess
 import sys
 
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -25,27 +24,18 @@ sys.path[:0] = [os.path.join(REPO, "python"), os.path.join(REPO, "addon"), os.pa
 import bpy  # noqa: E402
 
 import window_steps  # noqa: E402
-from window_steps import run_plan, view3d  # noqa: E402
+from window_steps import click, run_plan, shading, view3d  # noqa: E402
 
 
 def shot(name):
     window_steps.shot(OUT, name)
 
 
-def xdo(*args):
-    subprocess.run(["xdotool", *args], check=True)
-
-
-def click(x, y):
-    xdo("mousemove", str(x), str(y), "click", "1")
-
-
 def park():
-    xdo("mousemove", "800", "1280")
+    window_steps.xdotool("mousemove", "800", "1280")
 
 
 def prepare():
-    from mathutils import Euler
     import lmrefine_blender
     lmrefine_blender.register()
     s = bpy.context.scene.lmrefine
@@ -57,14 +47,7 @@ def prepare():
     area.spaces.active.show_region_ui = True
     with bpy.context.temp_override(window=window, area=area):
         bpy.ops.screen.screen_full_area()
-    window, area = view3d()
-    space = area.spaces.active
-    space.show_region_ui = True
-    space.overlay.show_floor = space.overlay.show_axis_x = space.overlay.show_axis_y = False
-    view = space.region_3d
-    view.view_perspective = 'PERSP'
-    view.view_rotation = Euler((1.0, 0.0, -0.6)).to_quaternion()
-    view.view_distance, view.view_location = 19.0, (0.0, 0.5, 0.5)
+    window_steps.frame((1.0, 0.0, -0.6), 19.0, (0.0, 0.5, 0.5))
 
 
 def refine():
@@ -75,17 +58,8 @@ def refine():
     print("RESULT", r.message)
 
 
-def shading(kind, color=None):
-    space = view3d()[1].spaces.active
-    space.shading.type = kind
-    if color:
-        space.shading.color_type = color
-
-
 def show(which):
-    window, area = view3d()
-    with bpy.context.temp_override(window=window, area=area):
-        print("SHOW", which, bpy.ops.object.lmrefine_show_preview(shown=which))
+    print("SHOW", which, window_steps.show(which))
 
 
 def remove():

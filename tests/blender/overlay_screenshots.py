@@ -43,11 +43,11 @@ sys.path[:0] = [os.path.join(REPO, "python"), os.path.join(REPO, "addon"), os.pa
 import bpy  # noqa: E402
 
 
-from window_steps import run_plan, shot, view3d  # noqa: E402
+import window_steps  # noqa: E402
+from window_steps import click, run_plan, shot, view3d, xdotool  # noqa: E402
 
 
 def prepare():
-    from mathutils import Euler
     import lmrefine_blender
     lmrefine_blender.register()
     settings = bpy.context.scene.lmrefine
@@ -59,21 +59,9 @@ def prepare():
     window, area = view3d()
     with bpy.context.temp_override(window=window, area=area):
         bpy.ops.screen.screen_full_area()
-    window, area = view3d()
-    space = area.spaces.active
-    space.show_region_ui = False
-    space.overlay.show_floor = space.overlay.show_axis_x = space.overlay.show_axis_y = False
+    space = window_steps.frame((1.0, 0.0, -0.6), 19.0, (0.0, 0.5, 0.5), sidebar=False)
     space.overlay.show_extras = space.overlay.show_cursor = False  # the sun's line, the 3D cursor
     space.shading.type = 'SOLID'
-    view = space.region_3d
-    view.view_perspective = 'PERSP'
-    view.view_rotation = Euler((1.0, 0.0, -0.6)).to_quaternion()
-    view.view_distance, view.view_location = 19.0, (0.0, 0.5, 0.5)
-
-
-def xdotool(*args):
-    import subprocess
-    subprocess.run(["xdotool", *args], check=True)
 
 
 def show_panel():
@@ -106,7 +94,7 @@ def overlay(which):
 
 PLAN = [prepare, refine, lambda: overlay('REFINED'), lambda: None, lambda: shot(OUT, "overlay_refined"),
         lambda: overlay('SOURCE'), lambda: None, lambda: shot(OUT, "overlay_source"),
-        lambda: overlay('REFINED'), show_panel, lambda: xdotool("mousemove", "1586", "253", "click", "1"),
+        lambda: overlay('REFINED'), show_panel, lambda: click(1586, 253),
         lambda: xdotool("mousemove", "800", "880"), lambda: shot(OUT, "overlay_panel"),  # the Lightmap tab
         lambda: os._exit(0)]
 

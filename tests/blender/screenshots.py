@@ -19,7 +19,6 @@ and shows Material Preview after and before, Rendered, and the panel. The docs' 
 """
 
 import os
-import subprocess
 import sys
 
 OUT = os.path.abspath(sys.argv[sys.argv.index("--") + 1])
@@ -40,19 +39,15 @@ if bpy.app.background:
 
 
 import window_steps  # noqa: E402
-from window_steps import run_plan, view3d  # noqa: E402
+from window_steps import click, run_plan, shading, show, view3d  # noqa: E402
 
 
 def shot(name):
     window_steps.shot(OUT, name)
 
 
-def click(x, y):
-    subprocess.run(["xdotool", "mousemove", str(x), str(y), "click", "1"], check=True)
-
-
 def park_mouse():  # a tick after the click: Blender must see the click where it was made
-    subprocess.run(["xdotool", "mousemove", "800", "880"], check=True)
+    window_steps.xdotool("mousemove", "800", "880")
 
 
 def full_screen():
@@ -67,34 +62,13 @@ def full_screen():
 
 
 def frame():
-    from mathutils import Euler
-    window, area = view3d()
-    space = area.spaces.active
-    space.show_region_ui = True
-    space.overlay.show_floor = space.overlay.show_axis_x = space.overlay.show_axis_y = False
-    view = space.region_3d
-    view.view_perspective = 'PERSP'
-    view.view_rotation = Euler((0.9, 0.0, 0.5)).to_quaternion()
-    view.view_distance, view.view_location = 7.0, (0.2, 0.3, 0.0)
+    window_steps.frame((0.9, 0.0, 0.5), 7.0, (0.2, 0.3, 0.0))
 
 
 def refine():
     window, area = view3d()
     with bpy.context.temp_override(window=window, area=area):
         bpy.ops.object.lmrefine_refine_uvs('EXEC_DEFAULT')
-
-
-def shading(kind, color=None):
-    space = view3d()[1].spaces.active
-    space.shading.type = kind
-    if color:
-        space.shading.color_type = color
-
-
-def show(which):
-    window, area = view3d()
-    with bpy.context.temp_override(window=window, area=area):
-        bpy.ops.object.lmrefine_show_preview(shown=which)
 
 
 PLAN = [
