@@ -185,3 +185,62 @@ def test_fold_faces_need_no_bake():
     faces, _, length = folds_module.fold_faces(uvs, triangles, positions, 20.0)
     assert len(faces) == CELLS and length.sum() == pytest.approx(2.0, rel=1e-6)
     assert len(folds_module.fold_faces(_cut(uvs), triangles, positions, 20.0)[0]) == 0
+
+
+def _shading_normals(positions, triangles, smooth_ridge):
+    """Per-corner shading normals (3T, 3) of the roof: each face's own
+    (flat-shaded), or at the ridge's corners the mean of the two slopes'
+    (smooth-shaded across the ridge, as Shade Smooth makes it)."""
+    corners = positions[triangles]
+    face = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    face /= np.linalg.norm(face, axis=1, keepdims=True)
+    normals = np.repeat(face, 3, axis=0)
+    if smooth_ridge:
+        up = np.array([0.0, 0.0, 1.0]) * np.sign(face[:, 2].mean())
+        normals[np.isclose(positions[triangles.ravel(), 0], 0.0)] = up
+    return normals
+
+
+def test_a_smooth_shaded_ridge_is_no_crease():
+    positions, _, triangles = _roof()
+    flat = _shading_normals(positions, triangles, smooth_ridge=False)
+    smooth = _shading_normals(positions, triangles, smooth_ridge=True)
+    assert len(folds_module.creases(positions, triangles, 20.0, flat)[0]) == CELLS
+    assert len(folds_module.creases(positions, triangles, 20.0, smooth)[0]) == 0
+    # Smooth at one end of an edge only: still a step in the light there.
+    half = smooth.copy()
+    half[positions[triangles.ravel(), 1] > 0.5] = flat[positions[triangles.ravel(), 1] > 0.5]
+    assert 0 < len(folds_module.creases(positions, triangles, 20.0, half)[0]) < CELLS
+    # A zero or non-finite normal agrees with nothing: its edges stay hard.
+    for bad in (0.0, np.nan, np.inf):
+        broken = smooth.copy()
+        broken[np.isclose(positions[triangles.ravel(), 0], 0.0)] = bad
+        assert len(folds_module.creases(positions, triangles, 20.0, broken)[0]) == CELLS
+
+
+def test_route_reads_shading_normals(roof_case):
+    positions, uvs, triangles, lightmap = roof_case
+    smooth = _shading_normals(positions, triangles, smooth_ridge=True)
+    result = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, positions=positions,
+                                 normals=smooth)
+    info = result.report["rechart"]
+    assert not info["used"] and info["folds"]["count"] == 0, info
+    assert np.array_equal(result.uvs, lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2).uvs)
+    # Flat-shaded normals: the same as no normals (every crease a step).
+    flat = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, positions=positions,
+                               normals=_shading_normals(positions, triangles, smooth_ridge=False))
+    assert flat.report["rechart"]["used"]
+    none = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, positions=positions)
+    assert np.array_equal(flat.uvs, none.uvs)
+
+
+def test_normals_are_checked():
+    positions, uvs, triangles = _roof(2)
+    lightmap = np.ones((32, 32, 3), np.float32)
+    with pytest.raises(ValueError, match=r"normals= is read only with positions="):
+        lmrefine.refine_uvs(lightmap, uvs, triangles, 32, normals=np.ones((len(uvs), 3)))
+    with pytest.raises(ValueError, match=r"normals must have shape \(24, 3\)"):
+        lmrefine.refine_uvs(lightmap, uvs, triangles, 32, positions=positions, normals=np.ones((3, 3)))
+    with pytest.raises(TypeError, match="normals must hold real numbers"):
+        lmrefine.refine_uvs(lightmap, uvs, triangles, 32, positions=positions,
+                            normals=np.full((len(uvs), 3), "x"))

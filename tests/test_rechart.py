@@ -191,6 +191,41 @@ def test_cylinder_chart_count(angle, expected):
     assert same_partition(charts, reference_charts(positions, triangles, angle))
 
 
+def radial_normals(positions):
+    """A tube's smooth shading normals, per vertex: outwards from its axis."""
+    normals = positions.copy()
+    normals[:, 2] = 0.0
+    return normals / np.linalg.norm(normals, axis=1, keepdims=True)
+
+
+def test_smooth_shaded_edges_join_within_the_smooth_angle():
+    # The 24-segment tube smooth-shaded: its edges join within smooth_angle
+    # (40: 8 charts, as test_cylinder_chart_count at 40), not the angle (10: 24).
+    positions, triangles = cylinder(24)
+    smooth = radial_normals(positions)
+    _, charts, report = _native.rechart_mesh(positions, triangles, 10.0, normals=smooth, smooth_angle=40.0)
+    assert report["charts"] == 8
+    assert same_partition(charts, reference_charts(positions, triangles, 40.0))
+    # Per corner gives the same; flat-shaded normals (each face's own) are hard edges, as no normals.
+    per_corner = _native.rechart_mesh(positions, triangles, 10.0, normals=smooth[triangles].reshape(-1, 3),
+                                      smooth_angle=40.0)
+    assert np.array_equal(per_corner[1], charts)
+    corners = positions[triangles]
+    face = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    flat = np.repeat(face / np.linalg.norm(face, axis=1, keepdims=True), 3, axis=0)
+    assert _native.rechart_mesh(positions, triangles, 10.0, normals=flat, smooth_angle=40.0)[2]["charts"] == 24
+    # A zero or non-finite normal makes its edges hard: never an error.
+    for bad in (0.0, np.nan, np.inf, 1e38):
+        broken = smooth.copy()
+        broken[::2] = bad
+        _, parts, _ = _native.rechart_mesh(positions, triangles, 10.0, normals=broken, smooth_angle=40.0)
+        assert len(np.unique(parts)) >= 8
+    # Through the public entry: a valid packed layout that reports the angle used.
+    uvs, report = lmrefine.rechart(positions, triangles, 10.0, 64, normals=smooth, smooth_angle=40.0)
+    assert report["charts"] == 8 and report["smooth_angle"] == 40.0 and report["layout"]["valid"]
+    assert lmrefine.rechart(positions, triangles, 10.0, 64)[1]["smooth_angle"] is None
+
+
 @pytest.mark.parametrize("angle", [15.0, 40.0, 66.0])
 def test_charting_matches_the_reference_on_a_bumpy_surface(angle):
     positions, triangles = grid(14)
@@ -382,6 +417,10 @@ def test_bad_mesh_raises_a_clear_error(change, error, words):
     ({"angle": float("nan")}, ValueError, "angle"),
     ({"angle": True}, TypeError, "angle"),
     ({"angle": "66"}, TypeError, "angle"),
+    ({"smooth_angle": 0.0}, ValueError, "smooth_angle"),
+    ({"smooth_angle": 95.0}, ValueError, "smooth_angle"),
+    ({"normals": np.ones((5, 3))}, ValueError, "normals must be per vertex (8, 3) or per corner (36, 3)"),
+    ({"normals": np.full((8, 3), "x")}, ValueError, "normals must hold real numbers"),
     ({"weld_tolerance": -1.0}, ValueError, "weld_tolerance"),
     ({"weld_tolerance": 0.5}, ValueError, "weld_tolerance"),  # half the cube: would merge its corners
     ({"resolution": 0}, ValueError, "resolution"),

@@ -32,7 +32,7 @@ class AtlasGroup:
         areas = [uv_area(target.layout.uvs, target.layout.triangles) for target in self.targets]
         main = self.targets[int(np.argmax(areas))].obj.name  # argmax: the first of equal areas
         self.name = main if len(self.targets) == 1 else main + ATLAS_SUFFIX
-        self.uvs = self.triangles = self.positions = None
+        self.uvs = self.triangles = self.positions = self.normals = None
         self.slices = []  # per target: its rows of the joined UVs
         self.triangle_slices = []  # per target: its rows of the joined triangles
 
@@ -52,13 +52,16 @@ class AtlasGroup:
 
     def join(self):
         """Concatenate the targets' layouts (triangle indices offset); returns (uvs, triangles).
-        `positions` joins the loops' world positions the same way (refine_uvs' re-chart route), or is
-        None when a layout has none."""
+        `positions` and `normals` join the loops' world positions and split normals the same way
+        (refine_uvs' re-chart route), or are None when a layout has none."""
         layouts = [target.layout for target in self.targets]
         self.uvs, self.triangles, self.slices, self.triangle_slices = join_layouts(
             [(layout.uvs, layout.triangles) for layout in layouts])
         positions = [getattr(layout, "positions", None) for layout in layouts]
         self.positions = None if any(p is None for p in positions) else np.concatenate(positions)
+        normals = [getattr(layout, "normals", None) for layout in layouts]
+        self.normals = (None if self.positions is None or any(n is None for n in normals)
+                        else np.concatenate(normals))
         return self.uvs, self.triangles
 
     def split(self, uvs):

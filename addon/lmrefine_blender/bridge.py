@@ -32,6 +32,7 @@ class Layout:
     uvs: np.ndarray  # (L, 2) float32, per loop
     triangles: np.ndarray  # (T, 3) int32, loop indices
     positions: np.ndarray = None  # (L, 3) float64, per loop, world space: the mesh for refine_uvs' re-chart route
+    normals: np.ndarray = None  # (L, 3) float32, per loop, split normals in world space: where it is smooth-shaded
 
 
 @dataclass
@@ -67,7 +68,7 @@ def default_source_layer(mesh):
 
 def read_layout(mesh, uv_name, matrix_world=None):
     """The loop UVs of `uv_name` and the loop triangles of an (original) mesh, welded,
-    and each loop's position (times `matrix_world`, when given).
+    and each loop's position and split normal (times `matrix_world`, when given).
 
     Blender stores one UV per face corner, and corners of one vertex that a
     user sees as connected often differ in the last bits (even in Blender's
@@ -88,10 +89,25 @@ def read_layout(mesh, uv_name, matrix_world=None):
     vertices = np.empty(len(mesh.vertices) * 3, dtype=np.float32)
     mesh.vertices.foreach_get("co", vertices)
     vertices = vertices.reshape(-1, 3).astype(np.float64)
+    normals = loop_normals(mesh)
     if matrix_world is not None:
         matrix = np.array(matrix_world, dtype=np.float64)
         vertices = vertices @ matrix[:3, :3].T + matrix[:3, 3]
-    return Layout(weld_uvs(uvs, loop_vertex), triangles.reshape(-1, 3), vertices[loop_vertex])
+        with np.errstate(all="ignore"):  # a zero scale: the normals are not finite, their edges count as hard
+            normals = (normals.astype(np.float64) @ np.linalg.pinv(matrix[:3, :3])).astype(np.float32)
+    return Layout(weld_uvs(uvs, loop_vertex), triangles.reshape(-1, 3), vertices[loop_vertex], normals)
+
+
+def loop_normals(mesh):
+    """The split (shading) normal of each loop (L, 3) float32, as the mesh is
+    shaded: face normals where it is flat, vertex normals where smooth, and
+    Auto Smooth's sharp edges and custom normals as set. The temporary
+    normals layer is freed again: the mesh is left as it was."""
+    mesh.calc_normals_split()
+    normals = np.empty(len(mesh.loops) * 3, dtype=np.float32)
+    mesh.loops.foreach_get("normal", normals)
+    mesh.free_normals_split()
+    return normals.reshape(-1, 3)
 
 
 def read_uv_layer(mesh, uv_name):

@@ -102,7 +102,7 @@ def run(context, targets, options, journal, image_dir=None):
                     f"Refining {group.name} ({name})",
                     lambda progress, lightmap=firsts[name][group.name], group=group, side=side, pad=pad:
                         lmrefine.refine_uvs(lightmap, group.uvs, group.triangles, side, padding=pad,
-                                            progress=progress, positions=group.positions,
+                                            progress=progress, positions=group.positions, normals=group.normals,
                                             **options["refine_options"]),
                     done * span, span, parts=pipeline.refine_parts(group, options))
             except (ValueError, TypeError, MemoryError) as error:

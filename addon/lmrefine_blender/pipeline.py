@@ -65,7 +65,8 @@ def refine_parts(group, options):
         return REFINE_STAGES
     from lmrefine import folds, rechart_route
     route = (rechart_route.layout_room(group.uvs, group.triangles)["no_room"]
-             or len(folds.fold_faces(group.uvs, group.triangles, group.positions, rechart_route.ANGLE)[0]) > 0)
+             or len(folds.fold_faces(group.uvs, group.triangles, group.positions, rechart_route.ANGLE,
+                                     group.normals)[0]) > 0)
     return REFINE_STAGES + (RECHART_STAGES if route else 0)
 
 
@@ -403,7 +404,7 @@ def run(context, targets, options, journal, image_dir=None):
                 f"Refining {name}",
                 lambda progress, lightmap=lightmaps[name], group=group: lmrefine.refine_uvs(
                     lightmap, group.uvs, group.triangles, resolution, padding=padding, progress=progress,
-                    positions=group.positions, **options["refine_options"]),
+                    positions=group.positions, normals=group.normals, **options["refine_options"]),
                 done * span, span, parts=refine_parts(group, options))
         except (ValueError, TypeError, MemoryError) as error:
             # The core refused this map's input: skip its objects, refine the others

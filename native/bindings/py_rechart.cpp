@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <string>
+#include <vector>
 
 #include "lmrefine/chart/rechart.h"
 #include "lmrefine/core/error.h"
@@ -14,9 +15,11 @@ namespace lmrefine::bindings {
 namespace {
 
 py::tuple rechart_mesh(const py::handle& positions_in, const py::handle& triangles_in, const py::handle& angle_in,
-                       const py::handle& weld_tolerance_in, py::object progress_callback) {
+                       const py::handle& weld_tolerance_in, py::object progress_callback, const py::handle& normals_in,
+                       const py::handle& smooth_angle_in) {
     RechartOptions options;
     options.angle_degrees = py_util::real_param(angle_in, "angle");
+    options.smooth_angle_degrees = py_util::real_param(smooth_angle_in, "smooth_angle");
     if (!weld_tolerance_in.is_none()) {
         options.weld_tolerance = py_util::real_param(weld_tolerance_in, "weld_tolerance");
         if (!(options.weld_tolerance >= 0.0)) {
@@ -26,7 +29,27 @@ py::tuple rechart_mesh(const py::handle& positions_in, const py::handle& triangl
     }
     auto positions = py_util::require_points(positions_in, "positions", 3);
     auto triangles = py_util::require_indices(triangles_in, "triangles", 3);
-    const SurfaceMesh mesh{positions.data(), positions.shape(0), triangles.data(), triangles.shape(0)};
+    SurfaceMesh mesh{positions.data(), positions.shape(0), triangles.data(), triangles.shape(0)};
+    // Shading normals per vertex (V, 3) or per corner (T*3, 3); the core reads them per corner.
+    std::vector<float> corner_normals;
+    if (!normals_in.is_none()) {
+        auto normals = py_util::require_points(normals_in, "normals", 3, true);
+        const py::ssize_t count = normals.shape(0), corners = 3 * triangles.shape(0);
+        if (count != corners && count != positions.shape(0)) {
+            throw py::value_error("normals must be per vertex (" + std::to_string(positions.shape(0)) +
+                                  ", 3) or per corner (" + std::to_string(corners) + ", 3), got (" +
+                                  std::to_string(count) + ", 3)");
+        }
+        const float* n = normals.data();
+        corner_normals.resize(size_t(3 * corners));
+        for (py::ssize_t c = 0; c < corners; ++c) {
+            // Indices are range-checked by the core before the normals are read.
+            const int64_t row = count == corners ? int64_t(c) : int64_t(triangles.data()[c]);
+            const bool inside = row >= 0 && row < int64_t(count);
+            for (int k = 0; k < 3; ++k) corner_normals[size_t(3 * c + k)] = inside ? n[3 * row + k] : 0.0f;
+        }
+        mesh.corner_normals = corner_normals.data();
+    }
     py_util::PythonProgress progress(std::move(progress_callback));
     RechartResult result = progress.run([&](Progress& p) { return rechart(mesh, options, &p); });
     py::dict report;
@@ -44,7 +67,8 @@ py::tuple rechart_mesh(const py::handle& positions_in, const py::handle& triangl
 
 void bind_rechart(py::module_& m) {
     m.def("rechart_mesh", &rechart_mesh, py::arg("positions"), py::arg("triangles"), py::arg("angle") = 10.0,
-          py::arg("weld_tolerance") = py::none(), py::arg("progress") = py::none(),
+          py::arg("weld_tolerance") = py::none(), py::arg("progress") = py::none(), py::arg("normals") = py::none(),
+          py::arg("smooth_angle") = 45.0,
           R"doc(Charts of a mesh, each unwrapped with a least-squares conformal map (not packed).
 
 lmrefine.rechart is the public entry (it packs the charts too).
@@ -57,6 +81,11 @@ Args:
     weld_tolerance (float or None): positions closer than this are one
         vertex; None: 1e-6 of the diagonal of the mesh's bounding box.
     progress: callable ``progress(fraction, stage)``; False cancels.
+    normals (numpy.ndarray or None): shading normals, (V, 3) per vertex or
+        (T*3, 3) per corner. An edge whose two faces have the same normals
+        at both its ends is smooth-shaded; None: every edge is hard.
+    smooth_angle (float): the angle in (0, 90) used instead of ``angle``
+        across smooth-shaded edges.
 
 Returns:
     (uvs, charts, report): uvs float32 (3T, 2), corner k of triangle t at

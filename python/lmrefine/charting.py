@@ -22,6 +22,11 @@ from .packer import pack_charts
 # angles up to 17 degrees gave the lowest error, Smart UV Project's 66 the
 # highest (docs/refiner.md, "Re-charting").
 DEFAULT_ANGLE = 10.0
+# The same across a smooth-shaded edge (when shading normals are given):
+# there the light has no step to cut at, and the angle only bounds a chart's
+# curvature (a cylinder's charts span up to twice this arc). Chosen a priori
+# (docs/refiner.md, "Smooth-shaded meshes").
+SMOOTH_ANGLE = 45.0
 
 
 class RechartResult(NamedTuple):
@@ -41,7 +46,7 @@ def corner_triangles(triangle_count):
 
 
 def rechart(positions, triangles, angle=DEFAULT_ANGLE, resolution=256, padding=2.0, *, weld_tolerance=None,
-            rotations=True, progress=None):
+            rotations=True, progress=None, normals=None, smooth_angle=SMOOTH_ANGLE):
     """A new lightmap layout for a triangle mesh: conformal charts, uniform texel density, packed.
 
     Faces sharing an edge in 3D (positions closer than ``weld_tolerance``
@@ -69,6 +74,14 @@ def rechart(positions, triangles, angle=DEFAULT_ANGLE, resolution=256, padding=2
         weld_tolerance: distance within which positions are one vertex;
             None: 1e-6 of the diagonal of the mesh's bounding box.
         rotations: let the packer turn charts by a quarter turn.
+        normals: the mesh's shading normals, (V, 3) per vertex or (T*3, 3)
+            per corner, or None (every edge hard, as a flat-shaded mesh).
+            An edge whose two faces have the same shading normals at both
+            ends (within about a degree) is smooth-shaded: the light does
+            not step there, and faces across it join within ``smooth_angle``
+            instead of ``angle``. A zero or non-finite normal makes its
+            edges hard.
+        smooth_angle: degrees, in (0, 90).
         progress: callable ``progress(fraction, stage)``; returning False
             cancels (lmrefine.CancelledError). The native work runs with the
             GIL released.
@@ -80,7 +93,7 @@ def rechart(positions, triangles, angle=DEFAULT_ANGLE, resolution=256, padding=2
 
         * charts, grown_charts (charts the angle alone made), split_charts
           (charts grown again because their unwrap folded), degenerate_triangles,
-          welded_vertices, angle.
+          welded_vertices, angle, smooth_angle (None without normals).
         * angle_error_deg_mean / angle_error_deg_p95: the triangles' corner
           angles in UV against 3D, area-weighted mean and 95th percentile of
           the absolute difference (0 for a perfectly conformal layout).
@@ -101,12 +114,14 @@ def rechart(positions, triangles, angle=DEFAULT_ANGLE, resolution=256, padding=2
 
     start = time.perf_counter()
     world_uvs, charts, report = _native.rechart_mesh(positions, triangles, angle=angle,
-                                                     weld_tolerance=weld_tolerance, progress=progress)
+                                                     weld_tolerance=weld_tolerance, progress=progress,
+                                                     normals=normals, smooth_angle=smooth_angle)
     layout_triangles = corner_triangles(len(charts))
     packed, pack_report = pack_charts(world_uvs, layout_triangles, charts, None, resolution, padding,
                                       rotations=rotations, progress=progress)
     check = _native.check_layout(packed, layout_triangles, resolution, padding)
     report["angle"] = float(angle)
+    report["smooth_angle"] = None if normals is None else float(smooth_angle)
     report["padding"] = float(padding)
     report.update(_distortion(np.asarray(positions, np.float64)[np.asarray(triangles)], packed))
     height, width = pack_report["resolution"]

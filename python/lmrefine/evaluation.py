@@ -201,6 +201,14 @@ def _connected_objects(triangles, object_id):
     return sorted(groups.values())
 
 
+def _route_mesh(sample, options):
+    """The mesh for refine_uvs' re-chart route, one row per corner UV:
+    (positions, shading normals), or (None, None) when the route is off."""
+    if not (options.auto_rechart and options.rechart is None):
+        return None, None
+    return sample.positions[sample.triangles].reshape(-1, 3), sample.normals
+
+
 def _plain_refinement(unsplit, variant, baseline, to_unsplit, points, truth, transitions, sweep, resolution,
                       padding, options, stages, result):
     """The plain refinement (the same scene without the tessellation, refined
@@ -209,11 +217,10 @@ def _plain_refinement(unsplit, variant, baseline, to_unsplit, points, truth, tra
     tessellation's own gain, free of the points' sampling noise."""
     uvs, triangles = unsplit.layout(variant)
     # refine_uvs' re-chart route as for the tessellated mesh (evaluate_sample).
-    positions = (unsplit.positions[unsplit.triangles].reshape(-1, 3)
-                 if options.auto_rechart and options.rechart is None else None)
+    positions, normals = _route_mesh(unsplit, options)
     refined = stages.run("refine unsplit", lambda p: refine_uvs(baseline, uvs, triangles, resolution,
                                                                 padding=padding, progress=p, positions=positions,
-                                                                **options.refine_options))
+                                                                normals=normals, **options.refine_options))
     refined_map = stages.run("bake unsplit", lambda p: _bake_map(unsplit, refined.uvs, resolution, options, p))
     parent, parent_bary = to_unsplit
     bary = metrics.interpolate_corners(parent_bary, points.triangle, points.bary)
@@ -447,7 +454,8 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
         # The re-charted layout replaces the scene's UVs for every bake below
         # (a UV variant of its own, so a tessellation carries it too).
         recharted = stages.run("rechart", lambda p: rechart(sample.positions, sample.triangles, float(options.rechart),
-                                                            resolution, options.padding, progress=p))
+                                                            resolution, options.padding, progress=p,
+                                                            normals=sample.normals))
         variant = options.layout_name
         sample = replace(sample, uvs={**sample.uvs, variant: recharted.uvs})
         layout = {"source": "rechart", **{k: v for k, v in recharted.report.items() if k != "chart_ids"}}
@@ -475,11 +483,10 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
         uvs, triangles = sample.layout(variant)
     original_check = check_layout(uvs, triangles, resolution, options.padding)
     padding = min(float(options.padding), float(original_check["min_gutter_texels"]))
-    # The mesh for refine_uvs' re-chart route: one position per corner UV.
-    positions = (sample.positions[sample.triangles].reshape(-1, 3)
-                 if options.auto_rechart and options.rechart is None else None)
+    positions, normals = _route_mesh(sample, options)
     refined = stages.run("refine", lambda p: refine_uvs(baseline, uvs, triangles, resolution, padding=padding,
-                                                        progress=p, positions=positions, **options.refine_options))
+                                                        progress=p, positions=positions, normals=normals,
+                                                        **options.refine_options))
     refined_map = stages.run("bake refined", lambda p: _bake_map(sample, refined.uvs, resolution, options, p))
 
     # Ground truth at area-uniform points, and at two neighbours each along

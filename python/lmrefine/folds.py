@@ -9,7 +9,9 @@ baked and dilated on its own and the step costs nothing. Blender's Smart UV
 Project joins faces up to 66 degrees apart into one chart, so its atlases
 fold over many creases that lmrefine.rechart cuts. The error model of the
 re-chart route (rechart_route.predicted_error) counts the folds' light
-changes only in layouts that keep them inside a chart. docs/refiner.md, "The
+changes only in layouts that keep them inside a chart. Where the mesh is
+smooth-shaded across the edge (the same shading normals on both sides) the
+light does not step and the edge is no crease. docs/refiner.md, "The
 re-chart route".
 """
 
@@ -27,6 +29,9 @@ BAND_TEXELS = 1.5
 # The folds' texel bounding boxes searched at most, in atlases: folds inside
 # the charts of a layout that does not overlap itself stay far below.
 MAX_SEARCH_TEXELS = 64
+# Shading normals this close (as native/src/chart/charting.cpp) at both ends
+# of an edge: the mesh is smooth-shaded there, and the light has no step.
+SMOOTH_COS = 0.9999
 
 
 @dataclass
@@ -62,12 +67,15 @@ class Folds:
         return removed
 
 
-def creases(positions, triangles, angle):
+def creases(positions, triangles, angle, normals=None):
     """Mesh edges between two triangles whose normals differ by more than
     `angle` degrees. `positions` (N, 3) per UV index; corners at the same
-    position are one vertex. Returns (faces (C, 2), corner (C,), length
-    (C,)): the corner of faces[:, 0] where the edge starts. Triangles with no
-    area and edges used by more than two triangles are left out."""
+    position are one vertex. `normals` (N, 3) shading normals in the same
+    indexing, or None (flat-shaded): an edge whose two triangles have the
+    same shading normal at each of its ends is smooth-shaded, no crease.
+    Returns (faces (C, 2), corner (C,), length (C,)): the corner of
+    faces[:, 0] where the edge starts. Triangles with no area and edges used
+    by more than two triangles are left out."""
     triangles = np.asarray(triangles, np.int64)
     count = len(triangles)
     empty = (np.zeros((0, 2), np.int64), np.zeros(0, np.int64), np.zeros(0))
@@ -75,10 +83,10 @@ def creases(positions, triangles, angle):
         return empty
     corners = np.asarray(positions, np.float64)[triangles]  # (T, 3, 3)
     with np.errstate(over="ignore", invalid="ignore"):  # absurd positions: no normal, left out
-        normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-        norms = np.linalg.norm(normals, axis=1)
+        face_normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+        norms = np.linalg.norm(face_normals, axis=1)
     usable = np.isfinite(norms) & (norms > 0)
-    normals = normals / np.where(usable, norms, 1.0)[:, None]
+    face_normals = face_normals / np.where(usable, norms, 1.0)[:, None]
     _, vertex = np.unique(corners.reshape(-1, 3), axis=0, return_inverse=True)
     vertex = vertex.reshape(count, 3)
     ends = np.stack([vertex, np.roll(vertex, -1, axis=1)], axis=2).reshape(-1, 2)
@@ -94,7 +102,9 @@ def creases(positions, triangles, angle):
     second = order[np.flatnonzero(twice) + 1]
     faces = np.column_stack([first // 3, second // 3])
     keep = (usable[faces[:, 0]] & usable[faces[:, 1]] & (faces[:, 0] != faces[:, 1])
-            & ((normals[faces[:, 0]] * normals[faces[:, 1]]).sum(axis=1) < np.cos(np.radians(angle))))
+            & ((face_normals[faces[:, 0]] * face_normals[faces[:, 1]]).sum(axis=1) < np.cos(np.radians(angle))))
+    if normals is not None:
+        keep &= ~_smooth_edges(np.asarray(normals), triangles, vertex, faces, first % 3, second % 3)
     faces, corner = faces[keep], (first % 3)[keep]
     start = corners[faces[:, 0], corner]
     end = corners[faces[:, 0], (corner + 1) % 3]
@@ -102,12 +112,36 @@ def creases(positions, triangles, angle):
         return faces, corner, np.linalg.norm(end - start, axis=1)
 
 
-def fold_faces(uvs, triangles, positions, angle):
+def _smooth_edges(normals, triangles, vertex, faces, first_corner, second_corner):
+    """Per edge (faces (E, 2), the edge starting at first_corner in
+    faces[:, 0] and at second_corner in faces[:, 1]): whether the shading
+    normals of the two faces agree at both its ends. A zero or non-finite
+    normal agrees with nothing."""
+    f, g = faces[:, 0], faces[:, 1]
+    f_next, g_next = (first_corner + 1) % 3, (second_corner + 1) % 3
+    # The second face winds the edge the other way (its start is the first's
+    # end) unless the mesh's winding is inconsistent there.
+    opposite = vertex[g, second_corner] == vertex[f, f_next]
+    g_at_start = np.where(opposite, g_next, second_corner)
+    g_at_end = np.where(opposite, second_corner, g_next)
+
+    def same(a, b):
+        na = normals[triangles[f, a]].astype(np.float64)
+        nb = normals[triangles[g, b]].astype(np.float64)
+        with np.errstate(over="ignore", invalid="ignore"):
+            lengths = np.sqrt((na * na).sum(axis=1) * (nb * nb).sum(axis=1))
+            agree = (na * nb).sum(axis=1) >= SMOOTH_COS * lengths
+        return agree & np.isfinite(lengths) & (lengths > 0)
+
+    return same(first_corner, g_at_start) & same(f_next, g_at_end)
+
+
+def fold_faces(uvs, triangles, positions, angle, normals=None):
     """The creases sharper than `angle` degrees that lie inside a chart of
     the layout (uvs, triangles): (faces (F, 2), corner (F,), length (F,)) as
-    `creases` gives them. Geometry only, no bake: whether a layout can take
-    the folds route at all."""
-    faces, corner, length = creases(positions, triangles, angle)
+    `creases` gives them (`normals`: its shading normals). Geometry only, no
+    bake: whether a layout can take the folds route at all."""
+    faces, corner, length = creases(positions, triangles, angle, normals)
     if len(faces):
         charts = _native.find_charts(uvs, triangles, tolerance=CHART_TOLERANCE)
         inside = charts[faces[:, 0]] == charts[faces[:, 1]]
@@ -115,16 +149,17 @@ def fold_faces(uvs, triangles, positions, angle):
     return faces, corner, length
 
 
-def find_folds(uvs, triangles, positions, angle, energy, mask=None):
+def find_folds(uvs, triangles, positions, angle, energy, mask=None, normals=None):
     """The creases sharper than `angle` degrees that lie inside a chart of
     the layout (uvs, triangles), with the gradient `energy` (H, W) of the
     bake on that layout in a band of BAND_TEXELS around each (a texel near
-    two folds counts for the nearer)."""
+    two folds counts for the nearer). `normals`: shading normals, as for
+    `creases`."""
     uvs = np.asarray(uvs)
     triangles = np.asarray(triangles, np.int64)
     energy = np.asarray(energy)
     shape = energy.shape
-    faces, corner, length = fold_faces(uvs, triangles, positions, angle)
+    faces, corner, length = fold_faces(uvs, triangles, positions, angle, normals)
     covered = mask if mask is not None else _native.coverage_mask(uvs, triangles, shape)
     band_energy, band = _band(uvs, triangles, faces[:, 0], corner, np.where(covered, energy, 0.0))
     return Folds(faces=faces, corner=corner, length=length, energy=band_energy, band=band,

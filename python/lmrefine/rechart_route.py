@@ -205,20 +205,38 @@ def positions_array(positions, count):
     return array
 
 
+def normals_array(normals, count):
+    """`normals` (shading normals per UV) validated: (count, 3) float32. A
+    zero or non-finite normal is allowed: its edges count as hard."""
+    if isinstance(normals, (str, bytes)) or not hasattr(normals, "__len__"):
+        raise TypeError(f"normals must be an (N, 3) array of the UVs' shading normals, got "
+                        f"{type(normals).__name__}")
+    array = np.asarray(normals)
+    if not (np.issubdtype(array.dtype, np.integer) or np.issubdtype(array.dtype, np.floating)):
+        raise TypeError(f"normals must hold real numbers, got dtype {array.dtype}")
+    if array.ndim != 2 or array.shape != (count, 3):
+        raise ValueError(f"normals must have shape ({count}, 3), one shading normal per UV (the uvs' indexing), "
+                         f"got {array.shape}")
+    with np.errstate(over="ignore", invalid="ignore"):
+        return array.astype(np.float32)
+
+
 def refine_recharted(refine, lightmap, uvs, triangles, shape, padding, positions, room, energy, source_result,
-                     progress, folds=None):
+                     progress, folds=None, normals=None):
     """The re-chart route: `refine(lightmap, uvs, mask, padding)` (refine_uvs without
     positions, with the caller's options) on the re-charted mesh, from
     `lightmap` carried over to it. `source_result` is
     the source layout's own refinement, `energy` the first bake's gradient
     energy on the source layout, `folds` its charts' folds (lmrefine.folds;
-    None: counted as none). Returns (result or None, rechart report)."""
+    None: counted as none), `normals` the shading normals per UV (None: flat
+    shading). Returns (result or None, rechart report)."""
     info = {"used": False, "room": room, "angle": float(ANGLE), "folds": fold_report(folds)}
     original = source_result.report["original_check"]
     # The new layout is not held to the source's gutter: at least PADDING.
     pack_padding = max(float(padding), PADDING)
     try:
-        recharted = rechart(positions, triangles, ANGLE, shape, pack_padding, progress=progress)
+        recharted = rechart(positions, triangles, ANGLE, shape, pack_padding, progress=progress,
+                            normals=None if normals is None else normals[triangles].reshape(-1, 3))
     except ValueError as error:
         info["reason"] = f"the mesh could not be re-charted: {error}"
         return None, info

@@ -152,7 +152,8 @@ def identity_grid(resolution):
 def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gradient=None, strength=24.0,
                max_magnification=8.0, min_shrink=0.25, edge_shrink=0.8, delta=0.02, passes=1, border="same",
                directional=False, wavelet="d4", diffusion=0.05, max_steps=8, progress=None, repack=True,
-               min_chart_scale=0.5, max_chart_scale=2.0, positions=None, rechart=True, world_areas=None):
+               min_chart_scale=0.5, max_chart_scale=2.0, positions=None, rechart=True, world_areas=None,
+               normals=None):
     """Refine a lightmap UV layout: more texels where light changes fast.
 
     Args:
@@ -218,6 +219,14 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
             the same triangles.
         rechart: False turns the re-chart route off (the source layout
             is refined as without positions).
+        normals: (N, 3) the shading normal of each UV (the uvs' indexing),
+            or None (flat shading: every crease is a step in the light).
+            Used with positions: where the mesh is smooth-shaded across an
+            edge (the same normals on both sides at both its ends) the
+            light does not step, so the edge is no fold, and the re-chart
+            route joins faces across it within charting.SMOOTH_ANGLE
+            (docs/refiner.md, "Smooth-shaded meshes"). A zero or
+            non-finite normal makes its edges count as hard.
         world_areas: (T,) the triangles' surface areas (any unit), for
             repack: a chart's light changes count on the surface its
             texels cover, so a layout whose texel density is not uniform
@@ -259,6 +268,9 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
                "world_areas": world_areas}
     if not isinstance(rechart, (bool, np.bool_)):
         raise TypeError(f"rechart must be True or False, got {type(rechart).__name__}")
+    if normals is not None and positions is None:
+        raise ValueError("normals= is read only with positions= (the re-chart route): pass the UVs' 3-D positions "
+                         "too, or leave normals out")
     if positions is None:
         result, _, _ = _refine(lightmap, uvs, triangles, resolution, padding, mask, gradient, progress, options)
         result.report["rechart"] = None
@@ -266,12 +278,14 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
     start = time.perf_counter()
     uvs, triangles = _layout(uvs, triangles)
     positions = rechart_route.positions_array(positions, len(uvs))
+    if normals is not None:
+        normals = rechart_route.normals_array(normals, len(uvs))
     room = rechart_route.layout_room(uvs, triangles)
     result, energy, source_mask = _refine(lightmap, uvs, triangles, resolution, padding, mask, gradient, progress,
                                           options)
     folds = None
     if rechart and not room["no_room"] and gradient is None and lightmap is not None:
-        folds = find_folds(uvs, triangles, positions, rechart_route.ANGLE, energy, source_mask)
+        folds = find_folds(uvs, triangles, positions, rechart_route.ANGLE, energy, source_mask, normals)
     # Any fold opens the route; the keep rule decides (a re-charted layout
     # also changes charts and packing, so a fold's share alone does not).
     folded = folds is not None and len(folds.faces) > 0
@@ -291,7 +305,7 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
         recharted, info = rechart_route.refine_recharted(
             lambda carried, new_uvs, new_mask, new_padding: _refine(carried, new_uvs, triangles, shape, new_padding,
                                                                     new_mask, None, progress, options)[0],
-            lightmap, uvs, triangles, shape, padding, positions, room, energy, result, progress, folds)
+            lightmap, uvs, triangles, shape, padding, positions, room, energy, result, progress, folds, normals)
         if recharted is not None:
             result = _recharted_result(recharted, result, uvs, triangles, energy, source_mask, info)
     if not info["used"] and (room["no_room"] or folded) and rechart:

@@ -19,10 +19,25 @@ namespace {
 // A face is degenerate when its area is below this fraction of its longest
 // edge squared (a sliver no unwrap can give a shape).
 constexpr double kSliver = 1e-10;
+// Shading normals this close (cosine of about 0.8 degrees) at an edge's
+// ends are one normal: the edge is smooth-shaded (float rounding of an
+// exported normal stays far below).
+constexpr double kSmoothCos = 0.9999;
 
 glm::dvec3 position(const SurfaceMesh& mesh, int64_t v) {
     const float* p = mesh.positions + 3 * v;
     return {p[0], p[1], p[2]};
+}
+
+// Whether the shading normals of two corners agree; a zero, non-finite or
+// absurd normal agrees with nothing (the edge stays hard).
+bool same_normal(const SurfaceMesh& mesh, int64_t corner_a, int64_t corner_b) {
+    const float* a = mesh.corner_normals + 3 * corner_a;
+    const float* b = mesh.corner_normals + 3 * corner_b;
+    const glm::dvec3 na(a[0], a[1], a[2]), nb(b[0], b[1], b[2]);
+    const double lengths = std::sqrt(glm::dot(na, na) * glm::dot(nb, nb));
+    if (!std::isfinite(lengths) || !(lengths > 0.0)) return false;
+    return glm::dot(na, nb) >= kSmoothCos * lengths;
 }
 
 int64_t find_root(std::vector<int32_t>& parent, int64_t x) {
@@ -124,6 +139,7 @@ SurfaceFaces surface_faces(const SurfaceMesh& mesh, const std::vector<int32_t>& 
     faces.area.assign(size_t(count), 0.0);
     faces.degenerate.assign(size_t(count), 0);
     faces.neighbour.assign(size_t(3 * count), -1);
+    faces.smooth.assign(size_t(3 * count), 0);
     for (int64_t t = 0; t < count; ++t) {
         const int32_t* tri = mesh.triangles + 3 * t;
         const glm::dvec3 a = position(mesh, tri[0]), b = position(mesh, tri[1]), c = position(mesh, tri[2]);
@@ -166,12 +182,20 @@ SurfaceFaces surface_faces(const SurfaceMesh& mesh, const std::vector<int32_t>& 
         if (edge.uses != 2 || edge.forward[0] == edge.forward[1]) continue;
         faces.neighbour[size_t(edge.face_edge[0])] = edge.face_edge[1] / 3;
         faces.neighbour[size_t(edge.face_edge[1])] = edge.face_edge[0] / 3;
+        if (!mesh.corner_normals) continue;
+        // Wound in opposite directions: the first face's edge start is the
+        // second's edge end, and the other way round.
+        const int64_t f = edge.face_edge[0], g = edge.face_edge[1];
+        const int64_t f_start = f, f_end = 3 * (f / 3) + (f % 3 + 1) % 3;
+        const int64_t g_start = g, g_end = 3 * (g / 3) + (g % 3 + 1) % 3;
+        const uint8_t smooth = same_normal(mesh, f_start, g_end) && same_normal(mesh, f_end, g_start);
+        faces.smooth[size_t(f)] = faces.smooth[size_t(g)] = smooth;
     }
     return faces;
 }
 
 std::vector<std::vector<int64_t>> grow_charts(const SurfaceFaces& faces, const std::vector<int64_t>& face_ids,
-                                              double angle_radians) {
+                                              double angle_radians, double smooth_angle_radians) {
     // -2: not offered; -1: offered, not yet in a chart; >= 0: its chart.
     std::vector<int64_t> state(faces.area.size(), -2);
     for (int64_t f : face_ids) state[size_t(f)] = -1;
@@ -183,6 +207,7 @@ std::vector<std::vector<int64_t>> grow_charts(const SurfaceFaces& faces, const s
     for (int64_t f : face_ids) seeds.emplace_back(-int64_t(std::floor(std::log2(faces.area[size_t(f)]) * 64.0)), f);
     std::sort(seeds.begin(), seeds.end());
     const double min_cos = std::cos(angle_radians);
+    const double smooth_min_cos = std::cos(smooth_angle_radians);
     std::vector<std::vector<int64_t>> charts;
     std::deque<int64_t> queue;
     for (const auto& [size_class, seed] : seeds) {
@@ -199,7 +224,8 @@ std::vector<std::vector<int64_t>> grow_charts(const SurfaceFaces& faces, const s
             for (int k = 0; k < 3; ++k) {
                 const int64_t g = faces.neighbour[size_t(3 * f + k)];
                 if (g < 0 || state[size_t(g)] != -1) continue;
-                if (glm::dot(faces.normal[size_t(g)], axis) < min_cos) continue;
+                const double limit = faces.smooth[size_t(3 * f + k)] ? smooth_min_cos : min_cos;
+                if (glm::dot(faces.normal[size_t(g)], axis) < limit) continue;
                 state[size_t(g)] = id;
                 queue.push_back(g);
             }
@@ -232,7 +258,7 @@ std::vector<std::vector<int64_t>> bisect_chart(const SurfaceMesh& mesh, const Su
         std::vector<int64_t> ids;
         const size_t begin = half == 0 ? 0 : order.size() / 2, end = half == 0 ? order.size() / 2 : order.size();
         for (size_t k = begin; k < end; ++k) ids.push_back(chart[order[k]]);
-        for (auto& part : grow_charts(faces, ids, 4.0)) parts.push_back(std::move(part));
+        for (auto& part : grow_charts(faces, ids, 4.0, 4.0)) parts.push_back(std::move(part));
     }
     return parts;
 }

@@ -68,6 +68,10 @@ RechartResult rechart(const SurfaceMesh& mesh, const RechartOptions& options, Pr
     LMREFINE_REQUIRE(options.angle_degrees > 0.0 && options.angle_degrees < 90.0,
                      "angle must be in (0, 90) degrees (got " + std::to_string(options.angle_degrees) +
                          "): the largest angle between a chart's face normals and its first face's");
+    LMREFINE_REQUIRE(options.smooth_angle_degrees > 0.0 && options.smooth_angle_degrees < 90.0,
+                     "smooth_angle must be in (0, 90) degrees (got " + std::to_string(options.smooth_angle_degrees) +
+                         "): the largest angle between a chart's normals and its first face's across "
+                         "smooth-shaded edges");
     LMREFINE_REQUIRE(std::isfinite(options.weld_tolerance),
                      "weld_tolerance must be a finite distance (got " + std::to_string(options.weld_tolerance) + ")");
     validate_surface(mesh);
@@ -96,18 +100,24 @@ RechartResult rechart(const SurfaceMesh& mesh, const RechartOptions& options, Pr
                                         " triangles is degenerate (zero area or two corners at one position): "
                                         "there is no surface to chart");
 
-    // Charts to unwrap, each with the angle it was grown with; a chart
+    // Charts to unwrap, each with the angles it was grown with; a chart
     // whose unwrap folds goes back on the list, grown again with half the
-    // angle or cut in halves.
+    // angles or cut in halves.
+    struct Pending {
+        std::vector<int64_t> faces;
+        double angle, smooth_angle;
+    };
     const double angle = options.angle_degrees * kPi / 180.0;
-    std::vector<std::pair<std::vector<int64_t>, double>> pending;
-    for (auto& chart : grow_charts(faces, good, angle)) pending.emplace_back(std::move(chart), angle);
+    const double smooth_angle = options.smooth_angle_degrees * kPi / 180.0;
+    std::vector<Pending> pending;
+    for (auto& chart : grow_charts(faces, good, angle, smooth_angle)) pending.push_back({std::move(chart), angle, smooth_angle});
     result.grown_charts = int32_t(pending.size());
     if (progress) progress->begin("rechart: unwrap charts", uint64_t(good.size()));
     std::vector<Unwrapped> charts;
     while (!pending.empty()) {
-        auto [chart_faces, chart_angle] = std::move(pending.back());
+        Pending chart = std::move(pending.back());
         pending.pop_back();
+        const std::vector<int64_t>& chart_faces = chart.faces;
         if (progress) progress->check();
         Unwrapped unwrapped;
         if (unwrap(mesh, welded, chart_faces, unwrapped)) {
@@ -123,11 +133,12 @@ RechartResult rechart(const SurfaceMesh& mesh, const RechartOptions& options, Pr
         ++result.split_charts;
         // Curvature folds: a smaller angle. A chart that still folds within
         // a small angle (a folded input): cut in halves until the fold is isolated.
-        const double half = 0.5 * chart_angle;
-        auto parts = half >= kMinSplitAngle ? grow_charts(faces, chart_faces, half)
-                                            : std::vector<std::vector<int64_t>>{chart_faces};
+        const double half = 0.5 * chart.angle, smooth_half = 0.5 * chart.smooth_angle;
+        auto parts = std::max(half, smooth_half) >= kMinSplitAngle
+                         ? grow_charts(faces, chart_faces, half, smooth_half)
+                         : std::vector<std::vector<int64_t>>{chart_faces};
         if (parts.size() == 1) parts = bisect_chart(mesh, faces, chart_faces);
-        for (auto& part : parts) pending.emplace_back(std::move(part), std::min(half, chart_angle));
+        for (auto& part : parts) pending.push_back({std::move(part), half, smooth_half});
     }
     // Charts in order of their smallest face: ids do not depend on the order of splits.
     std::sort(charts.begin(), charts.end(), [](const Unwrapped& a, const Unwrapped& b) { return a.faces[0] < b.faces[0]; });

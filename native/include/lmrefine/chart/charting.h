@@ -19,6 +19,10 @@ struct SurfaceMesh {
     int64_t vertex_count = 0;
     const int32_t* triangles = nullptr;  // (triangle_count, 3) indices into positions
     int64_t triangle_count = 0;
+    // (triangle_count * 3, 3) shading normal per corner, or null. Where the
+    // two faces of an edge have the same shading normals at both its ends
+    // the mesh is smooth-shaded there: the light has no step to cut at.
+    const float* corner_normals = nullptr;
 };
 
 // Throws InvalidArgument naming the first index out of range or
@@ -39,6 +43,10 @@ struct SurfaceFaces {
     // faces wind it the same way (a flipped neighbour would fold), or
     // either face is degenerate.
     std::vector<int64_t> neighbour;    // (triangle_count * 3)
+    // Per face and edge: 1 when it has a neighbour and the mesh is
+    // smooth-shaded across it (SurfaceMesh::corner_normals); all 0 without
+    // shading normals (every edge hard).
+    std::vector<uint8_t> smooth;       // (triangle_count * 3)
 };
 
 SurfaceFaces surface_faces(const SurfaceMesh& mesh, const std::vector<int32_t>& welded);
@@ -46,10 +54,12 @@ SurfaceFaces surface_faces(const SurfaceMesh& mesh, const std::vector<int32_t>& 
 // Grows charts over `faces` (non-degenerate face ids): the largest face not
 // yet in a chart (faces within about 1% of one size: the first index) seeds one, which takes every face reachable through edge
 // neighbours in `faces` whose normal is within `angle_radians` of the
-// seed's. Every chart is edge-connected, and for an angle below 90 degrees
-// no face of a chart turns its back to the seed's plane. Deterministic.
+// seed's, or within `smooth_angle_radians` when the edge crossed is smooth
+// (SurfaceFaces::smooth). Every chart is edge-connected, and for angles
+// below 90 degrees no face of a chart turns its back to the seed's plane.
+// Deterministic.
 std::vector<std::vector<int64_t>> grow_charts(const SurfaceFaces& faces, const std::vector<int64_t>& face_ids,
-                                              double angle_radians);
+                                              double angle_radians, double smooth_angle_radians);
 
 // A chart (two or more face ids) cut in two halves at the median of its
 // face centroids along their widest axis, each half split into its

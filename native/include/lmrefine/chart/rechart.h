@@ -21,6 +21,9 @@ constexpr double kRelativeWeld = 1e-6;
 
 struct RechartOptions {
     double angle_degrees = 10.0;  // largest angle between a chart's normals and its first face's, in (0, 90)
+    // The same across smooth-shaded edges (SurfaceMesh::corner_normals), in
+    // (0, 90): there the angle only bounds the chart's curvature.
+    double smooth_angle_degrees = 45.0;
     // Positions closer than this are one vertex (world units); negative:
     // kRelativeWeld times the diagonal of the used positions' bounding box.
     double weld_tolerance = -1.0;
