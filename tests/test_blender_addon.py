@@ -1116,6 +1116,18 @@ def test_addon_recharts_a_source_folded_over_a_lit_ridge(facts):
     assert fractions[first] < fractions[-1]
 
 
+def test_addon_leaves_a_smooth_shaded_ridge_in_one_chart(facts):
+    value = fact(facts, "rechart_smooth_shaded_ridge")
+    assert value["outcome"] == "FINISHED", value["message"]
+    # Shade Smooth: the ridge's loops share one normal per vertex (up), read from the split normals.
+    assert len(value["ridge_normals"]) == 1 and value["ridge_normals"][0][2] > 0.99
+    assert value["valid"] and value["refined_charts"] == 1 and value["panel_recharted"] == 0
+    # The core was given the normals: no fold, the route not even tried, and its stages not counted.
+    assert value["rechart"]["folds"]["count"] == 0 and "charts" not in value["rechart"], value["rechart"]
+    assert "rechart: unwrap charts" not in value["stages"] and "automaton" in value["stages"]
+    assert not value["custom_normals"] and not value["auto_smooth"]
+
+
 def test_addon_recharts_a_shared_lightmap_pack_atlas(facts):
     value = fact(facts, "rechart_shared_lightmap_pack_atlas")
     assert value["outcome"] == "FINISHED", value["message"]

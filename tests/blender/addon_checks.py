@@ -1753,6 +1753,40 @@ def rechart_folded_source():
 
 
 @check("refine", "bake")
+def rechart_smooth_shaded_ridge():
+    """The same folded roof shaded smooth (Shade Smooth: one normal per vertex, so the light does not
+    step at the ridge): the ridge is no crease, the roof is not re-charted, and reading the split
+    normals leaves the mesh as it was."""
+    scenes.roof_scene(quads=8)
+    roof = bpy.data.objects["Roof"]
+    mesh = roof.data
+    mesh.polygons.foreach_set("use_smooth", [True] * len(mesh.polygons))
+    mesh.update()
+    register()
+    settings(resolution=RESOLUTION, padding=2, samples=4, first_lightmap='EMBREE', backend='EMBREE',
+             bake_passes={'DIRECT'})
+    layout = bridge.read_layout(mesh, "Lightmap", roof.matrix_world)
+    ridge = np.isclose(layout.positions[:, 0], 0.0)
+    outcome, message = refine()
+    result = bpy.context.scene.lmrefine.result
+    refined = bridge.read_uv_layer(mesh, "Lightmap_refined")
+    options = pipeline.settings_snapshot(bpy.context.scene.lmrefine)
+    seen = []
+    run = pipeline.run_blocking(pipeline.run(bpy.context, pipeline.validate(bpy.context, [roof], options), options,
+                                             Journal()),
+                                progress=lambda fraction, label: seen.append(label))
+    return {"outcome": outcome, "message": message, "panel_recharted": result.recharted,
+            "rechart": {key: value for key, value in run.reports["Roof"]["rechart"].items() if key != "room"},
+            "stages": sorted({label.split(" (", 1)[1][:-1] for label in seen
+                              if label.startswith("Refining") and " (" in label}),
+            "ridge_normals": np.unique(np.round(layout.normals[ridge], 5), axis=0).tolist(),
+            "refined_charts": int(len(np.unique(lmrefine.find_charts(refined, layout.triangles,
+                                                                      lmrefine.CHART_TOLERANCE)))),
+            "valid": bool(lmrefine.check_layout(refined, layout.triangles, RESOLUTION, padding=2)["valid"]),
+            "custom_normals": bool(mesh.has_custom_normals), "auto_smooth": bool(mesh.use_auto_smooth)}
+
+
+@check("refine", "bake")
 def rechart_shared_lightmap_pack_atlas():
     """A floor and a box whose Lightmap maps are one chart per face, packed side by side in one atlas:
     the joined layout gives no room, so the one refinement re-charts both meshes (their world positions
