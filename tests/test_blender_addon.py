@@ -1116,15 +1116,19 @@ def test_addon_recharts_a_source_folded_over_a_lit_ridge(facts):
     assert fractions[first] < fractions[-1]
 
 
-def test_addon_leaves_a_smooth_shaded_ridge_in_one_chart(facts):
+def test_addon_tells_the_core_a_ridge_is_smooth_shaded(facts):
     value = fact(facts, "rechart_smooth_shaded_ridge")
     assert value["outcome"] == "FINISHED", value["message"]
     # Shade Smooth: the ridge's loops share one normal per vertex (up), read from the split normals.
     assert len(value["ridge_normals"]) == 1 and value["ridge_normals"][0][2] > 0.99
-    assert value["valid"] and value["refined_charts"] == 1 and value["panel_recharted"] == 0
-    # The core was given the normals: no fold, the route not even tried, and its stages not counted.
-    assert value["rechart"]["folds"]["count"] == 0 and "charts" not in value["rechart"], value["rechart"]
-    assert "rechart: unwrap charts" not in value["stages"] and "automaton" in value["stages"]
+    assert value["valid"]
+    # The core was given the normals: the ridge still folds inside the chart (the route is tried), but
+    # smooth-shaded, so its light changes are not credited to a cut.
+    folds = value["rechart"]["folds"]
+    assert folds["count"] == 8 and folds["smooth"] == 8 and folds["energy_fraction"] == 0.0, value["rechart"]
+    assert "predicted_error" in value["rechart"] and "rechart: unwrap charts" in value["stages"]
+    assert value["panel_recharted"] == int(value["rechart"]["used"])
+    assert value["refined_charts"] == (2 if value["rechart"]["used"] else 1)
     assert not value["custom_normals"] and not value["auto_smooth"]
 
 

@@ -201,21 +201,37 @@ def _shading_normals(positions, triangles, smooth_ridge):
     return normals
 
 
-def test_a_smooth_shaded_ridge_is_no_crease():
+def test_smooth_shaded_folds_are_told_apart():
     positions, _, triangles = _roof()
+    faces, corner, _ = folds_module.creases(positions, triangles, 20.0)
     flat = _shading_normals(positions, triangles, smooth_ridge=False)
     smooth = _shading_normals(positions, triangles, smooth_ridge=True)
-    assert len(folds_module.creases(positions, triangles, 20.0, flat)[0]) == CELLS
-    assert len(folds_module.creases(positions, triangles, 20.0, smooth)[0]) == 0
+    assert not folds_module.smooth_shaded(positions, triangles, flat, faces, corner).any()
+    assert folds_module.smooth_shaded(positions, triangles, smooth, faces, corner).all()
     # Smooth at one end of an edge only: still a step in the light there.
     half = smooth.copy()
-    half[positions[triangles.ravel(), 1] > 0.5] = flat[positions[triangles.ravel(), 1] > 0.5]
-    assert 0 < len(folds_module.creases(positions, triangles, 20.0, half)[0]) < CELLS
+    top = positions[triangles.ravel(), 1] > 0.5
+    half[top] = flat[top]
+    assert 0 < folds_module.smooth_shaded(positions, triangles, half, faces, corner).sum() < CELLS
     # A zero or non-finite normal agrees with nothing: its edges stay hard.
-    for bad in (0.0, np.nan, np.inf):
+    for bad in (0.0, np.nan, np.inf, 1e308):
         broken = smooth.copy()
         broken[np.isclose(positions[triangles.ravel(), 0], 0.0)] = bad
-        assert len(folds_module.creases(positions, triangles, 20.0, broken)[0]) == CELLS
+        assert not folds_module.smooth_shaded(positions, triangles, broken, faces, corner).any()
+
+
+def test_a_smooth_shaded_fold_holds_no_light_step(roof_case):
+    positions, uvs, triangles, lightmap = roof_case
+    energy, mask = _energy(lightmap, uvs, triangles)
+    smooth = _shading_normals(positions, triangles, smooth_ridge=True)
+    hard = folds_module.find_folds(uvs, triangles, positions, 20.0, energy, mask)
+    soft = folds_module.find_folds(uvs, triangles, positions, 20.0, energy, mask, normals=smooth)
+    assert len(soft.faces) == len(hard.faces) == CELLS  # still folds: they open the route
+    assert soft.smooth.all() and not hard.smooth.any()
+    assert hard.energy_fraction > 0.5 and soft.energy_fraction == 0.0 and not soft.band.any()
+    # The model then credits a cut with nothing at the ridge.
+    cut = _cut(uvs)
+    assert not soft.energy_removed(cut, triangles).any() and hard.energy_removed(cut, triangles).sum() > 0
 
 
 def test_route_reads_shading_normals(roof_case):
@@ -224,12 +240,14 @@ def test_route_reads_shading_normals(roof_case):
     result = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, positions=positions,
                                  normals=smooth)
     info = result.report["rechart"]
-    assert not info["used"] and info["folds"]["count"] == 0, info
-    assert np.array_equal(result.uvs, lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2).uvs)
+    assert info["folds"]["count"] == CELLS and info["folds"]["smooth"] == CELLS
+    assert info["folds"]["energy_fraction"] == 0.0
+    assert "predicted_error" in info  # tried, the model decided
+    assert lmrefine.check_layout(result.uvs, triangles, RESOLUTION, padding=2)["valid"]
     # Flat-shaded normals: the same as no normals (every crease a step).
     flat = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, positions=positions,
                                normals=_shading_normals(positions, triangles, smooth_ridge=False))
-    assert flat.report["rechart"]["used"]
+    assert flat.report["rechart"]["used"] and flat.report["rechart"]["folds"]["smooth"] == 0
     none = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, positions=positions)
     assert np.array_equal(flat.uvs, none.uvs)
 

@@ -65,8 +65,7 @@ def refine_parts(group, options):
         return REFINE_STAGES
     from lmrefine import folds, rechart_route
     route = (rechart_route.layout_room(group.uvs, group.triangles)["no_room"]
-             or len(folds.fold_faces(group.uvs, group.triangles, group.positions, rechart_route.ANGLE,
-                                     group.normals)[0]) > 0)
+             or len(folds.fold_faces(group.uvs, group.triangles, group.positions, rechart_route.ANGLE)[0]) > 0)
     return REFINE_STAGES + (RECHART_STAGES if route else 0)
 
 

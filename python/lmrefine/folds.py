@@ -10,9 +10,10 @@ Project joins faces up to 66 degrees apart into one chart, so its atlases
 fold over many creases that lmrefine.rechart cuts. The error model of the
 re-chart route (rechart_route.predicted_error) counts the folds' light
 changes only in layouts that keep them inside a chart. Where the mesh is
-smooth-shaded across the edge (the same shading normals on both sides) the
-light does not step and the edge is no crease. docs/refiner.md, "The
-re-chart route".
+smooth-shaded across a fold (the same shading normals on both sides) the
+light does not step: such a fold still opens the route (Smart UV's charts
+span it), but its light changes are not counted as the fold's.
+docs/refiner.md, "Smooth-shaded meshes".
 """
 
 from dataclasses import dataclass
@@ -40,15 +41,18 @@ class Folds:
 
     faces: (F, 2) the two triangles of each fold; corner: (F,) the corner of
     faces[:, 0] at which the fold's edge starts; length: (F,) world length;
-    energy: (F,) gradient energy of the source bake in the fold's band;
-    band: (H, W) bool, the texels of every fold's band; total_energy: the
-    source bake's gradient energy over the layout."""
+    energy: (F,) gradient energy of the source bake in the fold's band (0
+    for a smooth-shaded fold); band: (H, W) bool, the texels of every
+    flat-shaded fold's band; total_energy: the source bake's gradient energy
+    over the layout; smooth: (F,) bool, the mesh smooth-shaded across the
+    fold (no step in the light; all False without shading normals)."""
     faces: np.ndarray
     corner: np.ndarray
     length: np.ndarray
     energy: np.ndarray
     band: np.ndarray
     total_energy: float
+    smooth: np.ndarray = None
 
     @property
     def energy_fraction(self):
@@ -67,15 +71,12 @@ class Folds:
         return removed
 
 
-def creases(positions, triangles, angle, normals=None):
+def creases(positions, triangles, angle):
     """Mesh edges between two triangles whose normals differ by more than
     `angle` degrees. `positions` (N, 3) per UV index; corners at the same
-    position are one vertex. `normals` (N, 3) shading normals in the same
-    indexing, or None (flat-shaded): an edge whose two triangles have the
-    same shading normal at each of its ends is smooth-shaded, no crease.
-    Returns (faces (C, 2), corner (C,), length (C,)): the corner of
-    faces[:, 0] where the edge starts. Triangles with no area and edges used
-    by more than two triangles are left out."""
+    position are one vertex. Returns (faces (C, 2), corner (C,), length
+    (C,)): the corner of faces[:, 0] where the edge starts. Triangles with no
+    area and edges used by more than two triangles are left out."""
     triangles = np.asarray(triangles, np.int64)
     count = len(triangles)
     empty = (np.zeros((0, 2), np.int64), np.zeros(0, np.int64), np.zeros(0))
@@ -103,8 +104,6 @@ def creases(positions, triangles, angle, normals=None):
     faces = np.column_stack([first // 3, second // 3])
     keep = (usable[faces[:, 0]] & usable[faces[:, 1]] & (faces[:, 0] != faces[:, 1])
             & ((face_normals[faces[:, 0]] * face_normals[faces[:, 1]]).sum(axis=1) < np.cos(np.radians(angle))))
-    if normals is not None:
-        keep &= ~_smooth_edges(np.asarray(normals), triangles, vertex, faces, first % 3, second % 3)
     faces, corner = faces[keep], (first % 3)[keep]
     start = corners[faces[:, 0], corner]
     end = corners[faces[:, 0], (corner + 1) % 3]
@@ -112,36 +111,36 @@ def creases(positions, triangles, angle, normals=None):
         return faces, corner, np.linalg.norm(end - start, axis=1)
 
 
-def _smooth_edges(normals, triangles, vertex, faces, first_corner, second_corner):
-    """Per edge (faces (E, 2), the edge starting at first_corner in
-    faces[:, 0] and at second_corner in faces[:, 1]): whether the shading
-    normals of the two faces agree at both its ends. A zero or non-finite
-    normal agrees with nothing."""
+def smooth_shaded(positions, triangles, normals, faces, corner):
+    """Per edge (faces (E, 2), starting at `corner` of faces[:, 0], as
+    `creases` gives them): whether the mesh is smooth-shaded across it, the
+    two faces' shading `normals` (N, 3, the positions' indexing) the same at
+    each of its ends. A zero or non-finite normal agrees with nothing."""
+    triangles = np.asarray(triangles, np.int64)
+    positions = np.asarray(positions)
+    normals = np.asarray(normals, np.float64)
     f, g = faces[:, 0], faces[:, 1]
-    f_next, g_next = (first_corner + 1) % 3, (second_corner + 1) % 3
-    # The second face winds the edge the other way (its start is the first's
-    # end) unless the mesh's winding is inconsistent there.
-    opposite = vertex[g, second_corner] == vertex[f, f_next]
-    g_at_start = np.where(opposite, g_next, second_corner)
-    g_at_end = np.where(opposite, second_corner, g_next)
-
-    def same(a, b):
-        na = normals[triangles[f, a]].astype(np.float64)
-        nb = normals[triangles[g, b]].astype(np.float64)
+    count = np.arange(len(faces))
+    agree = np.ones(len(faces), bool)
+    for end in (corner, (corner + 1) % 3):
+        here = triangles[f, end]
+        # The corner of the other face at the same position (corners at one position are one vertex).
+        at = (positions[triangles[g]] == positions[here][:, None, :]).all(axis=2)
+        there = triangles[g, np.argmax(at, axis=1)]
+        na, nb = normals[here], normals[there]
         with np.errstate(over="ignore", invalid="ignore"):
             lengths = np.sqrt((na * na).sum(axis=1) * (nb * nb).sum(axis=1))
-            agree = (na * nb).sum(axis=1) >= SMOOTH_COS * lengths
-        return agree & np.isfinite(lengths) & (lengths > 0)
+            same = (na * nb).sum(axis=1) >= SMOOTH_COS * lengths
+        agree &= same & np.isfinite(lengths) & (lengths > 0) & at[count, np.argmax(at, axis=1)]
+    return agree
 
-    return same(first_corner, g_at_start) & same(f_next, g_at_end)
 
-
-def fold_faces(uvs, triangles, positions, angle, normals=None):
+def fold_faces(uvs, triangles, positions, angle):
     """The creases sharper than `angle` degrees that lie inside a chart of
     the layout (uvs, triangles): (faces (F, 2), corner (F,), length (F,)) as
-    `creases` gives them (`normals`: its shading normals). Geometry only, no
-    bake: whether a layout can take the folds route at all."""
-    faces, corner, length = creases(positions, triangles, angle, normals)
+    `creases` gives them. Geometry only, no bake: whether a layout can take
+    the folds route at all."""
+    faces, corner, length = creases(positions, triangles, angle)
     if len(faces):
         charts = _native.find_charts(uvs, triangles, tolerance=CHART_TOLERANCE)
         inside = charts[faces[:, 0]] == charts[faces[:, 1]]
@@ -153,17 +152,22 @@ def find_folds(uvs, triangles, positions, angle, energy, mask=None, normals=None
     """The creases sharper than `angle` degrees that lie inside a chart of
     the layout (uvs, triangles), with the gradient `energy` (H, W) of the
     bake on that layout in a band of BAND_TEXELS around each (a texel near
-    two folds counts for the nearer). `normals`: shading normals, as for
-    `creases`."""
+    two folds counts for the nearer). `normals` (N, 3): the shading normals
+    per UV, or None (flat-shaded): a fold the mesh is smooth-shaded across
+    (`smooth_shaded`) has no step in the light, and its band holds nothing."""
     uvs = np.asarray(uvs)
     triangles = np.asarray(triangles, np.int64)
     energy = np.asarray(energy)
     shape = energy.shape
-    faces, corner, length = fold_faces(uvs, triangles, positions, angle, normals)
+    faces, corner, length = fold_faces(uvs, triangles, positions, angle)
+    smooth = (np.zeros(len(faces), bool) if normals is None or not len(faces)
+              else smooth_shaded(positions, triangles, normals, faces, corner))
     covered = mask if mask is not None else _native.coverage_mask(uvs, triangles, shape)
-    band_energy, band = _band(uvs, triangles, faces[:, 0], corner, np.where(covered, energy, 0.0))
+    hard = ~smooth
+    band_energy = np.zeros(len(faces))
+    band_energy[hard], band = _band(uvs, triangles, faces[hard, 0], corner[hard], np.where(covered, energy, 0.0))
     return Folds(faces=faces, corner=corner, length=length, energy=band_energy, band=band,
-                 total_energy=float(np.asarray(energy, np.float64)[covered].sum()))
+                 total_energy=float(np.asarray(energy, np.float64)[covered].sum()), smooth=smooth)
 
 
 def _band(uvs, triangles, face, corner, energy, chunk=1 << 21):

@@ -274,5 +274,6 @@ def fold_report(folds):
     """The report's summary of a source layout's folds (None: not looked for)."""
     if folds is None:
         return None
-    return {"count": int(len(folds.faces)), "length": float(folds.length.sum()),
+    smooth = 0 if folds.smooth is None else int(folds.smooth.sum())
+    return {"count": int(len(folds.faces)), "length": float(folds.length.sum()), "smooth": smooth,
             "energy_fraction": folds.energy_fraction}

@@ -211,8 +211,8 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
             rechart_route.REQUIRED_GAIN; docs/refiner.md, "The re-chart
             route"), else the source layout's own refinement is returned.
             report["rechart"] says what happened: used, room (the rule's
-            figures), folds (count, length, energy_fraction; None when not
-            looked for), reason when not used, the new layout's charts and
+            figures), folds (count, length, smooth (how many are
+            smooth-shaded), energy_fraction; None when not looked for), reason when not used, the new layout's charts and
             the model's predicted_error when re-charted (None without
             positions).
             The result keeps the input's indexing: result.uvs (N, 2) for
@@ -221,12 +221,14 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
             is refined as without positions).
         normals: (N, 3) the shading normal of each UV (the uvs' indexing),
             or None (flat shading: every crease is a step in the light).
-            Used with positions: where the mesh is smooth-shaded across an
-            edge (the same normals on both sides at both its ends) the
-            light does not step, so the edge is no fold, and the re-chart
-            route joins faces across it within charting.SMOOTH_ANGLE
-            (docs/refiner.md, "Smooth-shaded meshes"). A zero or
-            non-finite normal makes its edges count as hard.
+            Used with positions: where the mesh is smooth-shaded across a
+            fold (the same normals on both sides at both its ends) the
+            light does not step, so the error model does not count the
+            fold's light changes as removable by a cut, and the re-chart
+            route joins faces across such edges within
+            charting.SMOOTH_ANGLE (docs/refiner.md, "Smooth-shaded
+            meshes"). A zero or non-finite normal makes its edges count as
+            hard.
         world_areas: (T,) the triangles' surface areas (any unit), for
             repack: a chart's light changes count on the surface its
             texels cover, so a layout whose texel density is not uniform
@@ -328,9 +330,10 @@ def _recharted_result(recharted, source_result, uvs, triangles, energy, mask, in
                f"triangles, {room['room_fraction']:.0%} of its area in triangles with a UV inside their chart)")
     else:
         folds = info["folds"]
+        smooth = f", {folds['smooth']} of them smooth-shaded" if folds.get("smooth") else ""
         why = (f"the source layout's charts fold over {folds['count']} creases sharper than {info['angle']:g} "
-               f"degrees ({folds['length']:.3g} world units), which hold {folds['energy_fraction']:.0%} of its "
-               f"light changes")
+               f"degrees ({folds['length']:.3g} world units{smooth}), which hold {folds['energy_fraction']:.0%} "
+               f"of its light changes")
     notes.insert(0, f"re-charted: {why}, so the mesh was re-charted ({info['charts']} charts at "
                     f"{info['angle']:g} degrees) and refined; the error model predicts "
                     f"{info['predicted_error']:.2f} of the source layout's error "

@@ -1755,8 +1755,8 @@ def rechart_folded_source():
 @check("refine", "bake")
 def rechart_smooth_shaded_ridge():
     """The same folded roof shaded smooth (Shade Smooth: one normal per vertex, so the light does not
-    step at the ridge): the ridge is no crease, the roof is not re-charted, and reading the split
-    normals leaves the mesh as it was."""
+    step at the ridge): the ridge still folds, but the core is told it is smooth-shaded and credits a
+    cut there with nothing; reading the split normals leaves the mesh as it was."""
     scenes.roof_scene(quads=8)
     roof = bpy.data.objects["Roof"]
     mesh = roof.data

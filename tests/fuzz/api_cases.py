@@ -322,13 +322,31 @@ def random_mesh(rng):
     return positions.astype(np.float32), np.asarray(triangles, np.int32)
 
 
+def shading_normals(rng, positions):
+    """Shading normals for `positions`: smooth (a function of the position, so corners at one
+    position agree), random per row (hard everywhere), or with zero and non-finite rows."""
+    positions = np.asarray(positions, np.float64)
+    kind = rng.integers(3)
+    if kind == 0:
+        with np.errstate(all="ignore"):
+            return np.column_stack([np.sin(positions[:, 0]), np.cos(positions[:, 1]), np.ones(len(positions))])
+    normals = rng.normal(size=(len(positions), 3))
+    if kind == 2 and len(normals):
+        normals[rng.integers(len(normals), size=3)] = rng.choice([0.0, np.nan, np.inf, 1e300])
+    return normals
+
+
 def case_rechart(lm, rng):
     positions, triangles = random_mesh(rng)
     r = int(rng.choice([16, 32, 64]))
     kwargs = {"positions": positions, "triangles": triangles, "angle": float(rng.uniform(5, 85)), "resolution": r,
               "padding": float(rng.choice([0, 1, 2])), "progress": None}
+    if rng.random() < 0.5:
+        kwargs["normals"] = shading_normals(rng, positions)
+        kwargs["smooth_angle"] = float(rng.uniform(5, 85))
     makers = {"positions": as_array, "triangles": as_array, "angle": as_number, "resolution": as_resolution,
-              "padding": as_number, "weld_tolerance": as_number, "rotations": as_number, "progress": as_progress}
+              "padding": as_number, "weld_tolerance": as_number, "rotations": as_number, "progress": as_progress,
+              "normals": as_array, "smooth_angle": as_number}
     kwargs, chosen = mutate(kwargs, rng, makers)
     return Case("rechart", _call(lm.rechart, dict(kwargs)), list(kwargs.values()),
                 layout=(None, kwargs["triangles"], kwargs["resolution"], kwargs["padding"]), recharted=True,
@@ -375,8 +393,10 @@ def case_refine_uvs_folds(lm, rng):
     kwargs = {"lightmap": lightmap(rng, r), "uvs": uvs.astype(np.float32),
               "triangles": np.arange(len(uvs), dtype=np.int32).reshape(-1, 3), "resolution": r,
               "padding": float(rng.choice([0, 1, 2])), "positions": positions, "max_steps": 2, "progress": None}
+    if rng.random() < 0.5:
+        kwargs["normals"] = shading_normals(rng, positions)
     makers = {"lightmap": as_array, "positions": as_array, "rechart": as_number, "resolution": as_resolution,
-              "padding": as_number, "progress": as_progress}
+              "padding": as_number, "progress": as_progress, "normals": as_array}
     kwargs, chosen = mutate(kwargs, rng, makers)
     layout = (kwargs["uvs"], kwargs["triangles"], kwargs["resolution"], kwargs["padding"])
     return Case("refine_uvs", _call(lm.refine_uvs, dict(kwargs)), list(kwargs.values()), layout=layout,
