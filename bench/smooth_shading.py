@@ -86,10 +86,11 @@ def main():
                     folds = rechart.get("folds") or {}
                     rows.append((name, f"{changed:.0%}", scene["variant"], "given" if with_normals else "not given",
                                  f"{scene['equal_error_resolution_ratio']:.2f}x", "yes" if rechart.get("used") else "no",
-                                 str(rechart.get("charts", "")), str(folds.get("count", "")),
+                                 str(rechart.get("charts", "")),
+                                 f"{folds['count']} ({folds.get('smooth', 0)} smooth)" if folds else "",
                                  f"{folds['energy_fraction']:.1%}" if folds else ""))
     print(f"| scene (auto smooth {args.auto_smooth:g} deg, {args.resolution}^2) | smooth corners | UVs | "
-          "normals to the route | equal-error ratio | re-charted | charts | folds | folds' light changes |")
+          "normals to the route | equal-error ratio | re-charted | charts | folds (smooth-shaded) | folds' light changes |")
     print("|---|---|---|---|---|---|---|---|---|")
     for row in rows:
         print("| " + " | ".join(row) + " |")

@@ -186,18 +186,22 @@ def _per_index(recharted, uvs, triangles):
     return out
 
 
+def _per_uv_vectors(value, count, name, what):
+    """`value` as an (count, 3) array of real numbers, one `what` per UV."""
+    if isinstance(value, (str, bytes)) or not hasattr(value, "__len__"):
+        raise TypeError(f"{name} must be an (N, 3) array of the UVs' {what}s, got {type(value).__name__}")
+    array = np.asarray(value)
+    if not (np.issubdtype(array.dtype, np.integer) or np.issubdtype(array.dtype, np.floating)):
+        raise TypeError(f"{name} must hold real numbers, got dtype {array.dtype}")
+    if array.ndim != 2 or array.shape != (count, 3):
+        raise ValueError(f"{name} must have shape ({count}, 3), one {what} per UV (the uvs' indexing), "
+                         f"got {array.shape}")
+    return array
+
+
 def positions_array(positions, count):
     """`positions` validated: (count, 3) float64, finite."""
-    if isinstance(positions, (str, bytes)) or not hasattr(positions, "__len__"):
-        raise TypeError(f"positions must be an (N, 3) array of the UVs' 3-D positions, got "
-                        f"{type(positions).__name__}")
-    array = np.asarray(positions)
-    if not (np.issubdtype(array.dtype, np.integer) or np.issubdtype(array.dtype, np.floating)):
-        raise TypeError(f"positions must hold real numbers, got dtype {array.dtype}")
-    if array.ndim != 2 or array.shape != (count, 3):
-        raise ValueError(f"positions must have shape ({count}, 3), one 3-D position per UV (the uvs' indexing), "
-                         f"got {array.shape}")
-    array = array.astype(np.float64)
+    array = _per_uv_vectors(positions, count, "positions", "3-D position").astype(np.float64)
     if not np.isfinite(array).all():
         bad = int(np.flatnonzero(~np.isfinite(array).all(axis=1))[0])
         raise ValueError(f"positions[{bad}] is NaN or Inf; fix the mesh's vertices (or pass positions=None "
@@ -208,15 +212,7 @@ def positions_array(positions, count):
 def normals_array(normals, count):
     """`normals` (shading normals per UV) validated: (count, 3) float32. A
     zero or non-finite normal is allowed: its edges count as hard."""
-    if isinstance(normals, (str, bytes)) or not hasattr(normals, "__len__"):
-        raise TypeError(f"normals must be an (N, 3) array of the UVs' shading normals, got "
-                        f"{type(normals).__name__}")
-    array = np.asarray(normals)
-    if not (np.issubdtype(array.dtype, np.integer) or np.issubdtype(array.dtype, np.floating)):
-        raise TypeError(f"normals must hold real numbers, got dtype {array.dtype}")
-    if array.ndim != 2 or array.shape != (count, 3):
-        raise ValueError(f"normals must have shape ({count}, 3), one shading normal per UV (the uvs' indexing), "
-                         f"got {array.shape}")
+    array = _per_uv_vectors(normals, count, "normals", "shading normal")
     with np.errstate(over="ignore", invalid="ignore"):
         return array.astype(np.float32)
 
