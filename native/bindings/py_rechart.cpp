@@ -43,7 +43,7 @@ py::tuple rechart_mesh(const py::handle& positions_in, const py::handle& triangl
         const float* n = normals.data();
         corner_normals.resize(size_t(3 * corners));
         for (py::ssize_t c = 0; c < corners; ++c) {
-            // Indices are range-checked by the core before the normals are read.
+            // An index out of range reads a zero normal here; the core then rejects the triangle.
             const int64_t row = count == corners ? int64_t(c) : int64_t(triangles.data()[c]);
             const bool inside = row >= 0 && row < int64_t(count);
             for (int k = 0; k < 3; ++k) corner_normals[size_t(3 * c + k)] = inside ? n[3 * row + k] : 0.0f;
