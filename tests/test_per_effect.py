@@ -126,3 +126,27 @@ def test_bad_per_effect_options_are_refused_with_the_fix(tmp_path, capsys):
         EvaluationOptions(per_effect="sqrt", stages=2).check()
     assert cli.main(["evaluate", "courtyard", "--per-effect", "bright", "--out", str(tmp_path)]) == 2
     assert "unknown per-effect split rule 'bright'" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("auto_rechart", [True, False])
+def test_each_effect_is_refined_with_the_mesh_as_the_add_on_does(monkeypatch, auto_rechart):
+    # The add-on's per-effect maps go through refine_uvs' re-chart route (positions and split normals);
+    # the evaluation's must too, or it measures a different refinement.
+    from lmrefine import evaluation
+    calls = []
+
+    def recording(*args, **kwargs):
+        calls.append((kwargs.get("positions"), kwargs.get("normals")))
+        return lmrefine.refine_uvs(*args, **kwargs)
+
+    monkeypatch.setattr(evaluation, "refine_uvs", recording)
+    scene = tiny_scene(12)
+    options = EvaluationOptions(resolution=32, points=300, samples=4, truth_samples=8, multipliers=(1.0, 2.0),
+                                view_width=0, per_effect="sqrt", auto_rechart=auto_rechart)
+    evaluate_sample(scene, options)
+    assert len(calls) == 1 + len(EFFECTS)  # the combined map, then one per effect
+    for positions, normals in calls:
+        if auto_rechart:
+            assert positions.shape == normals.shape == (3 * len(scene.triangles), 3)
+        else:
+            assert positions is None and normals is None

@@ -352,6 +352,8 @@ def _per_effect(sample, uvs, triangles, resolution, options, stages, points, tru
     combined_errors = [metrics.error_stats(s["lookup"], truth, everywhere)["rmse"] for s in sweep]
     combined_transition_errors = [metrics.error_stats(s["lookup"], truth, transitions)["rmse"] for s in sweep]
     rules, layouts = [], {}
+    # Each effect's refinement takes the re-chart route as the add-on's per-effect maps do.
+    positions, normals = _route_mesh(sample, options)
     for rule in options.per_effect:
         fractions = split_fractions(rule, energies)
         sides = split_resolutions(resolution, fractions)
@@ -362,7 +364,8 @@ def _per_effect(sample, uvs, triangles, resolution, options, stages, points, tru
             padding = min(float(options.padding), float(gutter))
             first, plain = lookup(name, uvs, side, "input", keep_map=True)
             refined = stages.run("per-effect refine", lambda p: refine_uvs(
-                first, uvs, triangles, side, padding=padding, progress=p, **options.refine_options))
+                first, uvs, triangles, side, padding=padding, progress=p, positions=positions, normals=normals,
+                **options.refine_options))
             _, refined_lookup = lookup(name, refined.uvs, side, f"{rule} refined")
             layouts[(rule, name)] = refined.uvs
             # The effect's own uniform bakes at side x multipliers, against its own truth.
