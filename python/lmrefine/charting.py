@@ -113,6 +113,9 @@ def rechart(positions, triangles, angle=DEFAULT_ANGLE, resolution=256, padding=2
     import time
 
     start = time.perf_counter()
+    if normals is not None and np.asarray(normals).dtype.kind == "f":
+        with np.errstate(over="ignore"):  # an absurd normal becomes Inf: its edges count as hard
+            normals = np.asarray(normals).astype(np.float32)
     world_uvs, charts, report = _native.rechart_mesh(positions, triangles, angle=angle,
                                                      weld_tolerance=weld_tolerance, progress=progress,
                                                      normals=normals, smooth_angle=smooth_angle)
