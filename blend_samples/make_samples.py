@@ -144,10 +144,12 @@ def arch_faces(bm, center, span, rise_top, depth, thickness, segments=12):
         bm.faces.new((fi, fo, bo, bi))      # springing faces (closed ends)
 
 
-def make_object(name, build, color, receiver=True, closed=True):
+def make_object(name, build, color, receiver=True, closed=True, smooth=False):
     """A mesh object built by `build(bm)` in world space. Closed meshes get
     outward normals; open ones (floors, room walls) keep the winding that
-    `build` gave them (u x v of their grids)."""
+    `build` gave them (u x v of their grids). `smooth`: Shade Smooth with
+    Auto Smooth at 60 degrees, as artists shade curved props (edges sharper
+    than that stay hard)."""
     mesh = bpy.data.meshes.new(name)
     bm = bmesh.new()
     build(bm)
@@ -156,6 +158,10 @@ def make_object(name, build, color, receiver=True, closed=True):
         bmesh.ops.recalc_face_normals(bm, faces=bm.faces)
     bm.to_mesh(mesh)
     bm.free()
+    if smooth:
+        mesh.polygons.foreach_set("use_smooth", [True] * len(mesh.polygons))
+        mesh.use_auto_smooth = True
+        mesh.auto_smooth_angle = math.radians(60)
     obj = bpy.data.objects.new(name, mesh)
     bpy.context.collection.objects.link(obj)
     obj["lmrefine_receiver"] = receiver
@@ -444,10 +450,60 @@ def village():
     return {"passes": ["direct"]}
 
 
+def cloister():
+    """A cloister garth (holdout: never used to tune constants; added as the
+    first smooth-shaded scene, to test the re-chart route's reading of
+    shading normals on a scene it was not written on): round columns of 16
+    sides, a domed well head, a grassy mound and a barrel-vaulted walk, all
+    shaded smooth with Auto Smooth 60 degrees as artists shade curved props,
+    on a flat paving; a low sun from the west and a warm point light."""
+    make_object("Paving", lambda bm: grid_faces(bm, (-6, -6, 0), (12, 0, 0), (0, 12, 0), 30, 30),
+                (0.72, 0.7, 0.66), closed=False)
+    for k in range(5):
+        make_object(f"Column{k}", lambda bm, k=k: cylinder_faces(bm, (-4.0 + 2.0 * k, 3.2, 0), 0.28, 2.6),
+                    (0.85, 0.82, 0.76), smooth=True)
+
+    def vault(bm):
+        # Half a cylinder along x over the walk behind the columns, open below, 20 sides.
+        segments, length, radius = 20, 11.0, 1.3
+        rows = [[bm.verts.new((-5.5 + length * i / 22, 4.6 + radius * math.cos(math.pi * s / segments),
+                               2.6 + radius * math.sin(math.pi * s / segments)))
+                 for s in range(segments + 1)] for i in range(23)]
+        for i in range(22):
+            for s in range(segments):
+                bm.faces.new((rows[i][s], rows[i][s + 1], rows[i + 1][s + 1], rows[i + 1][s]))
+    make_object("Vault", vault, (0.8, 0.76, 0.7), closed=False, smooth=True)
+
+    def well(bm):
+        cylinder_faces(bm, (1.5, -1.5, 0), 0.9, 0.8)
+        # A dome of quad rings (no pole triangles: Lightmap Pack keeps its gutters), capped at 75 degrees.
+        rings = [[bm.verts.new((1.5 + 0.6 * math.cos(math.radians(e)) * math.cos(2 * math.pi * k / 16),
+                                -1.5 + 0.6 * math.cos(math.radians(e)) * math.sin(2 * math.pi * k / 16),
+                                0.8 + 0.6 * math.sin(math.radians(e)))) for k in range(16)]
+                 for e in (0, 15, 30, 45, 60, 75)]
+        for low, high in zip(rings, rings[1:]):
+            for k in range(16):
+                bm.faces.new((low[k], low[(k + 1) % 16], high[(k + 1) % 16], high[k]))
+        bm.faces.new(rings[-1])
+    make_object("Well", well, (0.7, 0.72, 0.74), smooth=True)
+
+    def mound(bm):
+        grid_faces(bm, (-5.0, -5.0, 0.01), (4.0, 0, 0), (0, 4.0, 0), 16, 16)
+        for vert in bm.verts:
+            r2 = (vert.co.x + 3.0) ** 2 + (vert.co.y + 3.0) ** 2
+            vert.co.z = 0.01 + 0.9 * math.exp(-r2 / 1.2)
+    make_object("Mound", mound, (0.42, 0.55, 0.3), closed=False, smooth=True)
+    add_light("Sun", "SUN", (0, 0, 10), (math.radians(62), 0.0, math.radians(-95)), energy=4.0,
+              angle=math.radians(0.5))
+    add_light("Lamp", "POINT", (3.5, 1.0, 2.2), energy=120.0, color=(1.0, 0.8, 0.6), shadow_soft_size=0.1)
+    set_world((0.05, 0.07, 0.1))
+    return {"passes": ["direct"]}
+
+
 # Which scenes tune the refiner's constants and which only report is in
 # docs/evaluation.md ("Tuning scenes and holdout scenes").
 SCENES = {"courtyard": courtyard, "room": room, "fence_and_tree": fence_and_tree, "game_level": game_level,
-          "atrium": atrium, "plaza": plaza, "alley": alley, "village": village}
+          "atrium": atrium, "plaza": plaza, "alley": alley, "village": village, "cloister": cloister}
 
 
 # --------------------------------------------------------------------------- UVs and export

@@ -9,7 +9,7 @@ import lmrefine
 from lmrefine import sample_scenes
 
 ROOT = Path(__file__).resolve().parents[1]
-NAMES = ("courtyard", "room", "fence_and_tree", "game_level", "atrium", "plaza", "alley", "village")
+NAMES = ("courtyard", "room", "fence_and_tree", "game_level", "atrium", "plaza", "alley", "village", "cloister")
 # Coarse on purpose (for the tessellation option): its triangles are metres long.
 COARSE = ("plaza",)
 FINE = tuple(name for name in NAMES if name not in COARSE)
@@ -88,6 +88,24 @@ def test_village_smart_uv_charts_fold_over_creases_over_valid_layouts():
     uvs, triangles = scene.layout("lightmap")
     assert len(fold_faces(uvs, triangles, positions, 20.0)[0]) == 0  # one chart per face: nothing folds
     _assert_valid_small_sample(scene, "village")
+
+
+def test_cloister_is_smooth_shaded_where_it_is_curved_over_valid_layouts():
+    # The smooth-shaded holdout (Shade Smooth, Auto Smooth 60 degrees): the columns, vault, well and mound
+    # have one shading normal per vertex, so Smart UV's charts fold over edges the light does not step at.
+    from lmrefine.folds import fold_faces, smooth_shaded
+    scene = sample_scenes.load_sample("cloister")
+    corners = scene.positions[scene.triangles]
+    face = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    face /= np.linalg.norm(face, axis=1, keepdims=True)
+    smooth_corners = (scene.normals.reshape(-1, 3, 3) * face[:, None]).sum(axis=2) < 0.9999
+    assert 0.3 < smooth_corners.mean() < 0.7  # the paving (flat) is about half the triangles
+    positions = corners.reshape(-1, 3)
+    uvs, triangles = scene.layout("smart")
+    faces, corner, _ = fold_faces(uvs, triangles, positions, 20.0)
+    smooth = smooth_shaded(positions, triangles, scene.normals, faces, corner)
+    assert len(faces) > 50 and smooth.mean() > 0.8
+    _assert_valid_small_sample(scene, "cloister")
 
 
 def test_receivers_are_tessellated_finely_enough_to_move_texels():
