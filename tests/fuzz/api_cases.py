@@ -365,16 +365,23 @@ def case_refine_uvs_rechart(lm, rng):
         inset = inset[::-1]  # mirrored charts, as Lightmap Pack leaves some
     uvs = np.concatenate([(np.array([k % across, k // across]) + inset) * cell for k in range(count)])
     corner_positions = positions[triangles.ravel() % len(positions)] if len(positions) else positions
+    return _route_case(lm, rng, r, uvs, corner_positions, "re-chart route", {"strength": as_number})
+
+
+def _route_case(lm, rng, r, uvs, positions, what, extra_makers, normals=False):
+    """A hostile refine_uvs call on per-corner `uvs` with the mesh `positions` (the re-chart route's
+    input); with `normals`, shading normals half the time."""
     kwargs = {"lightmap": lightmap(rng, r), "uvs": uvs.astype(np.float32),
-              "triangles": np.arange(3 * count, dtype=np.int32).reshape(-1, 3), "resolution": r,
-              "padding": float(rng.choice([0, 1, 2])), "positions": corner_positions, "max_steps": 2,
-              "progress": None}
+              "triangles": np.arange(len(uvs), dtype=np.int32).reshape(-1, 3), "resolution": r,
+              "padding": float(rng.choice([0, 1, 2])), "positions": positions, "max_steps": 2, "progress": None}
+    if normals and rng.random() < 0.5:
+        kwargs["normals"] = shading_normals(rng, positions)
     makers = {"lightmap": as_array, "positions": as_array, "rechart": as_number, "resolution": as_resolution,
-              "padding": as_number, "progress": as_progress, "strength": as_number}
+              "padding": as_number, "progress": as_progress, **extra_makers}
     kwargs, chosen = mutate(kwargs, rng, makers)
     layout = (kwargs["uvs"], kwargs["triangles"], kwargs["resolution"], kwargs["padding"])
     return Case("refine_uvs", _call(lm.refine_uvs, dict(kwargs)), list(kwargs.values()), layout=layout,
-                description=f"refine_uvs (re-chart route) hostile: {chosen}")
+                description=f"refine_uvs ({what}) hostile: {chosen}")
 
 
 
@@ -390,17 +397,7 @@ def case_refine_uvs_folds(lm, rng):
     fold = rng.uniform(0.1, 0.9, 2)
     height = rng.uniform(-3, 3) * np.abs(uvs[:, 0] - fold[0]) + rng.uniform(-3, 3) * np.abs(uvs[:, 1] - fold[1])
     positions = np.column_stack([uvs, height]) * rng.choice([1e-6, 1.0, 1e6])
-    kwargs = {"lightmap": lightmap(rng, r), "uvs": uvs.astype(np.float32),
-              "triangles": np.arange(len(uvs), dtype=np.int32).reshape(-1, 3), "resolution": r,
-              "padding": float(rng.choice([0, 1, 2])), "positions": positions, "max_steps": 2, "progress": None}
-    if rng.random() < 0.5:
-        kwargs["normals"] = shading_normals(rng, positions)
-    makers = {"lightmap": as_array, "positions": as_array, "rechart": as_number, "resolution": as_resolution,
-              "padding": as_number, "progress": as_progress, "normals": as_array}
-    kwargs, chosen = mutate(kwargs, rng, makers)
-    layout = (kwargs["uvs"], kwargs["triangles"], kwargs["resolution"], kwargs["padding"])
-    return Case("refine_uvs", _call(lm.refine_uvs, dict(kwargs)), list(kwargs.values()), layout=layout,
-                description=f"refine_uvs (folded chart) hostile: {chosen}")
+    return _route_case(lm, rng, r, uvs, positions, "folded chart", {"normals": as_array}, normals=True)
 
 # ---------------------------------------------------------------- images
 
