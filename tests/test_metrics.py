@@ -55,6 +55,64 @@ def test_bilinear_lookup_follows_the_texel_space_convention():
     assert metrics.bilinear_lookup(ramp, np.array([[0.0, 0.5], [1.0, 0.5]]))[:, 0] == pytest.approx([0, 7])
 
 
+def bilinear_reference(image, uv):
+    """metrics.bilinear_lookup in plain numpy (what it was before the native
+    kernel): texel coordinates clamped to the border, the 2 x 2 texels
+    around, weights in float64."""
+    image = np.asarray(image)
+    if image.ndim == 2:
+        image = image[..., None]
+    uv = np.asarray(uv, np.float64)
+    height, width = image.shape[:2]
+    x = np.clip(uv[:, 0] * width - 0.5, 0.0, width - 1.0)
+    y = np.clip((1.0 - uv[:, 1]) * height - 0.5, 0.0, height - 1.0)
+    j0 = np.minimum(np.floor(x).astype(np.int64), width - 2) if width > 1 else np.zeros(len(x), np.int64)
+    i0 = np.minimum(np.floor(y).astype(np.int64), height - 2) if height > 1 else np.zeros(len(y), np.int64)
+    fx = (x - j0)[:, None] if width > 1 else np.zeros((len(x), 1))
+    fy = (y - i0)[:, None] if height > 1 else np.zeros((len(y), 1))
+    j1, i1 = np.minimum(j0 + 1, width - 1), np.minimum(i0 + 1, height - 1)
+    top = image[i0, j0] * (1 - fx) + image[i0, j1] * fx
+    bottom = image[i1, j0] * (1 - fx) + image[i1, j1] * fx
+    return top * (1 - fy) + bottom * fy
+
+
+@pytest.mark.parametrize("shape", [(33, 47, 3), (16, 16), (1, 9, 2), (9, 1), (1, 1, 4)])
+@pytest.mark.parametrize("dtype", [np.float32, np.float64, np.float16, np.int32])
+def test_bilinear_lookup_matches_the_numpy_reference_bit_for_bit(shape, dtype):
+    rng = np.random.default_rng(len(shape) * 100 + shape[0])
+    image = (rng.normal(size=shape) * 50).astype(dtype)
+    uv = rng.uniform(-0.2, 1.2, (3000, 2))
+    uv[:6] = [[np.inf, 0.5], [-np.inf, np.inf], [0, 1], [1, 0], [0.5, -np.inf], [0.5, 0.5]]
+    fast, slow = metrics.bilinear_lookup(image, uv), bilinear_reference(image, uv)
+    assert fast.dtype == slow.dtype == np.float64 and fast.shape == slow.shape
+    assert np.array_equal(fast, slow)
+    # A non-contiguous view and float32 UVs read the same.
+    view = np.asarray(image)[::-1][::-1]
+    assert np.array_equal(metrics.bilinear_lookup(view, uv.astype(np.float32)),
+                          bilinear_reference(image, uv.astype(np.float32)))
+    assert metrics.bilinear_lookup(image, np.zeros((0, 2))).shape == (0, slow.shape[1])
+
+
+def test_bilinear_lookup_refuses_bad_input():
+    from lmrefine import _native
+
+    image = np.zeros((4, 4, 3), np.float32)
+    with pytest.raises(ValueError, match=r"uv\[1\] is NaN"):
+        metrics.bilinear_lookup(image, np.array([[0.5, 0.5], [np.nan, 0.5]]))
+    with pytest.raises(ValueError, match=r"uv must have shape \(P, 2\)"):
+        metrics.bilinear_lookup(image, np.zeros((3, 3)))
+    with pytest.raises(ValueError, match="uv must hold real numbers"):
+        metrics.bilinear_lookup(image, np.array([["a", "b"]]))
+    with pytest.raises(ValueError, match="image is empty"):
+        metrics.bilinear_lookup(np.zeros((0, 4), np.float32), np.zeros((1, 2)))
+    with pytest.raises(ValueError, match="image must have shape"):
+        metrics.bilinear_lookup(np.zeros((2, 2, 2, 2), np.float32), np.zeros((1, 2)))
+    with pytest.raises(ValueError, match="image must be float32 or float64"):
+        _native.bilinear_lookup(np.zeros((2, 2), np.int32), np.zeros((1, 2)))
+    with pytest.raises(ValueError, match="image must be a numpy array"):
+        _native.bilinear_lookup([[0.0]], np.zeros((1, 2)))
+
+
 def test_a_perfect_lightmap_gives_zero_error():
     # Light that is linear in u (hence in x) is reproduced exactly by a
     # bilinear lookup of its texel-centre samples: zero error everywhere.

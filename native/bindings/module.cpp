@@ -15,6 +15,7 @@ namespace lmrefine::bindings {
 void bind_image_io(py::module_& m);
 void bind_coverage(py::module_& m);
 void bind_texel_points(py::module_& m);
+void bind_bilinear_lookup(py::module_& m);
 void bind_chart(py::module_& m);
 void bind_rechart(py::module_& m);
 void bind_packer(py::module_& m);
@@ -58,6 +59,7 @@ PYBIND11_MODULE(_native, m) {
     lmrefine::bindings::bind_image_io(m);
     lmrefine::bindings::bind_coverage(m);
     lmrefine::bindings::bind_texel_points(m);
+    lmrefine::bindings::bind_bilinear_lookup(m);
     lmrefine::bindings::bind_chart(m);
     lmrefine::bindings::bind_rechart(m);
     lmrefine::bindings::bind_packer(m);
