@@ -96,7 +96,8 @@ def resample_lightmap(lightmap, source_uvs, source_triangles, uvs, triangles, ma
     lightmap = np.asarray(lightmap, np.float32)
     shape = lightmap.shape[:2]
     triangle, bary = _texel_points(np.asarray(uvs, np.float64), triangles, shape, mask)
-    source = np.asarray(source_uvs, np.float64)[np.asarray(source_triangles)[triangle]]  # (P, 3, 2)
+    # Corners per triangle first (T, 3, 2), then per texel (P, 3, 2): one gather of the large array.
+    source = np.asarray(source_uvs, np.float64)[np.asarray(source_triangles)][triangle]
     values = metrics.bilinear_lookup(lightmap, np.einsum("pk,pkd->pd", bary, source))
     out = np.zeros(lightmap.shape[:2] + (values.shape[1],), np.float32)
     out[mask] = values
