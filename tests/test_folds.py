@@ -132,6 +132,26 @@ def test_route_recharts_a_folded_layout_with_room(roof_case):
     assert len(np.unique(lmrefine.find_charts(off.uvs, triangles, lmrefine.CHART_TOLERANCE))) == 1
 
 
+def test_route_on_a_folded_layout_equals_its_plain_pieces(roof_case, monkeypatch):
+    # The route's fast pieces (the native bilinear lookup of the carried map,
+    # one error model shared by both predictions) give the same bits as the
+    # plain ones: the numpy lookup and a fresh model per prediction.
+    from test_metrics import bilinear_reference
+
+    positions, uvs, triangles, lightmap = roof_case
+    fast = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, positions=positions)
+    model = rechart_route.ErrorModel
+    monkeypatch.setattr(lmrefine.metrics, "bilinear_lookup", bilinear_reference)
+    monkeypatch.setattr(rechart_route, "ErrorModel", lambda *args, **kwargs: type(
+        "Fresh", (), {"relative": staticmethod(lambda layout: model(*args, **kwargs).relative(layout))})())
+    plain = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, positions=positions)
+    assert fast.report["rechart"]["used"] and plain.report["rechart"]["used"]
+    assert np.array_equal(fast.uvs, plain.uvs) and np.array_equal(fast.grid, plain.grid)
+    for key in ("predicted_error", "predicted_error_source_route"):
+        assert fast.report["rechart"][key] == plain.report["rechart"][key]
+    assert fast.report["notes"] == plain.report["notes"]
+
+
 def test_route_without_folds_is_not_tried_and_says_why():
     # The same roof flattened: one chart, no crease, so the route is not tried (a crease search only).
     positions, uvs, triangles = _roof()

@@ -150,6 +150,23 @@ def test_predicted_error_of_scaled_layouts():
     assert rechart_route.predicted_error(half, uvs, triangles, energy) == pytest.approx(0.5, rel=1e-6)
 
 
+def test_one_error_model_predicts_as_fresh_calls(lightmap_pack_case):
+    # The route asks one model about two layouts: each answer equals
+    # predicted_error's own, bit for bit, in either order.
+    corners, uvs, triangles, lightmap = lightmap_pack_case
+    mask = lmrefine.coverage_mask(uvs, triangles, RESOLUTION)
+    energy = lmrefine.gradient_map(lightmap, mask).sum(axis=2)
+    _, _, one_chart = _floor_layouts()
+    layouts = [one_chart[0], uvs, (0.5 * uvs + 0.25).astype(np.float32)]
+    for args in ((), (corners, lightmap)):
+        model = rechart_route.ErrorModel(uvs, triangles, energy, *args)
+        shared = [model.relative(layout) for layout in layouts + layouts[::-1]]
+        fresh = [rechart_route.predicted_error(uvs, layout, triangles, energy, *args)
+                 for layout in layouts + layouts[::-1]]
+        assert shared == fresh
+    assert shared[1] == 1.0
+
+
 def test_predicted_error_counts_chart_borders():
     # A smooth light ramp (no edges): the same floor at the same texel density costs less with
     # one chart than with a chart per quad, whose borders the dilation fills.

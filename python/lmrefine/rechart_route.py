@@ -136,43 +136,72 @@ def predicted_error(source_uvs, uvs, triangles, energy, positions=None, lightmap
     in a fold's band count in the edge term only for layouts that keep the
     fold inside a chart, and the band's luminance slope (the bake's blurred
     step, not smooth light) is left out of the border term."""
-    source_uvs, uvs = np.asarray(source_uvs), np.asarray(uvs)
-    shape = energy.shape
-    edge = allocation.triangle_energy(source_uvs, triangles, energy)
-    before = np.abs(allocation.signed_areas(source_uvs, triangles))
-    after = np.abs(allocation.signed_areas(uvs, triangles))
-    if positions is None or lightmap is None:
-        keep = (before > 0) & (edge > 0)
-        total = float(edge[keep].sum())
-        if total <= 0:
-            return 1.0
-        return float((edge[keep] / np.sqrt(np.maximum(after[keep], 1e-300) / before[keep])).sum() / total)
-    corners = np.asarray(positions, np.float64)[triangles]
-    world = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
-    texels = float(shape[0] * shape[1])
-    keep = (before > 0) & (after > 0) & (world > 0)
-    # Texel size in world units per triangle, in each layout.
-    size_before = np.where(keep, np.sqrt(world / np.maximum(before * texels, 1e-300)), 0.0)
-    size_after = np.where(keep, np.sqrt(world / np.maximum(after * texels, 1e-300)), 0.0)
-    # Slope per world unit: the source bake's slope per texel over its texel size.
-    if mask is None:
-        mask = _native.coverage_mask(source_uvs, triangles, shape)
-    slope = allocation.luminance_slope(lightmap, mask)
-    if folds is not None:
-        slope = np.where(folds.band, np.float32(0), slope)
-    slope = allocation.opening(slope, mask)
-    rows, cols = allocation.triangle_texels(source_uvs, triangles, shape)
-    slope_world = np.where(keep, slope[rows, cols].mean(axis=1) / np.maximum(size_before, 1e-300), 0.0)
-    lengths = np.linalg.norm(corners - np.roll(corners, -1, axis=1), axis=2)  # edge k: corner k to k + 1
+    return ErrorModel(source_uvs, triangles, energy, positions, lightmap, mask, folds).relative(uvs)
 
-    def error(layout, size):
-        border = (_chart_borders(layout, triangles)[2] * lengths).sum(axis=1)
-        held = edge if folds is None else np.maximum(edge - folds.energy_removed(layout, triangles), 0.0)
-        return (allocation.EDGE_ERROR * (held * size_before * size)[keep].sum()
-                + allocation.BORDER_ERROR * (slope_world * border * size * size)[keep].sum())
 
-    source_error = error(source_uvs, size_before)
-    return float(error(uvs, size_after) / source_error) if source_error > 0 else 1.0
+class ErrorModel:
+    """predicted_error with what depends only on the source layout and the
+    first bake (texel sizes, the opened slope, the source layout's own error)
+    computed once: the route compares two layouts against the same source.
+    `relative(uvs)` is predicted_error(source_uvs, uvs, ...) bit for bit."""
+
+    def __init__(self, source_uvs, triangles, energy, positions=None, lightmap=None, mask=None, folds=None):
+        source_uvs = np.asarray(source_uvs)
+        self.triangles, self.folds, self.texels = triangles, folds, float(energy.shape[0] * energy.shape[1])
+        self.edge = allocation.triangle_energy(source_uvs, triangles, energy)
+        self.before = np.abs(allocation.signed_areas(source_uvs, triangles))
+        self.world = None
+        if positions is None or lightmap is None:
+            return
+        corners = np.asarray(positions, np.float64)[triangles]
+        self.world = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]),
+                                          axis=1)
+        # Texel size in world units per triangle in the source layout.
+        self.size_before = np.where(self.world > 0, np.sqrt(self.world / np.maximum(self.before * self.texels,
+                                                                                    1e-300)), 0.0)
+        # Slope per world unit: the source bake's slope per texel over its texel size.
+        if mask is None:
+            mask = _native.coverage_mask(source_uvs, triangles, energy.shape)
+        slope = allocation.luminance_slope(lightmap, mask)
+        if folds is not None:
+            slope = np.where(folds.band, np.float32(0), slope)
+        slope = allocation.opening(slope, mask)
+        rows, cols = allocation.triangle_texels(source_uvs, triangles, energy.shape)
+        self.slope_texel = slope[rows, cols].mean(axis=1)
+        self.lengths = np.linalg.norm(corners - np.roll(corners, -1, axis=1), axis=2)  # edge k: corner k to k + 1
+        self.source_uvs = source_uvs
+        self._source_error = {}  # per keep mask's bytes: the source layout's error over those triangles
+
+    def relative(self, uvs):
+        """The predicted error of layout `uvs` over the source layout's (1.0 = the same)."""
+        uvs = np.asarray(uvs)
+        edge, before = self.edge, self.before
+        after = np.abs(allocation.signed_areas(uvs, self.triangles))
+        if self.world is None:
+            keep = (before > 0) & (edge > 0)
+            total = float(edge[keep].sum())
+            if total <= 0:
+                return 1.0
+            return float((edge[keep] / np.sqrt(np.maximum(after[keep], 1e-300) / before[keep])).sum() / total)
+        keep = (before > 0) & (after > 0) & (self.world > 0)
+        size_before = np.where(keep, self.size_before, 0.0)
+        size_after = np.where(keep, np.sqrt(self.world / np.maximum(after * self.texels, 1e-300)), 0.0)
+        slope_world = np.where(keep, self.slope_texel / np.maximum(size_before, 1e-300), 0.0)
+
+        def error(layout, size):
+            border = (_chart_borders(layout, self.triangles)[2] * self.lengths).sum(axis=1)
+            held = edge if self.folds is None else np.maximum(edge - self.folds.energy_removed(layout,
+                                                                                               self.triangles), 0.0)
+            return (allocation.EDGE_ERROR * (held * size_before * size)[keep].sum()
+                    + allocation.BORDER_ERROR * (slope_world * border * size * size)[keep].sum())
+
+        # The source's error depends on the layout only through `keep` (the
+        # triangles with area in both): computed once per keep mask.
+        key = keep.tobytes()
+        if key not in self._source_error:
+            self._source_error[key] = error(self.source_uvs, size_before)
+        source_error = self._source_error[key]
+        return float(error(uvs, size_after) / source_error) if source_error > 0 else 1.0
 
 
 def _per_index(recharted, uvs, triangles):
@@ -251,9 +280,10 @@ def refine_recharted(refine, lightmap, uvs, triangles, shape, padding, positions
     if worse:
         info["reason"] = f"the re-charted layout failed {', '.join(worse)} against the source layout"
         return None, info
-    info["predicted_error"] = predicted_error(uvs, result.uvs, triangles, energy, positions, lightmap, folds=folds)
-    info["predicted_error_source_route"] = predicted_error(uvs, source_result.uvs, triangles, energy, positions,
-                                                           lightmap, folds=folds)
+    # One model of the source layout for both predictions (its texel sizes, slope and error).
+    model = ErrorModel(uvs, triangles, energy, positions, lightmap, folds=folds)
+    info["predicted_error"] = model.relative(result.uvs)
+    info["predicted_error_source_route"] = model.relative(source_result.uvs)
     # Both against the source layout; the lower prediction wins (the source
     # layout's own refinement is never worse than the source by its checks).
     if not (info["predicted_error"] < REQUIRED_GAIN
