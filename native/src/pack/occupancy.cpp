@@ -24,7 +24,7 @@ void keep_inside(const std::vector<Span>& candidates, const std::vector<Span>& r
         while (k < candidates.size() && candidates[k].second <= first) ++k;
         for (size_t m = k; m < candidates.size() && candidates[m].first < last; ++m) {
             const int a = std::max(first, candidates[m].first), b = std::min(last, candidates[m].second);
-            if (a < b) out.push_back({a, b});
+            if (a < b) out.emplace_back(a, b);
         }
     }
 }
