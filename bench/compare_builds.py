@@ -119,6 +119,28 @@ def cases(size):
             listed.append((f"refine {scene_name}/{variant} same scalar passes=1",
                            refine(f"{scene_name}/{variant}")))
 
+    # The re-chart route (refine_uvs with the mesh, the repack on): the source refinement, the
+    # re-charting, the carried map and the second refinement, on every scene whose layout folds
+    # over creases or gives no room. A smooth light with one hard shadow edge stands in for a bake.
+    rows, cols = np.mgrid[0:size, 0:size] / size
+    light = (0.2 + 0.6 * rows * cols + 0.8 * (cols > 0.37 + 0.2 * rows))[..., None] * np.float32([1.0, 0.9, 0.8])
+    light = np.ascontiguousarray(light, np.float32)
+    for scene_name in sample_names(samples):
+        scene = load_sample(os.path.join(samples, scene_name + ".npz"))
+        for variant in scene.uvs:
+            uvs, tris = scene.layout(variant)
+            listed.append((f"route {scene_name}/{variant}",
+                           lambda scene=scene, uvs=uvs, tris=tris: (lambda result: {
+                               "uvs": result.uvs, "grid": result.grid,
+                               "report": {k: v for k, v in result.report.items() if k != "notes"},
+                               "notes": result.report["notes"]})(
+                                   lmrefine.refine_uvs(light, uvs, tris, size, positions=scene.corner_positions))))
+        listed.append((f"rechart {scene_name}", lambda scene=scene: lmrefine.rechart(
+            scene.positions, scene.triangles, 20.0, size)))
+    points = rng.uniform(-0.1, 1.1, (20000, 2))
+    from lmrefine import metrics
+    listed.append(("bilinear_lookup", lambda: metrics.bilinear_lookup(light, points)))
+
     def bake():
         scene = load_sample(os.path.join(samples, "room.npz"))
         uvs, _ = scene.layout("lightmap")
