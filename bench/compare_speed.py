@@ -1,6 +1,9 @@
 """Is a change to the automaton as fast as before? The CPU time of
 `run_automaton` on the bench plane's energy map (hard shadow edge, D4
-gradient map, strength 24), scalar and four-spring, in two builds, each in
+gradient map, strength 24), scalar and four-spring; with `--case route`,
+of `refine_uvs` on bench_refine's folded_smart_uv case (courtyard's Smart
+UV atlas, its bake at a quarter of the size scaled up) without the mesh
+(the source refinement) and with it (the re-chart route); in two builds, each in
 its own subprocess with PYTHONPATH set to that build's python/ directory,
 alternating base and new so both see the same machine load. Prints the best
 time of each and the ratio new / base.
@@ -10,6 +13,7 @@ machine that is steadier than wall time (other jobs take cores, not CPU
 time); a ratio within about 3% is noise.
 
     /usr/bin/python3 bench/compare_speed.py --base /tmp/base/python --new python [--rounds 5] [--size 1024] [--threads 1]
+    /usr/bin/python3 bench/compare_speed.py --base /tmp/base/python --new python --case route --rounds 3
 """
 
 import argparse
@@ -45,10 +49,34 @@ for name, energy in (("scalar", gradient.sum(axis=2)), ("four-spring", gradient)
 print(json.dumps(times))
 """
 
+ROUTE_CHILD = r"""
+import json, sys, time
+size = int(sys.argv[1])
+import numpy as np
+import lmrefine
+from lmrefine.sample_scenes import load_sample
+sample = load_sample("courtyard")
+uvs, tris = sample.layout("smart")
+positions = sample.positions[sample.triangles].reshape(-1, 3)
+small = lmrefine.bake(sample.to_scene(uvs), size // 4, passes="direct", samples=8, seed=0)[0][..., :3]
+lightmap = np.ascontiguousarray(np.kron(small, np.ones((4, 4, 1))), dtype=np.float32)
+times = {}
+for name, extra in (("source refinement", {}), ("re-chart route", {"positions": positions})):
+    best = float("inf")
+    for _ in range(2):
+        start = time.process_time()
+        result = lmrefine.refine_uvs(lightmap, uvs, tris, size, **extra)
+        best = min(best, time.process_time() - start)
+    times[name] = best
+assert result.report["rechart"]["used"]
+print(json.dumps(times))
+"""
 
-def measure(python_dir, size, threads):
+
+def measure(python_dir, size, threads, case="automaton"):
     env = dict(os.environ, PYTHONPATH=os.path.abspath(python_dir), LMREFINE_THREADS=str(threads))
-    out = subprocess.run([sys.executable, "-c", CHILD, str(size), os.path.join(HERE, "..", "tests")],
+    child = ROUTE_CHILD if case == "route" else CHILD
+    out = subprocess.run([sys.executable, "-c", child, str(size), os.path.join(HERE, "..", "tests")],
                          env=env, capture_output=True, text=True, check=True).stdout
     return json.loads(out)
 
@@ -60,16 +88,23 @@ def main():
     parser.add_argument("--rounds", type=int, default=5, help="subprocesses per build, alternating (default 5)")
     parser.add_argument("--size", type=int, default=1024, help="lightmap resolution (default 1024)")
     parser.add_argument("--threads", type=int, default=1, help="LMREFINE_THREADS (default 1)")
+    parser.add_argument("--case", choices=("automaton", "route"), default="automaton",
+                        help="run_automaton on the plane (default), or refine_uvs' re-chart route")
     args = parser.parse_args()
     runs = {"base": [], "new": []}
     for _ in range(args.rounds):
         for build, path in (("base", args.base), ("new", args.new)):
-            runs[build].append(measure(path, args.size, args.threads))
-    print(f"run_automaton at {args.size}^2, {args.threads} thread(s), CPU seconds, best of {3 * args.rounds}:")
+            runs[build].append(measure(path, args.size, args.threads, args.case))
+    what, per_run = ("refine_uvs on courtyard's Smart UV atlas", 2) if args.case == "route" else ("run_automaton", 3)
+    print(f"{what} at {args.size}^2, {args.threads} thread(s), CPU seconds, best of {per_run * args.rounds}:")
     for name in runs["base"][0]:
         base = min(r[name] for r in runs["base"])
         new = min(r[name] for r in runs["new"])
-        print(f"  {name:<12} base {base:.3f}  new {new:.3f}  new/base {new / base:.3f}")
+        print(f"  {name:<18} base {base:.3f}  new {new:.3f}  new/base {new / base:.3f}")
+    if args.case == "route":
+        for build in runs:
+            route, source = (min(r[name] for r in runs[build]) for name in ("re-chart route", "source refinement"))
+            print(f"  {build}: the route costs {route / source:.2f}x the source refinement")
 
 
 if __name__ == "__main__":
