@@ -66,12 +66,29 @@ void Occupancy::update_runs(int row) {
 bool Occupancy::first_fit(const Footprint& fp, int& out_x, int& out_y, int last_row) const {
     const int fw = fp.covered.width, fh = fp.covered.height;
     if (fw > width_ || fh > height_) return false;
-    for (int y = 0; y + fh <= height_ && y <= last_row; ++y) {
+    // Atlas row q is too short for footprint row r: no corner row up to q
+    // that puts q at a footprint row with a longer span can fit either. The
+    // corner row to try next is the first that puts q at a footprint row
+    // whose longest span fits (past q when none does); the rows skipped
+    // would each fail the tests below.
+    const auto next_row = [&](int q, int r) {
+        const int free = longest_[size_t(q)];
+        int k = r - 1;
+        while (k >= 0 && fp.longest[size_t(k)] > free) --k;
+        return q - k;
+    };
+    for (int y = 0; y + fh <= height_ && y <= last_row;) {
         // A row whose longest free run is too short rules the row out at once.
-        if (longest_[size_t(y + fp.tightest)] < fp.longest[size_t(fp.tightest)]) continue;
-        bool runs_long_enough = true;
-        for (int r = 0; r < fh && runs_long_enough; ++r) runs_long_enough = longest_[size_t(y + r)] >= fp.longest[size_t(r)];
-        if (!runs_long_enough) continue;
+        if (longest_[size_t(y + fp.tightest)] < fp.longest[size_t(fp.tightest)]) {
+            y = next_row(y + fp.tightest, fp.tightest);
+            continue;
+        }
+        int long_enough = 0;  // footprint rows from the top whose atlas row has a long enough run
+        while (long_enough < fh && longest_[size_t(y + long_enough)] >= fp.longest[size_t(long_enough)]) ++long_enough;
+        if (long_enough < fh) {
+            y = next_row(y + long_enough, long_enough);
+            continue;
+        }
         // The corners where every span lies in a free run, narrowed row by
         // row (the tightest row first: it leaves the fewest).
         candidates_.assign(1, {0, width_ - fw + 1});
@@ -88,6 +105,7 @@ bool Occupancy::first_fit(const Footprint& fp, int& out_x, int& out_y, int last_
             out_y = y;
             return true;
         }
+        ++y;
     }
     return false;
 }
