@@ -318,6 +318,29 @@ def test_placement_rule_matches_the_plain_reference(seed):
     assert lmrefine._native._first_fit(occupied, chart, padding) == reference_first_fit(occupied, chart, padding)
 
 
+@pytest.mark.parametrize("seed", range(30))
+def test_placement_rule_skips_rows_too_short_as_the_reference(seed):
+    # Rows with one free run of random length and charts whose rows have
+    # different lengths (a triangle's or a lens's): first_fit jumps over the
+    # corner rows where some atlas row is too short for its chart row; the
+    # placement must still be the plain rule's first one.
+    rng = np.random.default_rng(1000 + seed)
+    height, width = int(rng.integers(6, 14)), int(rng.integers(6, 16))
+    occupied = np.ones((height, width), bool)
+    for row in range(height):  # mostly long runs, some short ones
+        length = int(rng.integers(0, width + 1)) if rng.random() < 0.35 else width - int(rng.integers(0, 4))
+        start = int(rng.integers(0, width - length + 1))
+        occupied[row, start:start + length] = False
+    rows = int(rng.integers(2, 6))
+    chart = np.zeros((rows, 5), bool)
+    for row in range(rows):
+        length = int(rng.integers(1, 6))
+        start = int(rng.integers(0, 6 - length))
+        chart[row, start:start + length] = True
+    padding = float(rng.choice([0.0, 1.0, 1.5]))
+    assert lmrefine._native._first_fit(occupied, chart, padding) == reference_first_fit(occupied, chart, padding)
+
+
 def test_a_triangle_smaller_than_the_tolerance_is_not_collapsed():
     # A sliver whose short edge (5e-6) is below the tolerance, beside a quad
     # sharing its long corner: snapping its two close corners together would
