@@ -133,15 +133,15 @@ def test_route_recharts_a_folded_layout_with_room(roof_case):
 
 
 def test_route_on_a_folded_layout_equals_its_plain_pieces(roof_case, monkeypatch):
-    # The route's fast pieces (the native bilinear lookup of the carried map,
-    # one error model shared by both predictions) give the same bits as the
-    # plain ones: the numpy lookup and a fresh model per prediction.
-    from test_metrics import bilinear_reference
+    # The route's fast pieces (the native carried map, one error model shared
+    # by both predictions) give the same bits as the plain ones: the numpy
+    # resampling and a fresh model per prediction.
+    from test_rechart_route import _resample_numpy
 
     positions, uvs, triangles, lightmap = roof_case
     fast = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, positions=positions)
     model = rechart_route.ErrorModel
-    monkeypatch.setattr(lmrefine.metrics, "bilinear_lookup", bilinear_reference)
+    monkeypatch.setattr(rechart_route, "resample_lightmap", _resample_numpy)
     monkeypatch.setattr(rechart_route, "ErrorModel", lambda *args, **kwargs: type(
         "Fresh", (), {"relative": staticmethod(lambda layout: model(*args, **kwargs).relative(layout))})())
     plain = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, positions=positions)

@@ -10,6 +10,7 @@ import pytest
 import lmrefine
 from lmrefine import rechart_route
 from layouts import floor_grid, grid_chart, lightmap_pack, smart_uv
+from test_metrics import bilinear_reference
 
 CELLS = 12
 RESOLUTION = 128
@@ -111,6 +112,71 @@ def _resample_reference(lightmap, source_uvs, source_triangles, uvs, triangles, 
     return out
 
 
+def _texel_points_numpy(uvs, triangles, shape, mask):
+    """For every texel of `mask` in row-major order: the triangle holding its
+    centre (texel_points) and the centre's barycentrics there, clamped into
+    the triangle; a third each where no triangle with area reaches."""
+    triangle, bary, score = lmrefine._native.texel_points(uvs, triangles, shape)
+    where = np.asarray(mask, bool)
+    bary = np.clip(bary[where], 0.0, None)
+    bary /= np.maximum(bary.sum(axis=1, keepdims=True), 1e-300)
+    bary[~np.isfinite(score[where])] = 1.0 / 3.0
+    return triangle[where], bary
+
+
+def _resample_numpy(lightmap, source_uvs, source_triangles, uvs, triangles, mask):
+    """resample_lightmap as it was in numpy before the native kernel
+    (_native.carry_lightmap), which must give the same bits."""
+    lightmap = np.asarray(lightmap, np.float32)
+    triangle, bary = _texel_points_numpy(np.asarray(uvs, np.float64), triangles, lightmap.shape[:2], mask)
+    source = np.asarray(source_uvs, np.float64)[np.asarray(source_triangles)[triangle]]  # (P, 3, 2)
+    values = bilinear_reference(lightmap, np.einsum("pk,pkd->pd", bary, source))
+    out = np.zeros(lightmap.shape[:2] + (values.shape[1],), np.float32)
+    out[mask] = values
+    return out.reshape(lightmap.shape)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_resample_lightmap_matches_its_numpy_form_bit_for_bit(seed):
+    # Random triangles over and beyond the map (texels they only graze, overlaps, a degenerate
+    # one), a random source layout of the same triangles, RGB and single-channel maps.
+    rng = np.random.default_rng(seed)
+    count = int(rng.integers(1, 30))
+    uvs = rng.uniform(-0.1, 1.1, (3 * count, 2))
+    uvs[:3] = uvs[0]  # no area: texels only it reaches take a third of each corner
+    triangles = np.arange(3 * count, dtype=np.int32).reshape(-1, 3)
+    source_uvs = rng.uniform(0, 1, (3 * count, 2)).astype(np.float32)
+    source_triangles = triangles[:, ::-1].copy()
+    shape = (int(rng.integers(1, 40)), int(rng.integers(1, 40)))
+    mask = rng.random(shape) < 0.8
+    for channels in ((3,), ()):
+        lightmap = rng.uniform(0, 4, shape + channels).astype(np.float32)
+        fast = rechart_route.resample_lightmap(lightmap, source_uvs, source_triangles, uvs, triangles, mask)
+        slow = _resample_numpy(lightmap, source_uvs, source_triangles, uvs, triangles, mask)
+        assert fast.dtype == slow.dtype == np.float32 and fast.shape == slow.shape == lightmap.shape
+        assert np.array_equal(fast, slow)
+
+
+def test_carry_lightmap_refuses_bad_input():
+    carry = lmrefine._native.carry_lightmap
+    lightmap, mask = np.zeros((8, 8, 3), np.float32), np.ones((8, 8), bool)
+    uvs, triangles = np.array([[0, 0], [1, 0], [0, 1]], np.float64), np.array([[0, 1, 2]], np.int32)
+    with pytest.raises(ValueError, match="lightmap must be float32"):
+        carry(lightmap.astype(np.float64), uvs, triangles, uvs, triangles, mask)
+    with pytest.raises(ValueError, match=r"source_uvs\[1\] is NaN"):
+        carry(lightmap, np.array([[0, 0], [np.nan, 0], [0, 1]]), triangles, uvs, triangles, mask)
+    with pytest.raises(ValueError, match=r"uvs must have shape \(N, 2\)"):
+        carry(lightmap, uvs, triangles, np.zeros((3, 3)), triangles, mask)
+    with pytest.raises(ValueError, match=r"triangles\[0\] indexes uvs row 3"):
+        carry(lightmap, uvs, triangles, uvs, np.array([[0, 1, 3]]), mask)
+    with pytest.raises(ValueError, match="the same triangles"):
+        carry(lightmap, uvs, np.zeros((2, 3), np.int32), uvs, triangles, mask)
+    with pytest.raises(ValueError, match="mask must have the lightmap's shape"):
+        carry(lightmap, uvs, triangles, uvs, triangles, np.ones((8, 7), bool))
+    with pytest.raises(ValueError, match="mask must be a numpy array"):
+        carry(lightmap, uvs, triangles, uvs, triangles, None)
+
+
 def test_resample_lightmap_matches_the_reference(rng):
     positions, triangles = floor_grid(3, 1.0)
     source = lightmap_pack(charts_across=3, margin_texels=2, resolution=32)
@@ -133,7 +199,7 @@ def test_resample_lightmap_carries_a_linear_light_exactly():
     mask = lmrefine.coverage_mask(target_uvs, triangles, 64)
     carried = rechart_route.resample_lightmap(lightmap, source_uvs, triangles, target_uvs, triangles, mask)
     # Where a target texel's centre lies inside a triangle, the value is that point's source u.
-    triangle, bary = rechart_route._texel_points(target_uvs.astype(np.float64), triangles, (64, 64), mask)
+    triangle, bary = _texel_points_numpy(target_uvs.astype(np.float64), triangles, (64, 64), mask)
     expected = np.einsum("pk,pk->p", bary, source_uvs[triangles[triangle], 0])
     inside = np.abs(carried[mask] - expected) < 1e-4
     assert inside.mean() > 0.6  # texels whose bilinear footprint stays inside their source chart

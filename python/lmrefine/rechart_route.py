@@ -15,7 +15,7 @@ route".
 
 import numpy as np
 
-from . import _native, allocation, backoff, metrics
+from . import _native, allocation, backoff
 from .charting import rechart
 from .packer import CHART_TOLERANCE
 
@@ -92,29 +92,13 @@ def resample_lightmap(lightmap, source_uvs, source_triangles, uvs, triangles, ma
     takes the bilinear value of the source map at the same surface point (the
     texel centre in the triangle that holds it, or the nearest point of the
     nearest triangle for a texel a triangle only grazes). Other texels are 0.
-    Returns float32 with the lightmap's shape."""
+    Returns float32 with the lightmap's shape.
+
+    Native (lmrefine._native.carry_lightmap: texel_points, then per texel
+    the clamped barycentrics, the source UV and the bilinear lookup, on all
+    cores), bit-identical to the numpy reference in tests/test_rechart_route.py."""
     lightmap = np.asarray(lightmap, np.float32)
-    shape = lightmap.shape[:2]
-    triangle, bary = _texel_points(np.asarray(uvs, np.float64), triangles, shape, mask)
-    # Corners per triangle first (T, 3, 2), then per texel (P, 3, 2): one gather of the large array.
-    source = np.asarray(source_uvs, np.float64)[np.asarray(source_triangles)][triangle]
-    values = metrics.bilinear_lookup(lightmap, np.einsum("pk,pkd->pd", bary, source))
-    out = np.zeros(lightmap.shape[:2] + (values.shape[1],), np.float32)
-    out[mask] = values
-    return out.reshape(lightmap.shape)
-
-
-def _texel_points(uvs, triangles, shape, mask):
-    """For every texel of `mask` in row-major order: the triangle holding its
-    centre (the one it lies deepest in, lmrefine._native.texel_points) and the
-    centre's barycentrics there, clamped into the triangle for texels no
-    centre of which lies inside."""
-    triangle, bary, score = _native.texel_points(uvs, triangles, shape)
-    where = np.asarray(mask, bool)
-    bary = np.clip(bary[where], 0.0, None)
-    bary /= np.maximum(bary.sum(axis=1, keepdims=True), 1e-300)
-    bary[~np.isfinite(score[where])] = 1.0 / 3.0  # a texel only degenerate triangles touch
-    return triangle[where], bary
+    return _native.carry_lightmap(lightmap, source_uvs, source_triangles, uvs, triangles, np.asarray(mask, bool))
 
 
 def predicted_error(source_uvs, uvs, triangles, energy, positions=None, lightmap=None, mask=None, folds=None):

@@ -6,6 +6,9 @@
 
 #include <glm/vec2.hpp>
 
+#include "lmrefine/core/parallel.h"
+#include "lmrefine/layout/bilinear_lookup.h"
+
 namespace lmrefine {
 
 TexelPoints texel_points(const double* uvs, const int32_t* triangles, int64_t triangle_count, int width,
@@ -49,6 +52,37 @@ TexelPoints texel_points(const double* uvs, const int32_t* triangles, int64_t tr
             }
         }
     }
+    return out;
+}
+
+std::vector<float> carry_lightmap(const TexelPoints& points, const uint8_t* mask, const double* source_uvs,
+                                  const int32_t* source_triangles, const float* image, int width, int height,
+                                  int channels) {
+    const int64_t texels = int64_t(width) * int64_t(height);
+    std::vector<float> out(size_t(texels) * size_t(channels), 0.0f);
+    parallel_for(texels, 1 << 14, [&](int64_t begin, int64_t end) {
+        std::vector<double> value(static_cast<size_t>(channels));  // one texel's channels
+        for (int64_t i = begin; i < end; ++i) {
+            if (!mask[i]) continue;
+            double w[3];
+            if (std::isfinite(points.score[size_t(i)])) {
+                // Clamped into the triangle (a texel it only grazes), summed left to right as numpy sums.
+                for (int k = 0; k < 3; ++k) w[k] = std::max(points.bary[size_t(3 * i + k)], 0.0);
+                const double sum = std::max((0.0 + w[0]) + w[1] + w[2], 1e-300);
+                for (double& weight : w) weight /= sum;
+            } else {
+                w[0] = w[1] = w[2] = 1.0 / 3.0;  // a texel only degenerate triangles touch
+            }
+            const int32_t* corner = source_triangles + 3 * points.triangle[size_t(i)];
+            double u = 0.0, v = 0.0;
+            for (int k = 0; k < 3; ++k) {
+                u += w[k] * source_uvs[2 * corner[k]];
+                v += w[k] * source_uvs[2 * corner[k] + 1];
+            }
+            bilinear_sample(image, width, height, channels, u, v, value.data());
+            for (int c = 0; c < channels; ++c) out[size_t(i * channels + c)] = float(value[size_t(c)]);
+        }
+    });
     return out;
 }
 

@@ -27,4 +27,18 @@ struct TexelPoints {
 TexelPoints texel_points(const double* uvs, const int32_t* triangles, int64_t triangle_count, int width,
                          int height);
 
+// A lightmap `image` (height, width, channels) baked on the source layout
+// (source_uvs, source_triangles) carried over to the layout whose texel
+// points are `points` (texel_points of the same triangles, same size): each
+// texel of `mask` (H * W bytes, nonzero = covered) takes the bilinear value
+// (bilinear_lookup.h) of the source map at the same surface point, its
+// barycentrics clamped to >= 0 and normalized (a third each where no
+// triangle with area reaches); other texels are 0. Returns H * W * channels
+// floats. The order of operations is resample_lightmap's numpy one
+// (python/lmrefine/rechart_route.py before this kernel): the same bits.
+// Indices must be in range (the caller validates them).
+std::vector<float> carry_lightmap(const TexelPoints& points, const uint8_t* mask, const double* source_uvs,
+                                  const int32_t* source_triangles, const float* image, int width, int height,
+                                  int channels);
+
 }  // namespace lmrefine
