@@ -117,13 +117,15 @@ SurfacePoint TexelGeometry::point_on(const Candidate& c, const glm::dvec3& weigh
 }
 
 SurfacePoint TexelGeometry::at(double px, double py) const {
-    const Candidate* inside = containing(px, py);
-    if (inside) return point_on(*inside, inside->wx * px + inside->wy * py + inside->w0);
-    // Outside every candidate (a texel the chart covers only partly). The
-    // sample is mirrored across the nearest edge, so the texel averages the
-    // band of the chart along its border rather than its border line: a
-    // point on the line where a wall meets the floor sees the floor from
-    // its ray origin and reads as shadow, darkening the whole border texel.
+    for (const Candidate& c : candidates_) {
+        const glm::dvec3 w = c.wx * px + c.wy * py + c.w0;
+        if (w.x >= 0.0 && w.y >= 0.0 && w.z >= 0.0) return point_on(c, w);
+    }
+    // Outside every candidate (a texel the chart covers only partly): the
+    // nearest point of the nearest triangle, moved a little towards the
+    // triangle's centre. A point on the border line itself reads a contact
+    // line as shadow: where a wall stands on a floor, a ray from the wall's
+    // bottom edge starts in the floor's plane and finds the floor.
     const glm::dvec2 p(px, py);
     const Candidate* best = &candidates_.front();
     glm::dvec2 best_point = p;
@@ -139,21 +141,11 @@ SurfacePoint TexelGeometry::at(double px, double py) const {
             }
         }
     }
-    const glm::dvec2 mirror = 2.0 * best_point - p;
-    if (const Candidate* c = containing(mirror.x, mirror.y)) return point_on(*c, c->wx * mirror.x + c->wy * mirror.y + c->w0);
-    // A thin chart the mirror leaves too: the nearest point, moved a little
-    // towards the triangle's centre so that it is not on the border line.
+    const glm::dvec2 centre = (best->corner[0] + best->corner[1] + best->corner[2]) / 3.0;
+    const double to_centre = glm::length(centre - best_point);
+    if (to_centre > 0.0) best_point += (centre - best_point) * (std::min(kInset, 0.5 * to_centre) / to_centre);
     glm::dvec3 w = glm::clamp(best->wx * best_point.x + best->wy * best_point.y + best->w0, 0.0, 1.0);
-    w /= (w.x + w.y + w.z);
-    return point_on(*best, w * (1.0 - kInset) + glm::dvec3(kInset / 3.0));
-}
-
-const TexelGeometry::Candidate* TexelGeometry::containing(double px, double py) const {
-    for (const Candidate& c : candidates_) {
-        const glm::dvec3 w = c.wx * px + c.wy * py + c.w0;
-        if (w.x >= 0.0 && w.y >= 0.0 && w.z >= 0.0) return &c;
-    }
-    return nullptr;
+    return point_on(*best, w / (w.x + w.y + w.z));
 }
 
 }  // namespace lmrefine
