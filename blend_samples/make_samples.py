@@ -500,10 +500,64 @@ def cloister():
     return {"passes": ["direct"]}
 
 
+def depot():
+    """A goods depot (holdout: never used to tune constants; added after the
+    baker's border fix, with props resting on the floor and on each other,
+    so that many chart borders run along contact lines): crates on the
+    floor and stacked, a pallet rack along the back wall, a loading ramp; a
+    roof with a grid of skylights lets the sun in as bright patches, a
+    rectangular panel light over the ramp and a lamp by the door."""
+    make_object("Floor", lambda bm: grid_faces(bm, (-7, -5, 0), (14, 0, 0), (0, 10, 0), 46, 33), (0.6, 0.6, 0.58),
+                closed=False)
+    make_object("BackWall", lambda bm: grid_faces(bm, (-7, 5, 0), (14, 0, 0), (0, 0, 4.0), 46, 13),
+                (0.74, 0.72, 0.68), closed=False)
+
+    def crates(bm):
+        for center, size in (((-4.5, -1.5, 0.5), (1.0, 1.0, 1.0)), ((-4.5, -1.5, 1.35), (0.7, 0.7, 0.7)),
+                             ((-2.6, -2.8, 0.4), (1.6, 0.8, 0.8)), ((1.0, -1.0, 0.6), (1.2, 1.2, 1.2)),
+                             ((2.2, -1.2, 0.35), (0.7, 0.9, 0.7)), ((1.0, -1.0, 1.6), (0.8, 0.8, 0.8)),
+                             ((4.8, 1.5, 0.45), (0.9, 1.4, 0.9))):
+            box_faces(bm, center, size)
+    make_object("Crates", crates, (0.66, 0.52, 0.36))
+
+    def rack(bm):
+        for z in (0.9, 1.9, 2.9):
+            box_faces(bm, (-1.0, 4.45, z), (9.0, 0.9, 0.06))
+    make_object("RackShelves", rack, (0.55, 0.58, 0.62))
+
+    def uprights(bm):
+        for x in (-5.5, -2.5, 0.5, 3.5):
+            for y in (4.05, 4.85):
+                box_faces(bm, (x, y, 1.5), (0.08, 0.08, 3.0), cell=9.0)
+    make_object("RackUprights", uprights, (0.3, 0.35, 0.6), receiver=False)
+    run = 3.0
+    lift = 0.9
+
+    def ramp(bm):
+        grid_faces(bm, (4.0, -4.8, 0), (2.4, 0, 0), (0, run, lift), cells(2.4), cells(math.hypot(run, lift)))
+    make_object("Ramp", ramp, (0.62, 0.6, 0.56), closed=False)
+
+    def roof(bm):
+        # Skylights: a 3 x 2 grid of openings in a roof 4.6 m up (an occluder only).
+        # Openings as (x0, y0, x1, y1) fractions; the grid's u runs along y, so it takes them as (y, x).
+        holes = [(0.12 + 0.3 * i, 0.2 + 0.4 * j, 0.24 + 0.3 * i, 0.4 + 0.4 * j) for i in range(3) for j in range(2)]
+        grid_faces(bm, (-7, -5, 4.6), (0, 10, 0), (14, 0, 0), 40, 56, holes=[(y0, x0, y1, x1) for x0, y0, x1, y1 in holes])
+    make_object("Roof", roof, (0.5, 0.5, 0.5), receiver=False, closed=False)
+    add_light("Sun", "SUN", (0, 0, 10), (math.radians(30), 0.0, math.radians(160)), energy=5.0,
+              angle=math.radians(0.5))
+    panel_at = Vector((5.2, -3.0, 3.0))
+    add_light("Panel", "AREA", panel_at, aim(panel_at, (5.2, -3.0, 0.0)), energy=300.0, shape="RECTANGLE",
+              size=1.6, size_y=0.3, color=(0.85, 0.9, 1.0))
+    add_light("Lamp", "POINT", (-6.2, -4.0, 2.8), energy=150.0, shadow_soft_size=0.1, color=(1.0, 0.8, 0.55))
+    set_world((0.04, 0.05, 0.07))
+    return {"passes": ["direct"]}
+
+
 # Which scenes tune the refiner's constants and which only report is in
 # docs/evaluation.md ("Tuning scenes and holdout scenes").
 SCENES = {"courtyard": courtyard, "room": room, "fence_and_tree": fence_and_tree, "game_level": game_level,
-          "atrium": atrium, "plaza": plaza, "alley": alley, "village": village, "cloister": cloister}
+          "atrium": atrium, "plaza": plaza, "alley": alley, "village": village, "cloister": cloister,
+          "depot": depot}
 
 
 # --------------------------------------------------------------------------- UVs and export

@@ -121,6 +121,30 @@ def test_smooth_sphere_under_a_sun_has_no_self_shadowing():
     assert np.all(image[cosine < -0.2, 0] == 0.0)
 
 
+def test_a_chart_border_on_a_contact_line_bakes_as_the_surface_next_to_it():
+    """A wall standing on a floor, its chart's bottom edge through the middle
+    of a texel row: that row's texels are half outside the chart. Their
+    outside samples must land on the wall near its bottom, which the sun
+    lights, not on the line where wall and floor meet, where a ray starts in
+    the floor's plane and finds it (the row baked half dark before)."""
+    resolution = 32
+    u0, v0, u1, v1 = 8.5 / resolution, 4.5 / resolution, 23.5 / resolution, 27.5 / resolution
+    scene = lmrefine.Scene()
+    wall, wall_triangles, wall_uvs = quad(([-1, 0, 0], [1, 0, 0], [-1, 0, 2]), (u0, v0, u1, v1))  # faces -y
+    scene.add_mesh(wall, wall_triangles, uvs=wall_uvs)
+    ground, ground_triangles, _ = floor(half=3.0)
+    scene.add_mesh(ground, ground_triangles, receiver=False)
+    scene.add_light("sun", energy=3.0, angle=0.0, direction=(0.0, 1.0, -1.0))
+    image = lmrefine.bake(scene, resolution, samples=16, dilation=0)[0][..., 0]
+    columns = slice(10, 22)
+    bottom = resolution - 5  # the row v in [4, 5] / resolution: half inside the chart
+    inner = image[8:resolution - 8, columns]
+    expected = 3.0 * np.cos(np.pi / 4) / np.pi  # irradiance / pi (the colour pass is off)
+    np.testing.assert_allclose(inner, expected, rtol=1e-3)
+    np.testing.assert_allclose(image[bottom, columns], expected, rtol=0.02)
+    np.testing.assert_allclose(image[resolution - 28, columns], expected, rtol=0.02)  # the top edge, no contact
+
+
 def test_progress_reports_stages_and_cancel_raises_without_result():
     scene = lit_scene()
     calls = []

@@ -19,7 +19,7 @@ SAMPLES_DIR = os.path.normpath(os.path.join(os.path.dirname(__file__), "..", "..
 # Constants of the refiner are chosen on the tuning scenes only; the others
 # report (docs/evaluation.md, "Tuning scenes and holdout scenes").
 TUNING_SCENES = ("courtyard", "game_level", "fence_and_tree")
-REPORTING_SCENES = ("room", "atrium", "plaza", "alley", "village", "cloister")
+REPORTING_SCENES = ("room", "atrium", "plaza", "alley", "village", "cloister", "depot")
 
 # UV variant name -> array name in the .npz.
 # "own": the lightmap UV map of a scene exported from a user's .blend

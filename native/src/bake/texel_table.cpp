@@ -121,7 +121,11 @@ SurfacePoint TexelGeometry::at(double px, double py) const {
         const glm::dvec3 w = c.wx * px + c.wy * py + c.w0;
         if (w.x >= 0.0 && w.y >= 0.0 && w.z >= 0.0) return point_on(c, w);
     }
-    // Outside every candidate: clamp onto the nearest one.
+    // Outside every candidate (a texel the chart covers only partly): the
+    // nearest point of the nearest triangle, moved a little towards the
+    // triangle's centre. A point on the border line itself reads a contact
+    // line as shadow: where a wall stands on a floor, a ray from the wall's
+    // bottom edge starts in the floor's plane and finds the floor.
     const glm::dvec2 p(px, py);
     const Candidate* best = &candidates_.front();
     glm::dvec2 best_point = p;
@@ -137,6 +141,9 @@ SurfacePoint TexelGeometry::at(double px, double py) const {
             }
         }
     }
+    const glm::dvec2 centre = (best->corner[0] + best->corner[1] + best->corner[2]) / 3.0;
+    const double to_centre = glm::length(centre - best_point);
+    if (to_centre > 0.0) best_point += (centre - best_point) * (std::min(kInset, 0.5 * to_centre) / to_centre);
     glm::dvec3 w = glm::clamp(best->wx * best_point.x + best->wy * best_point.y + best->w0, 0.0, 1.0);
     return point_on(*best, w / (w.x + w.y + w.z));
 }

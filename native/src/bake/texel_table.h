@@ -30,7 +30,7 @@ TexelTable build_texel_table(const Scene& scene, const std::vector<int>& meshes,
 // The surfaces behind one texel, prepared once so that each sample costs a
 // few multiply-adds: sample positions (continuous pixel coordinates) map to
 // the candidate triangle that contains them, or else to the nearest one with
-// the point clamped onto it (a texel that a chart covers only partly).
+// the point clamped just inside it (a texel that a chart covers only partly).
 class TexelGeometry {
 public:
     void load(const Scene& scene, const TexelTable& table, int64_t k);
@@ -48,6 +48,9 @@ private:
         bool smooth;
     };
     SurfacePoint point_on(const Candidate& c, const glm::dvec3& weights) const;
+    // How far (in texels) a clamped sample moves off the border line, towards
+    // its triangle's centre: float noise in positions is far below it.
+    static constexpr double kInset = 1.0 / 64.0;
 
     std::vector<Candidate> candidates_;
     float texel_size_ = 0.0f;
