@@ -1085,6 +1085,10 @@ def test_addon_recharts_a_lightmap_pack_source(facts):
     assert "re-charted from the mesh: Floor" in on["result_message"]
     assert off["panel_recharted"] == 0 and off["refined_charts"] == 64
     assert "re-charted" not in off["result_message"]
+    # The panel's texel figures are measured on the re-charted map against the source, whichever way
+    # either winds its faces (they read 1.00x when the two wound differently).
+    np.testing.assert_allclose(on["panel_density"], on["area_ratio"], rtol=1e-3)
+    assert on["area_ratio"][1] > 1.05
     # Progress through the re-chart route: the source layout's three stages fill 3/8 of the
     # refinement's share, the route's five the rest, so it keeps moving (it used to stand at the
     # share's end from the first pack on).

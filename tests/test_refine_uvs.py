@@ -455,6 +455,22 @@ def test_the_packer_is_not_run_when_even_a_full_atlas_would_not_pay():
     assert lmrefine.refine_uvs(None, uvs, tris, R, gradient=gradient).report["repack"]["used"] is True
 
 
+def test_layout_figures_count_texels_whatever_way_a_layout_winds_its_charts():
+    """The re-chart route's charts need not wind as the source's do (a Lightmap Pack layout's faces may be
+    clockwise in UV): the figures are unsigned area ratios, not 1.0 for 'no triangle measured'."""
+    uvs, tris = plane(16)
+    lightmap = shadow_edge_lightmap(64, angle=0.3)
+    mirrored = uvs.copy()
+    mirrored[:, 0] = 1.0 - mirrored[:, 0]  # every triangle now winds the other way
+    grown = 0.5 + (mirrored - 0.5) * np.sqrt(0.5)  # and covers half its area
+    for old, new in ((uvs, grown), (mirrored, uvs)):
+        figures = lmrefine.refine.layout_figures(lightmap, old, new, tris)
+        expected = 0.5 if new is grown else 1.0
+        np.testing.assert_allclose(figures["triangle_density"], expected, rtol=1e-4)
+        assert figures["transition_widening"] == pytest.approx(expected, rel=1e-4)
+        assert figures["density_min"] == pytest.approx(expected, rel=1e-4)
+
+
 def test_layout_figures_of_one_refinement_are_its_report_and_compose_over_two():
     """lmrefine.refine.layout_figures measures a layout made by any number of refinements against the
     first one's input at the first lightmap's edges (what the add-on's Stages report); for one

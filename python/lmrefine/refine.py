@@ -554,14 +554,18 @@ def _transition_widening(old, new, triangles, energy, mask):
     threshold = max(float(np.percentile(covered, 90.0)), np.finfo(np.float32).tiny)
     rows, cols = allocation.triangle_texels(old, triangles, energy.shape)
     at_change = (mask[rows, cols] & (energy[rows, cols] >= threshold)).any(axis=1)
-    before = allocation.signed_areas(old, triangles)[at_change]
-    after = allocation.signed_areas(new, triangles)[at_change]
+    # Unsigned: a layout may wind a chart either way (the re-chart route's
+    # charts need not keep the source's), and texels count the same.
+    before = np.abs(allocation.signed_areas(old, triangles)[at_change])
+    after = np.abs(allocation.signed_areas(new, triangles)[at_change])
     keep = before > 0
     return float(after[keep].sum() / before[keep].sum()) if keep.any() else 1.0
 
 
 def _triangle_density(old, new, triangles):
-    """New UV area / old UV area per triangle (NaN where the old area is 0)."""
-    before, after = allocation.signed_areas(old, triangles), allocation.signed_areas(new, triangles)
+    """New UV area / old UV area per triangle, unsigned (NaN where the old
+    area is 0)."""
+    before = np.abs(allocation.signed_areas(old, triangles))
+    after = np.abs(allocation.signed_areas(new, triangles))
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.where(before != 0, after / before, np.nan)

@@ -1675,6 +1675,14 @@ def save_scene_for_batch():
     return _save_for_batch(fresh_shadow_scene, "shadow.blend")
 
 
+def _area_ratio_range(source, refined, triangles):
+    def areas(uvs):
+        a, b, c = (np.asarray(uvs, np.float64)[triangles[:, k]] for k in range(3))
+        return np.abs((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
+    ratio = areas(refined) / areas(source)
+    return [float(ratio.min()), float(ratio.max())]
+
+
 @check("refine", "bake")
 def rechart_lightmap_pack_source():
     """A source map with one chart per face (Lightmap Pack's kind) gives the refiner no room: the run
@@ -1706,6 +1714,9 @@ def rechart_lightmap_pack_source():
             "source_identical": bool(np.array_equal(bridge.read_uv_layer(mesh, "Lightmap"), source_uvs)),
             "geometry_identical": geometry_digest(mesh) == geometry,
             "image": _image_stats("Floor_lightmap_direct", refined, layout.triangles),
+            # The panel's texel figures and the same measured here: unsigned UV area, refined over source.
+            "panel_density": [float(result.density_min), float(result.density_max)],
+            "area_ratio": _area_ratio_range(layout.uvs, refined, layout.triangles),
         }
         if rechart:  # the progress of the refinement, re-chart route included: (fraction, stage) in order
             options = pipeline.settings_snapshot(bpy.context.scene.lmrefine)
