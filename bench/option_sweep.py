@@ -34,7 +34,7 @@ import lmrefine  # noqa: E402
 from lmrefine import _native, metrics, sample_scenes  # noqa: E402
 from lmrefine.baker import evaluate as evaluate_light  # noqa: E402
 from lmrefine.evaluation import (EvaluationOptions, _bake_map, _route_mesh, _single_pass,  # noqa: E402
-                                 _Stages, _uniform_sweep)
+                                 _Stages, _uniform_sweep, surface_points)
 
 
 def _fixed_parts(sample, options):
@@ -44,16 +44,8 @@ def _fixed_parts(sample, options):
     uvs, triangles = sample.layout(options.variant)
     passes = _single_pass(sample, options)
     baseline = _bake_map(sample, uvs, resolution, options, None)
-    areas = sample.triangle_areas()
-    density = metrics.texel_density(uvs, triangles, areas, resolution)
-    points = metrics.sample_surface(sample.positions, sample.triangles, options.points, normals=sample.normals,
-                                    seed=options.seed)
-    texel_size = 1.0 / np.sqrt(np.maximum(density, 1e-30))
-    order = np.argsort(texel_size)
-    cumulative = np.cumsum(areas[order])
-    median_texel = float(texel_size[order][np.searchsorted(cumulative, cumulative[-1] / 2)])
-    stencil, stencil_normals, distances = metrics.gradient_stencil(
-        sample.positions, sample.triangles, points, 0.5 * median_texel, normals=sample.normals)
+    density = metrics.texel_density(uvs, triangles, sample.triangle_areas(), resolution)
+    points, stencil, stencil_normals, distances, _ = surface_points(sample, density, options)
     scene = sample.to_scene(uvs)
     first = evaluate_light(scene, np.concatenate([points.points, stencil]),
                            np.concatenate([points.normals, stencil_normals]), passes=passes,

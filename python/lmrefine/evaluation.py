@@ -443,6 +443,24 @@ def _diagnose(result, context):
     return notes
 
 
+def surface_points(sample, density, options):
+    """The points the error is measured at (area-uniform on the receivers)
+    and, for the transition detector, two neighbours of each along the
+    surface half a median texel away (`density`: texels per unit area of
+    each triangle in the input layout). Returns (points, stencil points,
+    stencil normals, distances, median texel size)."""
+    areas = sample.triangle_areas()
+    points = metrics.sample_surface(sample.positions, sample.triangles, options.points, normals=sample.normals,
+                                    seed=options.seed)
+    texel_size = 1.0 / np.sqrt(np.maximum(density, 1e-30))
+    order = np.argsort(texel_size)
+    cumulative = np.cumsum(areas[order])
+    median_texel = float(texel_size[order][np.searchsorted(cumulative, cumulative[-1] / 2)])
+    stencil_points, stencil_normals, distances = metrics.gradient_stencil(
+        sample.positions, sample.triangles, points, 0.5 * median_texel, normals=sample.normals)
+    return points, stencil_points, stencil_normals, distances, median_texel
+
+
 def evaluate_sample(sample, options, out_dir=None, progress=None):
     """Run the whole evaluation on one SampleScene; returns its report dict
     (and writes report.md, report.json and pictures into `out_dir` if given)."""
@@ -497,15 +515,8 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
     areas = sample.triangle_areas()
     density_base = metrics.texel_density(uvs, triangles, areas, resolution)
     density_refined = metrics.texel_density(refined.uvs, triangles, areas, resolution)
-    points = metrics.sample_surface(sample.positions, sample.triangles, options.points, normals=sample.normals,
-                                    seed=options.seed)
-    texel_size = 1.0 / np.sqrt(np.maximum(density_base, 1e-30))
-    order = np.argsort(texel_size)
-    cumulative = np.cumsum(areas[order])
-    median_texel = float(texel_size[order][np.searchsorted(cumulative, cumulative[-1] / 2)])
+    points, stencil_points, stencil_normals, distances, median_texel = surface_points(sample, density_base, options)
     step = 0.5 * median_texel
-    stencil_points, stencil_normals, distances = metrics.gradient_stencil(
-        sample.positions, sample.triangles, points, step, normals=sample.normals)
     scene = sample.to_scene(uvs)
 
     # With per_effect the truth is traced per effect, the combined light their sum.
