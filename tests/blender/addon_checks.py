@@ -20,6 +20,7 @@ import bpy  # noqa: E402
 import numpy as np  # noqa: E402
 
 import lmrefine  # noqa: E402
+from lmrefine import metrics  # noqa: E402
 import lmrefine_blender  # noqa: E402
 import lmrefine_blender.atlas  # noqa: E402
 import scenes  # noqa: E402
@@ -1676,10 +1677,7 @@ def save_scene_for_batch():
 
 
 def _area_ratio_range(source, refined, triangles):
-    def areas(uvs):
-        a, b, c = (np.asarray(uvs, np.float64)[triangles[:, k]] for k in range(3))
-        return np.abs((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
-    ratio = areas(refined) / areas(source)
+    ratio = metrics.uv_areas(refined, triangles) / metrics.uv_areas(source, triangles)
     return [float(ratio.min()), float(ratio.max())]
 
 
