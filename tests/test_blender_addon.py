@@ -853,19 +853,21 @@ def test_batch_stages_and_tessellate(facts, work_dir):
 
 
 def test_batch_rechart_flag(facts, work_dir):
-    """The coarse floor's Lightmap map has one chart per quad: re-charted by default, not with --no-rechart."""
+    """The coarse floor's Lightmap map has one chart per quad: re-charted by default, not with --no-rechart.
+    Re-charted, a second stage refines inside the new charts (lmrefine.metrics.further_stage_options)."""
     blend = fact(facts, "save_coarse_scene_for_batch")["path"]
     used = {}
-    for flag in ("--rechart", "--no-rechart"):
+    for flag, stages in (("--rechart", "2"), ("--no-rechart", "1")):
         out = work_dir / f"batch{flag}"
         process = run_batch(blend, "--objects", "Floor", "--resolution", "64", "--samples", "4",
-                            "--bake-passes", "direct", "--no-preview", flag, "--out", str(out))
+                            "--bake-passes", "direct", "--no-preview", flag, "--stages", stages, "--out", str(out))
         assert process.returncode == 0, process.stderr[-3000:]
         report = json.loads((out / "report.json").read_text())
         floor = report["objects"]["Floor"]["report"]
         assert floor["check_layout"]["valid"] is True
         used[flag] = floor["rechart"]["used"]
         assert floor["rechart"]["room"]["no_room"] is True
+        assert floor.get("stages", {}).get("repack") is (False if stages == "2" else None)
     assert used == {"--rechart": True, "--no-rechart": False}
 
 

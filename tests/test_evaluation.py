@@ -304,6 +304,7 @@ def test_multi_stage_refinement_reports_every_stage_and_stops_when_the_layout_se
     many = evaluate_sample(scene, EvaluationOptions(**common, stages=4))
     history = many["stages"]["stages"]
     assert [e["stage"] for e in history] == [1, 2, 3, 4] and "stages" not in one
+    assert many["stages"]["repack"] is True  # not re-charted from a layout with no room: repacked again
     assert history[0]["rmse"] == pytest.approx(one["rmse_refined"])  # stage 1 is the plain refinement
     # Stage 2, refined from stage 1's sharper bake, has a lower world-space error.
     assert history[1]["rmse"] < 0.8 * history[0]["rmse"] and history[1]["layout_change"] > 0.05
@@ -339,3 +340,7 @@ def test_evaluate_recharts_a_source_with_no_room_and_measures_against_it(tmp_pat
     assert "re-charted from the mesh** by refine_uvs" in (tmp_path / "on" / "report.md").read_text()
     off = evaluate_sample(scene, EvaluationOptions(**common, auto_rechart=False))
     assert off["refine"]["rechart"] is None
+    # A second stage refines inside the re-charted charts (metrics.further_stage_options), and says so.
+    two = evaluate_sample(scene, EvaluationOptions(**common, stages=2), out_dir=str(tmp_path / "two"))
+    assert two["stages"]["repack"] is False
+    assert "later stages refined inside the charts only" in (tmp_path / "two" / "report.md").read_text()

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import lmrefine
-from lmrefine import rechart_route
+from lmrefine import metrics, rechart_route
 from layouts import floor_grid, grid_chart, lightmap_pack, smart_uv
 from test_metrics import bilinear_reference
 
@@ -275,6 +275,30 @@ def test_route_recharts_a_lightmap_pack_source(lightmap_pack_case):
     assert worse_than_source(result.uvs, uvs, triangles, RESOLUTION, 2)[0] == []
     again = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, positions=corners)
     assert np.array_equal(again.uvs, result.uvs)  # deterministic
+
+
+def test_later_stages_of_a_recharted_layout_with_no_room_refine_inside_its_charts(lightmap_pack_case):
+    """The stage rule (metrics.further_stage_options): from a source layout with no room, re-charted or not,
+    stages 2, 3, ... keep the charts' scales and places; a layout with room repacks again."""
+    corners, uvs, triangles, lightmap = lightmap_pack_case
+    routed = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, positions=corners)
+    assert routed.report["rechart"]["used"] and routed.report["rechart"]["room"]["no_room"]
+    assert metrics.further_stage_options(routed.report) == {"repack": False}
+    off = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, positions=corners, rechart=False)
+    assert metrics.further_stage_options(off.report) == {"repack": False}  # no room, not re-charted
+    # Without the positions stage 1 did not measure the room: the user's options as they are.
+    assert metrics.further_stage_options(lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION).report) == {}
+    # A layout with room, re-charted for its folds or not, repacks again.
+    assert metrics.further_stage_options({"rechart": {"used": True, "room": {"no_room": False}}}) == {}
+    corners_room, _, (uvs_room, triangles_room) = _floor_layouts()
+    with_room = lmrefine.refine_uvs(_shadowed_floor(uvs_room, triangles_room), uvs_room, triangles_room,
+                                    RESOLUTION, padding=2, positions=corners_room)
+    assert metrics.further_stage_options(with_room.report) == {}
+    # The stage-2 refinement with the rule refines inside the charts, no repack.
+    second = lmrefine.refine_uvs(lightmap, routed.uvs, triangles, RESOLUTION, padding=2,
+                                 **metrics.further_stage_options(routed.report))
+    assert second.report["repack"] is None
+    assert lmrefine.check_layout(second.uvs, triangles, RESOLUTION, padding=2)["valid"]
 
 
 def test_route_off_switch(lightmap_pack_case):

@@ -60,7 +60,9 @@ def _report_outcome(operator, context, outcome, seconds):
     if outcome.tessellation:
         result.message += f"; tessellation added {summary['vertices_added']} vertices"
     if outcome.stages:
-        why = "; ".join(f"{name}: {entry['stopped']}" for name, entry in outcome.stages.items())
+        why = "; ".join(f"{name}: {entry['stopped']}" + ("" if entry.get("repack", True) else
+                                                         ", stages 2+ refined inside the charts (no room in the source map)")
+                        for name, entry in outcome.stages.items())
         result.message += f"; stages kept: {summary['stages_kept']} of {result.stages} ({why})"
     for name in recharted_maps:
         operator.report({'INFO'}, f"'{name}': " + outcome.reports[name]["notes"][0])

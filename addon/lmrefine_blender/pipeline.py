@@ -605,10 +605,14 @@ def _further_stages(context, lmrefine, groups, refined_uvs, options, journal, ou
     from lmrefine import metrics
     resolution, padding = options["resolution"], options["padding"]
     driving = options["driving_pass"]
+    further = {}  # group name -> its refine options for stages 2, 3, ... (the rule of `evaluate --stages`)
     for group in groups:
+        first = outcome.reports[group.name]
+        further[group.name] = {**options["refine_options"], **metrics.further_stage_options(first)}
         outcome.stages[group.name] = {
-            "stages": [{"stage": 1, "moved": bool(outcome.reports[group.name]["moved"]), "kept": True}],
-            "stopped": f"{options['stages']} stages done"}
+            "stages": [{"stage": 1, "moved": bool(first["moved"]), "kept": True}],
+            "stopped": f"{options['stages']} stages done",
+            "repack": bool(further[group.name].get("repack", True))}
     active = list(groups)
     # Progress: each stage one unit per map for its bake and one per refinement, as run() counts them.
     end = done + (options["stages"] - 1) * 2 * len(groups)
@@ -633,7 +637,7 @@ def _further_stages(context, lmrefine, groups, refined_uvs, options, journal, ou
                 f"Stage {stage}: refining {name}",
                 lambda progress, lightmap=lightmaps[name], previous=previous, group=group:
                     lmrefine.refine_uvs(lightmap, previous, group.triangles, resolution, padding=padding,
-                                        progress=progress, **options["refine_options"]),
+                                        progress=progress, **further[group.name]),
                 done * span, span, parts=REFINE_STAGES)
             done += 1
             change = metrics.layout_change(previous, result.uvs, group.triangles)

@@ -263,10 +263,11 @@ def _further_stages(sample, triangles, resolution, padding, options, stages, poi
 
     history = [errors(1, refined, lookup)]
     stopped = f"{options.stages} stages done"
+    further = {**options.refine_options, **metrics.further_stage_options(refined.report)}
     for stage in range(2, options.stages + 1):
         previous, previous_map = refined, refined_map
         candidate = stages.run("refine", lambda p: refine_uvs(previous_map, previous.uvs, triangles, resolution,
-                                                              padding=padding, progress=p, **options.refine_options))
+                                                              padding=padding, progress=p, **further))
         change = metrics.layout_change(previous.uvs, candidate.uvs, triangles)
         reason = metrics.stage_stop_reason(stage, bool(candidate.report["moved"]), change)
         if reason is not None:
@@ -281,7 +282,8 @@ def _further_stages(sample, triangles, resolution, padding, options, stages, poi
         history.append(errors(stage, candidate, lookup, change))
     for entry in history:
         entry.setdefault("kept", True)
-    return refined, refined_map, lookup, {"stages": history, "stopped": stopped}
+    return refined, refined_map, lookup, {"stages": history, "stopped": stopped,
+                                          "repack": bool(further.get("repack", True))}
 
 
 def _uniform_sweep(sample, uvs, uv_points, resolution, options, stages, label, first=None):

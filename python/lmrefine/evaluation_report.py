@@ -395,7 +395,9 @@ def scene_markdown(result):
                                                      f"{_number(e['transition_rmse'])}" if e["kept"] else
                                                      f"not kept (layout change {e['layout_change']:.1%})")
                          for e in r["stages"]["stages"])
-        lines[-1:-1] = [f"- Multi-stage refinement: {rows}; stopped: {r['stages']['stopped']}."]
+        inside = ("; the later stages refined inside the charts only (the source layout has no room)"
+                  if r["stages"].get("repack") is False else "")
+        lines[-1:-1] = [f"- Multi-stage refinement: {rows}; stopped: {r['stages']['stopped']}{inside}."]
     if r.get("tessellation"):
         t = r["tessellation"]
         lines[-1:-1] = [f"- Tessellated along transitions before refining: {t['vertices_before']} -> "

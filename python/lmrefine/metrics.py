@@ -94,6 +94,20 @@ def stage_stop_reason(stage, moved, change):
             f"{STAGE_MIN_CHANGE:.0%}: stage {stage - 1} kept")
 
 
+def further_stage_options(first_report):
+    """refine_uvs keywords that stages 2, 3, ... add to the user's, from
+    stage 1's report: on a source layout with no room (Lightmap Pack's one
+    chart per face; report["rechart"]["room"], so only when stage 1 had the
+    positions) stage 1's gain is its charts' scales, re-charted or not, and
+    scaling them again from a bake on that non-uniform layout loses, so the
+    later stages refine inside the charts only (docs/refiner.md,
+    "Multi-stage refinement"). Every other layout repacks as stage 1 did."""
+    rechart = (first_report or {}).get("rechart") or {}
+    if (rechart.get("room") or {}).get("no_room"):
+        return {"repack": False}
+    return {}
+
+
 def interpolate_corners(per_corner, triangle, bary):
     """Values given per corner (3T, K) (corner k of triangle t at 3t+k) at
     points (triangle, barycentric coordinates)."""
