@@ -619,6 +619,15 @@ def test_tessellation_is_refused_where_it_would_change_more(facts, case, advice)
     assert "or turn off Tessellate" in value["message"] and value["changed"] == []
 
 
+def test_charts_stretched_across_stripes_are_reported_and_in_the_map(facts):
+    value = fact(facts, "stretch_across_stripes")
+    assert value["outcome"] == "FINISHED" and value["valid"]
+    assert value["panel_stretched"] >= 2  # the two striped tiles
+    assert f"{value['panel_stretched']} chart(s) stretched across their light changes" in value["result_message"]
+    # Measured on the refined map: across the stripes (x) the texels gained more than along them (y).
+    assert value["gains"]["x"] > 1.5 * value["gains"]["y"], value["gains"]
+
+
 def test_stages_refine_again_and_report_the_stages_kept(facts):
     value = fact(facts, "stages_refine_the_layout_again")
     one, two = value["1"], value["2"]

@@ -37,6 +37,12 @@ def tiny_scene(cells=24):
         description="a floor and a floating slab")
 
 
+def test_evaluate_flags_reach_refine_uvs():
+    args = cli.build_parser().parse_args(["evaluate", "courtyard", "--no-stretch", "--no-repack"])
+    assert cli.evaluation_options(args).refine_options == {"repack": False, "max_stretch": 1.0}
+    assert cli.evaluation_options(cli.build_parser().parse_args(["evaluate", "courtyard"])).refine_options == {}
+
+
 def test_a_saved_scene_loads_back(tmp_path):
     scene = tiny_scene(4)
     scene.save(tmp_path / "tiny.npz")
@@ -75,6 +81,12 @@ def test_the_pipeline_reports_every_figure_with_sensible_values(tmp_path):
     # The refiner gave the transitions more texels, and the equal-error
     # search places the refined map where its error says.
     assert report["transition_widening"] > 1.05
+    # Texels across the edges, measured along the light's gradient: more than none, and bounded by
+    # what the area gain allows a stretch of at most 2 (2 x its square root).
+    assert 1.0 < report["transition_widening_linear"] <= 2 * report["transition_widening"] ** 0.5
+    stretch = report["refine"]["repack"]["stretch"]
+    if stretch is not None:
+        assert ("Chart stretch:" in (out / "tiny_smart" / "report.md").read_text()) and stretch["charts_stretched"] >= 1
     ratio, status = report["equal_error_resolution_ratio"], report["equal_error_status"]
     # The baseline is limited by resolution here, not noise: a ratio exists.
     assert status in ("within", "below", "above") and ratio > 0

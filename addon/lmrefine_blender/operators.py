@@ -40,6 +40,7 @@ def _report_outcome(operator, context, outcome, seconds):
     recharted_maps = [name for name, report in outcome.reports.items() if (report.get("rechart") or {}).get("used")]
     recharted = [obj for name in recharted_maps for obj in outcome.atlases.get(name, [name])]
     result.recharted = len(recharted)
+    result.stretched = summary["stretched_charts"]
     result.stages_stopped = "; ".join(_stage_stop(name, entry) for name, entry in outcome.stages.items()
                                       if not entry["stages"][-1]["kept"])
     if summary["moved"] == 0:
@@ -57,6 +58,9 @@ def _report_outcome(operator, context, outcome, seconds):
     if recharted:
         result.message += (f"; re-charted from the mesh: {', '.join(recharted)} (the source map gave the "
                            "refiner no room, or its charts folded over sharp edges; Info has the reason)")
+    if summary["stretched_charts"]:
+        result.message += (f"; {summary['stretched_charts']} chart(s) stretched across their light changes "
+                           f"(up to {summary['largest_stretch']:.2f}x, their texel area kept)")
     if outcome.tessellation:
         result.message += f"; tessellation added {summary['vertices_added']} vertices"
     if outcome.stages:

@@ -181,6 +181,9 @@ class LMREFINE_PT_refine_result(_LightmapTab, bpy.types.Panel):
         recharted = result.valid and result.recharted > 0
         rows.append((f"Re-charted: {result.recharted}" if recharted else "Re-charted: none", 'UV_DATA',
                      recharted))
+        stretched = result.valid and result.stretched > 0
+        rows.append((f"Stretched: {result.stretched} charts" if stretched else "Stretched: none", 'FULLSCREEN_ENTER',
+                     stretched))
         tessellated = result.valid and result.tessellated
         rows.append((f"New vertices: {result.vertices_added}" if tessellated else "Tessellation: off",
                      'MOD_TRIANGULATE', tessellated))

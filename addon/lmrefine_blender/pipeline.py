@@ -123,6 +123,9 @@ class Outcome:
             limited_by = report.get("limited_by") or []
             limits.update([limited_by] if isinstance(limited_by, str) else limited_by)
         kept = [len([s for s in entry["stages"] if s["kept"]]) for entry in self.stages.values()]
+        # Charts the output layouts stretched across their light changes (refine_uvs' chart stretch).
+        stretches = [(report.get("repack") or {}).get("stretch") or {} for report in reports]
+        stretches = [s for s in stretches if s.get("used")]
         return {
             "moved": moved,
             "transition_widening": widening,
@@ -131,6 +134,8 @@ class Outcome:
             "limited_by": ", ".join(sorted(limits)),
             "vertices_added": sum(report["vertices_added"] for report in self.tessellation.values()),
             "stages_kept": max(kept, default=1),
+            "stretched_charts": sum(int(s["charts_stretched"]) for s in stretches),
+            "largest_stretch": max((float(s["largest_stretch"]) for s in stretches), default=1.0),
             "objects": len(self.objects),
             "images_per_pass": len(self.images),
             "shared_images": {name: objects for name, objects in self.atlases.items() if len(objects) > 1},
@@ -653,6 +658,7 @@ def _further_stages(context, lmrefine, groups, refined_uvs, options, journal, ou
             _check_refined(lmrefine, group.label(), result.uvs, bridge.Layout(group.uvs, group.triangles),
                            previous, resolution, padding)
             refined_uvs[name] = result.uvs
+            outcome.reports[name]["repack"] = _plain(result.report["repack"])  # the kept stage's packing
             _write_group_layers(group, result.uvs, journal)
     # Maps that stopped early left their share of the progress undone: catch up.
     return end

@@ -95,6 +95,9 @@ class LMREFINE_PG_result(bpy.types.PropertyGroup):
                                    description="Objects whose stages stopped early: the stage that moved too little")
     recharted: IntProperty(name="Re-charted", description="Objects whose source map gave the refiner no room or "
                            "folded over sharp edges, re-charted from the mesh and refined", default=0)
+    stretched: IntProperty(name="Stretched", description="Charts of the refined maps stretched across their light "
+                           "changes (more texels across the shadows' edges, fewer along them), summed over the maps",
+                           default=0)
 
 
 class LMREFINE_PG_settings(bpy.types.PropertyGroup):

@@ -24,7 +24,7 @@ alone, on the whole gradient energy, gives s_c proportional to
 import numpy as np
 
 from .packer import CHART_TOLERANCE, pack_charts
-from ._native import find_charts
+from ._native import coverage_mask, find_charts
 
 # Edge-density floor, relative to the mean over charts: a flat chart is
 # treated as if it had this much light change (without smooth light it
@@ -106,12 +106,17 @@ def opening(values, mask):
     return _window(eroded, mask, np.maximum, -np.inf)
 
 
+def texel_luminance(lightmap):
+    """(H, W) float32 luminance of a (H, W[, C]) lightmap (one channel: itself)."""
+    image = np.asarray(lightmap, np.float32)
+    lum = image if image.ndim == 2 else image[..., 0] if image.shape[2] == 1 else image[..., :3] @ LUMA
+    return lum.astype(np.float32)
+
+
 def luminance_slope(lightmap, mask):
     """|grad L| per covered texel (L the lightmap's luminance, per texel),
     from the differences to its covered neighbours (0 where it has none)."""
-    image = np.asarray(lightmap, np.float32)
-    lum = image if image.ndim == 2 else image[..., 0] if image.shape[2] == 1 else image[..., :3] @ LUMA
-    lum = lum.astype(np.float32)
+    lum = texel_luminance(lightmap)
     slope = []
     for axis in (0, 1):
         head = [slice(None)] * 2
@@ -291,13 +296,16 @@ def padded_utilisation(area, perimeter, padding, shape):
 
 
 def repack(source_uvs, refined_uvs, triangles, energy, resolution, padding, min_scale, max_scale, progress=None,
-           lightmap=None, mask=None, world_areas=None):
+           lightmap=None, mask=None, world_areas=None, max_stretch=1.0):
     """Scale the charts of `refined_uvs` by their signal (measured on the
     source layout `source_uvs`, where `energy` and `lightmap` were baked;
     `mask` its coverage; `world_areas` the triangles' surface areas, or
     None for a source of uniform texel density) and pack them into one
-    atlas. Returns (uvs, report); uvs is None when the packed layout is not
-    better than `refined_uvs` by the error model (the report says so)."""
+    atlas. With a lightmap and max_stretch > 1 a second packing stretches
+    each chart across its light changes (lmrefine.stretch) and is kept when
+    the model predicts less error for it. Returns (uvs, report); uvs is None
+    when the packed layout is not better than `refined_uvs` by the error
+    model (the report says so)."""
     charts = find_charts(source_uvs, triangles, tolerance=CHART_TOLERANCE)
     scales, edge, smooth, _ = chart_scales(source_uvs, triangles, charts, energy, min_scale, max_scale,
                                            lightmap, mask, world_areas=world_areas)
@@ -311,9 +319,13 @@ def repack(source_uvs, refined_uvs, triangles, energy, resolution, padding, min_
         return None, {"charts": int(len(scales)), "used": False, "predicted_error": best,
                       "reason": f"even filling the whole atlas the error model predicts {best:.3f} of the unpacked "
                                 f"error at best (a repack needs below {REQUIRED_GAIN})"}
+    stretched = None
+    if max_stretch > 1.0 and lightmap is not None:
+        stretched = _stretch_candidate(source_uvs, refined_uvs, triangles, charts, lightmap, mask, resolution,
+                                       max_stretch)
     try:
-        packed, pack_report = pack_charts(refined_uvs, triangles, charts, scales, resolution, padding,
-                                          progress=progress)
+        (packed, pack_report), stretched_pack = _pack_both(refined_uvs, None if stretched is None else stretched["uvs"],
+                                                           triangles, charts, scales, resolution, padding, progress)
     except ValueError as error:  # the charts do not fit at a usable scale: keep the unpacked layout
         return None, {"charts": int(len(scales)), "used": False, "reason": str(error)}
     final = pack_report["chart_scales"]  # linear scale of each chart against refined_uvs
@@ -322,6 +334,36 @@ def repack(source_uvs, refined_uvs, triangles, energy, resolution, padding, min_
     area_before, _ = chart_outlines(refined_uvs, triangles, charts, resolution)
     # Predicted error of the packed layout relative to refined_uvs (1.0 = the same), both terms.
     predicted = predicted_error(edge, smooth, final)
+    stretch_report = None
+    if stretched is not None:
+        stretch_report = {"used": False, "predicted_error_unstretched": predicted, **stretched["report"]}
+    if stretched is not None and stretched_pack is None:
+        stretch_report["reason"] = "the stretched charts do not fit"
+    elif stretched is not None:
+        candidate_uvs, candidate_report = stretched_pack
+        candidate_final = np.asarray(candidate_report["chart_scales"], np.float64)
+        candidate_area, candidate_perimeter = chart_outlines(candidate_uvs, triangles, charts, resolution)
+        # The same density rule as the unstretched packing (the model does not see the gutters).
+        dense = (padded_utilisation(candidate_area, candidate_perimeter, padding, resolution)
+                 >= MIN_UTILISATION_KEPT * padded_utilisation(area_before, perimeter_out / final, padding,
+                                                               resolution))
+        # The stretch's edge error over the unstretched packing's, each chart weighted by its light
+        # changes as the structure tensor measures them.
+        weight, factor = stretched["weight"], stretched["factor"]
+        before = (weight / np.maximum(np.asarray(final, np.float64), 1e-12)).sum()
+        after = (weight * stretched["edge_factor"] / np.maximum(candidate_final, 1e-12)).sum()
+        candidate = predicted * (float(after / before) if before > 0 else 1.0)
+        stretch_report["predicted_error"] = candidate
+        if candidate < predicted and dense:
+            stretch_report["used"] = True
+            packed, pack_report, final = candidate_uvs, candidate_report, candidate_final
+            area_after, perimeter_out = candidate_area, candidate_perimeter
+            predicted = candidate
+        elif not dense:
+            stretch_report["reason"] = ("the stretched charts would pack less densely than the input (with their "
+                                        "gutters)")
+        else:
+            stretch_report["reason"] = f"the error model predicts {candidate:.3f} stretched against {predicted:.3f}"
     report = {
         "charts": int(len(scales)),
         "chart_scales": np.asarray(final, np.float64),
@@ -337,6 +379,7 @@ def repack(source_uvs, refined_uvs, triangles, energy, resolution, padding, min_
         "placement": pack_report["placement"],
         "predicted_error": predicted,
         "smooth_fraction": float(smooth.sum() / max(edge.sum() + smooth.sum(), 1e-300)),
+        "stretch": stretch_report,
     }
     # The model must promise a clear gain, and the packed atlas must be about
     # as dense as the input for its padding (the model does not see what the
@@ -347,3 +390,62 @@ def repack(source_uvs, refined_uvs, triangles, energy, resolution, padding, min_
     report["used"] = bool(predicted < REQUIRED_GAIN and report["padded_utilisation_after"]
                           >= MIN_UTILISATION_KEPT * report["padded_utilisation_before"])
     return (packed if report["used"] else None), report
+
+
+def _stretch_candidate(source_uvs, refined_uvs, triangles, charts, lightmap, mask, resolution, max_stretch):
+    """`refined_uvs` with its charts stretched across their light changes
+    (lmrefine.stretch), with each chart's factor, edge-term factor and
+    light-change weight; None when no chart stretches."""
+    from . import stretch
+
+    if mask is None:
+        mask = coverage_mask(source_uvs, triangles, resolution)
+    tensors = stretch.chart_tensors(lightmap, mask, source_uvs, refined_uvs, triangles, charts)
+    factor, direction, share, weight = stretch.stretch_factors(tensors, refined_uvs, triangles, charts, resolution,
+                                                               max_stretch)
+    if not (factor > 1.0).any():
+        return None
+    return {"uvs": stretch.stretch_charts(refined_uvs, triangles, charts, factor, direction), "factor": factor,
+            "edge_factor": stretch.edge_factor(factor, share), "weight": weight,
+            "report": {"charts_stretched": int((factor > 1.0).sum()), "chart_stretch": factor,
+                       "largest_stretch": float(factor.max())}}
+
+
+def _pack_both(uvs, stretched_uvs, triangles, charts, scales, resolution, padding, progress):
+    """pack_charts of `uvs` (its errors raise) and, when given, of
+    `stretched_uvs` at the same time in a second thread (the packer is
+    mostly serial and releases the GIL; None when it does not fit). Only the
+    first reports progress; cancelling it cancels both."""
+    if stretched_uvs is None:
+        return pack_charts(uvs, triangles, charts, scales, resolution, padding, progress=progress), None
+    import threading
+    from concurrent.futures import ThreadPoolExecutor
+
+    cancelled = threading.Event()
+
+    def first_progress(fraction, stage):
+        keep_going = True if progress is None else progress(fraction, stage)
+        if keep_going is False:
+            cancelled.set()
+        return keep_going
+
+    def second():
+        try:
+            return pack_charts(stretched_uvs, triangles, charts, scales, resolution, padding,
+                               progress=lambda fraction, stage: not cancelled.is_set())
+        except ValueError:
+            return None
+
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        future = pool.submit(second)
+        try:
+            first = pack_charts(uvs, triangles, charts, scales, resolution, padding, progress=first_progress)
+        except BaseException:
+            cancelled.set()
+            raise
+        try:
+            return first, future.result()
+        except Exception:
+            if cancelled.is_set():  # the second pack stopped because the first one did
+                return first, None
+            raise

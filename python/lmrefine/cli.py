@@ -68,6 +68,8 @@ def evaluation_options(args):
         refine_options["passes"] = args.refine_passes
     if args.no_repack:
         refine_options["repack"] = False
+    if getattr(args, "no_stretch", False):
+        refine_options["max_stretch"] = 1.0
     rechart = getattr(args, "rechart", None)
     compare = ()
     if rechart is not None and getattr(args, "compare", False):
@@ -188,6 +190,8 @@ def add_evaluation_arguments(parser, resolution, points):
     parser.add_argument("--refine-passes", type=int, help="refine_uvs passes (default: refine_uvs' own)")
     parser.add_argument("--no-repack", action="store_true",
                         help="refine inside charts only (refine_uvs repack=False): no chart scaling or packing")
+    parser.add_argument("--no-stretch", action="store_true",
+                        help="never stretch a chart across its light changes (refine_uvs max_stretch=1)")
     from .charting import DEFAULT_ANGLE
 
     parser.add_argument("--rechart", type=float, nargs="?", const=DEFAULT_ANGLE, metavar="ANGLE",

@@ -640,8 +640,13 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
     result.update(figures(everywhere))
     result["layout"] = layout
     result["layout_comparison"] = [{"variant": variant, **against(other_sweep)} for variant, other_sweep in compared]
-    result["transition_widening_linear"] = (math.sqrt(result["transition_widening"])
-                                            if math.isfinite(result["transition_widening"]) else float("nan"))
+    # Texels across the light change, measured along the truth's gradient on the surface (a stretched
+    # chart gains more across its edges than the square root of its area change).
+    directions = metrics.surface_gradient_direction(points.points, truth, stencil_points, neighbour_truth)
+    corner_positions = sample.positions[sample.triangles]
+    result["transition_widening_linear"] = metrics.transition_widening_across(
+        corner_positions, np.asarray(uvs)[triangles], np.asarray(refined.uvs)[triangles], points.triangle,
+        directions, transitions, resolution)
     result["truth_mean"] = float(truth.mean())
     result["truth_noise_rmse"] = truth_noise
     object_ids = sample.object_id[points.triangle]

@@ -383,6 +383,11 @@ def scene_markdown(result):
         f"{', '.join(r['refine'].get('limited_by') or []) or 'nothing'}.",
         "",
     ]
+    stretched = (r["refine"].get("repack") or {}).get("stretch")
+    if stretched:
+        lines[-1:-1] = [f"- Chart stretch: {stretched['charts_stretched']} chart(s) stretched across their light "
+                        f"changes, up to {stretched['largest_stretch']:.2f}x; " + (
+                            "kept" if stretched["used"] else f"not kept ({stretched.get('reason', '')})") + "."]
     if r.get("uniform_repack"):
         u = r["uniform_repack"]
         gain = f"{u['signal_gain']:.2f}x" if u.get("signal_gain") else "n/a"

@@ -272,10 +272,64 @@ def texels_per_metre(uvs, triangles, world_areas, resolution, faces=None):
     return value
 
 
+def surface_gradient_direction(points, truth, stencil_points, neighbour_truth):
+    """(P, 3) unit direction of the luminance gradient along the surface at
+    each point, from the truth at its two stencil neighbours (orthogonal
+    steps in its triangle's plane, `gradient_stencil`); 0 where the light
+    does not change."""
+    points = np.asarray(points, np.float64)
+    count = len(points)
+    base = luminance(truth)
+    steps = np.asarray(stencil_points, np.float64).reshape(2, count, 3) - points
+    change = luminance(neighbour_truth).reshape(2, count) - base
+    squared = np.maximum((steps ** 2).sum(axis=2), 1e-24)
+    # Each step's directional derivative times its unit direction; the two directions are orthogonal.
+    gradient = ((change / squared)[..., None] * steps).sum(axis=0)
+    norm = np.linalg.norm(gradient, axis=1, keepdims=True)
+    return np.where(norm > 0, gradient / np.maximum(norm, 1e-300), 0.0)
+
+
+def texels_across(corner_positions, corner_uvs, point_triangle, directions, resolution):
+    """(P,) texels per metre of the layout along each point's surface
+    direction `directions` (P, 3): |J d| x resolution, with J the point's
+    triangle's map from its plane to UV. corner_positions (T, 3, 3), corner_uvs
+    (T, 3, 2). 0 on triangles without area."""
+    height, width = (resolution, resolution) if np.isscalar(resolution) else resolution
+    corners = np.asarray(corner_positions, np.float64)[point_triangle]
+    uvs = np.asarray(corner_uvs, np.float64)[point_triangle] * np.array([width, height])
+    edges = np.stack([corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]], axis=2)  # (P, 3, 2)
+    uv_edges = np.stack([uvs[:, 1] - uvs[:, 0], uvs[:, 2] - uvs[:, 0]], axis=2)              # (P, 2, 2)
+    gram = np.einsum("pci,pcj->pij", edges, edges)
+    det = gram[:, 0, 0] * gram[:, 1, 1] - gram[:, 0, 1] ** 2
+    good = det > 1e-24 * np.maximum(gram[:, 0, 0] * gram[:, 1, 1], 1e-300)
+    inverse = np.zeros_like(gram)
+    inverse[good] = np.linalg.inv(gram[good])
+    # The direction's coordinates on the two edges (least squares: exact in the plane), then into UV.
+    coefficients = np.einsum("pij,pcj,pc->pi", inverse, edges, np.asarray(directions, np.float64))
+    across = np.einsum("pij,pj->pi", uv_edges, coefficients)
+    return np.where(good, np.linalg.norm(across, axis=1), 0.0)
+
+
+def transition_widening_across(corner_positions, uvs_baseline, uvs_refined, point_triangle, directions,
+                               transitions, resolution):
+    """Refined over baseline texels per metre across the light change
+    (`texels_across` along the surface gradient's direction), averaged over
+    the transition points: the gain in texels across an edge as the layouts
+    give it, stretched charts included. NaN when there are none."""
+    selected = np.asarray(transitions, bool) & (np.linalg.norm(directions, axis=1) > 0)
+    if not selected.any():
+        return float("nan")
+    triangle, direction = np.asarray(point_triangle)[selected], np.asarray(directions)[selected]
+    before = texels_across(corner_positions, uvs_baseline, triangle, direction, resolution)
+    after = texels_across(corner_positions, uvs_refined, triangle, direction, resolution)
+    keep = before > 0
+    return float((after[keep] / before[keep]).mean()) if keep.any() else float("nan")
+
+
 def transition_widening(density_baseline, density_refined, point_triangle, transitions):
     """Refined over baseline texel density at the transition points, averaged
-    (area ratio; its square root is the gain in texels across an edge).
-    NaN when there are no transition points."""
+    (area ratio; `transition_widening_across` gives the gain in texels
+    across the edges). NaN when there are no transition points."""
     ratio = np.asarray(density_refined, np.float64) / np.maximum(np.asarray(density_baseline, np.float64), 1e-30)
     selected = ratio[np.asarray(point_triangle)[np.asarray(transitions, bool)]]
     return float(selected.mean()) if selected.size else float("nan")

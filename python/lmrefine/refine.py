@@ -153,7 +153,7 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
                max_magnification=8.0, min_shrink=0.25, edge_shrink=0.8, delta=0.02, passes=1, border="same",
                directional=False, wavelet="d4", diffusion=0.05, max_steps=8, progress=None, repack=True,
                min_chart_scale=0.5, max_chart_scale=2.0, positions=None, rechart=True, world_areas=None,
-               normals=None):
+               normals=None, max_stretch=2.0):
     """Refine a lightmap UV layout: more texels where light changes fast.
 
     Args:
@@ -198,6 +198,12 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
             in-chart deformation, before the charts are scaled and moved.
         min_chart_scale, max_chart_scale: bounds on a chart's linear scale
             relative to the median chart, for repack.
+        max_stretch: >= 1; with repack and a lightmap, a chart whose light
+            changes run mostly one way may be stretched across them by up
+            to this and squeezed along them by as much, its texel area kept
+            (lmrefine.stretch; docs/refiner.md, "Chart stretch"); kept only
+            when the error model predicts less error than the unstretched
+            packing. 1 = off. report["repack"]["stretch"] says what happened.
         positions: (N, 3) the 3-D position of each UV (the uvs' indexing),
             or None. With positions and rechart, a source layout that gives
             the refiner no room (rechart_route.layout_room: one chart per
@@ -267,7 +273,7 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
                "edge_shrink": edge_shrink, "delta": delta, "passes": passes, "border": border,
                "directional": directional, "wavelet": wavelet, "diffusion": diffusion, "max_steps": max_steps,
                "repack": repack, "min_chart_scale": min_chart_scale, "max_chart_scale": max_chart_scale,
-               "world_areas": world_areas}
+               "world_areas": world_areas, "max_stretch": max_stretch}
     if not isinstance(rechart, (bool, np.bool_)):
         raise TypeError(f"rechart must be True or False, got {type(rechart).__name__}")
     if normals is not None and positions is None:
@@ -353,7 +359,7 @@ def _refine(lightmap, uvs, triangles, resolution, padding, mask, gradient, progr
         options["diffusion"], options["max_steps"]
     repack, min_chart_scale, max_chart_scale = options["repack"], options["min_chart_scale"], \
         options["max_chart_scale"]
-    world_areas = options["world_areas"]
+    world_areas, max_stretch = options["world_areas"], options["max_stretch"]
     start = time.perf_counter()
     shape = _resolution(resolution)
     uvs, triangles = _layout(uvs, triangles)
@@ -436,6 +442,9 @@ def _refine(lightmap, uvs, triangles, resolution, padding, mask, gradient, progr
         if not 0 < min_chart_scale <= 1 <= max_chart_scale < np.inf:
             raise ValueError(f"need 0 < min_chart_scale <= 1 <= max_chart_scale (finite), got {min_chart_scale} "
                              f"and {max_chart_scale}")
+        if isinstance(max_stretch, (bool, np.bool_)) or not isinstance(max_stretch, (int, float, np.number)) \
+                or not 1.0 <= float(max_stretch) < np.inf:
+            raise ValueError(f"max_stretch must be a finite number >= 1 (1 = no stretch), got {max_stretch!r}")
         # Pack at the gutter the checks ask for: the padding, or the input's
         # gutter where that is narrower (backoff.allowed_gutter), never below
         # a texel unless the padding is (dilation needs a texel between charts).
@@ -443,7 +452,7 @@ def _refine(lightmap, uvs, triangles, resolution, padding, mask, gradient, progr
         packed, repack_report = allocation.repack(uvs, new_uvs, triangles, scalar_energy, shape, pack_padding,
                                                   float(min_chart_scale), float(max_chart_scale), progress,
                                                   lightmap=lightmap if gradient_given is None else None, mask=mask,
-                                                  world_areas=world_areas)
+                                                  world_areas=world_areas, max_stretch=float(max_stretch))
         if packed is not None:
             packed_check = _native.check_layout(packed, triangles, shape, padding)
             worse = backoff.failures(packed_check, original, padding)

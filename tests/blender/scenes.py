@@ -224,3 +224,53 @@ def roof_scene(quads=8):
     light.rotation_euler = (0.0, -0.67, 0.0)  # from -x, 38 degrees off vertical: the -x slope faces it
     select_only(roof)
     return scene
+
+
+def striped_scene(tile=2.0, quads=4):
+    """Nine floor tiles in one object 'Tiles' (a Lightmap map with one island per tile, 3 x 3 like atlas
+    cells), thin beams 'Beams' above the two back-left tiles and a sun straight above: the beams' shadows
+    are stripes across x on those tiles, where a chart stretched across them gains texels."""
+    import bmesh
+
+    scene = reset()
+    bm = bmesh.new()
+    layer = bm.loops.layers.uv.new("Lightmap")
+    for row in range(3):
+        for column in range(3):
+            x0, y0 = column * tile * 1.1, row * tile * 1.1
+            grid = [[bm.verts.new((x0 + i * tile / quads, y0 + j * tile / quads, 0.0)) for i in range(quads + 1)]
+                    for j in range(quads + 1)]
+            for j in range(quads):
+                for i in range(quads):
+                    face = bm.faces.new((grid[j][i], grid[j][i + 1], grid[j + 1][i + 1], grid[j + 1][i]))
+                    for loop in face.loops:
+                        loop[layer].uv = (0.02 + column / 3 + (loop.vert.co.x - x0) / tile * 0.29,
+                                          0.02 + row / 3 + (loop.vert.co.y - y0) / tile * 0.29)
+    mesh = bpy.data.meshes.new("TilesMesh")
+    bm.to_mesh(mesh)
+    bm.free()
+    tiles = bpy.data.objects.new("Tiles", mesh)
+    scene.collection.objects.link(tiles)
+    tiles.data.materials.append(_material("TilesMaterial", (0.8, 0.8, 0.8)))
+    beams = bmesh.new()
+    for k in range(10):  # 5 cm wide, 40 cm apart, along y over the back row's first two tiles
+        bmesh.ops.create_cube(beams, size=1.0, matrix=_box_matrix((0.2 + 0.4 * k, 2 * tile * 1.1 + tile / 2, 1.0),
+                                                                  (0.05, tile * 1.2, 0.05)))
+    mesh = bpy.data.meshes.new("BeamsMesh")
+    beams.to_mesh(mesh)
+    beams.free()
+    blocker = bpy.data.objects.new("Beams", mesh)
+    scene.collection.objects.link(blocker)
+    light = bpy.data.lights.new("Sun", 'SUN')  # straight down; made without operators, so any context will do
+    light.energy, light.angle = 3.0, 0.01
+    sun = bpy.data.objects.new("Sun", light)
+    sun.location = (0.0, 0.0, 5.0)
+    scene.collection.objects.link(sun)
+    select_only(tiles)
+    return scene
+
+
+def _box_matrix(centre, size):
+    from mathutils import Matrix
+
+    return Matrix.Translation(centre) @ Matrix.Diagonal((*size, 1.0))

@@ -1,0 +1,158 @@
+"""Chart stretch: more texels across a chart's light changes, fewer along them.
+
+A chart scale (lmrefine.allocation) gives a chart texels in both directions
+alike. Shadows of beams, pickets and railings are stripes: the bake blurs a
+stripe over the texels across it, and texels along it buy nothing. When a
+chart's light changes mostly run one way, stretching the chart across them
+by a and squeezing it along them by 1/a keeps its texel area and narrows the
+texels where the error is (docs/refiner.md, "Chart stretch").
+
+The direction comes from the structure tensor of the first bake's luminance
+gradient, J = sum over the chart's texels of g g^T (g = grad L). With its
+eigenvalues l1 >= l2 the chart's light changes split into a part across the
+main direction e1 and a part along it, in the ratio sqrt(l1) : sqrt(l2)
+(w1 : w2, summing to 1). The edge term of the chart model (error falling
+with the texel size across an edge) then changes by the factor
+
+    f(a) = w1 / a + w2 a,
+
+least at a = sqrt(w1 / w2) = (l1 / l2)^(1/4): `stretch_factors` uses that,
+bounded by `max_stretch` and by the chart's width, for the charts that hold
+more light changes than the mean chart. allocation.repack packs the
+stretched charts as a second candidate and keeps it when its edge error,
+each chart weighted by sqrt(l1) + sqrt(l2), is lower than the unstretched
+packing's and it packs about as densely as the input.
+"""
+
+import numpy as np
+
+from .allocation import texel_luminance, triangle_energy
+
+# A chart is never squeezed to fewer texels across than this (its extent
+# along the squeezed direction in the layout being stretched): bilinear
+# lookup and dilation need a few texels.
+MIN_WIDTH_TEXELS = 4.0
+# Stretches below this are left out (the packing they would change costs
+# more than they can give).
+MIN_STRETCH = 1.01
+
+
+def luminance_gradient(lightmap, mask):
+    """(H, W, 2) float32: the luminance gradient (d/du, d/dv) per covered
+    texel in texels, each component the mean of the differences to the
+    covered neighbours along it (0 where it has none)."""
+    lum = texel_luminance(lightmap)
+    out = np.zeros(lum.shape + (2,), np.float32)
+    # u runs along the columns; v runs up, against the rows.
+    for channel, axis, sign in ((0, 1, 1.0), (1, 0, -1.0)):
+        head, tail = [slice(None)] * 2, [slice(None)] * 2
+        head[axis], tail[axis] = slice(1, None), slice(None, -1)
+        both = mask[tuple(head)] & mask[tuple(tail)]
+        step = np.where(both, lum[tuple(head)] - lum[tuple(tail)], np.float32(0))
+        total, count = np.zeros(lum.shape, np.float32), np.zeros(lum.shape, np.float32)
+        total[tuple(head)] += step
+        total[tuple(tail)] += step
+        count[tuple(head)] += both
+        count[tuple(tail)] += both
+        out[..., channel] = sign * total / np.maximum(count, 1)
+    return np.where(mask[..., None], out, np.float32(0))
+
+
+def chart_tensors(lightmap, mask, source_uvs, uvs, triangles, charts):
+    """(C, 2, 2) float64: each chart's structure tensor of the luminance
+    gradient of `lightmap` (baked on `source_uvs`, `mask` its coverage), in
+    the frame of layout `uvs` (the same triangles, each an affine image of
+    its source triangle: a gradient g maps to A^-T g). Triangles without
+    area in either layout add nothing."""
+    gradient = luminance_gradient(lightmap, mask)
+    gu, gv = gradient[..., 0], gradient[..., 1]
+    # Per triangle, in the source frame: sums over its texels (allocation's four points per triangle).
+    parts = [triangle_energy(source_uvs, triangles, field) for field in (gu * gu, gu * gv, gv * gv)]
+    tensor = np.stack([np.stack([parts[0], parts[1]], -1), np.stack([parts[1], parts[2]], -1)], -2)
+    source = np.asarray(source_uvs, np.float64)[triangles]
+    target = np.asarray(uvs, np.float64)[triangles]
+    before = np.stack([source[:, 1] - source[:, 0], source[:, 2] - source[:, 0]], -1)  # columns: edge vectors
+    after = np.stack([target[:, 1] - target[:, 0], target[:, 2] - target[:, 0]], -1)
+    det_before = before[:, 0, 0] * before[:, 1, 1] - before[:, 0, 1] * before[:, 1, 0]
+    det_after = after[:, 0, 0] * after[:, 1, 1] - after[:, 0, 1] * after[:, 1, 0]
+    scale = np.maximum(np.abs(before).max(axis=(1, 2)), np.abs(after).max(axis=(1, 2)))
+    good = (np.abs(det_before) > 1e-12 * scale ** 2) & (np.abs(det_after) > 1e-12 * scale ** 2)
+    # A^-1 = before after^-1 (A maps source edges onto layout edges).
+    inverse = np.zeros_like(after)
+    inverse[good] = before[good] @ np.linalg.inv(after[good])
+    mapped = np.transpose(inverse, (0, 2, 1)) @ tensor @ inverse
+    mapped[~good] = 0.0
+    count = int(charts.max()) + 1 if len(charts) else 0
+    out = np.zeros((count, 2, 2))
+    for i in range(2):
+        for j in range(2):
+            out[:, i, j] = np.bincount(charts, weights=mapped[:, i, j], minlength=count)
+    return out
+
+
+def stretch_factors(tensors, uvs, triangles, charts, resolution, max_stretch):
+    """Per chart (factor a >= 1, direction e1 (C, 2), share w1 of its light
+    changes across e1, light changes sqrt(l1) + sqrt(l2)): the model's best
+    stretch (l1 / l2)^(1/4), bounded by `max_stretch` and by
+    MIN_WIDTH_TEXELS across the squeezed direction; 1 below MIN_STRETCH,
+    without light changes, or for a chart with fewer light changes than the
+    mean chart (a stretched chart costs packing density whatever it holds;
+    only the charts that hold the light changes pay it back)."""
+    count = len(tensors)
+    values, vectors = np.linalg.eigh(tensors)  # ascending eigenvalues
+    low, high = np.maximum(values[:, 0], 0.0), np.maximum(values[:, 1], 0.0)
+    direction = vectors[:, :, 1]
+    roots = np.sqrt(high) + np.sqrt(low)
+    share = np.where(roots > 0, np.sqrt(high) / np.maximum(roots, 1e-300), 0.5)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        best = np.where(low > 0, (high / np.maximum(low, 1e-300)) ** 0.25, np.inf)
+    factor = np.where(high > 0, np.minimum(best, max_stretch), 1.0)
+    # The chart's extent across the squeezed direction e2 (perpendicular to e1), in texels.
+    height, width = resolution
+    corner_uvs = np.asarray(uvs, np.float64)[triangles] * np.array([width, height])
+    along = np.stack([-direction[:, 1], direction[:, 0]], -1)[charts]  # (T, 2)
+    projected = np.einsum("tkc,tc->tk", corner_uvs, along)
+    lo = np.full(count, np.inf)
+    hi = np.full(count, -np.inf)
+    np.minimum.at(lo, charts, projected.min(axis=1))
+    np.maximum.at(hi, charts, projected.max(axis=1))
+    extent = np.where(hi >= lo, hi - lo, 0.0)
+    factor = np.minimum(factor, np.maximum(extent / MIN_WIDTH_TEXELS, 1.0))
+    factor = np.where((factor >= MIN_STRETCH) & (roots >= roots.mean()), factor, 1.0)
+    return factor, direction, share, roots
+
+
+def edge_factor(factor, share):
+    """The chart model's edge-term factor of a stretch: share / a + (1 - share) a."""
+    return share / factor + (1.0 - share) * factor
+
+
+def stretch_charts(uvs, triangles, charts, factor, direction):
+    """`uvs` with every chart c stretched by factor[c] along direction[c] and
+    squeezed by 1 / factor[c] across it, about its mean corner (area and
+    orientation kept: the map has determinant 1). UVs of unstretched charts
+    are unchanged. A UV index used by two charts takes its first chart's
+    map (pack_charts refuses such layouts anyway)."""
+    out = np.asarray(uvs, np.float64).copy()
+    owner = np.full(len(out), -1, np.int64)
+    flat = np.asarray(triangles).reshape(-1)
+    corner_chart = np.repeat(np.asarray(charts), 3)
+    used_uvs, first = np.unique(flat, return_index=True)
+    owner[used_uvs] = corner_chart[first]
+    moved = (owner >= 0) & (factor[np.maximum(owner, 0)] > 1.0)
+    if not moved.any():
+        return np.asarray(uvs).copy()
+    count = len(factor)
+    used = owner >= 0
+    weight = np.bincount(owner[used], minlength=count).astype(np.float64)
+    centre = np.stack([np.bincount(owner[used], weights=out[used, k], minlength=count) for k in range(2)], -1)
+    centre /= np.maximum(weight, 1.0)[:, None]
+    index = np.flatnonzero(moved)
+    chart = owner[index]
+    e1 = direction[chart]
+    a = factor[chart][:, None]
+    offset = out[index] - centre[chart]
+    along = (offset * e1).sum(axis=1, keepdims=True)
+    # offset = along e1 + across e2: the e1 part grows by a, the e2 part shrinks by 1 / a.
+    out[index] = centre[chart] + a * along * e1 + (offset - along * e1) / a
+    return out.astype(np.asarray(uvs).dtype)

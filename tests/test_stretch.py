@@ -1,0 +1,179 @@
+"""Chart stretch (lmrefine.stretch): more texels across a chart's light changes, fewer along them."""
+
+import numpy as np
+import pytest
+
+import lmrefine
+from lmrefine import metrics, stretch
+from layouts import grid_chart, merge
+
+RESOLUTION = 128
+
+
+def _two_charts():
+    """Two charts of 8 x 8 quads side by side."""
+    return merge(grid_chart(8, (0.05, 0.1), (0.45, 0.9)), grid_chart(8, (0.55, 0.1), (0.95, 0.9)))
+
+
+def _stripes(period_texels=8.0, along_u=True):
+    """Hard stripes that change along u (constant along v), or the other way round."""
+    i, j = np.mgrid[0:RESOLUTION, 0:RESOLUTION]
+    coordinate = j if along_u else i
+    light = np.where((coordinate // (period_texels / 2)) % 2 == 0, 1.0, 0.2).astype(np.float32)
+    light[:, RESOLUTION // 2:] = 0.6  # the right chart is flat
+    return np.repeat(light[..., None], 3, axis=2)
+
+
+def _rotated(uvs, triangles, charts, chart):
+    """`uvs` with chart `chart` turned by 90 degrees about its centre (orientation kept)."""
+    out = uvs.astype(np.float64).copy()
+    index = np.unique(triangles[charts == chart])
+    centre = out[index].mean(axis=0)
+    offset = out[index] - centre
+    out[index] = centre + np.stack([-offset[:, 1], offset[:, 0]], axis=1)
+    return out.astype(np.float32)
+
+
+def test_stretch_charts_keeps_area_and_orientation_and_moves_only_stretched_charts():
+    uvs, triangles = _two_charts()
+    charts = lmrefine.find_charts(uvs, triangles, lmrefine.CHART_TOLERANCE)
+    direction = np.array([(1.0, 0.0), (0.0, 1.0)])
+    out = stretch.stretch_charts(uvs, triangles, charts, np.array([1.5, 1.0]), direction)
+    before, after = (lmrefine.allocation.signed_areas(u, triangles) for u in (uvs, out))
+    np.testing.assert_allclose(after, before, rtol=1e-5)  # determinant 1: area and winding kept
+    left = np.unique(triangles[charts == 0])
+    right = np.unique(triangles[charts == 1])
+    assert np.array_equal(out[right], uvs[right])
+    # Reference: the map diag(1.5, 1 / 1.5) about the chart's mean UV.
+    centre = uvs[left].astype(np.float64).mean(axis=0)
+    expected = centre + (uvs[left] - centre) * np.array([1.5, 1 / 1.5])
+    np.testing.assert_allclose(out[left], expected, atol=1e-6)
+    # A diagonal direction: the same map turned by 45 degrees.
+    diagonal = np.array([(np.sqrt(0.5), np.sqrt(0.5)), (1.0, 0.0)])
+    turned = stretch.stretch_charts(uvs, triangles, charts, np.array([2.0, 1.0]), diagonal)
+    e1, e2 = diagonal[0], np.array([-diagonal[0][1], diagonal[0][0]])
+    offset = uvs[left] - centre
+    expected = centre + np.outer(offset @ e1 * 2.0, e1) + np.outer(offset @ e2 / 2.0, e2)
+    np.testing.assert_allclose(turned[left], expected, atol=1e-6)
+
+
+def test_tensor_finds_the_stripes_direction_in_the_layout_being_stretched():
+    uvs, triangles = _two_charts()
+    charts = lmrefine.find_charts(uvs, triangles, lmrefine.CHART_TOLERANCE)
+    mask = lmrefine.coverage_mask(uvs, triangles, RESOLUTION)
+    for along_u in (True, False):
+        lightmap = _stripes(along_u=along_u)
+        tensors = stretch.chart_tensors(lightmap, mask, uvs, uvs, triangles, charts)
+        factor, direction, share, weight = stretch.stretch_factors(tensors, uvs, triangles, charts,
+                                                                   (RESOLUTION, RESOLUTION), 2.0)
+        axis = 0 if along_u else 1
+        assert abs(direction[0][axis]) == pytest.approx(1.0, abs=1e-3)  # across the stripes
+        assert factor[0] == pytest.approx(2.0) and share[0] > 0.99      # all the light changes run one way
+        assert factor[1] == 1.0 and weight[1] == 0.0                    # the flat chart stays
+    # The same source bake seen through a layout whose left chart is turned by 90 degrees: the direction turns.
+    lightmap = _stripes(along_u=True)
+    turned = _rotated(uvs, triangles, charts, 0)
+    tensors = stretch.chart_tensors(lightmap, mask, uvs, turned, triangles, charts)
+    _, direction, _, _ = stretch.stretch_factors(tensors, turned, triangles, charts, (RESOLUTION, RESOLUTION), 2.0)
+    assert abs(direction[0][1]) == pytest.approx(1.0, abs=1e-3)
+
+
+def test_stretch_factor_is_the_models_optimum_and_respects_its_bounds():
+    # l1 / l2 = 16: the edge factor w1 / a + w2 a is least at a = (l1 / l2)^(1/4) = 2.
+    tensors = np.array([[[16.0, 0.0], [0.0, 1.0]], [[1.0, 0.0], [0.0, 1.0]], [[0.0, 0.0], [0.0, 0.0]]])
+    uvs, triangles = merge(grid_chart(2, (0.0, 0.0), (0.3, 0.3)), grid_chart(2, (0.4, 0.0), (0.7, 0.3)),
+                           grid_chart(2, (0.0, 0.4), (0.02, 0.7)))
+    charts = lmrefine.find_charts(uvs, triangles, lmrefine.CHART_TOLERANCE)
+    factor, _, share, weight = stretch.stretch_factors(tensors, uvs, triangles, charts, (100, 100), 4.0)
+    assert factor[0] == pytest.approx(2.0)
+    grid = np.linspace(1.0, 4.0, 301)
+    assert grid[np.argmin(stretch.edge_factor(grid, share[0]))] == pytest.approx(2.0, abs=0.01)
+    assert factor[1] == 1.0           # isotropic light changes: no direction to stretch across
+    assert factor[2] == 1.0           # no light changes (and below the mean chart's)
+    assert weight.tolist() == pytest.approx([5.0, 2.0, 0.0])
+    assert stretch.stretch_factors(tensors, uvs, triangles, charts, (100, 100), 1.5)[0][0] == pytest.approx(1.5)
+    # A chart 2 texels wide across the squeezed direction is never squeezed below MIN_WIDTH_TEXELS.
+    thin = np.array([[[1.0, 0.0], [0.0, 16.0]], [[0.0, 0.0], [0.0, 0.0]], [[0.0, 0.0], [0.0, 0.0]]])
+    factor, direction, _, _ = stretch.stretch_factors(thin, uvs, triangles, charts, (100, 100), 4.0)
+    assert abs(direction[0][1]) == pytest.approx(1.0)  # stretched along v, squeezed along u
+    assert factor[0] == pytest.approx(2.0)  # the chart is 30 texels wide along u: room to squeeze
+    narrow = thin[[2, 1, 0]]  # the 2-texel-wide third chart gets the stripes
+    factor, _, _, _ = stretch.stretch_factors(narrow, uvs, triangles, charts, (100, 100), 4.0)
+    assert factor[2] == 1.0
+
+
+def _nine_charts():
+    """3 x 3 square charts; hard stripes along u over the two top-left ones, flat light elsewhere."""
+    uvs, triangles = merge(*[grid_chart(4, (0.02 + a / 3, 0.02 + b / 3), (0.31 + a / 3, 0.31 + b / 3))
+                             for b in range(3) for a in range(3)])
+    j = np.arange(RESOLUTION)
+    light = np.full((RESOLUTION, RESOLUTION), 0.6, np.float32)
+    light[:RESOLUTION // 3, :2 * RESOLUTION // 3] = np.where((j[:2 * RESOLUTION // 3] // 4) % 2 == 0, 1.0, 0.2)
+    return uvs, triangles, np.repeat(light[..., None], 3, axis=2)
+
+
+def test_refine_uvs_stretches_striped_charts_across_their_stripes():
+    uvs, triangles, lightmap = _nine_charts()
+    result = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2)
+    report = result.report["repack"]["stretch"]
+    assert result.report["repack"]["used"] and report["used"], report
+    assert report["charts_stretched"] == 2 and report["largest_stretch"] == pytest.approx(2.0)
+    assert report["predicted_error"] < report["predicted_error_unstretched"]
+    assert lmrefine.check_layout(result.uvs, triangles, RESOLUTION, padding=2)["valid"]
+    # Measured on the output: the striped charts' texels across the stripes (u in the source) gained
+    # more than their texels along them, whatever turn the packer gave each chart.
+    charts = lmrefine.find_charts(uvs, triangles, lmrefine.CHART_TOLERANCE)
+    striped = np.isin(charts, np.flatnonzero(report["chart_stretch"] > 1))
+    world = np.concatenate([uvs, np.zeros((len(uvs), 1), np.float32)], axis=1)[triangles[striped]]
+    point_triangle = np.arange(int(striped.sum()))
+    gains = []
+    for direction in ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0)):
+        d = np.tile(direction, (len(point_triangle), 1))
+        before = metrics.texels_across(world, uvs[triangles[striped]], point_triangle, d, RESOLUTION)
+        after = metrics.texels_across(world, result.uvs[triangles[striped]], point_triangle, d, RESOLUTION)
+        gains.append(np.median(after / before))
+    assert gains[0] > 3.0 * gains[1]  # a stretch of 2: 4x the ratio across over along
+    # Off: no stretch is tried, and the layout differs.
+    off = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, max_stretch=1.0)
+    assert off.report["repack"]["stretch"] is None and off.report["repack"]["used"]
+    assert not np.array_equal(off.uvs, result.uvs)
+    again = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2)
+    assert np.array_equal(again.uvs, result.uvs)  # deterministic
+    for bad in (0.5, float("inf"), float("nan"), True, "2"):
+        with pytest.raises(ValueError, match="max_stretch"):
+            lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, max_stretch=bad)
+
+
+def test_a_stretch_that_packs_less_densely_than_the_input_is_not_kept():
+    """Two charts: stretching the striped one would leave the atlas emptier than the input."""
+    uvs, triangles = merge(*[grid_chart(6, (0.03 + 0.5 * a, 0.03 + 0.5 * b), (0.47 + 0.5 * a, 0.47 + 0.5 * b))
+                             for b in (0, 1) for a in (0, 1)])
+    half = RESOLUTION // 2
+    j = np.arange(half)
+    light = np.full((RESOLUTION, RESOLUTION), 0.6, np.float32)
+    light[:half, :half] = np.where((j // 4) % 2 == 0, 1.0, 0.2)
+    result = lmrefine.refine_uvs(np.repeat(light[..., None], 3, axis=2), uvs, triangles, RESOLUTION, padding=2)
+    report = result.report["repack"]["stretch"]
+    assert result.report["repack"]["used"] and not report["used"]
+    assert report["predicted_error"] < report["predicted_error_unstretched"]  # the model alone would take it
+    assert "pack less densely" in report["reason"]
+
+
+def test_texels_across_reads_the_layouts_map_along_a_surface_direction():
+    # One triangle in the world's xy plane, mapped to UV at 2 UV units per metre along x, 1 along y.
+    world = np.array([[(0, 0, 0), (1, 0, 0), (0, 1, 0)]], np.float64)
+    uv = np.array([[(0, 0), (0.02, 0), (0, 0.01)]], np.float64)
+    directions = np.array([(1, 0, 0), (0, 1, 0), (np.sqrt(0.5), np.sqrt(0.5), 0)], np.float64)
+    across = metrics.texels_across(world, uv, np.zeros(3, np.int64), directions, 100)
+    np.testing.assert_allclose(across, [2.0, 1.0, np.sqrt(2.5)])
+    # The gradient direction from a stencil: light rising along +y.
+    points = np.zeros((1, 3))
+    stencil = np.array([(0.1, 0, 0), (0, 0.1, 0)], np.float64)
+    truth = np.full((1, 3), 0.5)
+    neighbours = np.array([(0.5, 0.5, 0.5), (0.9, 0.9, 0.9)])
+    np.testing.assert_allclose(metrics.surface_gradient_direction(points, truth, stencil, neighbours),
+                               [(0, 1, 0)], atol=1e-12)
+    # An isotropic layout change: across-edge gain = sqrt of the area gain.
+    gain = metrics.transition_widening_across(world, uv, uv * 3, np.zeros(2, np.int64), directions[:2],
+                                              np.ones(2, bool), 100)
+    assert gain == pytest.approx(3.0)
