@@ -177,3 +177,18 @@ def test_texels_across_reads_the_layouts_map_along_a_surface_direction():
     gain = metrics.transition_widening_across(world, uv, uv * 3, np.zeros(2, np.int64), directions[:2],
                                               np.ones(2, bool), 100)
     assert gain == pytest.approx(3.0)
+
+
+@pytest.mark.filterwarnings("error::RuntimeWarning")
+def test_the_stretch_does_not_depend_on_the_lights_scale():
+    """Huge or tiny light (HDR bakes, wrong units): the same charts stretch by the same factors, no overflow."""
+    uvs, triangles, lightmap = _nine_charts()
+    reports = [lmrefine.refine_uvs((lightmap * scale).astype(np.float32), uvs, triangles, RESOLUTION,
+                                   padding=2).report["repack"]["stretch"] for scale in (1.0, 1e30, 1e-30)]
+    for report in reports[1:]:
+        assert report["used"] == reports[0]["used"]
+        np.testing.assert_allclose(report["chart_stretch"], reports[0]["chart_stretch"], rtol=1e-6)
+    charts = lmrefine.find_charts(uvs, triangles, lmrefine.CHART_TOLERANCE)
+    mask = lmrefine.coverage_mask(uvs, triangles, RESOLUTION)
+    flat = np.full_like(lightmap, 0.5)
+    assert not stretch.chart_tensors(flat, mask, uvs, uvs, triangles, charts).any()  # no light change: no tensor

@@ -60,11 +60,18 @@ def luminance_gradient(lightmap, mask):
 
 def chart_tensors(lightmap, mask, source_uvs, uvs, triangles, charts):
     """(C, 2, 2) float64: each chart's structure tensor of the luminance
-    gradient of `lightmap` (baked on `source_uvs`, `mask` its coverage), in
+    gradient of `lightmap` (baked on `source_uvs`, `mask` its coverage;
+    the gradient scaled by its largest component, all zero without one), in
     the frame of layout `uvs` (the same triangles, each an affine image of
     its source triangle: a gradient g maps to A^-T g). Triangles without
     area in either layout add nothing."""
-    gradient = luminance_gradient(lightmap, mask)
+    count = int(charts.max()) + 1 if len(charts) else 0
+    gradient = luminance_gradient(lightmap, mask).astype(np.float64)
+    # Only directions and ratios matter: scaled to at most 1, huge light cannot overflow the squares.
+    peak = float(np.abs(gradient).max(initial=0.0))
+    if not (np.isfinite(peak) and peak > 0):
+        return np.zeros((count, 2, 2))
+    gradient /= peak
     gu, gv = gradient[..., 0], gradient[..., 1]
     # Per triangle, in the source frame: sums over its texels (allocation's four points per triangle).
     parts = [triangle_energy(source_uvs, triangles, field) for field in (gu * gu, gu * gv, gv * gv)]
@@ -82,7 +89,6 @@ def chart_tensors(lightmap, mask, source_uvs, uvs, triangles, charts):
     inverse[good] = before[good] @ np.linalg.inv(after[good])
     mapped = np.transpose(inverse, (0, 2, 1)) @ tensor @ inverse
     mapped[~good] = 0.0
-    count = int(charts.max()) + 1 if len(charts) else 0
     out = np.zeros((count, 2, 2))
     for i in range(2):
         for j in range(2):
@@ -99,6 +105,8 @@ def stretch_factors(tensors, uvs, triangles, charts, resolution, max_stretch):
     mean chart (a stretched chart costs packing density whatever it holds;
     only the charts that hold the light changes pay it back)."""
     count = len(tensors)
+    if count == 0:
+        return np.ones(0), np.zeros((0, 2)), np.zeros(0), np.zeros(0)
     values, vectors = np.linalg.eigh(tensors)  # ascending eigenvalues
     low, high = np.maximum(values[:, 0], 0.0), np.maximum(values[:, 1], 0.0)
     direction = vectors[:, :, 1]
