@@ -620,12 +620,16 @@ def test_tessellation_is_refused_where_it_would_change_more(facts, case, advice)
 
 
 def test_charts_stretched_across_stripes_are_reported_and_in_the_map(facts):
-    value = fact(facts, "stretch_across_stripes")
+    value = fact(facts, "stretch_across_stripes")["2.0"]
     assert value["outcome"] == "FINISHED" and value["valid"]
     assert value["panel_stretched"] >= 2  # the two striped tiles
     assert f"{value['panel_stretched']} chart(s) stretched across their light changes" in value["result_message"]
     # Measured on the refined map: across the stripes (x) the texels gained more than along them (y).
     assert value["gains"]["x"] > 1.5 * value["gains"]["y"], value["gains"]
+    off = fact(facts, "stretch_across_stripes")["1.0"]  # Max Stretch 1: no chart stretched, and the map shows it
+    assert off["outcome"] == "FINISHED" and off["valid"] and off["panel_stretched"] == 0
+    assert "stretched across" not in off["result_message"]
+    assert off["gains"]["x"] < 1.3 * off["gains"]["y"], off["gains"]
 
 
 def test_stages_refine_again_and_report_the_stages_kept(facts):
@@ -653,7 +657,8 @@ def run_batch(blend, *flags):
 def test_batch_help_documents_flags():
     process = run_blender("--python", BATCH, "--", "--help")
     assert process.returncode == 0, process.stderr[-2000:]
-    for flag in ("--objects", "--resolution", "--out", "--backend", "--bake-passes", "--first-lightmap"):
+    for flag in ("--objects", "--resolution", "--out", "--backend", "--bake-passes", "--first-lightmap",
+                 "--max-stretch"):
         assert flag in process.stdout
 
 
@@ -869,7 +874,8 @@ def test_batch_rechart_flag(facts, work_dir):
     for flag, stages in (("--rechart", "2"), ("--no-rechart", "1")):
         out = work_dir / f"batch{flag}"
         process = run_batch(blend, "--objects", "Floor", "--resolution", "64", "--samples", "4",
-                            "--bake-passes", "direct", "--no-preview", flag, "--stages", stages, "--out", str(out))
+                            "--bake-passes", "direct", "--no-preview", flag, "--stages", stages,
+                            "--max-stretch", "1" if stages == "1" else "2", "--out", str(out))
         assert process.returncode == 0, process.stderr[-3000:]
         report = json.loads((out / "report.json").read_text())
         floor = report["objects"]["Floor"]["report"]
@@ -877,6 +883,8 @@ def test_batch_rechart_flag(facts, work_dir):
         used[flag] = floor["rechart"]["used"]
         assert floor["rechart"]["room"]["no_room"] is True
         assert floor.get("stages", {}).get("repack") is (False if stages == "2" else None)
+        if stages == "1":  # --max-stretch 1: no stretch is even tried
+            assert (floor.get("repack") or {}).get("stretch") is None
     assert used == {"--rechart": True, "--no-rechart": False}
 
 

@@ -84,8 +84,8 @@ class LMREFINE_PT_refine_options(_LightmapTab, bpy.types.Panel):
     def draw(self, context):
         settings = context.scene.lmrefine
         column = self.split_layout().column()
-        for name in ("strength", "max_magnification", "min_shrink", "delta", "passes", "border", "wavelet",
-                     "directional"):
+        for name in ("strength", "max_magnification", "min_shrink", "max_stretch", "delta", "passes", "border",
+                     "wavelet", "directional"):
             column.prop(settings, name)
         column.prop(settings, "rechart", text="Re-chart if Better")
 

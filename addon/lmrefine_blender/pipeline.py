@@ -174,6 +174,7 @@ def settings_snapshot(settings):
             "strength": settings.strength,
             "max_magnification": settings.max_magnification,
             "min_shrink": settings.min_shrink,
+            "max_stretch": settings.max_stretch,
             "delta": settings.delta,
             "passes": settings.passes,
             "border": settings.border.lower(),

@@ -144,6 +144,13 @@ class LMREFINE_PG_settings(bpy.types.PropertyGroup):
         name="Min Shrink", description="Smallest a texel's area may become in flat light (texel-density ratio)",
         default=0.25, min=0.01, max=1.0,
     )
+    max_stretch: FloatProperty(
+        name="Max Stretch",
+        description="A chart whose light changes run mostly one way (stripes of beams, railings) may be "
+                    "stretched across them by up to this and squeezed along them as much, its texel area kept; "
+                    "only where it predicts less error and the atlas stays as full. 1 turns it off",
+        default=2.0, min=1.0, max=4.0,
+    )
     delta: FloatProperty(
         name="Delta",
         description="The automaton stops when neighbouring texel densities differ by less than this (relative)",
