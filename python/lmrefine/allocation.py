@@ -349,7 +349,7 @@ def repack(source_uvs, refined_uvs, triangles, energy, resolution, padding, min_
                                                                resolution))
         # The stretch's edge error over the unstretched packing's, each chart weighted by its light
         # changes as the structure tensor measures them.
-        weight, factor = stretched["weight"], stretched["factor"]
+        weight = stretched["weight"]
         before = (weight / np.maximum(np.asarray(final, np.float64), 1e-12)).sum()
         after = (weight * stretched["edge_factor"] / np.maximum(candidate_final, 1e-12)).sum()
         candidate = predicted * (float(after / before) if before > 0 else 1.0)
