@@ -137,6 +137,9 @@ def test_refine_uvs_stretches_striped_charts_across_their_stripes():
     off = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, max_stretch=1.0)
     assert off.report["repack"]["stretch"] is None and off.report["repack"]["used"]
     assert not np.array_equal(off.uvs, result.uvs)
+    # The input's density, which both packings must keep, does not depend on the stretch chosen.
+    assert result.report["repack"]["padded_utilisation_before"] == \
+        pytest.approx(off.report["repack"]["padded_utilisation_before"])
     again = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2)
     assert np.array_equal(again.uvs, result.uvs)  # deterministic
     for bad in (0.5, float("inf"), float("nan"), True, "2"):

@@ -332,6 +332,8 @@ def repack(source_uvs, refined_uvs, triangles, energy, resolution, padding, min_
     # Areas and outlines: the packed charts are bit-exact; the input's outlines are theirs unscaled.
     area_after, perimeter_out = chart_outlines(packed, triangles, charts, resolution)
     area_before, _ = chart_outlines(refined_uvs, triangles, charts, resolution)
+    # The input's density with its gutters: its outlines are the packed ones unscaled (not so once stretched).
+    padded_before = padded_utilisation(area_before, perimeter_out / final, padding, resolution)
     # Predicted error of the packed layout relative to refined_uvs (1.0 = the same), both terms.
     predicted = predicted_error(edge, smooth, final)
     stretch_report = None
@@ -345,8 +347,7 @@ def repack(source_uvs, refined_uvs, triangles, energy, resolution, padding, min_
         candidate_area, candidate_perimeter = chart_outlines(candidate_uvs, triangles, charts, resolution)
         # The same density rule as the unstretched packing (the model does not see the gutters).
         dense = (padded_utilisation(candidate_area, candidate_perimeter, padding, resolution)
-                 >= MIN_UTILISATION_KEPT * padded_utilisation(area_before, perimeter_out / final, padding,
-                                                               resolution))
+                 >= MIN_UTILISATION_KEPT * padded_before)
         # The stretch's edge error over the unstretched packing's, each chart weighted by its light
         # changes as the structure tensor measures them.
         weight = stretched["weight"]
@@ -374,7 +375,7 @@ def repack(source_uvs, refined_uvs, triangles, energy, resolution, padding, min_
         "area_utilisation_before": float(pack_report["area_utilisation_input"]),
         "area_utilisation_after": float(pack_report["area_utilisation"]),
         "padding": float(padding),
-        "padded_utilisation_before": padded_utilisation(area_before, perimeter_out / final, padding, resolution),
+        "padded_utilisation_before": padded_before,
         "padded_utilisation_after": padded_utilisation(area_after, perimeter_out, padding, resolution),
         "placement": pack_report["placement"],
         "predicted_error": predicted,
