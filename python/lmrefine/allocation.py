@@ -338,33 +338,10 @@ def repack(source_uvs, refined_uvs, triangles, energy, resolution, padding, min_
     predicted = predicted_error(edge, smooth, final)
     stretch_report = None
     if stretched is not None:
-        stretch_report = {"used": False, "predicted_error_unstretched": predicted, **stretched["report"]}
-    if stretched is not None and stretched_pack is None:
-        stretch_report["reason"] = "the stretched charts do not fit"
-    elif stretched is not None:
-        candidate_uvs, candidate_report = stretched_pack
-        candidate_final = np.asarray(candidate_report["chart_scales"], np.float64)
-        candidate_area, candidate_perimeter = chart_outlines(candidate_uvs, triangles, charts, resolution)
-        # The same density rule as the unstretched packing (the model does not see the gutters).
-        dense = (padded_utilisation(candidate_area, candidate_perimeter, padding, resolution)
-                 >= MIN_UTILISATION_KEPT * padded_before)
-        # The stretch's edge error over the unstretched packing's, each chart weighted by its light
-        # changes as the structure tensor measures them.
-        weight = stretched["weight"]
-        before = (weight / np.maximum(np.asarray(final, np.float64), 1e-12)).sum()
-        after = (weight * stretched["edge_factor"] / np.maximum(candidate_final, 1e-12)).sum()
-        candidate = predicted * (float(after / before) if before > 0 else 1.0)
-        stretch_report["predicted_error"] = candidate
-        if candidate < predicted and dense:
-            stretch_report["used"] = True
-            packed, pack_report, final = candidate_uvs, candidate_report, candidate_final
-            area_after, perimeter_out = candidate_area, candidate_perimeter
-            predicted = candidate
-        elif not dense:
-            stretch_report["reason"] = ("the stretched charts would pack less densely than the input (with their "
-                                        "gutters)")
-        else:
-            stretch_report["reason"] = f"the error model predicts {candidate:.3f} stretched against {predicted:.3f}"
+        stretch_report, kept = _judge_stretch(stretched, stretched_pack, triangles, charts, resolution, padding,
+                                              final, predicted, padded_before)
+        if kept is not None:
+            packed, pack_report, final, area_after, perimeter_out, predicted = kept
     report = {
         "charts": int(len(scales)),
         "chart_scales": np.asarray(final, np.float64),
@@ -410,6 +387,36 @@ def _stretch_candidate(source_uvs, refined_uvs, triangles, charts, lightmap, mas
             "edge_factor": stretch.edge_factor(factor, share), "weight": weight,
             "report": {"charts_stretched": int((factor > 1.0).sum()), "chart_stretch": factor,
                        "largest_stretch": float(factor.max())}}
+
+
+def _judge_stretch(stretched, stretched_pack, triangles, charts, resolution, padding, final, predicted,
+                   padded_before):
+    """The stretch's report and, when the stretched packing is kept, its
+    (uvs, pack report, chart scales, chart areas, perimeters, predicted
+    error); `final`, `predicted` and `padded_before` are the unstretched
+    packing's scales and predicted error and the input's padded density."""
+    report = {"used": False, "predicted_error_unstretched": predicted, **stretched["report"]}
+    if stretched_pack is None:
+        report["reason"] = "the stretched charts do not fit"
+        return report, None
+    uvs, pack_report = stretched_pack
+    scales = np.asarray(pack_report["chart_scales"], np.float64)
+    area, perimeter = chart_outlines(uvs, triangles, charts, resolution)
+    # The same density rule as the unstretched packing (the model does not see the gutters).
+    dense = padded_utilisation(area, perimeter, padding, resolution) >= MIN_UTILISATION_KEPT * padded_before
+    # The stretch's edge error over the unstretched packing's, each chart weighted by its light
+    # changes as the structure tensor measures them.
+    weight = stretched["weight"]
+    before = (weight / np.maximum(np.asarray(final, np.float64), 1e-12)).sum()
+    after = (weight * stretched["edge_factor"] / np.maximum(scales, 1e-12)).sum()
+    candidate = predicted * (float(after / before) if before > 0 else 1.0)
+    report["predicted_error"] = candidate
+    if candidate < predicted and dense:
+        report["used"] = True
+        return report, (uvs, pack_report, scales, area, perimeter, candidate)
+    report["reason"] = ("the stretched charts would pack less densely than the input (with their gutters)"
+                        if not dense else f"the error model predicts {candidate:.3f} stretched against {predicted:.3f}")
+    return report, None
 
 
 def _pack_both(uvs, stretched_uvs, triangles, charts, scales, resolution, padding, progress):
