@@ -86,7 +86,10 @@ def test_the_pipeline_reports_every_figure_with_sensible_values(tmp_path):
     assert 1.0 < report["transition_widening_linear"] <= 2 * report["transition_widening"] ** 0.5
     stretch = report["refine"]["repack"]["stretch"]
     if stretch is not None:
-        assert ("Chart stretch:" in (out / "tiny_smart" / "report.md").read_text()) and stretch["charts_stretched"] >= 1
+        text = (out / "tiny_smart" / "report.md").read_text()
+        assert "Chart stretch:" in text and stretch["charts_stretched"] >= 1
+        assert (f"{stretch['charts_turned']} of them turned to their smallest boxes" in text) == \
+            bool(stretch["charts_turned"])
     ratio, status = report["equal_error_resolution_ratio"], report["equal_error_status"]
     # The baseline is limited by resolution here, not noise: a ratio exists.
     assert status in ("within", "below", "above") and ratio > 0

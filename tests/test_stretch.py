@@ -195,3 +195,119 @@ def test_the_stretch_does_not_depend_on_the_lights_scale():
     mask = lmrefine.coverage_mask(uvs, triangles, RESOLUTION)
     flat = np.full_like(lightmap, 0.5)
     assert not stretch.chart_tensors(flat, mask, uvs, uvs, triangles, charts).any()  # no light change: no tensor
+
+
+def _smallest_box_reference(points, steps=3600):
+    """The smallest axis-aligned box area over turns in [0, 90) degrees, by trying them all (plain reference)."""
+    best = np.inf
+    for angle in np.linspace(0.0, np.pi / 2, steps, endpoint=False):
+        c, s = np.cos(angle), np.sin(angle)
+        turned = points @ np.array([[c, s], [-s, c]])
+        best = min(best, np.ptp(turned[:, 0]) * np.ptp(turned[:, 1]))
+    return best
+
+
+def _box_area(points):
+    return np.ptp(points[:, 0]) * np.ptp(points[:, 1])
+
+
+def test_smallest_box_turns_match_a_search_over_all_turns():
+    rng = np.random.default_rng(3)
+    uvs, triangles, charts = [], [], []
+    for chart in range(6):
+        points = rng.normal(size=(12, 2)) * rng.uniform(0.02, 0.1, size=2) + 0.5
+        base = sum(len(p) for p in uvs)
+        uvs.append(points)
+        triangles.append(base + np.array([(0, k, k + 1) for k in range(1, 11)]))
+        charts += [chart] * 10
+    uvs, triangles, charts = np.concatenate(uvs), np.concatenate(triangles), np.array(charts)
+    turns = lmrefine._native.smallest_box_turns(uvs, triangles, charts)
+    assert turns.shape == (6, 2)
+    np.testing.assert_allclose(np.hypot(turns[:, 0], turns[:, 1]), 1.0)
+    for chart in range(6):
+        points = uvs[np.unique(triangles[charts == chart])]
+        c, s = turns[chart]
+        turned = points @ np.array([[c, s], [-s, c]])  # rows: (c x - s y, s x + c y)
+        assert _box_area(turned) <= _smallest_box_reference(points) * (1 + 1e-9)
+    # An id with no triangles keeps (1, 0); bad input is a ValueError naming it, never a crash.
+    gap = lmrefine._native.smallest_box_turns(uvs, triangles, np.where(charts == 5, 7, charts))
+    np.testing.assert_array_equal(gap[5], [1.0, 0.0])
+    bad_uvs = uvs.copy()
+    bad_uvs[3] = np.nan
+    for args, match in (((bad_uvs, triangles, charts), "uv"), ((uvs, triangles, charts[:-1]), "charts"),
+                        ((uvs, triangles, charts + len(triangles)), "charts"), ((uvs, triangles + 1000, charts),
+                                                                                 "triangles|index")):
+        with pytest.raises(ValueError, match=match):
+            lmrefine._native.smallest_box_turns(*args)
+
+
+def test_turn_to_smallest_boxes_turns_a_sheared_chart_and_nothing_else():
+    uvs, triangles = _two_charts()
+    charts = lmrefine.find_charts(uvs, triangles, lmrefine.CHART_TOLERANCE)
+    diagonal = np.array([(np.sqrt(0.5), np.sqrt(0.5))] * 2)
+    sheared = stretch.stretch_charts(uvs, triangles, charts, np.array([2.0, 1.0]), diagonal)
+    out, turned = stretch.turn_to_smallest_boxes(sheared, triangles, charts, np.array([True, True]))
+    # The stretched (sheared) chart turns; the axis-aligned one is already in its smallest box.
+    assert turned.tolist() == [True, False]
+    left, right = (np.unique(triangles[charts == c]) for c in (0, 1))
+    assert np.array_equal(out[right], sheared[right])
+    np.testing.assert_allclose(_box_area(out[left]), _smallest_box_reference(sheared[left]), rtol=1e-3)
+    assert _box_area(out[left]) < stretch.TURN_GAIN * _box_area(sheared[left])
+    # A turn: areas, winding and the shape's distances are kept.
+    np.testing.assert_allclose(lmrefine.allocation.signed_areas(out, triangles),
+                               lmrefine.allocation.signed_areas(sheared, triangles), rtol=1e-4)
+    distance = lambda p: np.linalg.norm(p[:, None] - p[None], axis=-1)  # noqa: E731
+    np.testing.assert_allclose(distance(out[left]), distance(sheared[left]), atol=1e-5)
+    # Charts not asked for stay, whatever their box.
+    same, none = stretch.turn_to_smallest_boxes(sheared, triangles, charts, np.array([False, False]))
+    assert not none.any() and np.array_equal(same, sheared)
+
+
+def _diagonal_stripes(gap):
+    """4 x 4 square charts over 0.97 of the atlas, `gap` UV inside each cell; hard diagonal
+    stripes over the two top-left charts, flat light elsewhere."""
+    w = 0.97 / 4
+    uvs, triangles = merge(*[grid_chart(4, (gap + a * w, gap + b * w), ((a + 1) * w - gap, (b + 1) * w - gap))
+                             for b in range(4) for a in range(4)])
+    i, j = np.mgrid[0:RESOLUTION, 0:RESOLUTION]
+    light = np.full((RESOLUTION, RESOLUTION), 0.6, np.float32)
+    rows, cols = slice(RESOLUTION - int(RESOLUTION * w), RESOLUTION), slice(0, int(2 * RESOLUTION * w))
+    light[rows, cols] = np.where(((i + j) // 4) % 2 == 0, 1.0, 0.2)[rows, cols]
+    return uvs, triangles, np.repeat(light[..., None], 3, axis=2)
+
+
+def test_diagonally_stretched_charts_too_loose_to_keep_are_packed_turned_to_their_smallest_boxes():
+    """Stretched along a diagonal, the striped charts are sheared and their atlas fails the density
+    rule; turned to their smallest boxes they pack closer, and that packing is kept."""
+    uvs, triangles, lightmap = _diagonal_stripes(gap=0.02)
+    result = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2)
+    report = result.report["repack"]["stretch"]
+    assert report["used"] and report["charts_stretched"] == 2 and report["charts_turned"] == 2, report
+    plain, turned = report["candidates"]
+    assert plain["charts_turned"] == 0 and not plain["dense"]
+    assert turned["charts_turned"] == 2 and turned["dense"]
+    assert turned["padded_utilisation"] > plain["padded_utilisation"]
+    assert report["predicted_error"] == turned["predicted_error"] < report["predicted_error_unstretched"]
+    before = result.report["repack"]["padded_utilisation_before"]
+    for candidate in (plain, turned):
+        kept_density = lmrefine.allocation.MIN_UTILISATION_KEPT * before
+        assert candidate["dense"] == (candidate["padded_utilisation"] >= kept_density)
+    assert result.report["repack"]["padded_utilisation_after"] == pytest.approx(turned["padded_utilisation"])
+    assert lmrefine.check_layout(result.uvs, triangles, RESOLUTION, padding=2)["valid"]
+    # Measured on the output: each stretched chart's box is its smallest (a stretch of 2 along the
+    # diagonal of a square, unturned, fills a box 4 times its area).
+    charts = lmrefine.find_charts(uvs, triangles, lmrefine.CHART_TOLERANCE)
+    areas = np.bincount(charts, weights=np.abs(lmrefine.allocation.signed_areas(result.uvs, triangles)))
+    for chart in np.flatnonzero(report["chart_stretch"] > 1):
+        points = result.uvs[np.unique(triangles[charts == chart])].astype(np.float64)
+        assert _box_area(points) == pytest.approx(_smallest_box_reference(points), rel=1e-2)
+        assert _box_area(points) < 2.0 * areas[chart]
+
+
+def test_a_stretched_packing_dense_enough_keeps_its_orientation_and_no_turn_is_packed():
+    """The same charts with more room: the sheared charts pack densely enough as they are, so they
+    keep their orientation to the texel grid and the turned fallback is not packed."""
+    uvs, triangles, lightmap = _diagonal_stripes(gap=0.03)
+    report = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2).report["repack"]["stretch"]
+    assert report["used"] and report["charts_turned"] == 0
+    assert len(report["candidates"]) == 1 and report["candidates"][0]["dense"]

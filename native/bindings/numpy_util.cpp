@@ -203,6 +203,31 @@ IndexArray require_indices(const py::handle& object, const char* name, int colum
     return contiguous<int32_t>(array, name);
 }
 
+std::pair<std::vector<int32_t>, int32_t> require_chart_ids(const py::handle& charts, int64_t triangle_count) {
+    py::array array = py::array::ensure(charts);
+    if (!array || (array.dtype().kind() != 'i' && array.dtype().kind() != 'u')) {
+        throw py::value_error("charts must be an integer array of chart ids, one per triangle");
+    }
+    if (array.ndim() != 1 || array.shape(0) != triangle_count) {
+        throw py::value_error("charts must have shape (" + std::to_string(triangle_count) +
+                              ",): one chart id per triangle, got " + shape_string(array));
+    }
+    py::array_t<int64_t, py::array::c_style | py::array::forcecast> wide(array);
+    std::vector<int32_t> ids(static_cast<size_t>(triangle_count));
+    int32_t count = 0;
+    for (py::ssize_t t = 0; t < wide.size(); ++t) {
+        const int64_t c = wide.data()[t];
+        if (c < 0 || c >= triangle_count) {
+            throw py::value_error("charts[" + std::to_string(t) + "] is " + std::to_string(c) +
+                                  "; chart ids must be in [0, " + std::to_string(triangle_count) +
+                                  "), one below the triangle count: number the charts 0..C-1 (find_charts does)");
+        }
+        ids[size_t(t)] = int32_t(c);
+        count = std::max(count, int32_t(c) + 1);
+    }
+    return {std::move(ids), count};
+}
+
 std::pair<int, int> parse_resolution(const py::handle& resolution, const char* what, uint64_t bytes_per_texel) {
     constexpr int64_t kMax = int64_t(1) << 24;
     int64_t height = 0, width = 0;

@@ -55,6 +55,12 @@ py::array_t<T, py::array::c_style> contiguous(const py::handle& object, const ch
         contiguous_array(object, name, py::dtype::of<T>()));
 }
 
+// Chart ids, one per triangle (an integer array of shape (triangle_count,)),
+// each in [0, triangle_count): below the triangle count, so every per-chart
+// array is bounded by the input's size. Returns the ids and the chart count
+// (the largest id + 1).
+std::pair<std::vector<int32_t>, int32_t> require_chart_ids(const py::handle& charts, int64_t triangle_count);
+
 // A Python int (or numpy integer; not bool) in [min, max].
 int64_t int_param(const py::handle& value, const char* name, int64_t min, int64_t max);
 // A real number (int, float or numpy scalar; not bool, not str), finite.

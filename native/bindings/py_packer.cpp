@@ -71,27 +71,7 @@ py::tuple pack(const py::handle& uvs_in, const py::handle& triangles_in, const p
         chart_ids = std::move(charts.triangle_chart);
         chart_count = charts.count;
     } else {
-        py::array array = py::array::ensure(charts_in);
-        if (!array || (array.dtype().kind() != 'i' && array.dtype().kind() != 'u')) {
-            throw py::value_error("charts must be an integer array of chart ids, one per triangle");
-        }
-        if (array.ndim() != 1 || array.shape(0) != layout.triangle_count) {
-            throw py::value_error("charts must have shape (" + std::to_string(layout.triangle_count) + ",): one chart id per triangle, got " +
-                                  py_util::shape_string(array));
-        }
-        py::array_t<int64_t, py::array::c_style | py::array::forcecast> wide(array);
-        chart_ids.resize(size_t(layout.triangle_count));
-        for (py::ssize_t t = 0; t < wide.size(); ++t) {
-            const int64_t c = wide.data()[t];
-            // Ids below the triangle count bound every per-chart array by the input's size.
-            if (c < 0 || c >= int64_t(layout.triangle_count)) {
-                throw py::value_error("charts[" + std::to_string(t) + "] is " + std::to_string(c) +
-                                      "; chart ids must be in [0, " + std::to_string(layout.triangle_count) +
-                                      "), one below the triangle count: number the charts 0..C-1 (find_charts does)");
-            }
-            chart_ids[size_t(t)] = int32_t(c);
-            chart_count = std::max(chart_count, int32_t(c) + 1);
-        }
+        std::tie(chart_ids, chart_count) = py_util::require_chart_ids(charts_in, layout.triangle_count);
     }
     std::vector<double> scales(size_t(chart_count), 1.0);
     if (!scales_in.is_none()) {

@@ -324,8 +324,9 @@ def repack(source_uvs, refined_uvs, triangles, energy, resolution, padding, min_
         stretched = _stretch_candidate(source_uvs, refined_uvs, triangles, charts, lightmap, mask, resolution,
                                        max_stretch)
     try:
-        (packed, pack_report), stretched_pack = _pack_both(refined_uvs, None if stretched is None else stretched["uvs"],
-                                                           triangles, charts, scales, resolution, padding, progress)
+        (packed, pack_report), stretched_pack = _pack_both(
+            refined_uvs, None if stretched is None else stretched["candidates"][0]["uvs"],
+            triangles, charts, scales, resolution, padding, progress)
     except ValueError as error:  # the charts do not fit at a usable scale: keep the unpacked layout
         return None, {"charts": int(len(scales)), "used": False, "reason": str(error)}
     final = pack_report["chart_scales"]  # linear scale of each chart against refined_uvs
@@ -338,7 +339,13 @@ def repack(source_uvs, refined_uvs, triangles, energy, resolution, padding, min_
     predicted = predicted_error(edge, smooth, final)
     stretch_report = None
     if stretched is not None:
-        stretch_report, kept = _judge_stretch(stretched, stretched_pack, triangles, charts, resolution, padding,
+        def packings():  # the first stretched packing is made; a fallback is packed only when asked for
+            yield stretched_pack
+            for candidate in stretched["candidates"][1:]:
+                yield _pack_or_none(candidate["uvs"], triangles, charts, scales, resolution, padding,
+                                    lambda fraction, stage: True if progress is None else progress(1.0, stage))
+
+        stretch_report, kept = _judge_stretch(stretched, packings(), triangles, charts, resolution, padding,
                                               final, predicted, padded_before)
         if kept is not None:
             packed, pack_report, final, area_after, perimeter_out, predicted = kept
@@ -372,7 +379,9 @@ def repack(source_uvs, refined_uvs, triangles, energy, resolution, padding, min_
 
 def _stretch_candidate(source_uvs, refined_uvs, triangles, charts, lightmap, mask, resolution, max_stretch):
     """`refined_uvs` with its charts stretched across their light changes
-    (lmrefine.stretch), with each chart's factor, edge-term factor and
+    (lmrefine.stretch): the candidate layouts to pack (the stretched charts,
+    and the same turned to their smallest boxes when any turn pays, each
+    with its "turned" (C,) bool), each chart's factor, edge-term factor and
     light-change weight; None when no chart stretches."""
     from . import stretch
 
@@ -383,40 +392,71 @@ def _stretch_candidate(source_uvs, refined_uvs, triangles, charts, lightmap, mas
                                                                max_stretch)
     if not (factor > 1.0).any():
         return None
-    return {"uvs": stretch.stretch_charts(refined_uvs, triangles, charts, factor, direction), "factor": factor,
+    uvs = stretch.stretch_charts(refined_uvs, triangles, charts, factor, direction)
+    candidates = [{"uvs": uvs, "turned": np.zeros(len(factor), bool)}]
+    # A chart stretched along a diagonal is sheared in the atlas's frame; turned to its smallest
+    # box it may pack closer, or not (the packing is judged, not predicted): a second candidate.
+    turned_uvs, turned = stretch.turn_to_smallest_boxes(uvs, triangles, charts, factor > 1.0)
+    if turned.any():
+        candidates.append({"uvs": turned_uvs, "turned": turned})
+    return {"candidates": candidates, "factor": factor,
             "edge_factor": stretch.edge_factor(factor, share), "weight": weight,
             "report": {"charts_stretched": int((factor > 1.0).sum()), "chart_stretch": factor,
                        "largest_stretch": float(factor.max())}}
 
 
-def _judge_stretch(stretched, stretched_pack, triangles, charts, resolution, padding, final, predicted,
-                   padded_before):
-    """The stretch's report and, when the stretched packing is kept, its
-    (uvs, pack report, chart scales, chart areas, perimeters, predicted
-    error); `final`, `predicted` and `padded_before` are the unstretched
-    packing's scales and predicted error and the input's padded density."""
-    report = {"used": False, "predicted_error_unstretched": predicted, **stretched["report"]}
-    if stretched_pack is None:
-        report["reason"] = "the stretched charts do not fit"
-        return report, None
-    uvs, pack_report = stretched_pack
-    scales = np.asarray(pack_report["chart_scales"], np.float64)
-    area, perimeter = chart_outlines(uvs, triangles, charts, resolution)
-    # The same density rule as the unstretched packing (the model does not see the gutters).
-    dense = padded_utilisation(area, perimeter, padding, resolution) >= MIN_UTILISATION_KEPT * padded_before
-    # The stretch's edge error over the unstretched packing's, each chart weighted by its light
-    # changes as the structure tensor measures them.
+def _judge_stretch(stretched, packings, triangles, charts, resolution, padding, final, predicted, padded_before):
+    """The stretch's report and, when a stretched packing is kept, its (uvs,
+    pack report, chart scales, chart areas, perimeters, predicted error):
+    the first candidate, in the order of stretched["candidates"], that packs
+    as densely as the input and predicts less error than the unstretched
+    packing. `packings` yields each candidate's packing (None when it does
+    not fit) and is read no further than the one kept. `final`,
+    `predicted` and `padded_before` are the unstretched packing's scales
+    and predicted error and the input's padded density."""
+    report = {"used": False, "predicted_error_unstretched": predicted, "charts_turned": 0, **stretched["report"]}
     weight = stretched["weight"]
     before = (weight / np.maximum(np.asarray(final, np.float64), 1e-12)).sum()
-    after = (weight * stretched["edge_factor"] / np.maximum(scales, 1e-12)).sum()
-    candidate = predicted * (float(after / before) if before > 0 else 1.0)
-    report["predicted_error"] = candidate
-    if candidate < predicted and dense:
-        report["used"] = True
-        return report, (uvs, pack_report, scales, area, perimeter, candidate)
-    report["reason"] = ("the stretched charts would pack less densely than the input (with their gutters)"
-                        if not dense else f"the error model predicts {candidate:.3f} stretched against {predicted:.3f}")
-    return report, None
+    judged, kept = [], None
+    for candidate, packing in zip(stretched["candidates"], packings):
+        entry = {"charts_turned": int(candidate["turned"].sum()), "fits": packing is not None}
+        judged.append(entry)
+        if packing is None:
+            continue
+        uvs, pack_report = packing
+        scales = np.asarray(pack_report["chart_scales"], np.float64)
+        area, perimeter = chart_outlines(uvs, triangles, charts, resolution)
+        # The same density rule as the unstretched packing (the model does not see the gutters).
+        entry["padded_utilisation"] = padded_utilisation(area, perimeter, padding, resolution)
+        entry["dense"] = bool(entry["padded_utilisation"] >= MIN_UTILISATION_KEPT * padded_before)
+        # The stretch's edge error over the unstretched packing's, each chart weighted by its light
+        # changes as the structure tensor measures them.
+        after = (weight * stretched["edge_factor"] / np.maximum(scales, 1e-12)).sum()
+        entry["predicted_error"] = predicted * (float(after / before) if before > 0 else 1.0)
+        if entry["dense"] and entry["predicted_error"] < predicted:
+            kept = (uvs, pack_report, scales, area, perimeter, entry["predicted_error"])
+            report.update(used=True, charts_turned=entry["charts_turned"])
+            break
+    report["candidates"] = judged
+    report["predicted_error"] = min((e["predicted_error"] for e in judged if "predicted_error" in e), default=None)
+    if kept is not None:
+        report["predicted_error"] = kept[-1]
+    elif not any(e["fits"] for e in judged):
+        report["reason"] = "the stretched charts do not fit"
+    elif not any(e.get("dense") for e in judged):
+        report["reason"] = "the stretched charts would pack less densely than the input (with their gutters)"
+    else:
+        best = min(e["predicted_error"] for e in judged if e.get("dense"))
+        report["reason"] = f"the error model predicts {best:.3f} stretched against {predicted:.3f}"
+    return report, kept
+
+
+def _pack_or_none(uvs, triangles, charts, scales, resolution, padding, progress):
+    """pack_charts, or None when the charts do not fit."""
+    try:
+        return pack_charts(uvs, triangles, charts, scales, resolution, padding, progress=progress)
+    except ValueError:
+        return None
 
 
 def _pack_both(uvs, stretched_uvs, triangles, charts, scales, resolution, padding, progress):
@@ -437,15 +477,9 @@ def _pack_both(uvs, stretched_uvs, triangles, charts, scales, resolution, paddin
             cancelled.set()
         return keep_going
 
-    def second():
-        try:
-            return pack_charts(stretched_uvs, triangles, charts, scales, resolution, padding,
-                               progress=lambda fraction, stage: not cancelled.is_set())
-        except ValueError:
-            return None
-
     with ThreadPoolExecutor(max_workers=1) as pool:
-        future = pool.submit(second)
+        future = pool.submit(_pack_or_none, stretched_uvs, triangles, charts, scales, resolution, padding,
+                             lambda fraction, stage: not cancelled.is_set())
         try:
             first = pack_charts(uvs, triangles, charts, scales, resolution, padding, progress=first_progress)
         except BaseException:

@@ -387,7 +387,9 @@ def scene_markdown(result):
     if stretched:
         lines[-1:-1] = [f"- Chart stretch: {stretched['charts_stretched']} chart(s) stretched across their light "
                         f"changes, up to {stretched['largest_stretch']:.2f}x; " + (
-                            "kept" if stretched["used"] else f"not kept ({stretched.get('reason', '')})") + "."]
+                            "kept" if stretched["used"] else f"not kept ({stretched.get('reason', '')})") + (
+                            f", {stretched['charts_turned']} of them turned to their smallest boxes"
+                            if stretched.get("charts_turned") else "") + "."]
     if r.get("uniform_repack"):
         u = r["uniform_repack"]
         gain = f"{u['signal_gain']:.2f}x" if u.get("signal_gain") else "n/a"

@@ -26,6 +26,7 @@ packing's and it packs about as densely as the input.
 
 import numpy as np
 
+from . import _native
 from .allocation import texel_luminance, triangle_energy
 
 # A chart is never squeezed to fewer texels across than this (its extent
@@ -35,6 +36,10 @@ MIN_WIDTH_TEXELS = 4.0
 # Stretches below this are left out (the packing they would change costs
 # more than they can give).
 MIN_STRETCH = 1.01
+# A stretched chart is turned to its smallest bounding box only when that box
+# is at most this share of the box it has (a smaller turn only reshuffles the
+# packing).
+TURN_GAIN = 0.9
 
 
 def luminance_gradient(lightmap, mask):
@@ -135,26 +140,31 @@ def edge_factor(factor, share):
     return share / factor + (1.0 - share) * factor
 
 
-def stretch_charts(uvs, triangles, charts, factor, direction):
-    """`uvs` with every chart c stretched by factor[c] along direction[c] and
-    squeezed by 1 / factor[c] across it, about its mean corner (area and
-    orientation kept: the map has determinant 1). UVs of unstretched charts
-    are unchanged. A UV index used by two charts takes its first chart's
-    map (pack_charts refuses such layouts anyway)."""
-    out = np.asarray(uvs, np.float64).copy()
-    owner = np.full(len(out), -1, np.int64)
+def _chart_centres(uvs, triangles, charts, count):
+    """(owner (N,) chart of each UV index, -1 when unused; centre (count, 2)
+    each chart's mean UV over the indices it owns). A UV index used by two
+    charts belongs to its first (pack_charts refuses such layouts anyway)."""
+    owner = np.full(len(uvs), -1, np.int64)
     flat = np.asarray(triangles).reshape(-1)
     corner_chart = np.repeat(np.asarray(charts), 3)
     used_uvs, first = np.unique(flat, return_index=True)
     owner[used_uvs] = corner_chart[first]
+    used = owner >= 0
+    weight = np.bincount(owner[used], minlength=count).astype(np.float64)
+    centre = np.stack([np.bincount(owner[used], weights=uvs[used, k], minlength=count) for k in range(2)], -1)
+    return owner, centre / np.maximum(weight, 1.0)[:, None]
+
+
+def stretch_charts(uvs, triangles, charts, factor, direction):
+    """`uvs` with every chart c stretched by factor[c] along direction[c] and
+    squeezed by 1 / factor[c] across it, about its mean UV (area and
+    orientation kept: the map has determinant 1). UVs of unstretched charts
+    are unchanged."""
+    out = np.asarray(uvs, np.float64).copy()
+    owner, centre = _chart_centres(out, triangles, charts, len(factor))
     moved = (owner >= 0) & (factor[np.maximum(owner, 0)] > 1.0)
     if not moved.any():
         return np.asarray(uvs).copy()
-    count = len(factor)
-    used = owner >= 0
-    weight = np.bincount(owner[used], minlength=count).astype(np.float64)
-    centre = np.stack([np.bincount(owner[used], weights=out[used, k], minlength=count) for k in range(2)], -1)
-    centre /= np.maximum(weight, 1.0)[:, None]
     index = np.flatnonzero(moved)
     chart = owner[index]
     e1 = direction[chart]
@@ -164,3 +174,43 @@ def stretch_charts(uvs, triangles, charts, factor, direction):
     # offset = along e1 + across e2: the e1 part grows by a, the e2 part shrinks by 1 / a.
     out[index] = centre[chart] + a * along * e1 + (offset - along * e1) / a
     return out.astype(np.asarray(uvs).dtype)
+
+
+def _box_areas(uvs, triangles, charts, count):
+    """(count,) each chart's axis-aligned bounding box area."""
+    corners = np.asarray(uvs, np.float64)[triangles]  # (T, 3, 2)
+    lo = np.full((count, 2), np.inf)
+    hi = np.full((count, 2), -np.inf)
+    np.minimum.at(lo, charts, corners.min(axis=1))
+    np.maximum.at(hi, charts, corners.max(axis=1))
+    size = np.where(hi >= lo, hi - lo, 0.0)
+    return size[:, 0] * size[:, 1]
+
+
+def turn_to_smallest_boxes(uvs, triangles, charts, which):
+    """(uvs, turned): `uvs` with each chart c in `which` ((C,) bool) turned
+    about its mean UV so its axis-aligned bounding box is smallest, where
+    that box is at most TURN_GAIN of the one it has (a stretch along a
+    diagonal makes a sheared chart the packer would place by its larger
+    box); turned (C,) bool, the charts turned. UVs of other charts are
+    unchanged."""
+    count = len(which)
+    out = np.asarray(uvs, np.float64).copy()
+    turned = np.zeros(count, bool)
+    if not np.any(which) or len(triangles) == 0:
+        return np.asarray(uvs).copy(), turned
+    turns = _native.smallest_box_turns(out, triangles, charts)
+    turns = np.concatenate([turns, np.tile([[1.0, 0.0]], (count - len(turns), 1))])
+    owner, centre = _chart_centres(out, triangles, charts, count)
+    index = np.flatnonzero((owner >= 0) & np.asarray(which)[np.maximum(owner, 0)])
+    chart = owner[index]
+    cos, sin = turns[chart, 0:1], turns[chart, 1:2]
+    offset = out[index] - centre[chart]
+    candidate = out.copy()
+    candidate[index] = centre[chart] + np.concatenate([cos * offset[:, :1] - sin * offset[:, 1:],
+                                                       sin * offset[:, :1] + cos * offset[:, 1:]], axis=1)
+    turned = np.asarray(which) & (_box_areas(candidate, triangles, charts, count)
+                                  <= TURN_GAIN * _box_areas(out, triangles, charts, count))
+    keep = turned[chart]
+    out[index[keep]] = candidate[index[keep]]
+    return out.astype(np.asarray(uvs).dtype), turned

@@ -1,4 +1,4 @@
-#include "bounding_box.h"
+#include "lmrefine/chart/bounding_box.h"
 
 #include <algorithm>
 #include <cmath>
@@ -58,6 +58,22 @@ glm::dvec2 smallest_box_turn(const std::vector<glm::dvec2>& points) {
     }
     // Turning by -angle(best) puts that edge along the u axis.
     return {best.x, -best.y};
+}
+
+std::vector<glm::dvec2> smallest_box_turns(const UvLayout& layout, const std::vector<int32_t>& triangle_chart,
+                                           int32_t chart_count) {
+    std::vector<std::vector<glm::dvec2>> points(size_t(std::max(chart_count, 0)));
+    for (int64_t t = 0; t < layout.triangle_count; ++t) {
+        std::vector<glm::dvec2>& chart = points[size_t(triangle_chart[size_t(t)])];
+        for (int k = 0; k < 3; ++k) {
+            const float* uv = layout.uvs + 2 * int64_t(layout.triangles[3 * t + k]);
+            chart.emplace_back(uv[0], uv[1]);
+        }
+    }
+    std::vector<glm::dvec2> turns;
+    turns.reserve(points.size());
+    for (const std::vector<glm::dvec2>& chart : points) turns.push_back(smallest_box_turn(chart));
+    return turns;
 }
 
 }  // namespace lmrefine::chart

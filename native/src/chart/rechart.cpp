@@ -8,7 +8,7 @@
 
 #include <glm/geometric.hpp>
 
-#include "bounding_box.h"
+#include "lmrefine/chart/bounding_box.h"
 #include "lmrefine/chart/conformal_map.h"
 #include "lmrefine/core/error.h"
 #include "lmrefine/core/progress.h"
