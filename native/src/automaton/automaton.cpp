@@ -7,6 +7,7 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <utility>
 
 #include <glm/common.hpp>
 #include <glm/geometric.hpp>
@@ -52,7 +53,14 @@ constexpr uint8_t kFreeTexel = 0, kEdgeTexel = 1, kRigidTexel = 2;
 Level make_level(const AutomatonInput& input, const std::vector<uint8_t>& rigid, double edge_shrink, int block,
                  const NodeGrid* coarser, bool ring) {
     const double texel_rigid_area[3] = {0.0, edge_shrink, 1.0};
-    const NodeGrid inner = identity_grid(input.width, input.height, block);
+    // identity_grid's rows, cols, xs and ys; its nodes are not needed (a
+    // fresh array is costly to fault in, see docs/refiner.md "How a step
+    // stays cheap").
+    NodeGrid inner;
+    inner.cols = (input.width + block - 1) / block;
+    inner.rows = (input.height + block - 1) / block;
+    for (int j = 0; j <= inner.cols; ++j) inner.xs.push_back(std::min(j * block, input.width));
+    for (int i = 0; i <= inner.rows; ++i) inner.ys.push_back(std::min(i * block, input.height));
     const int pad = ring ? 1 : 0;
     Level level;
     level.block = block;
@@ -150,9 +158,11 @@ std::vector<uint8_t> rigid_texels(const AutomatonInput& input) {
 
 // The level's grid without its ring, affinely rescaled so the inner border
 // nodes' bounding box is the lightmap again (an affine map with positive
-// scales keeps every cell convex and non-inverted).
-NodeGrid inner_grid(const Level& level, bool ring, int width, int height) {
-    if (!ring) return level.grid;
+// scales keeps every cell convex and non-inverted). Without a ring the
+// grid is moved out (level.grid's nodes are left empty; its rows and cols,
+// which level.cell() reads, stay).
+NodeGrid inner_grid(Level& level, bool ring, int width, int height) {
+    if (!ring) return std::move(level.grid);
     NodeGrid inner;
     inner.rows = level.rows() - 2;
     inner.cols = level.cols() - 2;
