@@ -7,6 +7,7 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <utility>
 
 #include <glm/common.hpp>
 #include <glm/geometric.hpp>
@@ -44,22 +45,32 @@ int level_count(int width, int height, bool coarse_to_fine) {
 // Texel kinds of rigid_texels(): free, a chart's edge facing the gutter, rigid.
 constexpr uint8_t kFreeTexel = 0, kEdgeTexel = 1, kRigidTexel = 2;
 
-// A level of `block`-texel cells: energies summed over the block, the
-// uncovered texels counted, the rigid area (a chart edge texel counting
-// edge_shrink), nodes carried from the coarser grid (or at rest).
+// Makes `level` a level of `block`-texel cells: energies summed over the
+// block, the uncovered texels counted, the rigid area (a chart edge texel
+// counting edge_shrink), nodes carried from the coarser grid (or at rest).
 // With a ring, one extra ring of cells (one block wide) surrounds the grid,
-// its outer nodes one block outside the inner border nodes.
-Level make_level(const AutomatonInput& input, const std::vector<uint8_t>& rigid, double edge_shrink, int block,
-                 const NodeGrid* coarser, bool ring) {
+// its outer nodes one block outside the inner border nodes. The level's
+// arrays keep their storage (reserve_levels); prepare_level sets the rest.
+void make_level(Level& level, const AutomatonInput& input, const std::vector<uint8_t>& rigid, double edge_shrink,
+                int block, const NodeGrid* coarser, bool ring) {
     const double texel_rigid_area[3] = {0.0, edge_shrink, 1.0};
-    const NodeGrid inner = identity_grid(input.width, input.height, block);
+    // identity_grid's rows, cols, xs and ys; its nodes are not needed (a
+    // fresh array is costly to fault in, see docs/refiner.md "How a step
+    // stays cheap").
+    NodeGrid inner;
+    inner.cols = (input.width + block - 1) / block;
+    inner.rows = (input.height + block - 1) / block;
+    for (int j = 0; j <= inner.cols; ++j) inner.xs.push_back(std::min(j * block, input.width));
+    for (int i = 0; i <= inner.rows; ++i) inner.ys.push_back(std::min(i * block, input.height));
     const int pad = ring ? 1 : 0;
-    Level level;
     level.block = block;
     level.channels = input.channels;
+    level.reference_density = {};
     NodeGrid& grid = level.grid;
     grid.rows = inner.rows + 2 * pad;
     grid.cols = inner.cols + 2 * pad;
+    grid.xs.clear();
+    grid.ys.clear();
     if (ring) grid.xs.push_back(-block);
     grid.xs.insert(grid.xs.end(), inner.xs.begin(), inner.xs.end());
     if (ring) grid.xs.push_back(input.width + block);
@@ -118,7 +129,6 @@ Level make_level(const AutomatonInput& input, const std::vector<uint8_t>& rigid,
             }
         }
     });
-    return level;
 }
 
 // Per texel: rigid (uncovered: the gutter keeps its width in texels, and the
@@ -148,11 +158,33 @@ std::vector<uint8_t> rigid_texels(const AutomatonInput& input) {
     return rigid;
 }
 
+// Reserves every per-cell and per-node array of the levels, and the nodes
+// of the grid handed down between them, for the finest level (ring
+// included): each level reuses the storage of the coarser one before it,
+// so a run faults in fresh memory for the finest level only (on some
+// machines fresh memory costs more than a step; docs/refiner.md "How a step
+// stays cheap"). Reserving touches no memory.
+void reserve_levels(Level& level, NodeGrid& carried, int width, int height, int channels, bool ring) {
+    const size_t pad = ring ? 2 : 0;
+    const size_t cells = (size_t(width) + pad) * (size_t(height) + pad);
+    const size_t nodes = (size_t(width) + pad + 1) * (size_t(height) + pad + 1);
+    for (auto* v : {&level.energy, &level.next_energy}) v->reserve(cells * size_t(channels));
+    for (auto* v : {&level.uncovered_area, &level.rigid_area, &level.area, &level.safe_radius, &level.quality,
+                    &level.next_area, &level.next_safe_radius, &level.next_quality}) {
+        v->reserve(cells);
+    }
+    for (auto* v : {&level.grid.nodes, &level.next_nodes, &carried.nodes}) v->reserve(nodes);
+    level.kind.reserve(cells);
+    level.node_mode.reserve(nodes);
+    level.suspect_round.reserve(cells);
+    level.breaking_cell.reserve(cells);
+    level.reverted_node.reserve(nodes);
+}
+
 // The level's grid without its ring, affinely rescaled so the inner border
 // nodes' bounding box is the lightmap again (an affine map with positive
 // scales keeps every cell convex and non-inverted).
-NodeGrid inner_grid(const Level& level, bool ring, int width, int height) {
-    if (!ring) return level.grid;
+NodeGrid inner_grid(const Level& level, int width, int height) {
     NodeGrid inner;
     inner.rows = level.rows() - 2;
     inner.cols = level.cols() - 2;
@@ -173,6 +205,22 @@ NodeGrid inner_grid(const Level& level, bool ring, int width, int height) {
         }
     }
     return inner;
+}
+
+// Hands the finished level's grid to the next finer level as `carried`.
+// Without a ring its nodes swap buffers with carried's (level.grid keeps
+// its rows, cols, xs and ys, which level.cell() reads; its nodes are then
+// the old carried ones, overwritten by the next make_level).
+void hand_down(Level& level, bool ring, int width, int height, NodeGrid& carried) {
+    if (ring) {
+        carried = inner_grid(level, width, height);
+        return;
+    }
+    carried.rows = level.grid.rows;
+    carried.cols = level.grid.cols;
+    carried.xs = level.grid.xs;
+    carried.ys = level.grid.ys;
+    carried.nodes.swap(level.grid.nodes);
 }
 
 // Steps a level of `block`-texel cells may take (kCoarseStepFactor above).
@@ -254,28 +302,29 @@ AutomatonResult run_automaton(const AutomatonInput& input, const AutomatonOption
     AutomatonResult result;
     NodeGrid carried;
     Level level;
+    reserve_levels(level, carried, input.width, input.height, input.channels, ring);
     using Clock = std::chrono::steady_clock;
     for (int l = levels - 1; l >= 0; --l) {
         const Clock::time_point start = Clock::now();
         const int block = 1 << l;
-        level = make_level(input, rigid, options.edge_shrink, block, l == levels - 1 ? nullptr : &carried, ring);
+        make_level(level, input, rigid, options.edge_shrink, block, l == levels - 1 ? nullptr : &carried, ring);
         LevelStats stats;
         stats.block = block;
         stats.rows = level.rows() - (ring ? 2 : 0);
         stats.cols = level.cols() - (ring ? 2 : 0);
         run_level(level, options, ring, stats, result.steps, progress);
-        carried = inner_grid(level, ring, input.width, input.height);
+        hand_down(level, ring, input.width, input.height, carried);
         stats.seconds = std::chrono::duration<double>(Clock::now() - start).count();
         result.levels.push_back(stats);
     }
     for (int pass = 1; pass < options.passes; ++pass) {
         const Clock::time_point start = Clock::now();
-        level = make_level(input, rigid, options.edge_shrink, 1, &carried, ring);
+        make_level(level, input, rigid, options.edge_shrink, 1, &carried, ring);
         LevelStats stats;
         stats.rows = input.height;
         stats.cols = input.width;
         run_level(level, options, ring, stats, result.steps, progress);
-        carried = inner_grid(level, ring, input.width, input.height);
+        hand_down(level, ring, input.width, input.height, carried);
         stats.seconds = std::chrono::duration<double>(Clock::now() - start).count();
         result.levels.push_back(stats);
     }
@@ -301,7 +350,8 @@ RuleStep automaton_rule_step(const AutomatonInput& input, const AutomatonOptions
     LMREFINE_REQUIRE(input.width > 0 && input.height > 0, "the energy map is empty");
     LMREFINE_REQUIRE(input.channels == 1 || input.channels == 4, "the energy map needs 1 or 4 channels");
     const bool ring = options.border == BorderMode::ExtraRing;
-    Level level = make_level(input, rigid_texels(input), options.edge_shrink, 1, nullptr, ring);
+    Level level;
+    make_level(level, input, rigid_texels(input), options.edge_shrink, 1, nullptr, ring);
     LMREFINE_REQUIRE(nodes.size() == level.grid.nodes.size(),
                      "nodes must be the level's (rows + 1) x (cols + 1) nodes, ring included");
     level.grid.nodes = nodes;

@@ -135,10 +135,27 @@ struct CellBounds {
     double width = 0, height = 0;  // at rest (rigid cells)
 };
 
+// From the cell's kind, rigid area and size at rest (the factors set by
+// prepare_level): a ring cell keeps min_shrink of its area, a gutter cell
+// all of it, a material cell the covered factor's share or its rigid area
+// if larger, and at most the covered maximum's share.
 inline CellBounds bounds_of(const Level& level, int i, int j) {
     const size_t c = level.cell(i, j);
-    return {level.min_area[c], level.max_area[c], !(level.rigid_area[c] < level.original_area[c]),
-            level.grid.xs[j + 1] - level.grid.xs[j], level.grid.ys[i + 1] - level.grid.ys[i]};
+    CellBounds bounds;
+    bounds.width = level.grid.xs[j + 1] - level.grid.xs[j];
+    bounds.height = level.grid.ys[i + 1] - level.grid.ys[i];
+    const double rest = bounds.width * bounds.height;
+    const double rigid_area = level.rigid_area[c];
+    bounds.rigid = !(rigid_area < rest);
+    switch (level.kind[c]) {
+        case CellKind::Ring: bounds.min_area = level.ring_min_factor * rest; break;
+        case CellKind::Gutter: bounds.min_area = rest; break;  // gutter texels shift but are never compressed
+        case CellKind::Material:
+            bounds.min_area = std::max(level.covered_min_factor * rest, rigid_area);
+            bounds.max_area = level.covered_max_factor * rest;
+            break;
+    }
+    return bounds;
 }
 
 // The validity of a cell: the one definition the step guard, fit_to_bounds

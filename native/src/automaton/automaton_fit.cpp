@@ -53,9 +53,12 @@ int fit_to_bounds(Level& level) {
     for (const auto& r : row_bad) bad.insert(bad.end(), r.begin(), r.end());
     if (bad.empty()) return 0;
 
-    std::vector<glm::dvec2> carried;  // blended towards rest from round kFitSmoothRounds on
-    std::vector<double> kept(grid.nodes.size(), 1.0);
-    std::vector<uint32_t> lowered_round(grid.nodes.size(), 0);
+    // Blended towards rest from round kFitSmoothRounds on (made then: most
+    // fits end before, and a per-node array is costly to fault in).
+    std::vector<glm::dvec2> carried;
+    std::vector<double> kept;
+    // Nodes marked in this round's `lowered` list (cleared after the round).
+    std::vector<uint8_t> is_lowered(grid.nodes.size(), 0);
     std::vector<int32_t> lowered;
     std::vector<glm::dvec2> smoothed;
     for (int round = 0;; ++round) {
@@ -68,12 +71,13 @@ int fit_to_bounds(Level& level) {
             for (int ni = std::max(0, i - kFitMargin); ni <= std::min(rows, i + 1 + kFitMargin); ++ni) {
                 for (int nj = std::max(0, j - kFitMargin); nj <= std::min(cols, j + 1 + kFitMargin); ++nj) {
                     const size_t n = level.node(ni, nj);
-                    if (lowered_round[n] == uint32_t(round + 1)) continue;
-                    lowered_round[n] = uint32_t(round + 1);
+                    if (is_lowered[n]) continue;
+                    is_lowered[n] = 1;
                     lowered.push_back(int32_t(n));
                 }
             }
         }
+        for (int32_t node : lowered) is_lowered[size_t(node)] = 0;
         if (round < kFitSmoothRounds) {
             // First even out the nodes around the bad cells (a Laplacian
             // step, synchronous): cells interpolated from one coarse cell
@@ -101,7 +105,10 @@ int fit_to_bounds(Level& level) {
             }
             for (size_t k = 0; k < lowered.size(); ++k) level.grid.nodes[size_t(lowered[k])] = smoothed[k];
         } else {
-            if (round == kFitSmoothRounds) carried = level.grid.nodes;
+            if (round == kFitSmoothRounds) {
+                carried = level.grid.nodes;
+                kept.assign(grid.nodes.size(), 1.0);
+            }
             const bool last = round >= kFitRounds + kFitSmoothRounds;
             for (int32_t node : lowered) {
                 const size_t n = size_t(node);

@@ -35,7 +35,11 @@ struct Level {
     int channels = 1;
     std::vector<double> energy, next_energy;  // cells * channels
     std::vector<CellKind> kind;
-    std::vector<double> original_area, min_area, max_area;
+    // A cell's area bounds are factors of its area at rest (bounds_of,
+    // automaton_cell.h), computed where they are needed instead of stored:
+    // per-cell arrays cost more to fault in and read than the products.
+    double covered_min_factor = 0, covered_max_factor = 0;  // material cells (min: or rigid_area if larger)
+    double ring_min_factor = 0;                             // ring cells
     std::vector<double> uncovered_area;  // texel area of uncovered texels inside (pressure only)
     std::vector<double> rigid_area;      // texel area of rigid texels inside: uncovered or on a chart's edge
     std::vector<NodeMode> node_mode;

@@ -42,38 +42,31 @@ void prepare_level(Level& level, const AutomatonOptions& options, bool ring) {
     const int rows = level.rows(), cols = level.cols(), channels = level.channels;
     const size_t cells = size_t(rows) * cols;
     level.kind.assign(cells, CellKind::Material);
-    level.original_area.resize(cells);
-    level.min_area.resize(cells);
-    level.max_area.resize(cells);
     std::array<double, 4> energy{}, covered_area{};
     // Coarse levels keep a margin inside the bounds: cells interpolated from
     // a coarse cell differ in size, and the finest level must start inside.
     const bool coarse = level.block > 1;
     const double lowest = coarse ? std::min(1.0, options.min_area * kCoarseShrinkMargin) : options.min_area;
     const double highest = coarse ? std::max(1.0, options.max_area * 0.8) : options.max_area;
+    level.covered_min_factor = lowest;
+    level.covered_max_factor = highest;
+    level.ring_min_factor = options.min_area;
     for (int i = 0; i < rows; ++i) {
         for (int j = 0; j < cols; ++j) {
             const size_t c = level.cell(i, j);
             const double a0 = (level.grid.xs[j + 1] - level.grid.xs[j]) * (level.grid.ys[i + 1] - level.grid.ys[i]);
-            level.original_area[c] = a0;
             const bool in_ring = ring && (i == 0 || j == 0 || i == rows - 1 || j == cols - 1);
             if (in_ring) {
                 level.kind[c] = CellKind::Ring;
                 level.uncovered_area[c] = a0;
                 level.rigid_area[c] = 0;
-                level.min_area[c] = options.min_area * a0;
-                level.max_area[c] = std::numeric_limits<double>::infinity();
             } else if (level.uncovered_area[c] >= a0) {
                 level.kind[c] = CellKind::Gutter;
-                level.min_area[c] = a0;  // gutter texels shift but are never compressed
-                level.max_area[c] = std::numeric_limits<double>::infinity();
             } else {
                 // A coarse cell holding any rigid texel is rigid as a whole:
                 // its texels get their share of its area when it is
                 // interpolated, so a partly rigid block may not shrink.
                 if (coarse && level.rigid_area[c] > 0) level.rigid_area[c] = a0;
-                level.min_area[c] = std::max(lowest * a0, level.rigid_area[c]);
-                level.max_area[c] = highest * a0;
                 for (int k = 0; k < channels; ++k) {
                     energy[k] += level.energy[c * channels + k];
                     covered_area[k] += a0 - level.uncovered_area[c];
