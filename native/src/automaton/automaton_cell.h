@@ -103,9 +103,9 @@ inline Shape shape(const glm::dvec2 q[4]) {
         if (!(c > 0)) return {quad_area(q), 0.0, -1.0};
         c2[k] = c * c;
     }
-    // The divisions are most of a step's time: all four in one loop over
-    // contiguous arrays, which the compiler can pair into SIMD divisions
-    // (IEEE division rounds the same either way).
+    // All four divisions in one loop over contiguous arrays, so a compiler
+    // may pair them into SIMD divisions (IEEE division rounds the same
+    // either way; gcc 12 keeps them scalar, docs/refiner.md).
     const double over[4] = {8 * (l2[3] + l2[0]), 8 * (l2[0] + l2[1]), 8 * (l2[1] + l2[2]), 8 * (l2[2] + l2[3])};
     double radius2[4];
     for (int k = 0; k < 4; ++k) radius2[k] = c2[k] / over[k];
