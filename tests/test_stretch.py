@@ -311,3 +311,18 @@ def test_a_stretched_packing_dense_enough_keeps_its_orientation_and_no_turn_is_p
     report = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2).report["repack"]["stretch"]
     assert report["used"] and report["charts_turned"] == 0
     assert len(report["candidates"]) == 1 and report["candidates"][0]["dense"]
+
+
+def test_cancelling_during_the_turned_fallback_cancels_the_refinement():
+    """The fallback's packing honours the caller's progress: asked to stop there, refine_uvs stops."""
+    uvs, triangles, lightmap = _diagonal_stripes(gap=0.02)
+    packs = []
+
+    def progress(fraction, stage):
+        if stage == "pack":
+            packs.append(fraction)
+        return len(packs) < 3  # the first packing reports twice; the third report is the fallback's
+
+    with pytest.raises(lmrefine.CancelledError):
+        lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, progress=progress)
+    assert len(packs) == 3

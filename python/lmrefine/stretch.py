@@ -21,7 +21,10 @@ bounded by `max_stretch` and by the chart's width, for the charts that hold
 more light changes than the mean chart. allocation.repack packs the
 stretched charts as a second candidate and keeps it when its edge error,
 each chart weighted by sqrt(l1) + sqrt(l2), is lower than the unstretched
-packing's and it packs about as densely as the input.
+packing's and it packs about as densely as the input. When it does not
+pack densely enough, the stretched charts that a stretch along a diagonal
+sheared are turned to their smallest boxes (`turn_to_smallest_boxes`) and
+packed once more, judged by the same rules.
 """
 
 import numpy as np
