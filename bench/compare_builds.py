@@ -173,7 +173,9 @@ def worker(output, size, only):
 # ---------------------------------------------------------------- driver side
 
 def run_build(python_dir, args, output):
-    env = dict(os.environ, PYTHONPATH=os.path.abspath(python_dir))
+    # Both builds read this repository's sample scenes, wherever their python/ lies.
+    env = dict(os.environ, PYTHONPATH=os.path.abspath(python_dir),
+               LMREFINE_SAMPLES=os.path.join(ROOT, "blend_samples"))
     if args.threads:
         env["LMREFINE_THREADS"] = str(args.threads)
     command = [sys.executable, os.path.abspath(__file__), "--worker", output, "--size", str(args.size)]

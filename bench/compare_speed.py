@@ -74,7 +74,9 @@ print(json.dumps(times))
 
 
 def measure(python_dir, size, threads, case="automaton"):
-    env = dict(os.environ, PYTHONPATH=os.path.abspath(python_dir), LMREFINE_THREADS=str(threads))
+    # Both builds read this repository's sample scenes, wherever their python/ lies.
+    env = dict(os.environ, PYTHONPATH=os.path.abspath(python_dir), LMREFINE_THREADS=str(threads),
+               LMREFINE_SAMPLES=os.path.join(HERE, "..", "blend_samples"))
     child = ROUTE_CHILD if case == "route" else CHILD
     out = subprocess.run([sys.executable, "-c", child, str(size), os.path.join(HERE, "..", "tests")],
                          env=env, capture_output=True, text=True, check=True).stdout

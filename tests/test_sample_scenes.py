@@ -220,3 +220,30 @@ def test_scene_files_place_lights_by_matrix_and_older_files_still_load(tmp_path)
     np.testing.assert_allclose(values["Old"], expected["Old"], rtol=1e-5)
     # The spun strip runs along y, the old one along x.
     assert values["Strip"][1] > 1.3 * values["Strip"][0] and values["Old"][0] > 1.3 * values["Old"][1]
+
+
+def test_lmrefine_samples_names_the_sample_folder_for_a_copy_of_python(tmp_path):
+    """A bare copy of python/ (a baseline build for bench/compare_*.py) finds the scenes LMREFINE_SAMPLES names."""
+    import os
+    import shutil
+    import sys
+
+    copy = tmp_path / "python"
+    shutil.copytree(ROOT / "python" / "lmrefine", copy / "lmrefine", ignore=shutil.ignore_patterns("__pycache__"))
+    samples = tmp_path / "scenes"
+    samples.mkdir()
+    for name in ("plaza.npz", "plaza.blend"):
+        shutil.copy(ROOT / "blend_samples" / name, samples)
+    code = ("from lmrefine import sample_scenes as s; "
+            "print(s.SAMPLES_DIR); print(s.sample_names()); print(len(s.load_sample('plaza').triangles))")
+
+    def run(**env):
+        return subprocess.run([sys.executable, "-c", code], env=dict(os.environ, PYTHONPATH=str(copy), **env),
+                              capture_output=True, text=True)
+
+    found = run(LMREFINE_SAMPLES=str(samples))
+    assert found.returncode == 0, found.stderr
+    folder, names, triangles = found.stdout.split("\n")[:3]
+    assert folder == str(samples) and names == "['plaza']" and int(triangles) > 0
+    lost = run(LMREFINE_SAMPLES="")  # unset: the copy looks beside itself, where there are no scenes
+    assert lost.returncode != 0 and "no sample scene 'plaza'" in lost.stderr

@@ -14,7 +14,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-SAMPLES_DIR = os.path.normpath(os.path.join(os.path.dirname(__file__), "..", "..", "blend_samples"))
+# The repository's blend_samples/ beside python/; LMREFINE_SAMPLES names another
+# (a copy of python/ elsewhere, such as a baseline build for bench/compare_*.py).
+SAMPLES_DIR = os.path.normpath(os.environ.get("LMREFINE_SAMPLES") or
+                               os.path.join(os.path.dirname(__file__), "..", "..", "blend_samples"))
 
 # Constants of the refiner are chosen on the tuning scenes only; the others
 # report (docs/evaluation.md, "Tuning scenes and holdout scenes").
