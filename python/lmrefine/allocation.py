@@ -303,7 +303,9 @@ def repack(source_uvs, refined_uvs, triangles, energy, resolution, padding, min_
     None for a source of uniform texel density) and pack them into one
     atlas. With a lightmap and max_stretch > 1 a second packing stretches
     each chart across its light changes (lmrefine.stretch) and is kept when
-    the model predicts less error for it. Returns (uvs, report); uvs is None
+    the model predicts less error for it and it packs about as densely as
+    the input; when it does not, a third turns the sheared stretched charts
+    to their smallest boxes. Returns (uvs, report); uvs is None
     when the packed layout is not better than `refined_uvs` by the error
     model (the report says so)."""
     charts = find_charts(source_uvs, triangles, tolerance=CHART_TOLERANCE)
@@ -325,7 +327,7 @@ def repack(source_uvs, refined_uvs, triangles, energy, resolution, padding, min_
                                        max_stretch)
     try:
         (packed, pack_report), stretched_pack = _pack_both(
-            refined_uvs, None if stretched is None else stretched["candidates"][0]["uvs"],
+            refined_uvs, None if stretched is None else stretched["uvs"],
             triangles, charts, scales, resolution, padding, progress)
     except ValueError as error:  # the charts do not fit at a usable scale: keep the unpacked layout
         return None, {"charts": int(len(scales)), "used": False, "reason": str(error)}
@@ -339,11 +341,19 @@ def repack(source_uvs, refined_uvs, triangles, energy, resolution, padding, min_
     predicted = predicted_error(edge, smooth, final)
     stretch_report = None
     if stretched is not None:
-        def packings():  # the first stretched packing is made; a fallback is packed only when asked for
-            yield stretched_pack
-            for candidate in stretched["candidates"][1:]:
-                yield _pack_or_none(candidate["uvs"], triangles, charts, scales, resolution, padding,
-                                    lambda fraction, stage: True if progress is None else progress(1.0, stage))
+        def packings():
+            """(charts turned, packing) of each stretched candidate, made only when asked for: the
+            stretched charts as they are (packed beside the unstretched ones), then, when that is
+            refused, the sheared ones among them turned to their smallest boxes."""
+            from . import stretch
+
+            yield np.zeros(len(scales), bool), stretched_pack
+            turned_uvs, turned = stretch.turn_to_smallest_boxes(stretched["uvs"], triangles, charts,
+                                                                stretched["factor"] > 1.0)
+            if turned.any():
+                yield turned, _pack_or_none(turned_uvs, triangles, charts, scales, resolution, padding,
+                                            lambda fraction, stage: True if progress is None else
+                                            progress(1.0, stage))
 
         stretch_report, kept = _judge_stretch(stretched, packings(), triangles, charts, resolution, padding,
                                               final, predicted, padded_before)
@@ -379,9 +389,7 @@ def repack(source_uvs, refined_uvs, triangles, energy, resolution, padding, min_
 
 def _stretch_candidate(source_uvs, refined_uvs, triangles, charts, lightmap, mask, resolution, max_stretch):
     """`refined_uvs` with its charts stretched across their light changes
-    (lmrefine.stretch): the candidate layouts to pack (the stretched charts,
-    and the same turned to their smallest boxes when any turn pays, each
-    with its "turned" (C,) bool), each chart's factor, edge-term factor and
+    (lmrefine.stretch), with each chart's factor, edge-term factor and
     light-change weight; None when no chart stretches."""
     from . import stretch
 
@@ -392,14 +400,7 @@ def _stretch_candidate(source_uvs, refined_uvs, triangles, charts, lightmap, mas
                                                                max_stretch)
     if not (factor > 1.0).any():
         return None
-    uvs = stretch.stretch_charts(refined_uvs, triangles, charts, factor, direction)
-    candidates = [{"uvs": uvs, "turned": np.zeros(len(factor), bool)}]
-    # A chart stretched along a diagonal is sheared in the atlas's frame; turned to its smallest
-    # box it may pack closer, or not (the packing is judged, not predicted): a second candidate.
-    turned_uvs, turned = stretch.turn_to_smallest_boxes(uvs, triangles, charts, factor > 1.0)
-    if turned.any():
-        candidates.append({"uvs": turned_uvs, "turned": turned})
-    return {"candidates": candidates, "factor": factor,
+    return {"uvs": stretch.stretch_charts(refined_uvs, triangles, charts, factor, direction), "factor": factor,
             "edge_factor": stretch.edge_factor(factor, share), "weight": weight,
             "report": {"charts_stretched": int((factor > 1.0).sum()), "chart_stretch": factor,
                        "largest_stretch": float(factor.max())}}
@@ -408,18 +409,18 @@ def _stretch_candidate(source_uvs, refined_uvs, triangles, charts, lightmap, mas
 def _judge_stretch(stretched, packings, triangles, charts, resolution, padding, final, predicted, padded_before):
     """The stretch's report and, when a stretched packing is kept, its (uvs,
     pack report, chart scales, chart areas, perimeters, predicted error):
-    the first candidate, in the order of stretched["candidates"], that packs
-    as densely as the input and predicts less error than the unstretched
-    packing. `packings` yields each candidate's packing (None when it does
-    not fit) and is read no further than the one kept. `final`,
+    the first candidate that packs as densely as the input and predicts
+    less error than the unstretched packing. `packings` yields each
+    candidate's (charts turned (C,) bool, packing or None when it does not
+    fit) and is read no further than the one kept. `final`,
     `predicted` and `padded_before` are the unstretched packing's scales
     and predicted error and the input's padded density."""
     report = {"used": False, "predicted_error_unstretched": predicted, "charts_turned": 0, **stretched["report"]}
     weight = stretched["weight"]
     before = (weight / np.maximum(np.asarray(final, np.float64), 1e-12)).sum()
     judged, kept = [], None
-    for candidate, packing in zip(stretched["candidates"], packings):
-        entry = {"charts_turned": int(candidate["turned"].sum()), "fits": packing is not None}
+    for turned, packing in packings:
+        entry = {"charts_turned": int(turned.sum()), "fits": packing is not None}
         judged.append(entry)
         if packing is None:
             continue
