@@ -3,7 +3,11 @@
 gradient map, strength 24), scalar and four-spring; with `--case route`,
 of `refine_uvs` on bench_refine's folded_smart_uv case (courtyard's Smart
 UV atlas, its bake at a quarter of the size scaled up) without the mesh
-(the source refinement) and with it (the re-chart route); in two builds, each in
+(the source refinement) and with it (the re-chart route); with `--case
+first-call`, of one `refine_uvs` in a fresh process (what a click in the
+add-on or a level of the batch costs: the memory the call needs is touched
+for the first time), on the bench plane and on game_level's Smart UV atlas
+with its repack (bench_refine's smart_uv_repack case), wall and CPU time; in two builds, each in
 its own subprocess with PYTHONPATH set to that build's python/ directory,
 alternating base and new so both see the same machine load. Prints the best
 time of each and the ratio new / base.
@@ -14,6 +18,7 @@ time); a ratio within about 3% is noise.
 
     /usr/bin/python3 bench/compare_speed.py --base /tmp/base/python --new python [--rounds 5] [--size 1024] [--threads 1]
     /usr/bin/python3 bench/compare_speed.py --base /tmp/base/python --new python --case route --rounds 3
+    /usr/bin/python3 bench/compare_speed.py --base /tmp/base/python --new python --case first-call --threads 2
 """
 
 import argparse
@@ -21,6 +26,7 @@ import json
 import os
 import subprocess
 import sys
+import tempfile
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 
@@ -73,14 +79,61 @@ print(json.dumps(times))
 """
 
 
-def measure(python_dir, size, threads, case="automaton"):
+# Makes the game_level lightmap the first-call children read (so that no bake
+# runs in the measured process before the call), and the plane's.
+FIRST_CALL_INPUTS = r"""
+import sys
+import numpy as np
+import lmrefine
+from lmrefine.sample_scenes import load_sample
+size, folder = int(sys.argv[1]), sys.argv[2]
+sample = load_sample("game_level")
+uvs, tris = sample.layout("smart")
+small = lmrefine.bake(sample.to_scene(uvs), size // 4, passes="direct", samples=8, seed=0)[0][..., :3]
+np.save(folder + "/game_level.npy", np.ascontiguousarray(np.kron(small, np.ones((4, 4, 1))), dtype=np.float32))
+"""
+
+FIRST_CALL_CHILD = r"""
+import json, sys, time
+size, tests, case, folder = int(sys.argv[1]), sys.argv[2], sys.argv[3], sys.argv[4]
+sys.path.insert(0, tests)
+import numpy as np
+import lmrefine
+if case == "plane":
+    from layouts import plane, shadow_edge_lightmap
+    uvs, tris = plane(128, margin=0.02)
+    lightmap = shadow_edge_lightmap(size, 0.5, 0.3)
+else:
+    from lmrefine.sample_scenes import load_sample
+    uvs, tris = load_sample("game_level").layout("smart")
+    lightmap = np.load(folder + "/game_level.npy")
+wall, cpu = time.perf_counter(), time.process_time()
+lmrefine.refine_uvs(lightmap, uvs, tris, size)
+print(json.dumps({case + ", wall": time.perf_counter() - wall, case + ", CPU": time.process_time() - cpu}))
+"""
+
+
+def first_call(python_dir, size, threads, folder):
+    """One refine_uvs per fresh process, on the plane and on game_level."""
+    times = {}
+    for case in ("plane", "game_level"):
+        times.update(run_child(python_dir, threads, FIRST_CALL_CHILD, str(size), os.path.join(HERE, "..", "tests"),
+                               case, folder))
+    return times
+
+
+def run_child(python_dir, threads, child, *args):
     # Both builds read this repository's sample scenes, wherever their python/ lies.
     env = dict(os.environ, PYTHONPATH=os.path.abspath(python_dir), LMREFINE_THREADS=str(threads),
                LMREFINE_SAMPLES=os.path.join(HERE, "..", "blend_samples"))
+    out = subprocess.run([sys.executable, "-c", child, *args], env=env, capture_output=True, text=True,
+                         check=True).stdout
+    return json.loads(out) if out.strip() else {}
+
+
+def measure(python_dir, size, threads, case="automaton"):
     child = ROUTE_CHILD if case == "route" else CHILD
-    out = subprocess.run([sys.executable, "-c", child, str(size), os.path.join(HERE, "..", "tests")],
-                         env=env, capture_output=True, text=True, check=True).stdout
-    return json.loads(out)
+    return run_child(python_dir, threads, child, str(size), os.path.join(HERE, "..", "tests"))
 
 
 def main():
@@ -90,15 +143,22 @@ def main():
     parser.add_argument("--rounds", type=int, default=5, help="subprocesses per build, alternating (default 5)")
     parser.add_argument("--size", type=int, default=1024, help="lightmap resolution (default 1024)")
     parser.add_argument("--threads", type=int, default=1, help="LMREFINE_THREADS (default 1)")
-    parser.add_argument("--case", choices=("automaton", "route"), default="automaton",
-                        help="run_automaton on the plane (default), or refine_uvs' re-chart route")
+    parser.add_argument("--case", choices=("automaton", "route", "first-call"), default="automaton",
+                        help="run_automaton on the plane (default), refine_uvs' re-chart route, or one refine_uvs "
+                             "per fresh process")
     args = parser.parse_args()
     runs = {"base": [], "new": []}
-    for _ in range(args.rounds):
-        for build, path in (("base", args.base), ("new", args.new)):
-            runs[build].append(measure(path, args.size, args.threads, args.case))
-    what, per_run = ("refine_uvs on courtyard's Smart UV atlas", 2) if args.case == "route" else ("run_automaton", 3)
-    print(f"{what} at {args.size}^2, {args.threads} thread(s), CPU seconds, best of {per_run * args.rounds}:")
+    with tempfile.TemporaryDirectory() as folder:
+        if args.case == "first-call":
+            run_child(args.new, args.threads, FIRST_CALL_INPUTS, str(args.size), folder)
+        for _ in range(args.rounds):
+            for build, path in (("base", args.base), ("new", args.new)):
+                runs[build].append(first_call(path, args.size, args.threads, folder) if args.case == "first-call"
+                                   else measure(path, args.size, args.threads, args.case))
+    what, per_run, unit = {"route": ("refine_uvs on courtyard's Smart UV atlas", 2, "CPU seconds"),
+                           "first-call": ("the first refine_uvs of a process", 1, "seconds"),
+                           "automaton": ("run_automaton", 3, "CPU seconds")}[args.case]
+    print(f"{what} at {args.size}^2, {args.threads} thread(s), {unit}, best of {per_run * args.rounds}:")
     for name in runs["base"][0]:
         base = min(r[name] for r in runs["base"])
         new = min(r[name] for r in runs["new"])

@@ -5,6 +5,7 @@
 
 #include "grid_array.h"
 #include "lmrefine/core/error.h"
+#include "lmrefine/core/memory.h"
 #include "lmrefine/core/texel_space.h"
 #include "numpy_util.h"
 
@@ -14,7 +15,7 @@ namespace lmrefine {
 namespace py_util {
 
 py::array_t<float> grid_to_numpy(const NodeGrid& grid, int width, int height) {
-    std::vector<float> values(grid.nodes.size() * 2);
+    std::vector<float> values = large_vector<float>(grid.nodes.size() * 2);
     for (size_t k = 0; k < grid.nodes.size(); ++k) {
         const glm::dvec2 uv = pixel_to_uv(grid.nodes[k], width, height);
         values[2 * k] = float(uv.x);

@@ -14,6 +14,7 @@
 
 #include "automaton_level.h"
 #include "lmrefine/core/error.h"
+#include "lmrefine/core/memory.h"
 #include "lmrefine/core/parallel.h"
 #include "lmrefine/core/progress.h"
 
@@ -135,7 +136,7 @@ void make_level(Level& level, const AutomatonInput& input, const std::vector<uin
 // texels input.rigid marks), a chart's edge (covered, next to an uncovered
 // texel: shrinks only to edge_shrink) or free.
 std::vector<uint8_t> rigid_texels(const AutomatonInput& input) {
-    std::vector<uint8_t> rigid(size_t(input.width) * input.height, kFreeTexel);
+    std::vector<uint8_t> rigid = large_vector<uint8_t>(size_t(input.width) * input.height, kFreeTexel);
     if (input.rigid) {
         for (size_t t = 0; t < rigid.size(); ++t) rigid[t] = input.rigid[t] ? kRigidTexel : kFreeTexel;
     }
@@ -163,22 +164,23 @@ std::vector<uint8_t> rigid_texels(const AutomatonInput& input) {
 // included): each level reuses the storage of the coarser one before it,
 // so a run faults in fresh memory for the finest level only (on some
 // machines fresh memory costs more than a step; docs/refiner.md "How a step
-// stays cheap"). Reserving touches no memory.
+// stays cheap"), in large pages where the system gives them. Reserving
+// touches no memory.
 void reserve_levels(Level& level, NodeGrid& carried, int width, int height, int channels, bool ring) {
     const size_t pad = ring ? 2 : 0;
     const size_t cells = (size_t(width) + pad) * (size_t(height) + pad);
     const size_t nodes = (size_t(width) + pad + 1) * (size_t(height) + pad + 1);
-    for (auto* v : {&level.energy, &level.next_energy}) v->reserve(cells * size_t(channels));
+    for (auto* v : {&level.energy, &level.next_energy}) reserve_large(*v, cells * size_t(channels));
     for (auto* v : {&level.uncovered_area, &level.rigid_area, &level.area, &level.safe_radius, &level.quality,
                     &level.next_area, &level.next_safe_radius, &level.next_quality}) {
-        v->reserve(cells);
+        reserve_large(*v, cells);
     }
-    for (auto* v : {&level.grid.nodes, &level.next_nodes, &carried.nodes}) v->reserve(nodes);
-    level.kind.reserve(cells);
-    level.node_mode.reserve(nodes);
-    level.suspect_round.reserve(cells);
-    level.breaking_cell.reserve(cells);
-    level.reverted_node.reserve(nodes);
+    for (auto* v : {&level.grid.nodes, &level.next_nodes, &carried.nodes}) reserve_large(*v, nodes);
+    reserve_large(level.kind, cells);
+    reserve_large(level.node_mode, nodes);
+    reserve_large(level.suspect_round, cells);
+    reserve_large(level.breaking_cell, cells);
+    reserve_large(level.reverted_node, nodes);
 }
 
 // The level's grid without its ring, affinely rescaled so the inner border
@@ -333,7 +335,7 @@ AutomatonResult run_automaton(const AutomatonInput& input, const AutomatonOption
     result.converged = result.levels.back().converged;
     result.grid = std::move(carried);
     const int pad = ring ? 1 : 0;
-    result.energy.resize(size_t(values));
+    result.energy = large_vector<float>(size_t(values));
     for (int i = 0; i < input.height; ++i) {
         for (int j = 0; j < input.width; ++j) {
             for (int k = 0; k < input.channels; ++k) {

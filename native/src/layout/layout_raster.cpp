@@ -2,6 +2,7 @@
 
 #include <algorithm>
 
+#include "lmrefine/core/memory.h"
 #include "lmrefine/core/parallel.h"
 
 namespace lmrefine {
@@ -49,7 +50,7 @@ LayoutRaster::LayoutRaster(const UvLayout& layout, int width, int height)
 }
 
 std::vector<uint8_t> coverage_mask(const LayoutRaster& raster) {
-    std::vector<uint8_t> mask(size_t(raster.width()) * raster.height(), 0);
+    std::vector<uint8_t> mask = large_vector<uint8_t>(size_t(raster.width()) * raster.height(), 0);
     parallel_for(raster.band_count(), 1, [&](int64_t bands_begin, int64_t bands_end) {
         for (int64_t band = bands_begin; band < bands_end; ++band) {
             raster.for_each_span_in_band(int(band), [&](int64_t, int row, int begin, int end) {
@@ -62,7 +63,7 @@ std::vector<uint8_t> coverage_mask(const LayoutRaster& raster) {
 
 std::vector<int32_t> texel_owners(const LayoutRaster& raster, const std::vector<int32_t>& triangle_chart,
                                   const int8_t* skip) {
-    std::vector<int32_t> owner(size_t(raster.width()) * raster.height(), kUncovered);
+    std::vector<int32_t> owner = large_vector<int32_t>(size_t(raster.width()) * raster.height(), kUncovered);
     // Which triangle reaches a texel first does not matter: the owner is a
     // function of the set of charts that cover it.
     parallel_for(raster.band_count(), 1, [&](int64_t bands_begin, int64_t bands_end) {
