@@ -341,6 +341,19 @@ def test_placement_rule_skips_rows_too_short_as_the_reference(seed):
     assert lmrefine._native._first_fit(occupied, chart, padding) == reference_first_fit(occupied, chart, padding)
 
 
+def test_placement_rule_reads_any_nonzero_mask_value_as_covered():
+    # The kernel's masks hold 0 or 1 (its spans are found with memchr); the
+    # hook's masks are the user's, so 255 or 7 is covered as 1 is.
+    rng = np.random.default_rng(7)
+    occupied = rng.random((16, 18)) < 0.04
+    chart = rng.random((3, 4)) < 0.7
+    chart[0, 0] = True
+    expected = reference_first_fit(occupied, chart, 1.5)
+    assert expected is not None
+    as_bytes = lambda mask, value: np.where(mask, value, 0).astype(np.uint8)  # noqa: E731
+    assert lmrefine._native._first_fit(as_bytes(occupied, 255), as_bytes(chart, 7), 1.5) == expected
+
+
 def test_a_triangle_smaller_than_the_tolerance_is_not_collapsed():
     # A sliver whose short edge (5e-6) is below the tolerance, beside a quad
     # sharing its long corner: snapping its two close corners together would

@@ -1,5 +1,6 @@
 #include <pybind11/pybind11.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <string>
@@ -141,8 +142,11 @@ void bind_packer(py::module_& m) {
                 throw py::value_error("occupied and chart must be non-empty 2-D masks");
             }
             if (!(padding >= 0.0) || padding > 1e4) throw py::value_error("padding must be in [0, 1e4] texels");
-            std::vector<uint8_t> atlas(occupied.data(), occupied.data() + occupied.size());
-            std::vector<uint8_t> bits(chart.data(), chart.data() + chart.size());
+            // The kernel's masks hold 0 or 1; any nonzero value here is covered.
+            std::vector<uint8_t> atlas(size_t(occupied.size())), bits(size_t(chart.size()));
+            std::transform(occupied.data(), occupied.data() + occupied.size(), atlas.begin(),
+                           [](uint8_t v) { return uint8_t(v != 0); });
+            std::transform(chart.data(), chart.data() + chart.size(), bits.begin(), [](uint8_t v) { return uint8_t(v != 0); });
             int x = 0, y = 0;
             if (!first_fit_position(atlas, int(occupied.shape(1)), int(occupied.shape(0)), bits, int(chart.shape(1)),
                                     int(chart.shape(0)), padding, x, y)) {

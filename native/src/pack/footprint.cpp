@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 
 #include <glm/common.hpp>
 
@@ -15,19 +16,60 @@ SpanRows to_spans(const std::vector<uint8_t>& bits, int width, int height) {
     rows.offsets.reserve(size_t(height) + 1);
     for (int r = 0; r < height; ++r) {
         rows.offsets.push_back(int32_t(rows.spans.size()));
+        // Bits are 0 or 1, so memchr (vectorised in the C library) finds
+        // where each run begins and ends.
         const uint8_t* row = bits.data() + size_t(r) * size_t(width);
-        for (int c = 0; c < width;) {
-            if (!row[c]) {
-                ++c;
-                continue;
-            }
-            const int begin = c;
-            while (c < width && row[c]) ++c;
-            rows.spans.push_back({begin, c});
+        const uint8_t* end = row + width;
+        for (const uint8_t* p = row; p < end;) {
+            const auto* begin = static_cast<const uint8_t*>(std::memchr(p, 1, size_t(end - p)));
+            if (!begin) break;
+            const auto* stop = static_cast<const uint8_t*>(std::memchr(begin, 0, size_t(end - begin)));
+            if (!stop) stop = end;
+            rows.spans.push_back({int32_t(begin - row), int32_t(stop - row)});
+            p = stop;
         }
     }
     rows.offsets.push_back(int32_t(rows.spans.size()));
     return rows;
+}
+
+
+// The covered spans dilated: output row R holds covered row R - reach - di
+// grown by half[di + reach] on each side, for every di with a reach; the
+// union of those intervals, merged where they meet or touch (as maximal runs
+// of a bitmap holding them). Built from the spans, not a bitmap: the packer
+// makes two footprints per chart in every trial, and a bitmap the size of
+// the dilated chart cost more in fresh memory than the placement.
+SpanRows dilate(const SpanRows& covered, int reach, const std::vector<int>& half) {
+    SpanRows out;
+    out.width = covered.width + 2 * reach;
+    out.height = covered.height + 2 * reach;
+    out.offsets.reserve(size_t(out.height) + 1);
+    out.spans.reserve(covered.spans.size());
+    std::vector<Span> row;
+    for (int r = 0; r < out.height; ++r) {
+        const size_t first = out.spans.size();
+        out.offsets.push_back(int32_t(first));
+        row.clear();
+        for (int di = -reach; di <= reach; ++di) {
+            const int h = half[size_t(di + reach)];
+            const int source = r - reach - di;
+            if (h < 0 || source < 0 || source >= covered.height) continue;
+            for (int k = covered.offsets[source]; k < covered.offsets[source + 1]; ++k) {
+                row.push_back({covered.spans[k].first + reach - h, covered.spans[k].second + reach + h});
+            }
+        }
+        std::sort(row.begin(), row.end());
+        for (const Span& span : row) {
+            if (out.spans.size() > first && span.first <= out.spans.back().second) {
+                out.spans.back().second = std::max(out.spans.back().second, span.second);
+            } else {
+                out.spans.push_back(span);
+            }
+        }
+    }
+    out.offsets.push_back(int32_t(out.spans.size()));
+    return out;
 }
 
 }  // namespace
@@ -130,20 +172,7 @@ Footprint footprint_of_bits(const std::vector<uint8_t>& bits, int width, int hei
             if (gx * gx + gy * gy < padding * padding || (di == 0 && dj == 0)) half[size_t(di + fp.reach)] = dj;
         }
     }
-    const int dw = width + 2 * fp.reach, dh = height + 2 * fp.reach;
-    std::vector<uint8_t> dilated(size_t(dw) * size_t(dh), 0);
-    for (int r = 0; r < height; ++r) {
-        for (int k = fp.covered.offsets[r]; k < fp.covered.offsets[r + 1]; ++k) {
-            const auto [begin, end] = fp.covered.spans[k];
-            for (int di = -fp.reach; di <= fp.reach; ++di) {
-                const int h = half[size_t(di + fp.reach)];
-                if (h < 0) continue;
-                uint8_t* row = dilated.data() + size_t(r + di + fp.reach) * size_t(dw);
-                std::fill(row + begin + fp.reach - h, row + end + fp.reach + h, uint8_t(1));
-            }
-        }
-    }
-    fp.dilated = to_spans(dilated, dw, dh);
+    fp.dilated = dilate(fp.covered, fp.reach, half);
     return fp;
 }
 

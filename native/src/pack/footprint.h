@@ -65,7 +65,7 @@ Footprint make_footprint(const ChartPiece& piece, const UvLayout& layout, const 
 Footprint turned_footprint(const Footprint& fp, double padding);
 glm::dvec2 turn_local(const glm::dvec2& p, double width);
 
-// The footprint of a bitmap ((height * width) bytes, nonzero = covered).
+// The footprint of a bitmap ((height * width) bytes, 1 = covered, 0 = not).
 Footprint footprint_of_bits(const std::vector<uint8_t>& bits, int width, int height, double padding);
 
 }  // namespace lmrefine::pack
