@@ -5,12 +5,6 @@
 namespace lmrefine::pack {
 namespace {
 
-int lowest_bit(uint64_t word) {
-    int bit = 0;
-    while (!(word >> bit & 1)) ++bit;  // portable (no builtins); words are short to walk
-    return bit;
-}
-
 // Keeps the parts of `candidates` (sorted, disjoint column ranges of the
 // footprint's corner) where span [lo, hi) lies in one of `runs`.
 void keep_inside(const std::vector<Span>& candidates, const std::vector<Span>& runs, int lo, int hi,
@@ -32,35 +26,28 @@ void keep_inside(const std::vector<Span>& candidates, const std::vector<Span>& r
 }  // namespace
 
 Occupancy::Occupancy(int width, int height)
-    : width_(width), height_(height), words_((width + 63) / 64), bits_(size_t(words_) * size_t(height), 0),
-      runs_(size_t(height), std::vector<Span>{{0, width}}), longest_(size_t(height), width) {}
+    : width_(width), height_(height), runs_(size_t(height), std::vector<Span>{{0, width}}), longest_(size_t(height), width) {}
 
-void Occupancy::update_runs(int row) {
-    const uint64_t* words = bits_.data() + size_t(row) * size_t(words_);
+void Occupancy::block(int row, int lo, int hi) {
+    // Blocking only takes cells out of free runs: the runs it meets are cut
+    // to the parts left of lo and right of hi, which stay maximal.
     std::vector<Span>& runs = runs_[size_t(row)];
-    runs.clear();
-    int longest = 0;
-    int c = 0;
-    while (c < width_) {
-        // Skip blocked texels, then take the free run.
-        while (c < width_) {
-            const uint64_t blocked = words[c >> 6] >> (c & 63);
-            if (!(blocked & 1)) break;
-            const uint64_t free = ~blocked;
-            c = free ? c + lowest_bit(free) : (c | 63) + 1;
-        }
-        if (c >= width_) break;
-        const int begin = c;
-        while (c < width_) {
-            const uint64_t blocked = words[c >> 6] >> (c & 63);
-            if (blocked & 1) break;
-            c = blocked ? c + lowest_bit(blocked) : (c | 63) + 1;
-        }
-        c = std::min(c, width_);
-        runs.push_back({begin, c});
-        longest = std::max(longest, c - begin);
+    const auto first = std::upper_bound(runs.begin(), runs.end(), lo, [](int c, const Span& run) { return c < run.second; });
+    auto last = first;
+    bool longest_cut = false;
+    for (; last != runs.end() && last->first < hi; ++last) longest_cut |= last->second - last->first == longest_[size_t(row)];
+    if (first == last) return;
+    Span pieces[2];
+    int count = 0;
+    if (first->first < lo) pieces[count++] = {first->first, lo};
+    if ((last - 1)->second > hi) pieces[count++] = {hi, (last - 1)->second};
+    const auto at = runs.erase(first, last);
+    runs.insert(at, pieces, pieces + count);
+    if (longest_cut) {
+        int longest = 0;
+        for (const Span& run : runs) longest = std::max(longest, run.second - run.first);
+        longest_[size_t(row)] = longest;
     }
-    longest_[size_t(row)] = longest;
 }
 
 bool Occupancy::first_fit(const Footprint& fp, int& out_x, int& out_y, int last_row) const {
@@ -77,6 +64,21 @@ bool Occupancy::first_fit(const Footprint& fp, int& out_x, int& out_y, int last_
         while (k >= 0 && fp.longest[size_t(k)] > free) --k;
         return q - k;
     };
+    // The footprint's rows in the order the corners are narrowed: the
+    // tightest first (it leaves the fewest), then spread over the footprint
+    // (bit-reversed order: top, middle, quarters, ...), because neighbouring
+    // rows of a chart rule out nearly the same corners, and far rows of a
+    // tall or sheared chart rule out different ones: a failing row comes
+    // sooner. Intersections do not depend on the order, so neither does the
+    // position found.
+    row_order_.assign(1, fp.tightest);
+    int bits = 0;
+    while ((1 << bits) < fh) ++bits;
+    for (int k = 0; k < (1 << bits); ++k) {
+        int reversed = 0;
+        for (int b = 0; b < bits; ++b) reversed |= (k >> b & 1) << (bits - 1 - b);
+        if (reversed < fh && reversed != fp.tightest) row_order_.push_back(reversed);
+    }
     for (int y = 0; y + fh <= height_ && y <= last_row;) {
         // A row whose longest free run is too short rules the row out at once.
         if (longest_[size_t(y + fp.tightest)] < fp.longest[size_t(fp.tightest)]) {
@@ -89,11 +91,10 @@ bool Occupancy::first_fit(const Footprint& fp, int& out_x, int& out_y, int last_
             y = next_row(y + long_enough, long_enough);
             continue;
         }
-        // The corners where every span lies in a free run, narrowed row by
-        // row (the tightest row first: it leaves the fewest).
+        // The corners where every span lies in a free run, narrowed row by row.
         candidates_.assign(1, {0, width_ - fw + 1});
         for (int n = 0; n < fh && !candidates_.empty(); ++n) {
-            const int r = n == 0 ? fp.tightest : (n <= fp.tightest ? n - 1 : n);
+            const int r = row_order_[size_t(n)];
             for (int k = fp.covered.offsets[size_t(r)]; k < fp.covered.offsets[size_t(r) + 1] && !candidates_.empty(); ++k) {
                 keep_inside(candidates_, runs_[size_t(y + r)], fp.covered.spans[size_t(k)].first,
                             fp.covered.spans[size_t(k)].second, next_);
@@ -115,13 +116,11 @@ void Occupancy::place(const Footprint& fp, int x, int y) {
     for (int r = 0; r < d.height; ++r) {
         const int row = y - fp.reach + r;
         if (row < 0 || row >= height_) continue;
-        uint64_t* words = bits_.data() + size_t(row) * size_t(words_);
         for (int k = d.offsets[size_t(r)]; k < d.offsets[size_t(r) + 1]; ++k) {
             const int lo = std::max(0, x - fp.reach + d.spans[size_t(k)].first);
             const int hi = std::min(width_, x - fp.reach + d.spans[size_t(k)].second);
-            for (int c = lo; c < hi; ++c) words[c >> 6] |= uint64_t(1) << (c & 63);
+            if (lo < hi) block(row, lo, hi);
         }
-        update_runs(row);
     }
 }
 

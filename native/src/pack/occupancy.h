@@ -24,13 +24,14 @@ public:
     void place(const Footprint& fp, int x, int y);
 
 private:
-    void update_runs(int row);
+    // Blocks columns [lo, hi) of a row (inside the atlas, lo < hi).
+    void block(int row, int lo, int hi);
 
-    int width_, height_, words_;
-    std::vector<uint64_t> bits_;             // blocked texels, row-major, words_ per row
-    std::vector<std::vector<Span>> runs_;    // per row, its free runs [first, second), ascending
+    int width_, height_;
+    std::vector<std::vector<Span>> runs_;    // per row, its free runs [first, second), ascending and maximal
     std::vector<int32_t> longest_;           // per row, its longest free run
     mutable std::vector<Span> candidates_, next_;  // first_fit's scratch (one Occupancy per thread)
+    mutable std::vector<int> row_order_;            // first_fit's footprint rows, in the order tried
 };
 
 }  // namespace lmrefine::pack
