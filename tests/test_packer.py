@@ -341,6 +341,24 @@ def test_placement_rule_skips_rows_too_short_as_the_reference(seed):
     assert lmrefine._native._first_fit(occupied, chart, padding) == reference_first_fit(occupied, chart, padding)
 
 
+@pytest.mark.parametrize("seed", range(12))
+def test_placement_rule_matches_the_reference_for_tall_sheared_charts(seed):
+    # A stretched chart is a sheared band of many rows; first_fit narrows its
+    # corners over the rows in a spread order, which must find the same
+    # first position as the plain rule.
+    rng = np.random.default_rng(2000 + seed)
+    height, width = int(rng.integers(24, 34)), int(rng.integers(24, 34))
+    occupied = rng.random((height, width)) < rng.uniform(0.01, 0.05)
+    rows, thick = int(rng.integers(9, 17)), int(rng.integers(2, 5))
+    shear = rng.uniform(0.3, 1.0)
+    chart = np.zeros((rows, int(rows * shear) + thick + 1), bool)
+    for row in range(rows):
+        start = int(row * shear)
+        chart[row, start:start + thick] = True
+    padding = float(rng.choice([0.0, 1.0, 2.0]))
+    assert lmrefine._native._first_fit(occupied, chart, padding) == reference_first_fit(occupied, chart, padding)
+
+
 def test_placement_rule_reads_any_nonzero_mask_value_as_covered():
     # The kernel's masks hold 0 or 1 (its spans are found with memchr); the
     # hook's masks are the user's, so 255 or 7 is covered as 1 is.
