@@ -33,7 +33,6 @@ SpanRows to_spans(const std::vector<uint8_t>& bits, int width, int height) {
     return rows;
 }
 
-
 // The covered spans dilated: output row R holds covered row R - reach - di
 // grown by half[di + reach] on each side, for every di with a reach; the
 // union of those intervals, merged where they meet or touch (as maximal runs
@@ -55,8 +54,9 @@ SpanRows dilate(const SpanRows& covered, int reach, const std::vector<int>& half
             const int h = half[size_t(di + reach)];
             const int source = r - reach - di;
             if (h < 0 || source < 0 || source >= covered.height) continue;
-            for (int k = covered.offsets[source]; k < covered.offsets[source + 1]; ++k) {
-                row.push_back({covered.spans[k].first + reach - h, covered.spans[k].second + reach + h});
+            for (int k = covered.offsets[size_t(source)]; k < covered.offsets[size_t(source) + 1]; ++k) {
+                const Span& span = covered.spans[size_t(k)];
+                row.push_back({span.first + reach - h, span.second + reach + h});
             }
         }
         std::sort(row.begin(), row.end());

@@ -22,12 +22,12 @@ std::string gib(uint64_t bytes);
 void require_memory(const std::string& what, uint64_t bytes, const std::string& advice);
 
 // Asks the system to back the whole 2 MiB pages inside [data, data + bytes)
-// with large pages (Linux transparent huge pages, which this machine and
-// Debian's default kernel give on request only). Memory a process touches
-// for the first time costs a page fault per 4 KiB, about 3 ms per MB on the
-// 2-core VMs we measure on; a large page costs one fault per 2 MiB
-// (docs/refiner.md, "Fresh memory once per run"). Only untouched memory
-// gains; a no-op where the system has no such request, and never an error.
+// with large pages (Linux transparent huge pages, which many kernels,
+// Debian's among them, give on request only): memory touched for the first
+// time costs a page fault per 4 KiB, and one per 2 MiB in large pages
+// (docs/refiner.md, "Large pages for the large arrays"). Only untouched
+// memory gains; a no-op where the system has no such request, never an
+// error.
 void advise_large_pages(const void* data, size_t bytes);
 
 // v.reserve(n), its storage advised as above before anything touches it.
