@@ -7,10 +7,10 @@ UV atlas, its bake at a quarter of the size scaled up) without the mesh
 first-call`, of one `refine_uvs` in a fresh process (what a click in the
 add-on or a level of the batch costs: the memory the call needs is touched
 for the first time), on the bench plane and on game_level's Smart UV atlas
-with its repack (bench_refine's smart_uv_repack case), wall and CPU time; in two builds, each in
-its own subprocess with PYTHONPATH set to that build's python/ directory,
-alternating base and new so both see the same machine load. Prints the best
-time of each and the ratio new / base.
+with its repack (bench_refine's smart_uv_repack case), wall and CPU time;
+in two builds, each in its own subprocess with PYTHONPATH set to that
+build's python/ directory, alternating base and new so both see the same
+machine load. Prints the best time of each and the ratio new / base.
 
 CPU time of the whole process, one worker thread by default: on a shared
 machine that is steadier than wall time (other jobs take cores, not CPU
@@ -79,8 +79,8 @@ print(json.dumps(times))
 """
 
 
-# Makes the game_level lightmap the first-call children read (so that no bake
-# runs in the measured process before the call), and the plane's.
+# Makes the game_level lightmap the first-call children read, so that no bake
+# runs in a measured process before its call (the plane's map is cheap).
 FIRST_CALL_INPUTS = r"""
 import sys
 import numpy as np
