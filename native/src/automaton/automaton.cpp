@@ -164,23 +164,23 @@ std::vector<uint8_t> rigid_texels(const AutomatonInput& input) {
 // included): each level reuses the storage of the coarser one before it,
 // so a run faults in fresh memory for the finest level only (on some
 // machines fresh memory costs more than a step; docs/refiner.md "How a step
-// stays cheap"), in large pages where the system gives them. Reserving
-// touches no memory.
+// stays cheap"), in large pages where the system gives them (LargeVector).
+// Reserving touches no memory.
 void reserve_levels(Level& level, NodeGrid& carried, int width, int height, int channels, bool ring) {
     const size_t pad = ring ? 2 : 0;
     const size_t cells = (size_t(width) + pad) * (size_t(height) + pad);
     const size_t nodes = (size_t(width) + pad + 1) * (size_t(height) + pad + 1);
-    for (auto* v : {&level.energy, &level.next_energy}) reserve_large(*v, cells * size_t(channels));
+    for (auto* v : {&level.energy, &level.next_energy}) v->reserve(cells * size_t(channels));
     for (auto* v : {&level.uncovered_area, &level.rigid_area, &level.area, &level.safe_radius, &level.quality,
                     &level.next_area, &level.next_safe_radius, &level.next_quality}) {
-        reserve_large(*v, cells);
+        v->reserve(cells);
     }
-    for (auto* v : {&level.grid.nodes, &level.next_nodes, &carried.nodes}) reserve_large(*v, nodes);
-    reserve_large(level.kind, cells);
-    reserve_large(level.node_mode, nodes);
-    reserve_large(level.suspect_round, cells);
-    reserve_large(level.breaking_cell, cells);
-    reserve_large(level.reverted_node, nodes);
+    for (auto* v : {&level.grid.nodes, &level.next_nodes, &carried.nodes}) v->reserve(nodes);
+    level.kind.reserve(cells);
+    level.node_mode.reserve(nodes);
+    level.suspect_round.reserve(cells);
+    level.breaking_cell.reserve(cells);
+    level.reverted_node.reserve(nodes);
 }
 
 // The level's grid without its ring, affinely rescaled so the inner border
@@ -356,13 +356,13 @@ RuleStep automaton_rule_step(const AutomatonInput& input, const AutomatonOptions
     make_level(level, input, rigid_texels(input), options.edge_shrink, 1, nullptr, ring);
     LMREFINE_REQUIRE(nodes.size() == level.grid.nodes.size(),
                      "nodes must be the level's (rows + 1) x (cols + 1) nodes, ring included");
-    level.grid.nodes = nodes;
+    level.grid.nodes.assign(nodes.begin(), nodes.end());
     automaton_detail::prepare_level(level, options, ring);
     automaton_detail::measure_cells(level);
     RuleStep out;
     out.difference = automaton_detail::apply_rule(level, options);
-    out.nodes = std::move(level.next_nodes);
-    out.energy = std::move(level.next_energy);
+    out.nodes.assign(level.next_nodes.begin(), level.next_nodes.end());
+    out.energy.assign(level.next_energy.begin(), level.next_energy.end());
     return out;
 }
 

@@ -22,7 +22,7 @@ constexpr int64_t kSuspectGrain = 256;  // cells judged again after a revert, pe
 inline double cross(const glm::dvec2& a, const glm::dvec2& b) { return a.x * b.y - a.y * b.x; }
 
 // Corners of cell (i, j) in order around it.
-inline void corners(const Level& level, const std::vector<glm::dvec2>& nodes, int i, int j, glm::dvec2 q[4]) {
+inline void corners(const Level& level, const LargeVector<glm::dvec2>& nodes, int i, int j, glm::dvec2 q[4]) {
     q[0] = nodes[level.node(i, j)];
     q[1] = nodes[level.node(i, j + 1)];
     q[2] = nodes[level.node(i + 1, j + 1)];

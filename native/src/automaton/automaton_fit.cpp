@@ -55,7 +55,7 @@ int fit_to_bounds(Level& level) {
 
     // Blended towards rest from round kFitSmoothRounds on (made then: most
     // fits end before, and a per-node array is costly to fault in).
-    std::vector<glm::dvec2> carried;
+    LargeVector<glm::dvec2> carried;
     std::vector<double> kept;
     // Nodes marked in this round's `lowered` list (cleared after the round).
     std::vector<uint8_t> is_lowered(grid.nodes.size(), 0);
@@ -84,7 +84,7 @@ int fit_to_bounds(Level& level) {
             // differ in size, and smoothing evens them out without giving
             // up the deformation; blending towards rest (below) cascades
             // through a strongly compressed region and undoes it.
-            const std::vector<glm::dvec2>& before = level.grid.nodes;
+            const LargeVector<glm::dvec2>& before = level.grid.nodes;
             smoothed.resize(lowered.size());
             for (size_t k = 0; k < lowered.size(); ++k) {
                 const size_t n = size_t(lowered[k]);

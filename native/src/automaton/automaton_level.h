@@ -10,6 +10,7 @@
 
 #include "lmrefine/automaton/automaton.h"
 #include "lmrefine/automaton/warp.h"
+#include "lmrefine/core/memory.h"
 
 namespace lmrefine::automaton_detail {
 
@@ -31,36 +32,36 @@ struct Level {
     // every level.
     int block = 1;
     NodeGrid grid;                       // current node positions (and original xs, ys)
-    std::vector<glm::dvec2> next_nodes;  // the second buffer
+    LargeVector<glm::dvec2> next_nodes;  // the second buffer
     int channels = 1;
-    std::vector<double> energy, next_energy;  // cells * channels
-    std::vector<CellKind> kind;
+    LargeVector<double> energy, next_energy;  // cells * channels
+    LargeVector<CellKind> kind;
     // A cell's area bounds are factors of its area at rest (bounds_of,
     // automaton_cell.h), computed where they are needed instead of stored:
     // per-cell arrays cost more to fault in and read than the products.
     double covered_min_factor = 0, covered_max_factor = 0;  // material cells (min: or rigid_area if larger)
     double ring_min_factor = 0;                             // ring cells
-    std::vector<double> uncovered_area;  // texel area of uncovered texels inside (pressure only)
-    std::vector<double> rigid_area;      // texel area of rigid texels inside: uncovered or on a chart's edge
-    std::vector<NodeMode> node_mode;
+    LargeVector<double> uncovered_area;  // texel area of uncovered texels inside (pressure only)
+    LargeVector<double> rigid_area;      // texel area of rigid texels inside: uncovered or on a chart's edge
+    LargeVector<NodeMode> node_mode;
     std::array<double, 4> reference_density{};  // covered energy / covered area, per channel
     double initial_total = 0;                   // sum of all energies, for the conservation check
 
     // Cell shapes derived from the nodes (measure_cells), kept
     // double-buffered like them: a step measures the cells it moved while
     // checking their bounds, so the next step need not measure them again.
-    std::vector<double> area, safe_radius, quality;
-    std::vector<double> next_area, next_safe_radius, next_quality;
+    LargeVector<double> area, safe_radius, quality;
+    LargeVector<double> next_area, next_safe_radius, next_quality;
     // Scratch, rebuilt every step.
     std::vector<double> row_difference;  // per row of edges, the largest density difference
     std::vector<double> row_moved;       // per row of nodes, the largest squared node move
-    std::vector<uint32_t> suspect_round;  // per cell, the last revert round that queued it
-    std::vector<uint8_t> breaking_cell;   // per cell: breaks a bound (dense revert rounds)
-    std::vector<uint8_t> reverted_node;   // per node: put back in this dense round
+    LargeVector<uint32_t> suspect_round;  // per cell, the last revert round that queued it
+    LargeVector<uint8_t> breaking_cell;   // per cell: breaks a bound (dense revert rounds)
+    LargeVector<uint8_t> reverted_node;   // per node: put back in this dense round
     uint32_t revert_round = 0;
     // The nodes at the level's start (after fit_to_bounds), kept for
     // check_invariants only.
-    std::vector<glm::dvec2> start_nodes;
+    LargeVector<glm::dvec2> start_nodes;
 
     int rows() const { return grid.rows; }
     int cols() const { return grid.cols; }

@@ -257,7 +257,7 @@ double rule_of(Level& level, const AutomatonOptions& options) {
     const int rows = level.rows(), cols = level.cols();
     constexpr Facing face = facing(channels);
     constexpr int axes = channels == 4 ? 2 : 1;  // pressure: y (and x) axis
-    const std::vector<glm::dvec2>& nodes = level.grid.nodes;
+    const LargeVector<glm::dvec2>& nodes = level.grid.nodes;
 
     // 1. Edges: energy flux (only between covered cells, from the denser to
     // the less dense; the border and the gutter are adiabatic) and the push

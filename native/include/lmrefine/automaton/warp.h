@@ -11,6 +11,7 @@
 
 #include <glm/vec2.hpp>
 
+#include "lmrefine/core/memory.h"
 #include "lmrefine/core/texel_space.h"
 
 namespace lmrefine {
@@ -20,7 +21,7 @@ struct NodeGrid {
     int cols = 0;                    // cells across
     std::vector<double> xs;          // cols + 1 original node x, increasing
     std::vector<double> ys;          // rows + 1 original node y, increasing
-    std::vector<glm::dvec2> nodes;   // (rows + 1) * (cols + 1) deformed positions, row-major
+    LargeVector<glm::dvec2> nodes;   // (rows + 1) * (cols + 1) deformed positions, row-major
 
     glm::dvec2& node(int i, int j) { return nodes[size_t(i) * (cols + 1) + j]; }
     const glm::dvec2& node(int i, int j) const { return nodes[size_t(i) * (cols + 1) + j]; }

@@ -5,6 +5,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <new>
 #include <string>
 #include <vector>
 
@@ -45,6 +46,44 @@ std::vector<T> large_vector(size_t n, const T& value = T()) {
     v.assign(n, value);
     return v;
 }
+
+// An allocator whose blocks of 2 MiB and more start on a 2 MiB boundary and
+// are advised as above before anything touches them. With a plain
+// allocation the C library writes its header just before the block, which
+// touches the block's first large page in small pages: about 2 MiB of
+// every array would fault page by page.
+template <class T>
+struct LargePageAllocator {
+    using value_type = T;
+    static constexpr size_t kLargePage = size_t(1) << 21;
+
+    LargePageAllocator() = default;
+    template <class U>
+    LargePageAllocator(const LargePageAllocator<U>&) noexcept {}
+
+    T* allocate(size_t n) {
+        const size_t bytes = n * sizeof(T);
+        if (bytes < kLargePage) return static_cast<T*>(::operator new(bytes));
+        const size_t rounded = (bytes + kLargePage - 1) / kLargePage * kLargePage;
+        void* p = ::operator new(rounded, std::align_val_t(kLargePage));
+        advise_large_pages(p, rounded);
+        return static_cast<T*>(p);
+    }
+    void deallocate(T* p, size_t n) noexcept {
+        if (n * sizeof(T) < kLargePage) {
+            ::operator delete(p);
+        } else {
+            ::operator delete(p, std::align_val_t(kLargePage));
+        }
+    }
+    template <class U>
+    bool operator==(const LargePageAllocator<U>&) const noexcept { return true; }
+    template <class U>
+    bool operator!=(const LargePageAllocator<U>&) const noexcept { return false; }
+};
+
+template <class T>
+using LargeVector = std::vector<T, LargePageAllocator<T>>;
 
 // a * b * ... saturating at UINT64_MAX, for sizes computed from user input.
 uint64_t saturating_product(std::initializer_list<uint64_t> factors);
