@@ -89,11 +89,11 @@ py::array_t<bool> layout_mask(
 
 // Moves a vector into a numpy array of the given shape without copying; the
 // array owns the storage through a capsule.
-template <class T>
-py::array_t<T> to_numpy(std::vector<T>&& data, std::vector<py::ssize_t> shape) {
-    auto owner = std::make_unique<std::vector<T>>(std::move(data));
+template <class T, class A>
+py::array_t<T> to_numpy(std::vector<T, A>&& data, std::vector<py::ssize_t> shape) {
+    auto owner = std::make_unique<std::vector<T, A>>(std::move(data));
     T* pointer = owner->data();
-    py::capsule capsule(owner.get(), [](void* p) { delete static_cast<std::vector<T>*>(p); });
+    py::capsule capsule(owner.get(), [](void* p) { delete static_cast<std::vector<T, A>*>(p); });
     owner.release();
     return py::array_t<T>(std::move(shape), pointer, capsule);
 }

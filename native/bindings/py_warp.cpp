@@ -15,7 +15,7 @@ namespace lmrefine {
 namespace py_util {
 
 py::array_t<float> grid_to_numpy(const NodeGrid& grid, int width, int height) {
-    std::vector<float> values = large_vector<float>(grid.nodes.size() * 2);
+    LargeVector<float> values(grid.nodes.size() * 2);
     for (size_t k = 0; k < grid.nodes.size(); ++k) {
         const glm::dvec2 uv = pixel_to_uv(grid.nodes[k], width, height);
         values[2 * k] = float(uv.x);
@@ -106,7 +106,7 @@ Returns:
         "grid_cell_areas",
         [](const py::handle& grid_in) {
             const auto grid = py_util::grid_from_numpy(grid_in, "grid");
-            std::vector<float> areas;
+            LargeVector<float> areas;
             {
                 py::gil_scoped_release release;
                 areas = cell_areas(grid.view);

@@ -52,7 +52,7 @@ constexpr uint8_t kFreeTexel = 0, kEdgeTexel = 1, kRigidTexel = 2;
 // With a ring, one extra ring of cells (one block wide) surrounds the grid,
 // its outer nodes one block outside the inner border nodes. The level's
 // arrays keep their storage (reserve_levels); prepare_level sets the rest.
-void make_level(Level& level, const AutomatonInput& input, const std::vector<uint8_t>& rigid, double edge_shrink,
+void make_level(Level& level, const AutomatonInput& input, const LargeVector<uint8_t>& rigid, double edge_shrink,
                 int block, const NodeGrid* coarser, bool ring) {
     const double texel_rigid_area[3] = {0.0, edge_shrink, 1.0};
     // identity_grid's rows, cols, xs and ys; its nodes are not needed (a
@@ -135,8 +135,8 @@ void make_level(Level& level, const AutomatonInput& input, const std::vector<uin
 // Per texel: rigid (uncovered: the gutter keeps its width in texels, and the
 // texels input.rigid marks), a chart's edge (covered, next to an uncovered
 // texel: shrinks only to edge_shrink) or free.
-std::vector<uint8_t> rigid_texels(const AutomatonInput& input) {
-    std::vector<uint8_t> rigid = large_vector<uint8_t>(size_t(input.width) * input.height, kFreeTexel);
+LargeVector<uint8_t> rigid_texels(const AutomatonInput& input) {
+    LargeVector<uint8_t> rigid(size_t(input.width) * input.height, kFreeTexel);
     if (input.rigid) {
         for (size_t t = 0; t < rigid.size(); ++t) rigid[t] = input.rigid[t] ? kRigidTexel : kFreeTexel;
     }
@@ -300,7 +300,7 @@ AutomatonResult run_automaton(const AutomatonInput& input, const AutomatonOption
     for (int l = 0; l < levels; ++l) budget += uint64_t(level_step_budget(1 << l, options));
     if (progress) progress->begin("automaton", budget);
 
-    const std::vector<uint8_t> rigid = rigid_texels(input);
+    const LargeVector<uint8_t> rigid = rigid_texels(input);
     AutomatonResult result;
     NodeGrid carried;
     Level level;
@@ -335,7 +335,7 @@ AutomatonResult run_automaton(const AutomatonInput& input, const AutomatonOption
     result.converged = result.levels.back().converged;
     result.grid = std::move(carried);
     const int pad = ring ? 1 : 0;
-    result.energy = large_vector<float>(size_t(values));
+    result.energy.resize(size_t(values));
     for (int i = 0; i < input.height; ++i) {
         for (int j = 0; j < input.width; ++j) {
             for (int k = 0; k < input.channels; ++k) {

@@ -59,8 +59,8 @@ void warp_uvs_through(const Grid& grid, int width, int height, const float* uvs,
 }
 
 template <class Grid>
-std::vector<float> cell_areas_of(const Grid& grid) {
-    std::vector<float> areas(size_t(grid.rows) * grid.cols);
+LargeVector<float> cell_areas_of(const Grid& grid) {
+    LargeVector<float> areas(size_t(grid.rows) * grid.cols);
     parallel_for(grid.rows, 16, [&](int64_t begin, int64_t end) {
         for (int i = int(begin); i < int(end); ++i) {
             for (int j = 0; j < grid.cols; ++j) areas[size_t(i) * grid.cols + j] = cell_area(grid, i, j);
@@ -106,9 +106,9 @@ void warp_uvs(const UvGridView& grid, const float* uvs, int64_t count, float* ou
 
 namespace lmrefine {
 
-std::vector<float> cell_areas(const NodeGrid& grid) { return cell_areas_of(grid); }
+LargeVector<float> cell_areas(const NodeGrid& grid) { return cell_areas_of(grid); }
 
-std::vector<float> cell_areas(const UvGridView& grid) { return cell_areas_of(grid); }
+LargeVector<float> cell_areas(const UvGridView& grid) { return cell_areas_of(grid); }
 
 }  // namespace lmrefine
 

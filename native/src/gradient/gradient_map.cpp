@@ -257,8 +257,8 @@ void gradient_map(const float* image, int64_t height, int64_t width, int channel
 
     // A single channel is read in place (only covered texels are ever used);
     // RGB(A) is reduced to luminance once.
-    std::vector<float> luminance;
-    if (channels != 1) luminance = large_vector<float>(size_t(height * width));
+    LargeVector<float> luminance;
+    if (channels != 1) luminance.resize(size_t(height * width));
     const CoverageScan scan =
         scan_and_luminance(image, height, width, channels, mask, channels == 1 ? nullptr : luminance.data(), progress);
     if (progress) progress->check();

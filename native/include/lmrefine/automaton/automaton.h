@@ -84,7 +84,7 @@ struct LevelStats {
 
 struct AutomatonResult {
     NodeGrid grid;                 // finest grid, pixel space
-    std::vector<float> energy;     // final energies, height * width * channels
+    LargeVector<float> energy;     // final energies, height * width * channels
     std::vector<LevelStats> levels;  // coarsest first
     int steps = 0;
     bool converged = false;        // the finest level reached delta

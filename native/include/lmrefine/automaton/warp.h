@@ -63,8 +63,8 @@ namespace lmrefine {
 
 // Area of every cell (rows * cols, row-major), in the grid's units (texels^2
 // for a pixel-space grid).
-std::vector<float> cell_areas(const NodeGrid& grid);
-std::vector<float> cell_areas(const UvGridView& grid);
+LargeVector<float> cell_areas(const NodeGrid& grid);
+LargeVector<float> cell_areas(const UvGridView& grid);
 
 // Cells (rows * cols bytes, row-major) of a float32 UV-space grid, nodes
 // (rows + 1) x (cols + 1) of (u, v) with v up, that are not convex,
