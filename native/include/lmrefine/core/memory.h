@@ -64,6 +64,7 @@ struct LargePageAllocator {
     T* allocate(size_t n) {
         const size_t bytes = n * sizeof(T);
         if (bytes < kLargePage) return static_cast<T*>(::operator new(bytes));
+        if (bytes > SIZE_MAX - kLargePage) throw std::bad_alloc();
         const size_t rounded = (bytes + kLargePage - 1) / kLargePage * kLargePage;
         void* p = ::operator new(rounded, std::align_val_t(kLargePage));
         advise_large_pages(p, rounded);
