@@ -1,6 +1,8 @@
-// Memory checked before a large allocation, so an absurd request (a corrupt
-// image header, a resolution of 10^6) fails with a ResourceError that names
-// it instead of attempting a terabyte allocation.
+// Large allocations: checked against the machine's memory first, so an
+// absurd request (a corrupt image header, a resolution of 10^6) fails with a
+// ResourceError that names it instead of attempting a terabyte allocation;
+// and backed by large pages where the system gives them, so that touching
+// them the first time costs few page faults.
 #pragma once
 
 #include <cstddef>
