@@ -55,14 +55,7 @@ constexpr uint8_t kFreeTexel = 0, kEdgeTexel = 1, kRigidTexel = 2;
 void make_level(Level& level, const AutomatonInput& input, const LargeVector<uint8_t>& rigid, double edge_shrink,
                 int block, const NodeGrid* coarser, bool ring) {
     const double texel_rigid_area[3] = {0.0, edge_shrink, 1.0};
-    // identity_grid's rows, cols, xs and ys; its nodes are not needed (a
-    // fresh array is costly to fault in, see docs/refiner.md "How a step
-    // stays cheap").
-    NodeGrid inner;
-    inner.cols = (input.width + block - 1) / block;
-    inner.rows = (input.height + block - 1) / block;
-    for (int j = 0; j <= inner.cols; ++j) inner.xs.push_back(std::min(j * block, input.width));
-    for (int i = 0; i <= inner.rows; ++i) inner.ys.push_back(std::min(i * block, input.height));
+    const NodeGrid inner = grid_axes(input.width, input.height, block);
     const int pad = ring ? 1 : 0;
     level.block = block;
     level.channels = input.channels;

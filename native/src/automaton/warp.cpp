@@ -71,17 +71,13 @@ LargeVector<float> cell_areas_of(const Grid& grid) {
 
 }  // namespace
 
-NodeGrid identity_grid(int width, int height, int block) {
+NodeGrid grid_axes(int width, int height, int block) {
     LMREFINE_REQUIRE(width > 0 && height > 0 && block > 0, "grid size must be positive");
     NodeGrid grid;
     grid.cols = (width + block - 1) / block;
     grid.rows = (height + block - 1) / block;
     for (int j = 0; j <= grid.cols; ++j) grid.xs.push_back(std::min(j * block, width));
     for (int i = 0; i <= grid.rows; ++i) grid.ys.push_back(std::min(i * block, height));
-    grid.nodes.resize(size_t(grid.rows + 1) * (grid.cols + 1));
-    for (int i = 0; i <= grid.rows; ++i) {
-        for (int j = 0; j <= grid.cols; ++j) grid.node(i, j) = {grid.xs[j], grid.ys[i]};
-    }
     return grid;
 }
 

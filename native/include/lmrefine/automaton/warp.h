@@ -28,8 +28,9 @@ struct NodeGrid {
 };
 
 // A grid over [0, width] x [0, height] with `block`-texel cells (the last row
-// and column may be narrower), its nodes at their original positions.
-NodeGrid identity_grid(int width, int height, int block = 1);
+// and column may be narrower): its rows, cols, xs and ys, and no nodes (the
+// caller places them; fresh node arrays are costly to fault in).
+NodeGrid grid_axes(int width, int height, int block = 1);
 
 // Carries a point given in original coordinates. Points outside the grid's
 // original rectangle are clamped onto it first.

@@ -33,18 +33,15 @@ void require_memory(const std::string& what, uint64_t bytes, const std::string& 
 // error.
 void advise_large_pages(const void* data, size_t bytes);
 
-// v.reserve(n), its storage advised as above before anything touches it.
-template <class T>
-void reserve_large(std::vector<T>& v, size_t n) {
-    v.reserve(n);
-    advise_large_pages(v.data(), v.capacity() * sizeof(T));
-}
-
-// n copies of value in a vector reserved as above.
+// n copies of value in a plain vector whose storage is advised as above
+// before it is filled (for vectors whose type other code shares; the C
+// library's header touches the first large page, so LargeVector below
+// gains more).
 template <class T>
 std::vector<T> large_vector(size_t n, const T& value = T()) {
     std::vector<T> v;
-    reserve_large(v, n);
+    v.reserve(n);
+    advise_large_pages(v.data(), v.capacity() * sizeof(T));
     v.assign(n, value);
     return v;
 }
