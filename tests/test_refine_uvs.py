@@ -489,3 +489,78 @@ def test_layout_figures_of_one_refinement_are_its_report_and_compose_over_two():
                                first.report["triangle_density"] * second.report["triangle_density"], rtol=1e-4)
     with pytest.raises(ValueError, match="new_uvs must have the shape"):
         lmrefine.refine.layout_figures(lightmap, uvs, first.uvs[:-1], tris)
+
+
+def test_a_flipped_triangle_backs_off_just_enough_to_unflip():
+    # A thin triangle whose apex a smooth dip in the (valid) grid pushes
+    # across its base: at the fraction t of the dip the apex sits on the base,
+    # and the back-off keeps _UNFLIP_SHARE of that, not the 0.25 two halvings give.
+    from lmrefine import backoff
+    resolution = 64
+    uvs = np.array([[0.1, 0.5], [0.9, 0.5], [0.5, 0.52]], np.float32)
+    tris = np.array([[0, 1, 2]], np.int32)
+    identity = lmrefine.identity_grid(resolution)
+    y, x = np.mgrid[0:resolution + 1, 0:resolution + 1].astype(np.float64)
+    dip = 3.0 * np.exp(-((x - 32) ** 2 + (y - 0.48 * resolution) ** 2) / (2 * 6.0 ** 2))
+    full = identity.copy()
+    full[..., 1] -= (dip / resolution).astype(np.float32)  # v down, towards the base
+    assert not backoff.invalid_cells(full).any()
+    original = lmrefine.check_layout(uvs, tris, resolution, 2)
+    assert lmrefine.check_layout(lmrefine.warp_uvs(uvs, full), tris, resolution, 2, reference_uvs=uvs)["flipped"] == 1
+    grid, new_uvs, check, kept, limited_by = backoff.accept(full, identity, uvs, tris, (resolution, resolution),
+                                                            2, original)
+    assert check["valid"] and limited_by == ["flipped"]
+    moved = lmrefine.warp_uvs(uvs, full)[2, 1] - uvs[2, 1]
+    degenerate_at = (0.5 - uvs[2, 1]) / moved  # where the apex reaches v = 0.5
+    assert kept[32, 32] == pytest.approx(backoff._UNFLIP_SHARE * degenerate_at, rel=1e-3)  # the base moves a little too
+    assert kept[32, 32] > 0.25
+    np.testing.assert_array_equal(new_uvs, lmrefine.warp_uvs(uvs, grid))
+
+
+def test_unflip_factors_are_the_quadratic_roots():
+    from lmrefine import backoff
+    rng = np.random.default_rng(3)
+    uvs = rng.random((60, 2))
+    tris = np.arange(60).reshape(20, 3)
+    moved = uvs + rng.normal(0, 0.4, uvs.shape)
+    charts = np.arange(20) // 2  # two triangles a chart
+    factors = backoff.unflip_factors(uvs, moved, tris, charts, 10)
+    expected = np.full(10, np.nan)
+    for t, (a, b, c) in enumerate(tris):
+        e0, f0 = uvs[b] - uvs[a], uvs[c] - uvs[a]
+        de, df = (moved[b] - moved[a]) - e0, (moved[c] - moved[a]) - f0
+        cross = lambda p, q: p[0] * q[1] - p[1] * q[0]
+        k0, k1, k2 = cross(e0, f0), cross(e0, df) + cross(de, f0), cross(de, df)
+        if np.sign(k0 + k1 + k2) == np.sign(k0):
+            continue  # not flipped
+        root = min(r.real for r in np.roots([k2, k1, k0]) if abs(r.imag) < 1e-9 and 0 <= r.real <= 1)
+        expected[charts[t]] = np.fmin(expected[charts[t]], backoff._UNFLIP_SHARE * root)
+    assert np.isnan(expected).sum() < 10 and not np.isnan(expected).all()
+    np.testing.assert_allclose(factors, expected, rtol=1e-9, atol=1e-11)  # bisection: 2^-40
+    np.testing.assert_array_equal(np.isnan(factors), np.isnan(expected))
+
+
+def _ramp_reference(kept):
+    """backoff._ramp's rule over the whole grid: three times, each node
+    lowered to the mean of its 3 x 3 neighbourhood (the edge repeated)."""
+    from lmrefine import backoff
+    height, width = kept.shape
+    for _ in range(backoff._MARGIN):
+        padded = np.pad(kept, 1, mode="edge")
+        mean = sum(padded[1 + di:height + 1 + di, 1 + dj:width + 1 + dj] for di in (-1, 0, 1) for dj in (-1, 0, 1)) / 9
+        kept = np.minimum(kept, mean.astype(np.float32))
+    return kept
+
+
+def test_the_windowed_ramp_matches_the_ramp_over_the_whole_grid():
+    from lmrefine import backoff
+    rng = np.random.default_rng(5)
+    for case in range(40):
+        height, width = rng.integers(1, 30, 2)
+        kept = np.ones((height, width), np.float32)
+        for _ in range(rng.integers(0, 3)):  # dips anywhere, at the edges and corners too
+            i, j = rng.integers(0, height), rng.integers(0, width)
+            kept[i:i + rng.integers(1, 6), j:j + rng.integers(1, 6)] = rng.choice([0.0, 0.25, 0.5, 0.9])
+        expected = _ramp_reference(kept)
+        backoff._ramp(kept)  # in place
+        np.testing.assert_array_equal(kept, expected, err_msg=f"case {case}")

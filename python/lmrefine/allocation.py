@@ -25,6 +25,7 @@ import numpy as np
 
 from .packer import CHART_TOLERANCE, pack_charts
 from ._native import coverage_mask, find_charts
+from .rows import group_rows
 
 # Edge-density floor, relative to the mean over charts: a flat chart is
 # treated as if it had this much light change (without smooth light it
@@ -276,8 +277,8 @@ def chart_outlines(uvs, triangles, charts, shape, snap=0.0):
     high = np.where(forward[:, None], end, start)
     edge_chart = np.repeat(charts, 3)
     keys = np.column_stack([edge_chart.astype(np.float64), low, high])
-    _, inverse, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
-    outline = counts[inverse.ravel()] == 1
+    inverse, counts = group_rows(keys)
+    outline = counts[inverse] == 1
     count = int(charts.max()) + 1 if len(charts) else 0
     length = np.hypot(*(end - start).T)
     perimeter = np.bincount(edge_chart[outline], weights=length[outline], minlength=count)

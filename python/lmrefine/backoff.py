@@ -7,18 +7,29 @@ the whole refinement for one tight spot, the deformation is blended back
 towards the identity only around the charts that fail: every node keeps a
 fraction t of its displacement; t halves, round by round, in the
 neighbourhood of each failing chart (and of any grid cell the blend made
-invalid) until the layout passes. The original layout is the last resort.
+invalid) until the layout passes. A chart with flipped triangles backs off
+just enough to unflip them instead: scaling the fraction kept in its
+neighbourhood scales each of its corners' moves alike (the warp is linear
+in the nodes), so a triangle's area is a quadratic in the scale, whose root
+is found (if the chart fails in another way too, the next round halves
+it). The original layout is the last resort.
 """
 
 import numpy as np
 
 from . import _native
+from .allocation import signed_areas
 
 # Nodes this many texels around a failing chart's bounding box back off with it.
 _MARGIN = 3
 _ROUNDS = 10
 # Below this fraction a region goes all the way back to the original.
 _SNAP_TO_ZERO = 0.05
+# A flipped triangle's chart keeps this share of the fraction at which the
+# triangle turns degenerate: it stays clear of zero area, and of the rounding
+# between the float64 root and the float32 warp.
+_UNFLIP_SHARE = 0.9
+_ROOT_ITERATIONS = 40
 
 
 def failures(report, original, padding):
@@ -117,14 +128,56 @@ def _around(cells, margin):
 
 
 def _ramp(kept):
-    """Lower `kept` around its dips so it changes gradually (a step in the
-    fraction kept would shear the cells across it)."""
+    """Lower `kept` in place around its dips so it changes gradually (a step
+    in the fraction kept would shear the cells across it). Only the window
+    of the dips, grown by the ramp's reach, can change: elsewhere the mean
+    is 1."""
+    rows, cols = np.nonzero(np.any(kept < 1, axis=1)), np.nonzero(np.any(kept < 1, axis=0))
+    if not len(rows[0]):
+        return
+    i0, i1 = max(rows[0][0] - _MARGIN, 0), min(rows[0][-1] + _MARGIN + 1, kept.shape[0])
+    j0, j1 = max(cols[0][0] - _MARGIN, 0), min(cols[0][-1] + _MARGIN + 1, kept.shape[1])
+    # The window and its ring of neighbours; past the grid's edge, the edge repeated.
+    a0, a1, b0, b1 = max(i0 - 1, 0), min(i1 + 1, kept.shape[0]), max(j0 - 1, 0), min(j1 + 1, kept.shape[1])
+    edges = ((1 - (i0 - a0), 1 - (a1 - i1)), (1 - (j0 - b0), 1 - (b1 - j1)))
+    rows, cols = i1 - i0, j1 - j0
     for _ in range(_MARGIN):
-        padded = np.pad(kept, 1, mode="edge")
-        mean = sum(padded[1 + di:padded.shape[0] - 1 + di, 1 + dj:padded.shape[1] - 1 + dj]
+        padded = np.pad(kept[a0:a1, b0:b1], edges, mode="edge")
+        mean = sum(padded[1 + di:1 + di + rows, 1 + dj:1 + dj + cols]
                    for di in (-1, 0, 1) for dj in (-1, 0, 1)) / 9
-        kept = np.minimum(kept, mean.astype(np.float32))
-    return kept
+        np.minimum(kept[i0:i1, j0:j1], mean.astype(np.float32), out=kept[i0:i1, j0:j1])
+
+
+def unflip_factors(uvs, new_uvs, triangles, charts, count):
+    """(count,) per chart, the factor on the fraction of the deformation its
+    nodes keep that turns each of its flipped triangles back over with room
+    to spare (_UNFLIP_SHARE of the factor at which the triangle is degenerate),
+    or nan for a chart with no flipped triangle. new_uvs: the layout at the
+    current fractions; a factor on them scales every corner's move from
+    `uvs` by the same factor."""
+    factors = np.full(count, np.nan)
+    before, after = signed_areas(uvs, triangles), signed_areas(new_uvs, triangles)
+    flipped = np.flatnonzero((before != 0) & (np.sign(after) != np.sign(before)))
+    if not len(flipped):
+        return factors
+    start = uvs[triangles[flipped]].astype(np.float64)  # (F, 3, 2)
+    move = new_uvs[triangles[flipped]].astype(np.float64) - start
+    orientation = np.sign(before[flipped])
+
+    def keeps_orientation(t):
+        corners = start + t[:, None, None] * move
+        e, f = corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
+        return (e[:, 0] * f[:, 1] - e[:, 1] * f[:, 0]) * orientation > 0
+
+    # The area has the source's sign at 0 and the other at 1: bisect for the
+    # change (the quadratic has one root between them).
+    low, high = np.zeros(len(flipped)), np.ones(len(flipped))
+    for _ in range(_ROOT_ITERATIONS):
+        middle = 0.5 * (low + high)
+        kept = keeps_orientation(middle)
+        low, high = np.where(kept, middle, low), np.where(kept, high, middle)
+    np.fmin.at(factors, charts[flipped], _UNFLIP_SHARE * low)
+    return factors
 
 
 def accept(full, identity, uvs, triangles, shape, padding, original, checker=None):
@@ -163,16 +216,29 @@ def accept(full, identity, uvs, triangles, shape, padding, original, checker=Non
             limited_by += [f for f in failed if f not in limited_by]
             if boxes is None:
                 boxes = chart_boxes(uvs, triangles, shape, checker.charts)
-            region = np.zeros(kept.shape, bool)
-            for i0, j0, i1, j1 in boxes[check["failing_charts"]]:
-                region[i0:i1 + 1, j0:j1 + 1] = True
+            failing = check["failing_charts"]
+            factors = np.full(len(boxes), 0.5)
+            if "flipped" in failed:
+                unflip = unflip_factors(uvs, new_uvs, triangles, checker.charts, len(boxes))
+                factors = np.where(np.isnan(unflip), factors, unflip)
+            if len(failing):
+                # Each box from the fractions before this round (boxes overlap), the lowest kept.
+                lowered = []
+                for c in failing:
+                    i0, j0, i1, j1 = boxes[c]
+                    box = (slice(i0, i1 + 1), slice(j0, j1 + 1))
+                    lowered.append((box, np.where(kept[box] > _SNAP_TO_ZERO, np.float32(factors[c]) * kept[box],
+                                                  np.float32(0))))
+                for box, values in lowered:
+                    np.minimum(kept[box], values, out=kept[box])
+                _ramp(kept)
+                continue
+            region = np.ones(kept.shape, bool)  # a failure no chart owns: back off everywhere
         else:
             if "grid" not in limited_by:
                 limited_by.append("grid")
             region = _around(bad_cells, _MARGIN)
-        if not region.any():  # a failure no chart owns: back off everywhere
-            region[:] = True
         kept[region] = np.where(kept[region] > _SNAP_TO_ZERO, 0.5 * kept[region], 0.0)
-        kept = _ramp(kept)
+        _ramp(kept)
     kept[:] = 0.0
     return identity, uvs.copy(), original, kept, limited_by

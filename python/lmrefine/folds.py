@@ -22,6 +22,7 @@ import numpy as np
 
 from . import _native
 from .packer import CHART_TOLERANCE
+from .rows import group_rows
 
 # Texels on either side of a fold's UV segment whose light changes are the
 # fold's: the bake's step spreads over the texels that straddle the crease
@@ -88,8 +89,7 @@ def creases(positions, triangles, angle):
         norms = np.linalg.norm(face_normals, axis=1)
     usable = np.isfinite(norms) & (norms > 0)
     face_normals = face_normals / np.where(usable, norms, 1.0)[:, None]
-    _, vertex = np.unique(corners.reshape(-1, 3), axis=0, return_inverse=True)
-    vertex = vertex.reshape(count, 3)
+    vertex = group_rows(corners.reshape(-1, 3))[0].reshape(count, 3)
     ends = np.stack([vertex, np.roll(vertex, -1, axis=1)], axis=2).reshape(-1, 2)
     edges = np.sort(ends, axis=1)
     order = np.lexsort((edges[:, 1], edges[:, 0]))

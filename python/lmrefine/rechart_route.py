@@ -18,6 +18,7 @@ import numpy as np
 from . import _native, allocation, backoff
 from .charting import rechart
 from .packer import CHART_TOLERANCE
+from .rows import group_rows
 
 # A layout has no room when less than this fraction of its UV area lies in
 # triangles with a corner strictly inside their chart. Lightmap Pack layouts
@@ -79,11 +80,10 @@ def _chart_borders(uvs, triangles):
         return np.zeros(0, np.int32), np.zeros((0, 3), np.int64), np.zeros((0, 3), bool)
     charts = _native.find_charts(uvs, triangles, tolerance=CHART_TOLERANCE)
     snapped = np.round(np.asarray(uvs, np.float64)[triangles.ravel()] * _VERTEX_GRID).astype(np.int64)
-    _, vertex = np.unique(np.column_stack([np.repeat(charts, 3), snapped]), axis=0, return_inverse=True)
-    vertex = vertex.reshape(count, 3)
+    vertex = group_rows(np.column_stack([np.repeat(charts, 3), snapped]))[0].reshape(count, 3)
     edges = np.sort(np.stack([vertex, np.roll(vertex, -1, axis=1)], axis=2).reshape(-1, 2), axis=1)
-    _, edge_id, uses = np.unique(edges, axis=0, return_inverse=True, return_counts=True)
-    return charts, vertex, (uses[edge_id.ravel()] == 1).reshape(count, 3)
+    edge_id, uses = group_rows(edges)
+    return charts, vertex, (uses[edge_id] == 1).reshape(count, 3)
 
 
 def resample_lightmap(lightmap, source_uvs, source_triangles, uvs, triangles, mask):
