@@ -30,7 +30,7 @@ packed once more, judged by the same rules.
 import numpy as np
 
 from . import _native
-from .allocation import texel_luminance, triangle_energy
+from .allocation import signed_areas, texel_luminance, triangle_texels
 
 # A chart is never squeezed to fewer texels across than this (its extent
 # along the squeezed direction in the layout being stretched): bilinear
@@ -74,15 +74,19 @@ def chart_tensors(lightmap, mask, source_uvs, uvs, triangles, charts):
     its source triangle: a gradient g maps to A^-T g). Triangles without
     area in either layout add nothing."""
     count = int(charts.max()) + 1 if len(charts) else 0
-    gradient = luminance_gradient(lightmap, mask).astype(np.float64)
+    gradient = luminance_gradient(lightmap, mask)
     # Only directions and ratios matter: scaled to at most 1, huge light cannot overflow the squares.
     peak = float(np.abs(gradient).max(initial=0.0))
     if not (np.isfinite(peak) and peak > 0):
         return np.zeros((count, 2, 2))
-    gradient /= peak
-    gu, gv = gradient[..., 0], gradient[..., 1]
-    # Per triangle, in the source frame: sums over its texels (allocation's four points per triangle).
-    parts = [triangle_energy(source_uvs, triangles, field) for field in (gu * gu, gu * gv, gv * gv)]
+    # Per triangle, in the source frame: sums over its texels (allocation's
+    # four points per triangle, as triangle_energy), read at those points only.
+    height, width = gradient.shape[:2]
+    rows, cols = triangle_texels(source_uvs, triangles, (height, width))
+    texels = np.abs(signed_areas(source_uvs, triangles)) * height * width
+    sampled = gradient[rows, cols].astype(np.float64) / peak  # (T, 4, 2)
+    gu, gv = sampled[..., 0], sampled[..., 1]
+    parts = [(field.mean(axis=1) * texels) for field in (gu * gu, gu * gv, gv * gv)]
     tensor = np.stack([np.stack([parts[0], parts[1]], -1), np.stack([parts[1], parts[2]], -1)], -2)
     source = np.asarray(source_uvs, np.float64)[triangles]
     target = np.asarray(uvs, np.float64)[triangles]
