@@ -1,6 +1,8 @@
 """The atlas packer (docs/packer.md): every output passes check_layout with
 the padding, on layouts of every kind; the report describes the output."""
 
+import os
+
 import numpy as np
 import pytest
 
@@ -201,6 +203,24 @@ def test_the_result_does_not_depend_on_the_thread_count(monkeypatch):
         results.append(lmrefine.pack_charts(uvs, tris, None, None, 256, 2.0).uvs)
     for other in results[1:]:
         np.testing.assert_array_equal(other, results[0])
+
+
+def test_bitmaps_kept_between_calls_do_not_change_a_packing(tmp_path):
+    # The packer keeps its footprint bitmaps between calls: a packing after
+    # others (which left their charts' texels in them) equals the first
+    # packing of a fresh process.
+    import subprocess
+    import sys
+    fresh = tmp_path / "fresh.npy"
+    here = os.path.dirname(os.path.abspath(__file__))
+    code = ("import sys, numpy as np; sys.path.insert(0, sys.argv[2]); import lmrefine; from test_packer import kinds; "
+            "uvs, tris = kinds()['concave']; np.save(sys.argv[1], lmrefine.pack_charts(uvs, tris, None, None, 256, 2.0).uvs)")
+    subprocess.run([sys.executable, "-c", code, str(fresh), here], check=True,
+                   env=dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path)))
+    for kind in ("one_huge", "mixed_sizes", "lightmap_pack"):  # bitmaps full of other charts' texels
+        lmrefine.pack_charts(*kinds()[kind], None, None, 256, 2.0)
+    uvs, tris = kinds()["concave"]
+    np.testing.assert_array_equal(lmrefine.pack_charts(uvs, tris, None, None, 256, 2.0).uvs, np.load(fresh))
 
 
 def test_uniform_repack_of_smart_uv_layout_uses_more_of_the_atlas():

@@ -90,10 +90,10 @@ std::vector<glm::dvec2> local_pixels(const ChartPiece& piece, const std::vector<
 glm::dvec2 turn_local(const glm::dvec2& p, double width) { return {p.y, width - p.x}; }
 
 Footprint make_footprint(const ChartPiece& piece, const UvLayout& layout, const std::vector<glm::dvec2>& local,
-                         double padding) {
+                         double padding, std::vector<uint8_t>& bits) {
     const glm::ivec2 size = footprint_size(local);
     const int width = size.x, height = size.y;
-    std::vector<uint8_t> bits(size_t(width) * size_t(height), 0);
+    bits.assign(size_t(width) * size_t(height), 0);
     // A point grown by kInset: the up to four texels its square meets.
     auto set_point = [&](const glm::dvec2& p) {
         const int c0 = std::max(0, int(std::floor(p.x - kInset))), c1 = std::min(width - 1, int(std::floor(p.x + kInset)));
@@ -125,9 +125,7 @@ Footprint make_footprint(const ChartPiece& piece, const UvLayout& layout, const 
         }
     }
     for (const auto& p : local) set_point(p);
-    Footprint fp = footprint_of_bits(bits, width, height, padding);
-    fp.bits = std::move(bits);
-    return fp;
+    return footprint_of_bits(bits, width, height, padding);
 }
 
 glm::ivec2 footprint_size(const std::vector<glm::dvec2>& local) {
@@ -136,16 +134,15 @@ glm::ivec2 footprint_size(const std::vector<glm::dvec2>& local) {
     return {std::max(1, int(std::ceil(high.x + kInset))), std::max(1, int(std::ceil(high.y + kInset)))};
 }
 
-Footprint turned_footprint(const Footprint& fp, double padding) {
+Footprint turned_footprint(const Footprint& fp, const std::vector<uint8_t>& bits, double padding,
+                           std::vector<uint8_t>& turned) {
     const int width = fp.covered.width, height = fp.covered.height;
     // Texel (column c, row r) goes to (column r, row width - 1 - c).
-    std::vector<uint8_t> bits(size_t(width) * size_t(height), 0);
+    turned.assign(size_t(width) * size_t(height), 0);
     for (int r = 0; r < height; ++r) {
-        for (int c = 0; c < width; ++c) bits[size_t(width - 1 - c) * size_t(height) + size_t(r)] = fp.bits[size_t(r) * size_t(width) + size_t(c)];
+        for (int c = 0; c < width; ++c) turned[size_t(width - 1 - c) * size_t(height) + size_t(r)] = bits[size_t(r) * size_t(width) + size_t(c)];
     }
-    Footprint turned = footprint_of_bits(bits, height, width, padding);
-    turned.bits = std::move(bits);
-    return turned;
+    return footprint_of_bits(turned, height, width, padding);
 }
 
 Footprint footprint_of_bits(const std::vector<uint8_t>& bits, int width, int height, double padding) {

@@ -36,7 +36,6 @@ struct Footprint {
     int64_t texels = 0;  // covered texels
     std::vector<int32_t> longest;  // per covered row, its longest span
     int tightest = 0;              // the covered row with the longest span
-    std::vector<uint8_t> bits;     // covered texels, row-major (make_footprint and turned_footprint only)
 };
 
 // One chart as the packer sees it: its triangles and used UV indices.
@@ -55,14 +54,18 @@ std::vector<glm::dvec2> local_pixels(const ChartPiece& piece, const std::vector<
 glm::ivec2 footprint_size(const std::vector<glm::dvec2>& local);
 
 // The footprint of the chart at those local pixels; `padding` in texels.
+// `bits` is scratch the caller may reuse: it is left holding the covered
+// texels, row-major (1 = covered, 0 = not), as turned_footprint reads them.
 Footprint make_footprint(const ChartPiece& piece, const UvLayout& layout, const std::vector<glm::dvec2>& local,
-                         double padding);
+                         double padding, std::vector<uint8_t>& bits);
 
 // A quarter turn counter-clockwise (on the image, so in UV too), in texel
-// space: the footprint's texels turned, and a local point of a footprint
-// `width` columns wide moved with them. Exact on the texel lattice, so the
-// turned chart lies in the turned footprint as the chart in the footprint.
-Footprint turned_footprint(const Footprint& fp, double padding);
+// space: the footprint's texels (`bits`, as make_footprint left them)
+// turned, and a local point of a footprint `width` columns wide moved with
+// them. Exact on the texel lattice, so the turned chart lies in the turned
+// footprint as the chart in the footprint. `turned` is scratch.
+Footprint turned_footprint(const Footprint& fp, const std::vector<uint8_t>& bits, double padding,
+                           std::vector<uint8_t>& turned);
 glm::dvec2 turn_local(const glm::dvec2& p, double width);
 
 // The footprint of a bitmap ((height * width) bytes, 1 = covered, 0 = not).

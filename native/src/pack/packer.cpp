@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <mutex>
 #include <numeric>
 #include <string>
 
@@ -40,6 +41,44 @@ struct Trial {
     int64_t total_texels = 0;  // footprint cells of every chart (upright)
 };
 
+// Footprint bitmaps reused by the trials and by later calls: a fresh bitmap
+// per chart and trial cost more in page faults than its rasterization
+// (glibc gives a freed block back to the system and the next one is
+// faulted in anew), and so did a pool per call (docs/packer.md). Up to
+// kKeptBytes stay allocated between calls. The lock is only tried: a
+// thread that does not get it (or a child made by fork() while another
+// thread held it) allocates or frees as if there were no pool.
+class BitmapPool {
+public:
+    static constexpr size_t kKeptBytes = size_t(16) << 20;
+
+    std::vector<uint8_t> take() {
+        std::unique_lock<std::mutex> lock(mutex_, std::try_to_lock);
+        if (!lock.owns_lock() || free_.empty()) return {};
+        std::vector<uint8_t> bits = std::move(free_.back());
+        free_.pop_back();
+        kept_ -= bits.capacity();
+        return bits;
+    }
+    // Keeps `bits` for a later take() if the pool has room; else the caller frees it.
+    void give(std::vector<uint8_t>& bits) {
+        std::unique_lock<std::mutex> lock(mutex_, std::try_to_lock);
+        if (bits.capacity() == 0 || !lock.owns_lock() || kept_ + bits.capacity() > kKeptBytes) return;
+        kept_ += bits.capacity();
+        free_.push_back(std::move(bits));
+    }
+
+private:
+    std::mutex mutex_;
+    std::vector<std::vector<uint8_t>> free_;
+    size_t kept_ = 0;  // capacity held in free_
+};
+
+BitmapPool& footprint_bitmaps() {
+    static BitmapPool pool;
+    return pool;
+}
+
 struct Problem {
     const UvLayout& layout;
     const std::vector<ChartPiece>& pieces;
@@ -66,16 +105,19 @@ Trial run_trial(const Problem& problem, double global_scale, Progress* progress)
     const int turn_options = problem.options.rotate ? 2 : 1;
     std::vector<Footprint> footprints(count * size_t(turn_options));
     parallel_for(int64_t(count), 16, [&](int64_t begin, int64_t end) {
+        BitmapPool& pool = footprint_bitmaps();
+        std::vector<uint8_t> bits = pool.take(), turned = pool.take();
         for (int64_t c = begin; c < end; ++c) {
             const auto local = pack::local_pixels(problem.pieces[size_t(c)], problem.uvs, global_scale * problem.scales[size_t(c)],
                                                   problem.options.width, problem.options.height);
             Footprint& upright = footprints[size_t(c) * size_t(turn_options)];
-            upright = pack::make_footprint(problem.pieces[size_t(c)], problem.layout, local, problem.options.padding);
-            if (turn_options > 1) footprints[size_t(c) * 2 + 1] = pack::turned_footprint(upright, problem.options.padding);
-            for (int turns = 0; turns < turn_options; ++turns) {
-                std::vector<uint8_t>().swap(footprints[size_t(c) * size_t(turn_options) + size_t(turns)].bits);
+            upright = pack::make_footprint(problem.pieces[size_t(c)], problem.layout, local, problem.options.padding, bits);
+            if (turn_options > 1) {
+                footprints[size_t(c) * 2 + 1] = pack::turned_footprint(upright, bits, problem.options.padding, turned);
             }
         }
+        pool.give(bits);
+        pool.give(turned);
     });
     const std::vector<int32_t> order = placement_order(count, [&](int32_t c) {
         const Footprint& f = footprints[size_t(c) * size_t(turn_options)];
