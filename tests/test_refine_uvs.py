@@ -564,3 +564,54 @@ def test_the_windowed_ramp_matches_the_ramp_over_the_whole_grid():
         expected = _ramp_reference(kept)
         backoff._ramp(kept)  # in place
         np.testing.assert_array_equal(kept, expected, err_msg=f"case {case}")
+
+
+@pytest.mark.parametrize("seed", range(24))
+def test_the_back_off_of_random_strong_warps_passes_the_checks(seed):
+    # Random smooth bumps on thin triangles, each a chart in its own cell,
+    # and grid charts a few texels apart: the warp flips some triangles,
+    # squeezes some gutters, and blends of a grid that was not valid invert
+    # some cells.
+    # Whatever it backs off for, the layout accept() returns passes every
+    # check against the original, and the grid it returns gives those UVs.
+    from lmrefine import backoff
+    rng = np.random.default_rng(seed)
+    resolution = 64
+    charts = []
+    for k in range(6):  # thin triangles: a base of 6-14 texels, 0.5-2 texels high
+        centre = np.array([(k % 3 + 0.5) / 3, (k // 3 + 0.5) / 4])
+        base, height, angle = rng.uniform(6, 14) / resolution, rng.uniform(0.5, 2) / resolution, rng.uniform(0, np.pi)
+        along, up = np.array([np.cos(angle), np.sin(angle)]), np.array([-np.sin(angle), np.cos(angle)])
+        corners = np.array([centre - 0.5 * base * along, centre + 0.5 * base * along,
+                            centre + rng.uniform(-0.3, 0.3) * base * along + height * up], np.float32)
+        charts.append((corners, np.array([[0, 1, 2]], np.int32)))
+    for k in range(2):  # two grid charts 3 texels apart
+        lo = np.array([0.05 + 0.45 * k, 0.55])
+        charts.append(grid_chart(int(rng.integers(1, 4)), lo, lo + (0.45 - 3 / resolution, 0.4)))
+    uvs, tris = merge(*charts)
+    identity = lmrefine.identity_grid(resolution)
+    y, x = np.mgrid[0:resolution + 1, 0:resolution + 1].astype(np.float64)
+    full = identity.copy()
+    for _ in range(5):
+        cx, cy, sigma = rng.uniform(0, resolution), rng.uniform(0, resolution), rng.uniform(3, 8)
+        bump = np.exp(-((x - cx) ** 2 + (y - cy) ** 2) / (2 * sigma ** 2))
+        for axis in (0, 1):
+            full[..., axis] += (rng.normal(0, 1.0) * sigma * bump / resolution).astype(np.float32)
+    if seed % 2:  # as strong as a valid grid allows (the automaton's always is)
+        low, high = 0.0, 8.0
+        for _ in range(20):
+            middle = 0.5 * (low + high)
+            if backoff.invalid_cells(np.clip(identity + np.float32(middle) * (full - identity), 0, 1)).any():
+                high = middle
+            else:
+                low = middle
+        full = identity + np.float32(0.95 * low) * (full - identity)
+    full = np.clip(full, 0, 1)  # else: blends of it may invert cells, the back-off's "grid" case
+    original = lmrefine.check_layout(uvs, tris, resolution, 2)
+    assert original["valid"], original
+    grid, new_uvs, check, kept, limited_by = backoff.accept(full, identity, uvs, tris, (resolution, resolution),
+                                                            2, original)
+    assert backoff.failures(lmrefine.check_layout(new_uvs, tris, resolution, 2, reference_uvs=uvs,
+                                                  relative_gutter=True), original, 2) == []
+    np.testing.assert_array_equal(new_uvs, lmrefine.warp_uvs(uvs, grid))
+    assert ((0 <= kept) & (kept <= 1)).all()

@@ -132,11 +132,11 @@ def _ramp(kept):
     in the fraction kept would shear the cells across it). Only the window
     of the dips, grown by the ramp's reach, can change: elsewhere the mean
     is 1."""
-    rows, cols = np.nonzero(np.any(kept < 1, axis=1)), np.nonzero(np.any(kept < 1, axis=0))
-    if not len(rows[0]):
+    dip_rows, dip_cols = np.flatnonzero(np.any(kept < 1, axis=1)), np.flatnonzero(np.any(kept < 1, axis=0))
+    if not len(dip_rows):
         return
-    i0, i1 = max(rows[0][0] - _MARGIN, 0), min(rows[0][-1] + _MARGIN + 1, kept.shape[0])
-    j0, j1 = max(cols[0][0] - _MARGIN, 0), min(cols[0][-1] + _MARGIN + 1, kept.shape[1])
+    i0, i1 = max(dip_rows[0] - _MARGIN, 0), min(dip_rows[-1] + _MARGIN + 1, kept.shape[0])
+    j0, j1 = max(dip_cols[0] - _MARGIN, 0), min(dip_cols[-1] + _MARGIN + 1, kept.shape[1])
     # The window and its ring of neighbours; past the grid's edge, the edge repeated.
     a0, a1, b0, b1 = max(i0 - 1, 0), min(i1 + 1, kept.shape[0]), max(j0 - 1, 0), min(j1 + 1, kept.shape[1])
     edges = ((1 - (i0 - a0), 1 - (a1 - i1)), (1 - (j0 - b0), 1 - (b1 - j1)))
@@ -174,8 +174,8 @@ def unflip_factors(uvs, new_uvs, triangles, charts, count):
     low, high = np.zeros(len(flipped)), np.ones(len(flipped))
     for _ in range(_ROOT_ITERATIONS):
         middle = 0.5 * (low + high)
-        kept = keeps_orientation(middle)
-        low, high = np.where(kept, middle, low), np.where(kept, high, middle)
+        unflipped = keeps_orientation(middle)
+        low, high = np.where(unflipped, middle, low), np.where(unflipped, high, middle)
     np.fmin.at(factors, charts[flipped], _UNFLIP_SHARE * low)
     return factors
 

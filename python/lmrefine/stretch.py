@@ -86,7 +86,7 @@ def chart_tensors(lightmap, mask, source_uvs, uvs, triangles, charts):
     texels = np.abs(signed_areas(source_uvs, triangles)) * height * width
     sampled = gradient[rows, cols].astype(np.float64) / peak  # (T, 4, 2)
     gu, gv = sampled[..., 0], sampled[..., 1]
-    parts = [(field.mean(axis=1) * texels) for field in (gu * gu, gu * gv, gv * gv)]
+    parts = [field.mean(axis=1) * texels for field in (gu * gu, gu * gv, gv * gv)]
     tensor = np.stack([np.stack([parts[0], parts[1]], -1), np.stack([parts[1], parts[2]], -1)], -2)
     source = np.asarray(source_uvs, np.float64)[triangles]
     target = np.asarray(uvs, np.float64)[triangles]
