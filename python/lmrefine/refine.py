@@ -454,16 +454,13 @@ def _refine(lightmap, uvs, triangles, resolution, padding, mask, gradient, progr
                                                   lightmap=lightmap if gradient_given is None else None, mask=mask,
                                                   world_areas=world_areas, max_stretch=float(max_stretch))
         if packed is not None:
-            packed_check = _native.check_layout(packed, triangles, shape, padding)
+            packed_check = _native.check_layout(packed, triangles, shape, padding, failing_charts=True)
+            failing = set(packed_check.pop("failing_charts").tolist())
             worse = backoff.failures(packed_check, original, padding)
             if worse == ["overlapping"]:
                 # Overlaps are counted in texels, so a scaled chart that overlapped itself in the
                 # input may count a few more: acceptable when no other chart overlaps.
-                failing = set(_native.check_layout(packed, triangles, shape, padding,
-                                                   failing_charts=True)["failing_charts"].tolist())
-                before = set(_native.check_layout(uvs, triangles, shape, padding,
-                                                  failing_charts=True)["failing_charts"].tolist())
-                if failing <= before:
+                if failing <= set(checker.check(failing_charts=True)["failing_charts"].tolist()):
                     worse = []
             if worse:
                 repack_report["used"] = False
