@@ -553,11 +553,49 @@ def depot():
     return {"passes": ["direct"]}
 
 
+def stairs():
+    """Outdoor stairs (holdout: never used to tune constants; added in the
+    round of the unflip back-off and run once): twelve steps up between a
+    retaining wall and a balustrade of square balusters to a terrace; a low
+    sun from the balustrade's side rakes the balusters' comb of shadows
+    across the treads, the risers and the wall, and a lamp on the terrace
+    lights the top of the flight."""
+    steps, rise, going, width = 12, 0.17, 0.3, 2.4
+    top, length = steps * rise, steps * going
+    make_object("Ground", lambda bm: grid_faces(bm, (-2, -5, 0), (8, 0, 0), (0, 5, 0), cells(8), cells(5)),
+                (0.5, 0.52, 0.48), closed=False)
+
+    def flight(bm):
+        for i in range(steps):
+            # Riser (facing -y), then tread (facing up).
+            grid_faces(bm, (0, i * going, i * rise), (width, 0, 0), (0, 0, rise), cells(width), 1)
+            grid_faces(bm, (0, i * going, (i + 1) * rise), (width, 0, 0), (0, going, 0), cells(width), 1)
+    make_object("Flight", flight, (0.7, 0.68, 0.64), closed=False)
+    make_object("Wall", lambda bm: grid_faces(bm, (0, 0, 0), (0, length, 0), (0, 0, top + 1.0), cells(length),
+                                              cells(top + 1.0)), (0.76, 0.7, 0.62), closed=False)
+    make_object("Terrace", lambda bm: grid_faces(bm, (-1, length, top), (7, 0, 0), (0, 3, 0), cells(7), cells(3)),
+                (0.62, 0.6, 0.57), closed=False)
+    make_object("TerraceFront", lambda bm: grid_faces(bm, (width, length, 0), (6 - width, 0, 0), (0, 0, top),
+                                                      cells(6 - width), cells(top)), (0.72, 0.68, 0.6), closed=False)
+
+    def balusters(bm):
+        for k in range(24):
+            y = 0.08 + k * 0.15
+            base = (int(y // going) + 1) * rise
+            box_faces(bm, (width + 0.05, y, base + 0.4), (0.05, 0.05, 0.8), cell=9.0)
+    make_object("Balusters", balusters, (0.8, 0.8, 0.78), receiver=False)
+    add_light("Sun", "SUN", (0, 0, 10), (math.radians(60), 0.0, math.radians(70)), energy=5.0,
+              angle=math.radians(0.5))
+    add_light("Lamp", "POINT", (4.0, 5.0, top + 2.2), energy=120.0, shadow_soft_size=0.1, color=(1.0, 0.8, 0.55))
+    set_world((0.05, 0.06, 0.09))
+    return {"passes": ["direct"]}
+
+
 # Which scenes tune the refiner's constants and which only report is in
 # docs/evaluation.md ("Tuning scenes and holdout scenes").
 SCENES = {"courtyard": courtyard, "room": room, "fence_and_tree": fence_and_tree, "game_level": game_level,
           "atrium": atrium, "plaza": plaza, "alley": alley, "village": village, "cloister": cloister,
-          "depot": depot}
+          "depot": depot, "stairs": stairs}
 
 
 # --------------------------------------------------------------------------- UVs and export

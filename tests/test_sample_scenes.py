@@ -10,7 +10,7 @@ from lmrefine import sample_scenes
 
 ROOT = Path(__file__).resolve().parents[1]
 NAMES = ("courtyard", "room", "fence_and_tree", "game_level", "atrium", "plaza", "alley", "village", "cloister",
-         "depot")
+         "depot", "stairs")
 # Coarse on purpose (for the tessellation option): its triangles are metres long.
 COARSE = ("plaza",)
 FINE = tuple(name for name in NAMES if name not in COARSE)
@@ -123,6 +123,21 @@ def test_depot_has_props_resting_on_the_floor_and_on_each_other_over_valid_layou
         & (corners[:, 0, 2] > 0.5) & (normal_z < -0.99)
     assert on_floor.sum() >= 20 and stacked.sum() >= 8  # crate bottoms on the floor, on other crates
     _assert_valid_small_sample(scene, "depot")
+
+
+def test_stairs_have_a_comb_of_baluster_shadows_over_treads_and_risers_over_valid_layouts():
+    # The holdout added with the unflip back-off: twelve steps, each a riser (facing the
+    # viewer) and a tread (facing up); the balusters cast, are not lightmapped.
+    scene = sample_scenes.load_sample("stairs")
+    assert sorted(light["kind"] for light in scene.lights) == ["point", "sun"]
+    assert len(scene.occluder_triangles) == 24 * 12  # 24 balusters, 6 quads each
+    flight = scene.object_id == scene.objects.index("Flight")
+    normals = scene.normals.reshape(-1, 3, 3).mean(axis=1)[flight]
+    treads, risers = normals[:, 2] > 0.99, normals[:, 1] < -0.99
+    assert treads.sum() == risers.sum() > 0 and (treads | risers).all()
+    heights = np.unique(np.round(scene.positions[scene.triangles[flight]][..., 2], 4))
+    assert len(heights) == 13  # ground level and the twelve steps' tops
+    _assert_valid_small_sample(scene, "stairs")
 
 
 def test_receivers_are_tessellated_finely_enough_to_move_texels():
