@@ -232,3 +232,49 @@ def test_refine_uvs_checks_world_areas():
     result = lmrefine.refine_uvs(None, uvs, tris, 64, gradient=gradient, world_areas=world)
     np.testing.assert_array_equal(world, kept)
     assert lmrefine.check_layout(result.uvs, tris, 64, 2)["valid"]
+
+
+def _checkered_corner(resolution=64, across=4, gap=0.02):
+    """across x across square charts of 3 x 3 quads; a fine diagonal checker over the top-left
+    chart's texels (v up: the image's first rows), flat light elsewhere."""
+    w = 1.0 / across
+    uvs, tris = merge(*[grid_chart(3, (gap + w * a, gap + w * b), (w * (a + 1) - gap, w * (b + 1) - gap))
+                        for b in range(across) for a in range(across)])
+    i, j = np.mgrid[0:resolution, 0:resolution]
+    light = np.full((resolution, resolution), 0.6, np.float32)
+    cell = int(resolution * w)
+    light[:cell, :cell] = np.where(((i + j) // 2) % 2 == 0, 1.0, 0.2)[:cell, :cell]
+    return uvs, tris, np.repeat(light[..., None], 3, axis=2)
+
+
+def test_a_repack_too_loose_at_the_signal_scales_is_kept_at_their_square_roots():
+    """Sixteen charts, one with light changes: at the model's scales the fifteen flat charts shrink
+    and their gutters leave the atlas emptier than the density rule allows; half way to uniform
+    (the scales' square roots) it packs densely enough and is kept, not all of the gain dropped."""
+    uvs, tris, lightmap = _checkered_corner()
+    resolution, padding = 64, 2
+    result = lmrefine.refine_uvs(lightmap, uvs, tris, resolution, padding=padding, max_stretch=1.0)
+    repack = result.report["repack"]
+    refused = repack["softened"]["refused"]
+    assert repack["used"] and repack["softened"]["used"]
+    assert refused["predicted_error"] < allocation.REQUIRED_GAIN  # the model alone would take it
+    assert refused["padded_utilisation_after"] < allocation.MIN_UTILISATION_KEPT * refused["padded_utilisation_before"]
+    assert repack["padded_utilisation_after"] >= allocation.MIN_UTILISATION_KEPT * repack["padded_utilisation_before"]
+    assert refused["predicted_error"] < repack["predicted_error"] < allocation.REQUIRED_GAIN
+    # The scales used are the square roots of the model's, measured on the output: the checkered
+    # chart's texels over a flat chart's, relative to the input's.
+    charts = lmrefine.find_charts(uvs, tris, lmrefine.CHART_TOLERANCE)
+    full, _, _, _ = allocation.chart_scales(uvs, tris, charts, lmrefine.gradient_map(lightmap).sum(axis=2),
+                                            lightmap=lightmap)
+    np.testing.assert_allclose(repack["signal_scales"], np.sqrt(full))
+    area = lambda u: np.bincount(charts, weights=np.abs(allocation.signed_areas(u, tris)))  # noqa: E731
+    linear = np.sqrt(area(result.uvs) / area(uvs))
+    checkered = int(np.argmax(full))
+    flat = np.delete(np.arange(len(full)), checkered)
+    assert full[checkered] / np.median(full[flat]) > 1.5
+    assert linear[checkered] / np.median(linear[flat]) == pytest.approx(
+        np.sqrt(full[checkered] / np.median(full[flat])), rel=0.1)
+    assert lmrefine.check_layout(result.uvs, tris, resolution, padding)["valid"]
+    # Deterministic.
+    assert np.array_equal(lmrefine.refine_uvs(lightmap, uvs, tris, resolution, padding=padding,
+                                              max_stretch=1.0).uvs, result.uvs)

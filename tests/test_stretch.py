@@ -162,6 +162,41 @@ def test_a_stretch_that_packs_less_densely_than_the_input_is_not_kept():
     assert "pack less densely" in report["reason"]
 
 
+def test_a_stretch_too_loose_at_its_factor_is_kept_at_its_square_root():
+    """Four charts with more room around them: stretched by 2 the striped chart still leaves the
+    atlas emptier than the input; stretched by its square root (half the stretch in log scale) it
+    packs densely enough, and that is kept, with the report's factors the ones used."""
+    uvs, triangles = merge(*[grid_chart(6, (0.04 + 0.5 * a, 0.04 + 0.5 * b), (0.46 + 0.5 * a, 0.46 + 0.5 * b))
+                             for b in (0, 1) for a in (0, 1)])
+    half = RESOLUTION // 2
+    j = np.arange(half)
+    light = np.full((RESOLUTION, RESOLUTION), 0.6, np.float32)
+    light[:half, :half] = np.where((j // 4) % 2 == 0, 1.0, 0.2)
+    result = lmrefine.refine_uvs(np.repeat(light[..., None], 3, axis=2), uvs, triangles, RESOLUTION, padding=2)
+    report = result.report["repack"]["stretch"]
+    full, root = report["candidates"]  # the stripes run along an axis: no sheared chart to turn
+    assert full["largest_stretch"] == pytest.approx(2.0) and not full["dense"]
+    assert root["largest_stretch"] == pytest.approx(np.sqrt(2.0)) and root["dense"]
+    assert report["used"] and report["largest_stretch"] == pytest.approx(np.sqrt(2.0))
+    assert report["predicted_error"] == root["predicted_error"] < report["predicted_error_unstretched"]
+    assert lmrefine.check_layout(result.uvs, triangles, RESOLUTION, padding=2)["valid"]
+    # Measured on the output: the striped chart's texels across its stripes over along them, 2 for a
+    # stretch of sqrt(2) whatever turn the packer gave it, 1 for the flat charts (medians: the
+    # automaton moves the triangles inside the charts too).
+    charts = lmrefine.find_charts(uvs, triangles, lmrefine.CHART_TOLERANCE)
+    world = np.concatenate([uvs, np.zeros((len(uvs), 1), np.float32)], axis=1)[triangles]
+    point_triangle = np.arange(len(triangles))
+    gains = []
+    for direction in ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0)):
+        d = np.tile(direction, (len(triangles), 1))
+        gains.append(metrics.texels_across(world, result.uvs[triangles], point_triangle, d, RESOLUTION)
+                     / metrics.texels_across(world, uvs[triangles], point_triangle, d, RESOLUTION))
+    ratio = gains[0] / gains[1]
+    striped = charts == int(np.argmax(report["chart_stretch"]))
+    assert np.median(ratio[striped]) == pytest.approx(2.0, rel=0.03)
+    assert np.median(ratio[~striped]) == pytest.approx(1.0, rel=0.03)
+
+
 def test_texels_across_reads_the_layouts_map_along_a_surface_direction():
     # One triangle in the world's xy plane, mapped to UV at 2 UV units per metre along x, 1 along y.
     world = np.array([[(0, 0, 0), (1, 0, 0), (0, 1, 0)]], np.float64)

@@ -326,6 +326,27 @@ def repack(source_uvs, refined_uvs, triangles, energy, resolution, padding, min_
     if max_stretch > 1.0 and lightmap is not None:
         stretched = _stretch_candidate(source_uvs, refined_uvs, triangles, charts, lightmap, mask, resolution,
                                        max_stretch)
+    packed, report = _packing_at(scales, refined_uvs, triangles, charts, edge, smooth, stretched, resolution,
+                                 padding, progress)
+    if not report["used"] and report.get("predicted_error", 1.0) < REQUIRED_GAIN:
+        # Refused for its density alone: the signal's spread of chart sizes
+        # costs more gutter than the input's. The scales half way to uniform
+        # (in log scale) cost less, so the choice is not all or nothing.
+        soft_packed, soft = _packing_at(np.sqrt(scales), refined_uvs, triangles, charts, edge, smooth, stretched,
+                                        resolution, padding, None if progress is None else
+                                        lambda fraction, stage: progress(1.0, stage))
+        soft["softened"] = {"used": soft["used"], "refused": {
+            key: report[key] for key in ("predicted_error", "padded_utilisation_before", "padded_utilisation_after")
+            if key in report}}
+        if soft["used"]:
+            return soft_packed, soft
+        report["softened"] = soft["softened"]
+    return (packed if report["used"] else None), report
+
+
+def _packing_at(scales, refined_uvs, triangles, charts, edge, smooth, stretched, resolution, padding, progress):
+    """repack's packing of `refined_uvs`'s charts at relative `scales` (and of
+    the `stretched` candidate, when given) and its judgement: (packed uvs, report)."""
     try:
         (packed, pack_report), stretched_pack = _pack_both(
             refined_uvs, None if stretched is None else stretched["uvs"],
@@ -343,18 +364,25 @@ def repack(source_uvs, refined_uvs, triangles, energy, resolution, padding, min_
     stretch_report = None
     if stretched is not None:
         def packings():
-            """(charts turned, packing) of each stretched candidate, made only when asked for: the
-            stretched charts as they are (packed beside the unstretched ones), then, when that is
-            refused, the sheared ones among them turned to their smallest boxes."""
+            """(charts turned, stretch factors, edge-term factors, packing) of each stretched
+            candidate, made only when asked for: the stretched charts as they are (packed beside
+            the unstretched ones); when that is refused, the sheared ones among them turned to
+            their smallest boxes; then each chart stretched by the square root of its factor
+            (a stretch costs packing density: half of it costs less)."""
             from . import stretch
 
-            yield np.zeros(len(scales), bool), stretched_pack
-            turned_uvs, turned = stretch.turn_to_smallest_boxes(stretched["uvs"], triangles, charts,
-                                                                stretched["factor"] > 1.0)
+            def pack(uvs):
+                return _pack_or_none(uvs, triangles, charts, scales, resolution, padding,
+                                     lambda fraction, stage: True if progress is None else progress(1.0, stage))
+
+            factor = stretched["factor"]
+            yield np.zeros(len(scales), bool), factor, stretched["edge_factor"], stretched_pack
+            turned_uvs, turned = stretch.turn_to_smallest_boxes(stretched["uvs"], triangles, charts, factor > 1.0)
             if turned.any():
-                yield turned, _pack_or_none(turned_uvs, triangles, charts, scales, resolution, padding,
-                                            lambda fraction, stage: True if progress is None else
-                                            progress(1.0, stage))
+                yield turned, factor, stretched["edge_factor"], pack(turned_uvs)
+            half = np.sqrt(factor)
+            yield (np.zeros(len(scales), bool), half, stretch.edge_factor(half, stretched["share"]),
+                   pack(stretch.stretch_charts(refined_uvs, triangles, charts, half, stretched["direction"])))
 
         stretch_report, kept = _judge_stretch(stretched, packings(), triangles, charts, resolution, padding,
                                               final, predicted, padded_before)
@@ -385,7 +413,7 @@ def repack(source_uvs, refined_uvs, triangles, energy, resolution, padding, min_
     # and shrunk charts need the same gutters (docs/refiner.md).
     report["used"] = bool(predicted < REQUIRED_GAIN and report["padded_utilisation_after"]
                           >= MIN_UTILISATION_KEPT * report["padded_utilisation_before"])
-    return (packed if report["used"] else None), report
+    return packed, report
 
 
 def _stretch_candidate(source_uvs, refined_uvs, triangles, charts, lightmap, mask, resolution, max_stretch):
@@ -402,7 +430,8 @@ def _stretch_candidate(source_uvs, refined_uvs, triangles, charts, lightmap, mas
     if not (factor > 1.0).any():
         return None
     return {"uvs": stretch.stretch_charts(refined_uvs, triangles, charts, factor, direction), "factor": factor,
-            "edge_factor": stretch.edge_factor(factor, share), "weight": weight,
+            "edge_factor": stretch.edge_factor(factor, share), "weight": weight, "direction": direction,
+            "share": share,
             "report": {"charts_stretched": int((factor > 1.0).sum()), "chart_stretch": factor,
                        "largest_stretch": float(factor.max())}}
 
@@ -420,8 +449,9 @@ def _judge_stretch(stretched, packings, triangles, charts, resolution, padding, 
     weight = stretched["weight"]
     before = (weight / np.maximum(np.asarray(final, np.float64), 1e-12)).sum()
     judged, kept = [], None
-    for turned, packing in packings:
-        entry = {"charts_turned": int(turned.sum()), "fits": packing is not None}
+    for turned, factor, edge_factor, packing in packings:
+        entry = {"charts_turned": int(turned.sum()), "largest_stretch": float(factor.max()),
+                 "fits": packing is not None}
         judged.append(entry)
         if packing is None:
             continue
@@ -433,11 +463,12 @@ def _judge_stretch(stretched, packings, triangles, charts, resolution, padding, 
         entry["dense"] = bool(entry["padded_utilisation"] >= MIN_UTILISATION_KEPT * padded_before)
         # The stretch's edge error over the unstretched packing's, each chart weighted by its light
         # changes as the structure tensor measures them.
-        after = (weight * stretched["edge_factor"] / np.maximum(scales, 1e-12)).sum()
+        after = (weight * edge_factor / np.maximum(scales, 1e-12)).sum()
         entry["predicted_error"] = predicted * (float(after / before) if before > 0 else 1.0)
         if entry["dense"] and entry["predicted_error"] < predicted:
             kept = (uvs, pack_report, scales, area, perimeter, entry["predicted_error"])
-            report.update(used=True, charts_turned=entry["charts_turned"])
+            report.update(used=True, charts_turned=entry["charts_turned"], chart_stretch=factor,
+                          largest_stretch=entry["largest_stretch"])
             break
     report["candidates"] = judged
     report["predicted_error"] = min((e["predicted_error"] for e in judged if "predicted_error" in e), default=None)
