@@ -306,9 +306,12 @@ def repack(source_uvs, refined_uvs, triangles, energy, resolution, padding, min_
     each chart across its light changes (lmrefine.stretch) and is kept when
     the model predicts less error for it and it packs about as densely as
     the input; when it does not, a third turns the sheared stretched charts
-    to their smallest boxes. Returns (uvs, report); uvs is None
-    when the packed layout is not better than `refined_uvs` by the error
-    model (the report says so)."""
+    to their smallest boxes, and a fourth stretches each chart by the square
+    root of its factor. A packing the model takes but the density rule
+    refuses is packed again at the square roots of the scales (and judged
+    the same way). Returns (uvs, report); uvs is None when the packed layout
+    is not better than `refined_uvs` by the error model (the report says
+    so)."""
     charts = find_charts(source_uvs, triangles, tolerance=CHART_TOLERANCE)
     scales, edge, smooth, _ = chart_scales(source_uvs, triangles, charts, energy, min_scale, max_scale,
                                            lightmap, mask, world_areas=world_areas)
