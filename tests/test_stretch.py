@@ -147,15 +147,22 @@ def test_refine_uvs_stretches_striped_charts_across_their_stripes():
             lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, max_stretch=bad)
 
 
-def test_a_stretch_that_packs_less_densely_than_the_input_is_not_kept():
-    """Two charts: stretching the striped one would leave the atlas emptier than the input."""
-    uvs, triangles = merge(*[grid_chart(6, (0.03 + 0.5 * a, 0.03 + 0.5 * b), (0.47 + 0.5 * a, 0.47 + 0.5 * b))
+def _four_charts_one_striped(gap):
+    """2 x 2 square charts, `gap` UV inside each quarter of the atlas; hard stripes along u over the
+    top-left one, flat light elsewhere. Returns (uvs, triangles, lightmap)."""
+    uvs, triangles = merge(*[grid_chart(6, (gap + 0.5 * a, gap + 0.5 * b), (0.5 - gap + 0.5 * a, 0.5 - gap + 0.5 * b))
                              for b in (0, 1) for a in (0, 1)])
     half = RESOLUTION // 2
     j = np.arange(half)
     light = np.full((RESOLUTION, RESOLUTION), 0.6, np.float32)
     light[:half, :half] = np.where((j // 4) % 2 == 0, 1.0, 0.2)
-    result = lmrefine.refine_uvs(np.repeat(light[..., None], 3, axis=2), uvs, triangles, RESOLUTION, padding=2)
+    return uvs, triangles, np.repeat(light[..., None], 3, axis=2)
+
+
+def test_a_stretch_that_packs_less_densely_than_the_input_is_not_kept():
+    """Four charts: stretching the striped one would leave the atlas emptier than the input."""
+    uvs, triangles, lightmap = _four_charts_one_striped(gap=0.03)
+    result = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2)
     report = result.report["repack"]["stretch"]
     assert result.report["repack"]["used"] and not report["used"]
     assert report["predicted_error"] < report["predicted_error_unstretched"]  # the model alone would take it
@@ -166,13 +173,8 @@ def test_a_stretch_too_loose_at_its_factor_is_kept_at_its_square_root():
     """Four charts with more room around them: stretched by 2 the striped chart still leaves the
     atlas emptier than the input; stretched by its square root (half the stretch in log scale) it
     packs densely enough, and that is kept, with the report's factors the ones used."""
-    uvs, triangles = merge(*[grid_chart(6, (0.04 + 0.5 * a, 0.04 + 0.5 * b), (0.46 + 0.5 * a, 0.46 + 0.5 * b))
-                             for b in (0, 1) for a in (0, 1)])
-    half = RESOLUTION // 2
-    j = np.arange(half)
-    light = np.full((RESOLUTION, RESOLUTION), 0.6, np.float32)
-    light[:half, :half] = np.where((j // 4) % 2 == 0, 1.0, 0.2)
-    result = lmrefine.refine_uvs(np.repeat(light[..., None], 3, axis=2), uvs, triangles, RESOLUTION, padding=2)
+    uvs, triangles, lightmap = _four_charts_one_striped(gap=0.04)
+    result = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2)
     report = result.report["repack"]["stretch"]
     full, root = report["candidates"]  # the stripes run along an axis: no sheared chart to turn
     assert full["largest_stretch"] == pytest.approx(2.0) and not full["dense"]
