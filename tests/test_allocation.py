@@ -275,6 +275,8 @@ def test_a_repack_too_loose_at_the_signal_scales_is_kept_at_their_square_roots()
     assert linear[checkered] / np.median(linear[flat]) == pytest.approx(
         np.sqrt(full[checkered] / np.median(full[flat])), rel=0.1)
     assert lmrefine.check_layout(result.uvs, tris, resolution, padding)["valid"]
+    assert any(note.startswith("charts scaled by the square roots") and
+               f"{refused['padded_utilisation_after']:.0%} full" in note for note in result.report["notes"])
     # Deterministic.
     assert np.array_equal(lmrefine.refine_uvs(lightmap, uvs, tris, resolution, padding=padding,
                                               max_stretch=1.0).uvs, result.uvs)

@@ -349,6 +349,30 @@ def per_effect_summary(summary):
     return lines
 
 
+def repack_lines(repack):
+    """The report's lines on how the chart repack was packed: the scales
+    softened to their square roots, the chart stretch and its candidate."""
+    lines = []
+    softened = (repack or {}).get("softened")
+    if softened and softened["used"]:
+        refused = softened["refused"]
+        lines.append(f"- Chart scales: at the model's scales the atlas packed too loosely ("
+                     f"{refused['padded_utilisation_after']:.0%} full with its gutters, the input "
+                     f"{refused['padded_utilisation_before']:.0%}); their square roots were packed and kept.")
+    stretched = (repack or {}).get("stretch")
+    if stretched:
+        first = (stretched.get("candidates") or [{}])[0].get("largest_stretch", stretched["largest_stretch"])
+        half = stretched["used"] and stretched["largest_stretch"] < first * (1 - 1e-9)
+        lines.append(f"- Chart stretch: {stretched['charts_stretched']} chart(s) stretched across their light "
+                     f"changes, up to {stretched['largest_stretch']:.2f}x; " + (
+                         "kept" if stretched["used"] else f"not kept ({stretched.get('reason', '')})") + (
+                         f", {stretched['charts_turned']} of them turned to their smallest boxes"
+                         if stretched.get("charts_turned") else "") + (
+                         f" (each at the square root of its factor: stretched fully, up to {first:.2f}x, the "
+                         f"atlas packed too loosely)" if half else "") + ".")
+    return lines
+
+
 def scene_markdown(result):
     r = result
     lines = [
@@ -383,13 +407,7 @@ def scene_markdown(result):
         f"{', '.join(r['refine'].get('limited_by') or []) or 'nothing'}.",
         "",
     ]
-    stretched = (r["refine"].get("repack") or {}).get("stretch")
-    if stretched:
-        lines[-1:-1] = [f"- Chart stretch: {stretched['charts_stretched']} chart(s) stretched across their light "
-                        f"changes, up to {stretched['largest_stretch']:.2f}x; " + (
-                            "kept" if stretched["used"] else f"not kept ({stretched.get('reason', '')})") + (
-                            f", {stretched['charts_turned']} of them turned to their smallest boxes"
-                            if stretched.get("charts_turned") else "") + "."]
+    lines[-1:-1] = repack_lines(r["refine"].get("repack"))
     if r.get("uniform_repack"):
         u = r["uniform_repack"]
         gain = f"{u['signal_gain']:.2f}x" if u.get("signal_gain") else "n/a"

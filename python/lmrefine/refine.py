@@ -467,6 +467,12 @@ def _refine(lightmap, uvs, triangles, resolution, padding, mask, gradient, progr
                 notes.append(f"repack not used: the packed layout failed {', '.join(worse)}")
             else:
                 new_uvs, check = packed, packed_check
+                softened = repack_report.get("softened")
+                if softened:
+                    refused = softened["refused"]
+                    notes.append(f"charts scaled by the square roots of the model's scales: at its scales the "
+                                 f"atlas would be {refused['padded_utilisation_after']:.0%} full with its gutters "
+                                 f"(the input: {refused['padded_utilisation_before']:.0%})")
         elif "reason" in repack_report:
             notes.append(f"repack not used: {repack_report['reason']}")
         else:
