@@ -280,3 +280,47 @@ def test_a_repack_too_loose_at_the_signal_scales_is_kept_at_their_square_roots()
     # Deterministic.
     assert np.array_equal(lmrefine.refine_uvs(lightmap, uvs, tris, resolution, padding=padding,
                                               max_stretch=1.0).uvs, result.uvs)
+
+
+# Seeds 0-21 keep each candidate at least once: the softened scales (0, 6, 11), the turned stretch
+# (18, 21), the half stretch (20).
+@pytest.mark.parametrize("seed", range(22))
+def test_random_atlases_keep_the_rules_whichever_candidate_is_kept(seed):
+    """Square charts with random gaps and random striped or checkered patches: whichever packing is
+    kept (the model's scales or their square roots; the stretch full, turned or at its square
+    root), the layout is valid, the kept packing passes the density rule and the report names the
+    factors and scales used."""
+    rng = np.random.default_rng(seed)
+    resolution, padding = int(rng.choice([64, 96, 128])), 2.0
+    across = int(rng.integers(2, 5))
+    uvs, tris, _ = _checkered_corner(resolution, across, gap=float(rng.uniform(0.01, 0.05)))
+    i, j = np.mgrid[0:resolution, 0:resolution]
+    light = np.full((resolution, resolution), 0.6, np.float32)
+    for _ in range(int(rng.integers(1, 4))):
+        r0, c0 = rng.integers(0, resolution // 2, size=2)
+        size = int(rng.integers(resolution // 8, resolution // 2))
+        period = int(rng.integers(2, 6))
+        pattern = (j // period) % 2 if rng.random() < 0.5 else ((i + j) // period) % 2
+        patch = (slice(r0, r0 + size), slice(c0, c0 + size))
+        light[patch] = np.where(pattern[patch] == 0, 1.0, 0.2)
+    lightmap = np.repeat(light[..., None], 3, axis=2)
+    result = lmrefine.refine_uvs(lightmap, uvs, tris, resolution, padding=padding)
+    # Valid at the padding, or at the input's gutter where that is narrower (a gap of 0.01 at 96^2).
+    gutter = min(padding, lmrefine.check_layout(uvs, tris, resolution, padding)["min_gutter_texels"])
+    assert lmrefine.check_layout(result.uvs, tris, resolution, gutter - 1e-4)["valid"]
+    repack = result.report["repack"]
+    if not repack["used"]:
+        return
+    assert repack["padded_utilisation_after"] >= allocation.MIN_UTILISATION_KEPT * repack["padded_utilisation_before"]
+    assert repack["predicted_error"] < allocation.REQUIRED_GAIN
+    if repack.get("softened"):
+        refused = repack["softened"]["refused"]
+        assert refused["padded_utilisation_after"] < \
+            allocation.MIN_UTILISATION_KEPT * refused["padded_utilisation_before"]
+    stretch = repack["stretch"]
+    if stretch and stretch["used"]:
+        first = stretch["candidates"][0]["largest_stretch"]
+        kept = [c for c in stretch["candidates"] if c.get("dense") and c["predicted_error"] < stretch[
+            "predicted_error_unstretched"]][0]
+        assert stretch["largest_stretch"] == kept["largest_stretch"] == pytest.approx(stretch["chart_stretch"].max())
+        assert kept["largest_stretch"] in (pytest.approx(first), pytest.approx(np.sqrt(first)))
