@@ -282,6 +282,21 @@ def test_a_repack_too_loose_at_the_signal_scales_is_kept_at_their_square_roots()
                                               max_stretch=1.0).uvs, result.uvs)
 
 
+
+def test_cancelling_during_the_softened_repack_cancels_the_refinement():
+    """The second packing honours the caller's progress: asked to stop there, refine_uvs stops."""
+    uvs, tris, lightmap = _checkered_corner()
+    packs = []
+
+    def progress(fraction, stage):
+        if stage == "pack":
+            packs.append(fraction)
+        return len(packs) < 3  # the first packing reports twice; the third report is the softened one's
+
+    with pytest.raises(lmrefine.CancelledError):
+        lmrefine.refine_uvs(lightmap, uvs, tris, 64, padding=2, max_stretch=1.0, progress=progress)
+    assert len(packs) == 3
+
 # Seeds 0-21 keep each candidate at least once: the softened scales (0, 6, 11), the turned stretch
 # (18, 21), the half stretch (20).
 @pytest.mark.parametrize("seed", range(22))
