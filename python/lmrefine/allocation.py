@@ -80,12 +80,19 @@ def signed_areas(uvs, triangles):
     return 0.5 * ((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
 
 
+def triangle_samples(uvs, triangles, field):
+    """A texel field (H, W[, ...]) read at each triangle's four points
+    (triangle_texels): (T, 4[, ...]), and each triangle's area in texels (T,)."""
+    rows, cols = triangle_texels(uvs, triangles, field.shape[:2])
+    texels = np.abs(signed_areas(uvs, triangles)) * field.shape[0] * field.shape[1]
+    return field[rows, cols], texels
+
+
 def triangle_energy(uvs, triangles, energy):
     """Gradient energy each triangle covers: the mean energy at its four
     points (triangle_texels) times its area in texels."""
-    rows, cols = triangle_texels(uvs, triangles, energy.shape)
-    texels = np.abs(signed_areas(uvs, triangles)) * energy.shape[0] * energy.shape[1]
-    return energy[rows, cols].astype(np.float64).mean(axis=1) * texels
+    samples, texels = triangle_samples(uvs, triangles, energy)
+    return samples.astype(np.float64).mean(axis=1) * texels
 
 
 def _window(values, mask, reduce, fill):
@@ -336,15 +343,20 @@ def repack(source_uvs, refined_uvs, triangles, energy, resolution, padding, min_
         # costs more gutter than the input's. The scales half way to uniform
         # (in log scale) cost less, so the choice is not all or nothing.
         soft_packed, soft = _packing_at(np.sqrt(scales), refined_uvs, triangles, charts, edge, smooth, stretched,
-                                        resolution, padding, None if progress is None else
-                                        lambda fraction, stage: progress(1.0, stage))
-        soft["softened"] = {"used": soft["used"], "refused": {
-            key: report[key] for key in ("predicted_error", "padded_utilisation_before", "padded_utilisation_after")
-            if key in report}}
+                                        resolution, padding, _reports_done(progress))
+        softened = {"used": soft["used"], "refused": {
+            key: report[key] for key in ("predicted_error", "padded_utilisation_before", "padded_utilisation_after")}}
         if soft["used"]:
-            return soft_packed, soft
-        report["softened"] = soft["softened"]
+            return soft_packed, {**soft, "softened": softened}
+        report["softened"] = softened
     return (packed if report["used"] else None), report
+
+
+def _reports_done(progress):
+    """The progress callback of a packing after the first: it reports its
+    stage as done (the caller's bar does not run back) and passes the
+    caller's cancel on."""
+    return None if progress is None else (lambda fraction, stage: progress(1.0, stage))
 
 
 def _packing_at(scales, refined_uvs, triangles, charts, edge, smooth, stretched, resolution, padding, progress):
@@ -375,8 +387,7 @@ def _packing_at(scales, refined_uvs, triangles, charts, edge, smooth, stretched,
             from . import stretch
 
             def pack(uvs):
-                return _pack_or_none(uvs, triangles, charts, scales, resolution, padding,
-                                     lambda fraction, stage: True if progress is None else progress(1.0, stage))
+                return _pack_or_none(uvs, triangles, charts, scales, resolution, padding, _reports_done(progress))
 
             factor = stretched["factor"]
             yield np.zeros(len(scales), bool), factor, stretched["edge_factor"], stretched_pack

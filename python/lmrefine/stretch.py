@@ -30,7 +30,7 @@ packed once more, judged by the same rules.
 import numpy as np
 
 from . import _native
-from .allocation import signed_areas, texel_luminance, triangle_texels
+from .allocation import texel_luminance, triangle_samples
 
 # A chart is never squeezed to fewer texels across than this (its extent
 # along the squeezed direction in the layout being stretched): bilinear
@@ -81,10 +81,8 @@ def chart_tensors(lightmap, mask, source_uvs, uvs, triangles, charts):
         return np.zeros((count, 2, 2))
     # Per triangle, in the source frame: sums over its texels (allocation's
     # four points per triangle, as triangle_energy), read at those points only.
-    height, width = gradient.shape[:2]
-    rows, cols = triangle_texels(source_uvs, triangles, (height, width))
-    texels = np.abs(signed_areas(source_uvs, triangles)) * height * width
-    sampled = gradient[rows, cols].astype(np.float64) / peak  # (T, 4, 2)
+    samples, texels = triangle_samples(source_uvs, triangles, gradient)
+    sampled = samples.astype(np.float64) / peak  # (T, 4, 2)
     gu, gv = sampled[..., 0], sampled[..., 1]
     parts = [field.mean(axis=1) * texels for field in (gu * gu, gu * gv, gv * gv)]
     tensor = np.stack([np.stack([parts[0], parts[1]], -1), np.stack([parts[1], parts[2]], -1)], -2)
