@@ -1174,6 +1174,20 @@ def test_addon_says_tessellate_when_large_triangles_hold_the_light_changes(facts
     assert len(hint) == 1 and hint[0].startswith("'Floor': light changes cross ")
     assert off["widening"] < 1.25
     assert not any("turn on Tessellate" in w for w in on["warnings"])
+    # A floor of 9 vertices: the default budget adds 2, and the hint says the budget must be larger.
+    assert off["vertices_before"] == 9
+    assert "with a Vertex Budget well above 0.25 (at 0.25 it adds at most 2 to its 9 vertices)" in hint[0]
+    # With Tessellate on at the default budget, the run says the budget ran out with triangles left to split.
+    spent = [w for w in on["warnings"] if "Tessellate spent its Vertex Budget" in w]
+    assert on["tessellation"]["vertices_added"] == 2 and on["tessellation"]["candidates_left"] > 0
+    assert len(spent) == 1 and spent[0].startswith("'Floor': Tessellate spent its Vertex Budget (0.25 of its 9 "
+                                                   "vertices: 2 added) with ")
+    # A budget large for 9 vertices: the split ends by itself, no warning, and the edges gain far more.
+    large = value["tessellate_True_budget_64"]
+    assert large["error"] is None and large["tessellation"]["candidates_left"] == 0
+    assert 2 < large["tessellation"]["vertices_added"] <= 64 * 9
+    assert not any("Tessellate spent" in w or "turn on Tessellate" in w for w in large["warnings"])
+    assert large["widening"] > on["widening"] + 0.2, (large["widening"], on["widening"])
     # Strength 0 moves nothing whatever the triangles: the run says so, and does not send the user to Tessellate.
     still = value["tessellate_False_strength_0"]
     assert still["error"] is None and any("nothing moved: strength is 0" in w for w in still["warnings"])

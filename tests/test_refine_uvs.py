@@ -517,6 +517,70 @@ def test_a_flipped_triangle_backs_off_just_enough_to_unflip():
     np.testing.assert_array_equal(new_uvs, lmrefine.warp_uvs(uvs, grid))
 
 
+def test_a_flip_backs_off_around_its_triangle_not_its_whole_chart():
+    # The thin triangle of the test above, now the top of a chart whose rectangle
+    # reaches far below it: only the nodes around the flipped triangle back off
+    # (to the unflip factor), and the fraction kept climbs back to 1 within the
+    # chart's box, where a chart-level back-off would have lowered it all.
+    from lmrefine import backoff
+    resolution = 64
+    uvs = np.array([[0.1, 0.5], [0.9, 0.5], [0.5, 0.52], [0.1, 0.1], [0.9, 0.1]], np.float32)
+    tris = np.array([[0, 1, 2], [0, 3, 4], [0, 4, 1]], np.int32)
+    assert len(np.unique(lmrefine.find_charts(uvs, tris))) == 1
+    identity = lmrefine.identity_grid(resolution)
+    y, x = np.mgrid[0:resolution + 1, 0:resolution + 1].astype(np.float64)
+    dip = 3.0 * np.exp(-((x - 32) ** 2 + (y - 0.48 * resolution) ** 2) / (2 * 6.0 ** 2))
+    full = identity.copy()
+    full[..., 1] -= (dip / resolution).astype(np.float32)
+    original = lmrefine.check_layout(uvs, tris, resolution, 2)
+    grid, new_uvs, check, kept, limited_by = backoff.accept(full, identity, uvs, tris, (resolution, resolution),
+                                                            2, original)
+    assert check["valid"] and check["flipped"] == 0 and limited_by == ["flipped", "overlapping"]
+    moved = lmrefine.warp_uvs(uvs, full)[2, 1] - uvs[2, 1]
+    degenerate_at = (0.5 - uvs[2, 1]) / moved
+    assert kept[32, 32] == pytest.approx(backoff._UNFLIP_SHARE * degenerate_at, rel=1e-3)
+    row_far = int(round((1 - 0.2) * resolution))  # v = 0.2, inside the chart's box, 19 nodes below the dip
+    assert kept[row_far, 32] == 1.0 and kept[row_far:].min() == 1.0
+    # Where the fraction climbs, it does so no faster than the bound allows.
+    slope = backoff._SLOPE / np.maximum(np.linalg.norm((full - identity) * resolution, axis=2), backoff._SLOPE)
+    assert (kept[1:] - kept[:-1] <= slope[1:] + 1e-6).all() and (kept[:-1] - kept[1:] <= slope[:-1] + 1e-6).all()
+    np.testing.assert_array_equal(new_uvs, lmrefine.warp_uvs(uvs, grid))
+
+
+def _bounded_ramp_reference(kept, slope):
+    """backoff._bounded_ramp's rule: each node at most the lowest over all
+    nodes m of kept[m] plus the slopes of the nodes a path from m enters
+    (Dijkstra over the 4-neighbour grid)."""
+    import heapq
+    height, width = kept.shape
+    best = kept.astype(np.float64).copy()
+    queue = [(best[i, j], i, j) for i in range(height) for j in range(width)]
+    heapq.heapify(queue)
+    while queue:
+        value, i, j = heapq.heappop(queue)
+        if value > best[i, j]:
+            continue
+        for a, b in ((i + 1, j), (i - 1, j), (i, j + 1), (i, j - 1)):
+            if 0 <= a < height and 0 <= b < width and value + slope[a, b] < best[a, b]:
+                best[a, b] = value + slope[a, b]
+                heapq.heappush(queue, (best[a, b], a, b))
+    return best
+
+
+def test_the_bounded_ramp_is_the_shortest_path_bound():
+    from lmrefine import backoff
+    rng = np.random.default_rng(11)
+    for case in range(30):
+        height, width = rng.integers(1, 20, 2)
+        kept = np.ones((height, width), np.float32)
+        for _ in range(rng.integers(0, 4)):
+            kept[rng.integers(0, height), rng.integers(0, width)] = rng.uniform(0, 1)
+        slope = rng.uniform(0.01, 1.0, (height, width)).astype(np.float32)
+        expected = _bounded_ramp_reference(kept, slope)
+        backoff._bounded_ramp(kept, slope)
+        np.testing.assert_allclose(kept, np.minimum(expected, 1.0), atol=1e-5, err_msg=f"case {case}")
+
+
 def test_unflip_factors_are_the_quadratic_roots():
     from lmrefine import backoff
     rng = np.random.default_rng(3)

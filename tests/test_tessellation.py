@@ -141,6 +141,49 @@ def test_budget_caps_the_new_vertices():
     np.testing.assert_array_equal(untouched.uvs, uvs)
 
 
+def test_a_one_quad_floor_takes_a_large_budget_until_no_candidate_is_left():
+    # A budget is a fraction of the vertices: a floor of one quad (4 vertices) needs
+    # hundreds of times its count to split the triangles a shadow edge crosses.
+    positions, triangles, uvs = bent_grid(n=1)
+    strength = edge_strength(0.4)
+    small = tessellate(positions, triangles, uvs, strength, budget=16.0, min_texels=8)
+    assert small.report["vertices_added"] == 64 and small.report["stopped"] == "the vertex budget is spent"
+    assert small.report["candidates_left"] > 0
+    full = tessellate(positions, triangles, uvs, strength, budget=1024.0, min_texels=8)
+    assert 64 < full.report["vertices_added"] < 1024 * 4
+    assert full.report["candidates_left"] == 0
+    assert full.report["stopped"] == "every triangle a transition crosses is at most min_texels"
+    with pytest.raises(ValueError, match=r"budget must be a fraction of the vertex count in \[0, 1024\]"):
+        tessellate(positions, triangles, uvs, strength, budget=1025.0)
+
+
+def test_splits_are_held_to_the_lightmap_texels():
+    positions, triangles, uvs = bent_grid(n=1)
+    tiny = np.ones((4, 4))  # 16 texels, a transition everywhere, no size floor: only the texel count stops it
+    result = tessellate(positions, triangles, uvs, tiny, budget=1024.0, min_texels=0)
+    assert result.report["vertex_budget"] == 16 and result.report["vertices_added"] == 16
+
+
+def test_progress_is_reported_and_a_false_cancels():
+    import lmrefine
+    positions, triangles, uvs = bent_grid(n=1)
+    seen = []
+
+    def progress(fraction, stage):
+        seen.append((fraction, stage))
+        return True
+
+    result = tessellate(positions, triangles, uvs, edge_strength(0.4), budget=1024.0, progress=progress)
+    assert len(seen) >= result.report["rounds"] and all(stage == "tessellate" for _, stage in seen)
+    fractions = [f for f, _ in seen]
+    assert fractions == sorted(fractions) and 0 <= fractions[0] and fractions[-1] <= 1
+    calls = []
+    with pytest.raises(lmrefine.CancelledError):
+        tessellate(positions, triangles, uvs, edge_strength(0.4), budget=1024.0,
+                   progress=lambda fraction, stage: calls.append(fraction) or len(calls) < 3)
+    assert len(calls) == 3
+
+
 def test_flat_light_and_small_triangles_are_left_alone():
     positions, triangles, uvs = bent_grid()
     flat = tessellate(positions, triangles, uvs, np.zeros((R, R)))

@@ -190,6 +190,7 @@ def settings_snapshot(settings):
         "exr_float32": settings.exr_float32,
         "shared_atlas": settings.shared_atlas,
         "tessellate": settings.tessellate_budget if settings.tessellate else None,
+        "tessellate_budget": settings.tessellate_budget,
         "stages": settings.stages,
         "per_effect": settings.per_effect_rule.lower() if settings.layouts == 'PER_EFFECT' else None,
     }
@@ -433,7 +434,8 @@ def run(context, targets, options, journal, image_dir=None):
         # Strength 0 moves nothing whatever the triangles: the nothing-moved warning says why, Tessellate is no fix.
         if (options.get("tessellate") is None and options["refine_options"]["strength"] > 0
                 and result.report["transition_widening"] < COARSE_WIDENING):
-            _coarse_warning(lmrefine, label, lightmaps[name], group, result.report, outcome)
+            _coarse_warning(lmrefine, label, lightmaps[name], group, result.report, outcome,
+                            options.get("tessellate_budget", 0.25))
         report = {key: value for key, value in result.report.items() if key != "triangle_density"}
         report["check_layout"] = dict(check)
         report["source_check_layout"] = dict(source_check)
@@ -570,17 +572,22 @@ def _check_refined(lmrefine, label, uvs, layout, reference_uvs, resolution, padd
     return check, reference_check
 
 
-def _coarse_warning(lmrefine, label, lightmap, group, report, outcome):
+def _coarse_warning(lmrefine, label, lightmap, group, report, outcome, budget):
     """Edges hardly gained and light changes cross large triangles: say that tessellation is the fix
     (a warp moves vertices; inside a triangle the mapping stays affine)."""
     from lmrefine.tessellation import DEFAULT_MIN_TEXELS, coarse_transitions
     coarse = coarse_transitions(lightmap, group.uvs, group.triangles)
     if coarse["triangles"]:
+        # The default budget is a fraction of the vertices: on a mesh of few it adds next to nothing.
+        vertices = sum(len(target.obj.data.vertices) for target in group.targets)
+        allowed = sum(int(budget * len(target.obj.data.vertices)) for target in group.targets)
+        raise_budget = (f" with a Vertex Budget well above {budget:g} (at {budget:g} it adds at most {allowed} "
+                        f"to its {vertices} vertices)" if allowed < coarse["triangles"] else "")
         outcome.warnings.append(
             f"{label}: light changes cross {coarse['triangles']} triangle(s) of more than "
             f"{DEFAULT_MIN_TEXELS:g} texels, and moving UVs cannot put more texels inside a triangle "
-            f"(edges {report['transition_widening']:.2f}x): turn on Tessellate (Stages and Tessellation) "
-            "to split them in the mesh, as one undo step")
+            f"(edges {report['transition_widening']:.2f}x): turn on Tessellate (Stages and Tessellation)"
+            f"{raise_budget} to split them in the mesh, as one undo step")
 
 
 def _tessellate(lmrefine, target, lightmap, budget, journal, outcome, start, span):
@@ -592,13 +599,20 @@ def _tessellate(lmrefine, target, lightmap, budget, journal, outcome, start, spa
 
     def split(progress):
         strength = lmrefine.transition_strength_of(lightmap, layout.uvs, layout.triangles)
-        return lmrefine.tessellate(positions, triangles, corner_uvs, strength, budget=budget)
+        return lmrefine.tessellate(positions, triangles, corner_uvs, strength, budget=budget, progress=progress)
 
     result = yield NativeWork(f"Tessellating {obj.name}", split, start, span)
     added = tessellation.write(obj, result, journal)
     report = _plain(result.report)
     report["vertices_added"] = added
     outcome.tessellation[obj.name] = report
+    if report["stopped"] == "the vertex budget is spent" and report["candidates_left"]:
+        from lmrefine.tessellation import DEFAULT_MIN_TEXELS
+        outcome.warnings.append(
+            f"'{obj.name}': Tessellate spent its Vertex Budget ({budget:g} of its {report['vertices_before']} "
+            f"vertices: {added} added) with {report['candidates_left']} triangle(s) still crossed by light "
+            f"changes and larger than {DEFAULT_MIN_TEXELS:g} texels: raise Vertex Budget (Stages and "
+            "Tessellation; a mesh of few vertices needs many times its count)")
     if added:
         target.layout = bridge.read_layout(obj.data, target.source, obj.matrix_world)
 

@@ -212,8 +212,9 @@ class LMREFINE_PG_settings(bpy.types.PropertyGroup):
     )
     tessellate_budget: FloatProperty(
         name="Vertex Budget",
-        description="Most vertices the tessellation may add, as a fraction of each object's vertex count",
-        default=0.25, min=0.0, max=16.0, soft_max=1.0, subtype='FACTOR',
+        description="Most vertices the tessellation may add, as a fraction of each object's vertex count "
+                    "(a mesh of few vertices, such as a one-quad floor, needs hundreds: type the value)",
+        default=0.25, min=0.0, max=1024.0, soft_max=1.0, subtype='FACTOR',
     )
 
     # Second bake.

@@ -12,7 +12,10 @@ just enough to unflip them instead: scaling the fraction kept in its
 neighbourhood scales each of its corners' moves alike (the warp is linear
 in the nodes), so a triangle's area is a quadratic in the scale, whose root
 is found (if the chart fails in another way too, the next round halves
-it). The original layout is the last resort.
+it). Before a chart backs off for flips, backing off around the flipped
+triangles alone is tried, with the fraction kept rising from them no
+faster than the nodes' displacement allows. The original layout is the
+last resort.
 """
 
 import numpy as np
@@ -23,6 +26,13 @@ from .allocation import signed_areas
 # Nodes this many texels around a failing chart's bounding box back off with it.
 _MARGIN = 3
 _ROUNDS = 10
+# Rounds in which flips back off around the flipped triangles only, before
+# their whole charts do.
+_LOCAL_ROUNDS = 4
+# Around a local back-off the fraction kept changes between neighbouring
+# nodes by at most this over the node's displacement in texels: the blend
+# shears a cell by (change in fraction) x (displacement).
+_SLOPE = 0.1
 # Below this fraction a region goes all the way back to the original.
 _SNAP_TO_ZERO = 0.05
 # A flipped triangle's chart keeps this share of the fraction at which the
@@ -127,6 +137,46 @@ def _around(cells, margin):
     return nodes
 
 
+def _lower_around(kept, uvs, corners, factors, shape):
+    """Scale `kept` by each factor on the nodes around its triangle (corner
+    indices `corners` (F, 3) into uvs), from the fractions before this call;
+    where boxes overlap, the lowest. A box holds every node the triangle's
+    corners are warped with, so its corners' moves scale alike."""
+    height, width = shape
+    points = uvs[corners].astype(np.float64)  # (F, 3, 2)
+    x, y = points[..., 0] * width, (1 - points[..., 1]) * height
+    i0 = np.clip(np.floor(y.min(axis=1)) - _MARGIN, 0, height).astype(int)
+    i1 = np.clip(np.ceil(y.max(axis=1)) + _MARGIN, 0, height).astype(int)
+    j0 = np.clip(np.floor(x.min(axis=1)) - _MARGIN, 0, width).astype(int)
+    j1 = np.clip(np.ceil(x.max(axis=1)) + _MARGIN, 0, width).astype(int)
+    lowered = []
+    for a, b, c, d, factor in zip(i0, j0, i1, j1, factors):
+        box = (slice(a, c + 1), slice(b, d + 1))
+        lowered.append((box, np.where(kept[box] > _SNAP_TO_ZERO, np.float32(factor) * kept[box], np.float32(0))))
+    for box, values in lowered:
+        np.minimum(kept[box], values, out=kept[box])
+
+
+def _bounded_ramp(kept, slope):
+    """Lower `kept` in place so that it rises by at most `slope[n]` into any
+    node n from a neighbour: the lowest over paths of the start value plus
+    the slopes the path enters. Along a line that bound is a running minimum
+    of kept - cumsum(slope), so sweeps along rows and columns, both ways,
+    repeat until nothing changes (a path needs one round per turn)."""
+    values, slope = kept.astype(np.float64), slope.astype(np.float64)
+    while True:
+        before = values.copy()
+        for axis in (0, 1):
+            for reverse in (False, True):
+                line = np.flip(values, axis) if reverse else values
+                climb = np.cumsum(np.flip(slope, axis) if reverse else slope, axis=axis)
+                bound = np.minimum.accumulate(line - climb, axis=axis) + climb
+                np.minimum(line, bound, out=line)  # a view of `values` when reversed
+        if np.array_equal(values, before):
+            break
+    np.minimum(kept, values.astype(np.float32), out=kept)
+
+
 def _ramp(kept):
     """Lower `kept` in place around its dips so it changes gradually (a step
     in the fraction kept would shear the cells across it). Only the window
@@ -156,10 +206,18 @@ def unflip_factors(uvs, new_uvs, triangles, charts, count):
     current fractions; a factor on them scales every corner's move from
     `uvs` by the same factor."""
     factors = np.full(count, np.nan)
+    flipped, factor = flipped_triangles(uvs, new_uvs, triangles)
+    np.fmin.at(factors, charts[flipped], factor)
+    return factors
+
+
+def flipped_triangles(uvs, new_uvs, triangles):
+    """(indices of the triangles new_uvs turns over, the factor on each one's
+    corner moves that turns it back with room to spare)."""
     before, after = signed_areas(uvs, triangles), signed_areas(new_uvs, triangles)
     flipped = np.flatnonzero((before != 0) & (np.sign(after) != np.sign(before)))
     if not len(flipped):
-        return factors
+        return flipped, np.zeros(0)
     start = uvs[triangles[flipped]].astype(np.float64)  # (F, 3, 2)
     move = new_uvs[triangles[flipped]].astype(np.float64) - start
     orientation = np.sign(before[flipped])
@@ -176,8 +234,45 @@ def unflip_factors(uvs, new_uvs, triangles, charts, count):
         middle = 0.5 * (low + high)
         unflipped = keeps_orientation(middle)
         low, high = np.where(unflipped, middle, low), np.where(unflipped, high, middle)
-    np.fmin.at(factors, charts[flipped], _UNFLIP_SHARE * low)
-    return factors
+    return flipped, _UNFLIP_SHARE * low
+
+
+def _passed(check, threshold):
+    """check (a passing relative-gutter report) with `valid` at the gutter required of the whole layout."""
+    check.pop("failing_charts")
+    check["valid"] = bool(check["flipped"] == check["degenerate"] == check["overlapping"]
+                          == check["out_of_bounds"] == 0 and check["min_gutter_texels"] >= threshold)
+    return check
+
+
+def _unflip_locally(kept, displacement, identity, uvs, new_uvs, triangles, shape, padding, original, checker,
+                    threshold):
+    """Back off around flipped triangles only, from the fractions `kept`
+    (not modified) whose layout `new_uvs` has flips and perhaps overlaps but
+    no other failure: each flipped triangle's nodes keep its unflip factor,
+    and the fraction rises from there no faster than _SLOPE over the nodes'
+    displacement. Returns (grid, uvs, check, kept) once the layout passes,
+    or None if it fails in another way or is still flipped after
+    _LOCAL_ROUNDS (the caller then backs off whole charts)."""
+    kept = kept.copy()
+    slope = _SLOPE / np.maximum(np.linalg.norm(displacement * np.array(shape[::-1], np.float32), axis=2), _SLOPE)
+    for _ in range(_LOCAL_ROUNDS):
+        flipped, factor = flipped_triangles(uvs, new_uvs, triangles)
+        _lower_around(kept, uvs, triangles[flipped], factor, shape)
+        _bounded_ramp(kept, slope)
+        grid = kept[..., None] * displacement
+        grid += identity
+        grid = grid.astype(np.float32, copy=False)
+        if invalid_cells(grid).any():
+            return None
+        new_uvs = _native.warp_uvs(uvs, grid)
+        check = checker.check(new_uvs, failing_charts=True, relative_gutter=True)
+        failed = failures(check, original, padding)
+        if not failed:
+            return grid, new_uvs, _passed(check, threshold), kept
+        if "flipped" not in failed or not set(failed) <= {"flipped", "overlapping"}:
+            return None
+    return None
 
 
 def accept(full, identity, uvs, triangles, shape, padding, original, checker=None):
@@ -195,6 +290,7 @@ def accept(full, identity, uvs, triangles, shape, padding, original, checker=Non
     threshold = max(allowed_gutter(padding, original), 0.0)
     boxes = None
     limited_by = []
+    tried_locally = False
     for _ in range(_ROUNDS):
         # identity + kept * (full - identity), without temporaries.
         grid = kept[..., None] * displacement
@@ -208,12 +304,16 @@ def accept(full, identity, uvs, triangles, shape, padding, original, checker=Non
             check = checker.check(new_uvs, failing_charts=True, relative_gutter=True)
             failed = failures(check, original, padding)
             if not failed:
-                check.pop("failing_charts")
-                # `valid` at the gutter required of the whole layout.
-                check["valid"] = bool(check["flipped"] == check["degenerate"] == check["overlapping"]
-                                      == check["out_of_bounds"] == 0 and check["min_gutter_texels"] >= threshold)
-                return grid, new_uvs, check, kept, limited_by
+                return grid, new_uvs, _passed(check, threshold), kept, limited_by
             limited_by += [f for f in failed if f not in limited_by]
+            if not tried_locally and "flipped" in failed and set(failed) <= {"flipped", "overlapping"}:
+                # One small flipped triangle need not hold back its whole chart: first try
+                # backing off around the flipped triangles only.
+                tried_locally = True
+                local = _unflip_locally(kept, displacement, identity, uvs, new_uvs, triangles, shape, padding,
+                                        original, checker, threshold)
+                if local is not None:
+                    return (*local, limited_by)
             if boxes is None:
                 boxes = chart_boxes(uvs, triangles, shape, checker.charts)
             failing = check["failing_charts"]

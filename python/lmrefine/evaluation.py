@@ -19,6 +19,7 @@ from . import bake, check_layout, find_charts, metrics, pack_charts, refine_uvs,
 from . import evaluate as evaluate_light
 from .charting import rechart
 from .per_effect import EFFECTS, gradient_energy, parse_rules, split_fractions, split_resolutions
+from .tessellation import MAX_BUDGET
 
 DEFAULT_MULTIPLIERS = (1.0, 1.5, 2.0, 3.0, 4.0)
 # A transition-point RMSE at least this much lower counts as a gain.
@@ -72,8 +73,8 @@ class EvaluationOptions:
             raise ValueError(f"rechart must be an angle in (0, 90) degrees, got {self.rechart}")
         if not (isinstance(self.stages, int) and 1 <= self.stages <= 16):
             raise ValueError(f"stages must be an integer from 1 to 16, got {self.stages}")
-        if self.tessellate is not None and not (0.0 <= self.tessellate <= 16.0):
-            raise ValueError(f"the tessellation budget is a fraction of the vertex count in [0, 16] "
+        if self.tessellate is not None and not (0.0 <= self.tessellate <= MAX_BUDGET):
+            raise ValueError(f"the tessellation budget is a fraction of the vertex count in [0, {MAX_BUDGET:g}] "
                              f"(0.25 = at most 25% more vertices), got {self.tessellate}")
         if self.per_effect is not None:
             self.per_effect = parse_rules(self.per_effect)

@@ -33,7 +33,13 @@ DEFAULT_BUDGET = 0.25       # at most +25% vertices
 DEFAULT_MIN_TEXELS = 8.0    # triangles at or below this many texels are left alone
 DEFAULT_THRESHOLD = 0.5     # peak transition strength (0..1) that marks a triangle
 MAX_ROUNDS = 32
+# A budget is a fraction of the vertex count, so a floor of one quad (4
+# vertices) needs a large one: it took ~270x (1,074 new vertices) to split
+# every triangle a sun's shadows cross down to 8 texels at 512^2. The count
+# of splits is also held to the lightmap's texel count.
+MAX_BUDGET = 1024.0
 _POINTS_PER_CHUNK = 1 << 20
+_PROGRESS_SPLITS = 256
 
 
 @dataclass
@@ -63,7 +69,7 @@ def peak_strength(corner_uvs, strength):
         per_chunk = max(1, _POINTS_PER_CHUNK // len(weights))  # bounded memory for many large triangles
         for start in range(0, len(every), per_chunk):
             rows = every[start:start + per_chunk]
-            points = np.einsum("pk,tkd->tpd", weights, corner_uvs[rows])
+            points = weights @ corner_uvs[rows]  # (t, P, 2)
             cols = np.clip(np.floor(points[..., 0] * width), 0, width - 1).astype(np.int64)
             lines = np.clip(np.floor((1.0 - points[..., 1]) * height), 0, height - 1).astype(np.int64)
             peak[rows] = strength[lines, cols].max(axis=1)
@@ -140,8 +146,8 @@ def _check_inputs(positions, triangles, uvs, strength, budget, min_texels, thres
         raise ValueError("strength holds NaN or Inf values")
     budget, min_texels, threshold = (_number(n, v) for n, v in (("budget", budget), ("min_texels", min_texels),
                                                                   ("threshold", threshold)))
-    if not (0.0 <= budget <= 16.0):
-        raise ValueError(f"budget must be a fraction of the vertex count in [0, 16], got {budget}")
+    if not (0.0 <= budget <= MAX_BUDGET):
+        raise ValueError(f"budget must be a fraction of the vertex count in [0, {MAX_BUDGET:g}], got {budget}")
     if not (min_texels >= 0.0 and np.isfinite(min_texels)):
         raise ValueError(f"min_texels must be 0 or more, got {min_texels}")
     if not (0.0 <= threshold <= 1.0):
@@ -162,15 +168,20 @@ def _check_inputs(positions, triangles, uvs, strength, budget, min_texels, thres
 
 
 def tessellate(positions, triangles, uvs, strength, *, budget=DEFAULT_BUDGET, min_texels=DEFAULT_MIN_TEXELS,
-               threshold=DEFAULT_THRESHOLD, corner_attributes=None):
+               threshold=DEFAULT_THRESHOLD, corner_attributes=None, progress=None):
     """Split the triangles a strong light transition crosses (module doc).
 
     positions (V, 3), triangles (T, 3) vertex indices, uvs (3T, 2) the
     lightmap UVs per corner (corner k of triangle t at row 3t + k), and
     `strength` (H, W): transition strength in [0, 1] per texel of a lightmap
     baked on `uvs` (see transition_strength_of). `budget`: most new vertices,
-    as a fraction of V. corner_attributes: name -> (3T, k) per-corner arrays
+    as a fraction of V (at most MAX_BUDGET; never more than the lightmap's
+    texels). corner_attributes: name -> (3T, k) per-corner arrays
     interpolated with the UVs (other UV maps, normals: renormalise those).
+
+    progress: callable progress(fraction, stage), called every round and
+    every _PROGRESS_SPLITS splits; returning False cancels
+    (lmrefine.CancelledError, nothing returned).
 
     Returns a TessellationResult; its report holds vertices before/after,
     triangles before/after, splits, rounds, candidates left and why it stopped.
@@ -178,7 +189,11 @@ def tessellate(positions, triangles, uvs, strength, *, budget=DEFAULT_BUDGET, mi
     positions, triangles, uvs, strength, attributes = _check_inputs(
         positions, triangles, uvs, strength, budget, min_texels, threshold, corner_attributes)
     vertex_count = len(positions)
-    allowed = int(np.floor(budget * vertex_count))
+    allowed = min(int(np.floor(budget * vertex_count)), strength.size)
+
+    def report_progress():
+        if progress is not None and progress(min(len(splits) / max(allowed, 1), 1.0), "tessellate") is False:
+            raise _native.CancelledError("tessellation cancelled")
     # Copies: the caller's arrays are never modified.
     corner = {"uv": uvs.reshape(-1, 3, 2).copy()}
     corner.update({name: values.reshape(len(triangles), 3, -1).copy() for name, values in attributes.items()})
@@ -196,6 +211,8 @@ def tessellate(positions, triangles, uvs, strength, *, budget=DEFAULT_BUDGET, mi
         if len(splits) >= allowed:
             stopped = "the vertex budget is spent"
             break
+        report_progress()
+        next_report = len(splits) + _PROGRESS_SPLITS
         rounds += 1
         order = candidates[np.argsort(-(peak[candidates] * texels[candidates]), kind="stable")]
         edge_users = _edge_users(triangles)
@@ -208,6 +225,9 @@ def tessellate(positions, triangles, uvs, strength, *, budget=DEFAULT_BUDGET, mi
         for t in order:
             if len(splits) >= allowed:
                 break
+            if len(splits) >= next_report:
+                report_progress()
+                next_report = len(splits) + _PROGRESS_SPLITS
             if touched[t]:
                 continue
             texel_uv = corner["uv"][t] * np.array([strength.shape[1], strength.shape[0]])

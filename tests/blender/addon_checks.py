@@ -1866,17 +1866,22 @@ def coarse_floor_suggests_tessellation():
     square, under a box's shadow: the warp can move only the middle vertex and cannot put texels
     inside those triangles, so the run says Tessellate is the fix; with Tessellate on it does not."""
     facts = {}
-    for tessellate, strength in ((False, 24.0), (True, 24.0), (False, 0.0)):  # strength 0: nothing to tessellate for
+    # strength 0: nothing to tessellate for; budget 64: enough for the split to end by itself.
+    for tessellate, strength, budget in ((False, 24.0, 0.25), (True, 24.0, 0.25), (False, 0.0, 0.25),
+                                         (True, 24.0, 64.0)):
         scenes.coarse_shadow_scene(quads=2)
         floor = bpy.data.objects["Floor"]
         floor.data.uv_layers.remove(floor.data.uv_layers["Lightmap"])
         scenes._set_lightmap_layer(floor.data)
         register()
         settings(resolution=RESOLUTION, padding=2, samples=4, first_lightmap='EMBREE', backend='EMBREE',
-                 bake_passes={'DIRECT'}, tessellate=tessellate, strength=strength)
+                 bake_passes={'DIRECT'}, tessellate=tessellate, strength=strength, tessellate_budget=budget)
+        vertices = len(floor.data.vertices)
         outcome, warnings, error = _run_pipeline([bpy.data.objects["Floor"]])
-        facts[f"tessellate_{tessellate}" + ("_strength_0" if strength == 0 else "")] = {
-            "error": error, "warnings": warnings,
+        facts[f"tessellate_{tessellate}" + ("_strength_0" if strength == 0 else "")
+              + ("_budget_64" if budget == 64.0 else "")] = {
+            "error": error, "warnings": warnings, "vertices_before": vertices,
+            "tessellation": outcome and outcome.tessellation.get("Floor"),
             "widening": outcome and outcome.reports["Floor"]["transition_widening"]}
     return facts
 
