@@ -342,7 +342,10 @@ def test_a_shared_atlas_with_cycles_and_with_stages(facts, name):
     for name in ATLAS:
         member = value["objects"][name]
         assert member["preview_image"] == "Floor_atlas_lightmap_direct"
-        assert member["texels"] > 100 and member["light_max"] > 0.5
+        # Its light is in the shared image, and every chart keeps texels of its own for bilinear lookup
+        # (2 x 2): a flat box shrinks stage after stage (each stage's chart scales are bounded relative
+        # to that stage's median chart, not to the first stage's layout).
+        assert member["light_max"] > 0.5 and member["smallest_chart_texels"] >= 4, member
     assert set(value["shared_texels"].values()) == {0}
     assert value["joined_check"]["valid"] and value["joined_check"]["min_gutter_texels"] >= 2
     assert value["changed_after_undo"] == [] and value["can_undo_further"] is False

@@ -1007,6 +1007,13 @@ def preview_wiring_toggle_and_removal():
 
 # -------------------------------------------------------- shared atlas
 
+def _smallest_chart_texels(uvs, triangles):
+    """The fewest texels any chart of the layout covers at RESOLUTION."""
+    charts = lmrefine.find_charts(uvs, triangles)
+    return min(int(lmrefine.coverage_mask(uvs, triangles[charts == c], RESOLUTION).sum())
+               for c in np.unique(charts))
+
+
 def _atlas_run(**values):
     """atlas_scene refined in one undoable run; facts on images, previews, layouts, then one undo."""
     scenes.atlas_scene()
@@ -1035,6 +1042,7 @@ def _atlas_run(**values):
             "before_image": obj.get("lmrefine_preview", {}).get("before_image"),
             "moved": float(np.abs(refined[name] - source[name].uvs).max()),
             "texels": int(masks[name].sum()),
+            "smallest_chart_texels": _smallest_chart_texels(refined[name], source[name].triangles),
             "light_max": float(light.max()) if light is not None else None,
         }
     # The atlas members' refined charts: no two objects share a texel, and the joined layout is valid.
