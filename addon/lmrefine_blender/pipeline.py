@@ -431,8 +431,10 @@ def run(context, targets, options, journal, image_dir=None):
         if not result.report["moved"] and not any(w.startswith(black) for w in outcome.warnings):
             why = next((n for n in result.report["notes"] if n.startswith("nothing moved")), "nothing moved")
             outcome.warnings.append(f"{label}: {why}")
-        # Strength 0 moves nothing whatever the triangles: the nothing-moved warning says why, Tessellate is no fix.
+        # Strength 0 moves nothing whatever the triangles, nor does a layout held for its light steps on
+        # texel boundaries: the nothing-moved warning says why, Tessellate is no fix.
         if (options.get("tessellate") is None and options["refine_options"]["strength"] > 0
+                and "aligned_steps" not in result.report["limited_by"]
                 and result.report["transition_widening"] < COARSE_WIDENING):
             _coarse_warning(lmrefine, label, lightmaps[name], group, result.report, outcome,
                             options.get("tessellate_budget", 0.25))

@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import _native, allocation, backoff, rechart_route
+from . import _native, alignment, allocation, backoff, rechart_route
 from .folds import find_folds
 
 BORDER_MODES = ("same", "border_rule", "extra_ring")
@@ -26,6 +26,12 @@ _SCALE_MIN_FRACTION_OF_MAX = 0.25
 # guards and the rigid gutter cells between keep the rest (why this margin:
 # docs/refiner.md, "Options and defaults").
 _EDGE_SHRINK_GUTTER_MARGIN = 0.5
+# At least this share of the first lightmap's sharp light steps on texel
+# boundaries the layout's edges run along (lmrefine.alignment): the source
+# layout is returned as it is. The bundled scenes' layouts measure
+# 0.000-0.006, the flat-shaded sphere, cylinder and cube maps that lose when
+# moved 0.26-0.92 (1 to 16 samples per texel).
+ALIGNED_STEP_SHARE = 0.1
 
 
 @dataclass
@@ -258,8 +264,12 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
         backoff), limited_by (list of what held the result back: 'flipped',
         'overlapping', 'gutter', 'degenerate', 'grid' (a blend made a cell
         invalid), 'step_cap', 'max_magnification', 'min_shrink',
-        'original_gutter' (the original is tighter than padding); empty if
-        nothing), notes (list of sentences, e.g. on the original's gutter),
+        'original_gutter' (the original is tighter than padding),
+        'aligned_steps' (below); empty if nothing), aligned_steps (the share
+        of the lightmap's light steps on texel boundaries the layout's edges
+        run along, lmrefine.alignment; at ALIGNED_STEP_SHARE or more the
+        layout is returned as it is; None with gradient= or strength 0),
+        notes (list of sentences, e.g. on the original's gutter),
         passes, edge_shrink (the value used: 1.0 on a tight pack),
         border, seconds (timings: setup (the original's coverage, gutter
         texels and check), gradient_map, automaton, warp_and_check),
@@ -409,16 +419,25 @@ def _refine(lightmap, uvs, triangles, resolution, padding, mask, gradient, progr
     energy, scalar_energy = _energy(gradient, mask, float(strength), directional)
     timings["gradient_map"] = time.perf_counter() - clock
     clock = time.perf_counter()
-    run = _native.run_automaton(energy, mask, rigid=rigid, diffusion=diffusion, delta=delta, max_steps=max_steps,
-                                min_shrink=min_shrink, max_magnification=max_magnification,
-                                edge_shrink=edge_shrink_used, border=border,
-                                passes=int(passes), progress=progress)
     identity = identity_grid(shape)
+    # Light steps on texel boundaries the layout's edges run along: moving a vertex puts them inside texels.
+    aligned = (alignment.aligned_step_share(lightmap, uvs, triangles, mask)
+               if gradient_given is None and strength > 0 else None)
+    hold = aligned is not None and aligned >= ALIGNED_STEP_SHARE
+    if hold:
+        run = {"grid": identity, "steps": 0, "levels": [], "converged": True}
+    else:
+        run = _native.run_automaton(energy, mask, rigid=rigid, diffusion=diffusion, delta=delta,
+                                    max_steps=max_steps, min_shrink=min_shrink, max_magnification=max_magnification,
+                                    edge_shrink=edge_shrink_used, border=border, passes=int(passes),
+                                    progress=progress)
     full = run["grid"]
     timings["automaton"] = time.perf_counter() - clock
     clock = time.perf_counter()
 
     limited_by, notes = [], []
+    if hold:
+        limited_by.append("aligned_steps")
     if not run["converged"]:
         limited_by.append("step_cap")
     if original["min_gutter_texels"] < padding:
@@ -437,7 +456,7 @@ def _refine(lightmap, uvs, triangles, resolution, padding, mask, gradient, progr
 
     timings["warp_and_check"] = time.perf_counter() - clock
     repack_report = None
-    if repack and strength > 0:
+    if repack and strength > 0 and not hold:
         clock = time.perf_counter()
         if not 0 < min_chart_scale <= 1 <= max_chart_scale < np.inf:
             raise ValueError(f"need 0 < min_chart_scale <= 1 <= max_chart_scale (finite), got {min_chart_scale} "
@@ -492,7 +511,11 @@ def _refine(lightmap, uvs, triangles, resolution, padding, mask, gradient, progr
     moved = not np.array_equal(new_uvs, uvs)
     if not moved:
         broke = [kind for kind in limited_by if kind in ("flipped", "overlapping", "gutter", "degenerate", "grid")]
-        why = ("strength is 0" if strength == 0 else "the lightmap has no light change inside the charts"
+        why = ("strength is 0" if strength == 0 else
+               f"{aligned:.0%} of the first lightmap's light steps lie on texel boundaries that the layout's "
+               "edges run along (a flat-shaded mesh on a grid-aligned map), where no texel mixes two sides of a "
+               "step; moving the vertices would put the steps inside texels" if hold else
+               "the lightmap has no light change inside the charts"
                if not np.any(scalar_energy[mask] > 0) else
                "every deformation broke the layout and was backed off (" + ", ".join(broke) + ")" if broke else
                "the deformation left every UV in place: UVs on chart borders keep their place, and here every "
@@ -501,6 +524,7 @@ def _refine(lightmap, uvs, triangles, resolution, padding, mask, gradient, progr
 
     report = {
         "moved": moved,
+        "aligned_steps": aligned,
         **figures,
         "steps": int(run["steps"]),
         "levels": run["levels"],
