@@ -1169,6 +1169,16 @@ def test_addon_recharts_a_shared_lightmap_pack_atlas(facts):
     assert value["valid"] and value["shared_texels"] == 0 and value["source_identical"]
 
 
+def test_addon_leaves_a_flat_sphere_on_its_own_grid_map_as_it_is(facts):
+    value = fact(facts, "flat_sphere_on_its_own_map_is_left_as_it_is")
+    assert value["error"] is None and value["source_map"] == "UVMap"
+    assert value["moved"] is False and value["limited_by"] == ["aligned_steps"]
+    assert value["aligned_steps"] >= 0.1, value["aligned_steps"]
+    said = [w for w in value["warnings"] if "lie on texel boundaries" in w]
+    assert len(said) == 1 and said[0].startswith("'Sphere': nothing moved: ")
+    assert not any("Tessellate" in w for w in value["warnings"]), value["warnings"]
+
+
 def test_addon_says_tessellate_when_large_triangles_hold_the_light_changes(facts):
     value = fact(facts, "coarse_floor_suggests_tessellation")
     off, on = value["tessellate_False"], value["tessellate_True"]

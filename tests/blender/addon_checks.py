@@ -1893,5 +1893,25 @@ def coarse_floor_suggests_tessellation():
             "widening": outcome and outcome.reports["Floor"]["transition_widening"]}
     return facts
 
+@check("refine")
+def flat_sphere_on_its_own_map_is_left_as_it_is():
+    """A flat-shaded UV sphere on the UV map Blender gives it (its facets' edges on texel boundaries at
+    64^2), lit by a sun: the refinement would put the facets' light steps inside texels, so the map is
+    returned as it is, the warning says why, and no Tessellate advice follows."""
+    scenes.reset()
+    bpy.ops.mesh.primitive_uv_sphere_add(segments=32, ring_count=16, radius=1.0)
+    sphere = bpy.context.active_object
+    bpy.ops.object.light_add(type='SUN', rotation=(0.6, 0.3, 0.8))
+    bpy.context.active_object.data.energy = 3.0
+    register()
+    settings(resolution=RESOLUTION, padding=2, samples=4, first_lightmap='EMBREE', backend='EMBREE',
+             bake_passes={'DIRECT'})
+    outcome, warnings, error = _run_pipeline([sphere])
+    report = outcome.reports[sphere.name] if outcome else {}
+    return {"error": error, "warnings": warnings, "moved": report.get("moved"),
+            "aligned_steps": report.get("aligned_steps"), "limited_by": report.get("limited_by"),
+            "source_map": sphere.data.uv_layers[0].name}
+
+
 with open(OUT_JSON, "w", encoding="utf-8") as stream:
     json.dump(results, stream, indent=1, default=str)
