@@ -1177,6 +1177,10 @@ def test_addon_leaves_a_flat_sphere_on_its_own_grid_map_as_it_is(facts):
     said = [w for w in value["warnings"] if "lie on texel boundaries" in w]
     assert len(said) == 1 and said[0].startswith("'Sphere': nothing moved: ")
     assert not any("Tessellate" in w for w in value["warnings"]), value["warnings"]
+    split = value["tessellate"]
+    assert split["error"] is None and split["vertices_after"] == split["vertices_before"]
+    assert split["report"]["vertices_added"] == 0 and split["report"]["aligned_steps"] >= 0.1
+    assert any(w.startswith("'Sphere': not tessellated: ") for w in split["warnings"]), split["warnings"]
 
 
 def test_addon_says_tessellate_when_large_triangles_hold_the_light_changes(facts):

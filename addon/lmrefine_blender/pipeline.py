@@ -597,6 +597,17 @@ def _tessellate(lmrefine, target, lightmap, budget, journal, outcome, start, spa
     cross, in its mesh (journalled); its layout becomes the tessellated mesh's."""
     obj = target.obj
     layout = target.layout
+    from lmrefine.alignment import aligned_step_share
+    from lmrefine.refine import ALIGNED_STEP_SHARE
+    mask = lmrefine.coverage_mask(layout.uvs, layout.triangles, lightmap.shape[:2])
+    aligned = aligned_step_share(lightmap, layout.uvs, layout.triangles, mask)
+    if aligned >= ALIGNED_STEP_SHARE:
+        # Its refinement will leave the layout as it is (refine_uvs' aligned_steps): splitting would gain nothing.
+        outcome.tessellation[obj.name] = {"vertices_added": 0, "aligned_steps": aligned}
+        outcome.warnings.append(
+            f"'{obj.name}': not tessellated: {aligned:.0%} of its first lightmap's light steps lie on texel "
+            "boundaries its map's edges run along, so its layout stays as it is and a split would gain nothing")
+        return
     positions, triangles, corner_uvs = tessellation.mesh_arrays(obj.data, layout)
 
     def split(progress):

@@ -1908,9 +1908,17 @@ def flat_sphere_on_its_own_map_is_left_as_it_is():
              bake_passes={'DIRECT'})
     outcome, warnings, error = _run_pipeline([sphere])
     report = outcome.reports[sphere.name] if outcome else {}
-    return {"error": error, "warnings": warnings, "moved": report.get("moved"),
-            "aligned_steps": report.get("aligned_steps"), "limited_by": report.get("limited_by"),
-            "source_map": sphere.data.uv_layers[0].name}
+    facts = {"error": error, "warnings": warnings, "moved": report.get("moved"),
+             "aligned_steps": report.get("aligned_steps"), "limited_by": report.get("limited_by"),
+             "source_map": sphere.data.uv_layers[0].name}
+    # With Tessellate on, the mesh is not split for a layout that will stay as it is.
+    vertices = len(sphere.data.vertices)
+    settings(tessellate=True, tessellate_budget=4.0)
+    outcome, warnings, error = _run_pipeline([sphere])
+    facts["tessellate"] = {"error": error, "warnings": warnings, "vertices_before": vertices,
+                           "vertices_after": len(sphere.data.vertices),
+                           "report": outcome and outcome.tessellation.get(sphere.name)}
+    return facts
 
 
 with open(OUT_JSON, "w", encoding="utf-8") as stream:
