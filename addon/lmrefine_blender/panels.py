@@ -27,7 +27,7 @@ class _LightmapTab:
 # refine_uvs' limit names, short enough for the sidebar (the Info report has the full text).
 # Short: two fit the default sidebar width, more are counted ("Limit: growth/shrink +1").
 LIMIT_NAMES = {"max_magnification": "growth", "min_shrink": "shrink", "step_cap": "steps",
-               "original_gutter": "gutter"}
+               "original_gutter": "gutter", "aligned_steps": "aligned"}
 
 
 def source_line(settings, obj):
