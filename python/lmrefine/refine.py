@@ -29,9 +29,12 @@ _EDGE_SHRINK_GUTTER_MARGIN = 0.5
 # At least this share of the first lightmap's sharp light steps on texel
 # boundaries the layout's edges run along (lmrefine.alignment): the source
 # layout is returned as it is. The bundled scenes' layouts measure
-# 0.000-0.006, the flat-shaded sphere, cylinder and cube maps that lose when
-# moved 0.26-0.92 (1 to 16 samples per texel).
-ALIGNED_STEP_SHARE = 0.1
+# 0.000-0.006; a grid floor on a lattice-aligned map whose shadow edges
+# fall on its grid lines by chance 0.18-0.34 (the tests' small scenes); the
+# flat-shaded sphere, cube and cylinder maps that lose when moved 0.63-0.92,
+# 0.45-0.88 and 0.26-0.74 from 1 to 16 samples per texel (0.74 and more at
+# the add-on's default 16).
+ALIGNED_STEP_SHARE = 0.5
 
 
 @dataclass
