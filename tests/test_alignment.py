@@ -77,7 +77,8 @@ def test_the_share_matches_the_plain_rule():
     for uvs, tris, lightmap in cases:
         mask = lmrefine.coverage_mask(uvs, tris, R)
         expected = _share_reference(lightmap, uvs, tris, mask)
-        assert alignment.aligned_step_share(lightmap, uvs, tris, mask) == pytest.approx(expected, rel=1e-9, abs=1e-12)
+        # The kernel takes its steps in float32, the reference in float64.
+        assert alignment.aligned_step_share(lightmap, uvs, tris, mask) == pytest.approx(expected, rel=1e-5, abs=1e-9)
 
 
 def test_facets_on_texel_boundaries_are_left_where_they_are():

@@ -37,10 +37,16 @@ def _marked(lines, lo, hi, count, length):
     lo = np.clip(np.floor(lo + _ON_LINE).astype(np.int64), 0, length)
     hi = np.clip(np.ceil(hi - _ON_LINE).astype(np.int64), 0, length)
     keep = (lines >= 0) & (lines < count) & (hi > lo)
-    steps = np.zeros((count, length + 1), np.int64)
-    np.add.at(steps, (lines[keep], lo[keep]), 1)
-    np.add.at(steps, (lines[keep], hi[keep]), -1)
-    return np.cumsum(steps, axis=1)[:, :length] > 0
+    marked = np.zeros((count, length), bool)
+    if not keep.any():
+        return marked
+    used = np.unique(lines[keep])  # only the grid lines an edge runs along
+    row = np.searchsorted(used, lines[keep])
+    steps = np.zeros((len(used), length + 1), np.int32)
+    np.add.at(steps, (row, lo[keep]), 1)
+    np.add.at(steps, (row, hi[keep]), -1)
+    marked[used] = np.cumsum(steps, axis=1)[:, :length] > 0
+    return marked
 
 
 def _sharp(steps):
@@ -58,7 +64,6 @@ def aligned_step_share(lightmap, uvs, triangles, mask):
     coverage) that lie on texel boundaries a triangle edge of the layout
     runs along."""
     height, width = mask.shape
-    lum = texel_luminance(lightmap).astype(np.float64)
     corners = np.asarray(uvs, np.float64)[np.asarray(triangles, np.int64)]  # (T, 3, 2)
     start, end = corners.reshape(-1, 2), np.roll(corners, -1, axis=1).reshape(-1, 2)
     x0, y0 = start[:, 0] * width, (1.0 - start[:, 1]) * height
@@ -70,10 +75,14 @@ def aligned_step_share(lightmap, uvs, triangles, mask):
     on_column = (np.abs(x0 - x1) < _ON_LINE) & (np.abs(x0 - np.round(x0)) < _ON_LINE)
     columns = _marked(np.round(x0[on_column]).astype(np.int64), np.minimum(y0, y1)[on_column],
                       np.maximum(y0, y1)[on_column], width + 1, height).T  # (height, width + 1)
+    if not (on_row.any() or on_column.any()):
+        return 0.0  # no edge runs along a texel boundary: no step can lie on one
+    lum = texel_luminance(lightmap)
     across_rows = _sharp(np.abs(lum[1:] - lum[:-1]) * (mask[1:] & mask[:-1]))
     across_columns = _sharp((np.abs(lum[:, 1:] - lum[:, :-1]) * (mask[:, 1:] & mask[:, :-1])).T).T
-    total = across_rows.sum() + across_columns.sum()
+    total = across_rows.sum(dtype=np.float64) + across_columns.sum(dtype=np.float64)
     if not (np.isfinite(total) and total > 0):
         return 0.0
-    aligned = (across_rows * rows[1:height]).sum() + (across_columns * columns[:, 1:width]).sum()
+    aligned = (across_rows[rows[1:height]].sum(dtype=np.float64)
+               + across_columns[columns[:, 1:width]].sum(dtype=np.float64))
     return float(aligned / total)
