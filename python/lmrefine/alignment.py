@@ -70,13 +70,13 @@ def aligned_step_share(lightmap, uvs, triangles, mask):
     x1, y1 = end[:, 0] * width, (1.0 - end[:, 1]) * height
     # Horizontal edges on the line between texel rows r - 1 and r (line r).
     on_row = (np.abs(y0 - y1) < _ON_LINE) & (np.abs(y0 - np.round(y0)) < _ON_LINE)
-    rows = _marked(np.round(y0[on_row]).astype(np.int64), np.minimum(x0, x1)[on_row],
-                   np.maximum(x0, x1)[on_row], height + 1, width)
     on_column = (np.abs(x0 - x1) < _ON_LINE) & (np.abs(x0 - np.round(x0)) < _ON_LINE)
-    columns = _marked(np.round(x0[on_column]).astype(np.int64), np.minimum(y0, y1)[on_column],
-                      np.maximum(y0, y1)[on_column], width + 1, height).T  # (height, width + 1)
     if not (on_row.any() or on_column.any()):
         return 0.0  # no edge runs along a texel boundary: no step can lie on one
+    rows = _marked(np.round(y0[on_row]).astype(np.int64), np.minimum(x0, x1)[on_row],
+                   np.maximum(x0, x1)[on_row], height + 1, width)
+    columns = _marked(np.round(x0[on_column]).astype(np.int64), np.minimum(y0, y1)[on_column],
+                      np.maximum(y0, y1)[on_column], width + 1, height).T  # (height, width + 1)
     lum = texel_luminance(lightmap)
     across_rows = _sharp(np.abs(lum[1:] - lum[:-1]) * (mask[1:] & mask[:-1]))
     across_columns = _sharp((np.abs(lum[:, 1:] - lum[:, :-1]) * (mask[:, 1:] & mask[:, :-1])).T).T
