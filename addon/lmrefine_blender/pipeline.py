@@ -597,11 +597,10 @@ def _tessellate(lmrefine, target, lightmap, budget, journal, outcome, start, spa
     cross, in its mesh (journalled); its layout becomes the tessellated mesh's."""
     obj = target.obj
     layout = target.layout
-    from lmrefine.alignment import aligned_step_share
-    from lmrefine.refine import ALIGNED_STEP_SHARE
+    from lmrefine.alignment import layout_held
     mask = lmrefine.coverage_mask(layout.uvs, layout.triangles, lightmap.shape[:2])
-    aligned = aligned_step_share(lightmap, layout.uvs, layout.triangles, mask)
-    if aligned >= ALIGNED_STEP_SHARE:
+    aligned, held = layout_held(lightmap, layout.uvs, layout.triangles, mask)
+    if held:
         # Its refinement will leave the layout as it is (refine_uvs' aligned_steps): splitting would gain nothing.
         outcome.tessellation[obj.name] = {"vertices_added": 0, "aligned_steps": aligned}
         outcome.warnings.append(

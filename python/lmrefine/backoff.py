@@ -137,21 +137,13 @@ def _around(cells, margin):
     return nodes
 
 
-def _lower_around(kept, uvs, corners, factors, shape):
-    """Scale `kept` by each factor on the nodes around its triangle (corner
-    indices `corners` (F, 3) into uvs), from the fractions before this call;
-    where boxes overlap, the lowest. A box holds every node the triangle's
-    corners are warped with, so its corners' moves scale alike."""
-    height, width = shape
-    points = uvs[corners].astype(np.float64)  # (F, 3, 2)
-    x, y = points[..., 0] * width, (1 - points[..., 1]) * height
-    i0 = np.clip(np.floor(y.min(axis=1)) - _MARGIN, 0, height).astype(int)
-    i1 = np.clip(np.ceil(y.max(axis=1)) + _MARGIN, 0, height).astype(int)
-    j0 = np.clip(np.floor(x.min(axis=1)) - _MARGIN, 0, width).astype(int)
-    j1 = np.clip(np.ceil(x.max(axis=1)) + _MARGIN, 0, width).astype(int)
+def _lower(kept, boxes, factors):
+    """Scale `kept` by each factor on its node box (i0, j0, i1, j1), from the
+    fractions before this call (boxes overlap: the lowest kept); a fraction
+    that would fall below _SNAP_TO_ZERO goes to 0."""
     lowered = []
-    for a, b, c, d, factor in zip(i0, j0, i1, j1, factors):
-        box = (slice(a, c + 1), slice(b, d + 1))
+    for (i0, j0, i1, j1), factor in zip(boxes, factors):
+        box = (slice(i0, i1 + 1), slice(j0, j1 + 1))
         lowered.append((box, np.where(kept[box] > _SNAP_TO_ZERO, np.float32(factor) * kept[box], np.float32(0))))
     for box, values in lowered:
         np.minimum(kept[box], values, out=kept[box])
@@ -258,7 +250,8 @@ def _unflip_locally(kept, displacement, identity, uvs, new_uvs, triangles, shape
     slope = _SLOPE / np.maximum(np.linalg.norm(displacement * np.array(shape[::-1], np.float32), axis=2), _SLOPE)
     for _ in range(_LOCAL_ROUNDS):
         flipped, factor = flipped_triangles(uvs, new_uvs, triangles)
-        _lower_around(kept, uvs, triangles[flipped], factor, shape)
+        # Each triangle its own box: every node its corners are warped with, so its corners' moves scale alike.
+        _lower(kept, chart_boxes(uvs, triangles[flipped], shape, charts=np.arange(len(flipped))), factor)
         _bounded_ramp(kept, slope)
         grid = kept[..., None] * displacement
         grid += identity
@@ -322,15 +315,7 @@ def accept(full, identity, uvs, triangles, shape, padding, original, checker=Non
                 unflip = unflip_factors(uvs, new_uvs, triangles, checker.charts, len(boxes))
                 factors = np.where(np.isnan(unflip), factors, unflip)
             if len(failing):
-                # Each box from the fractions before this round (boxes overlap), the lowest kept.
-                lowered = []
-                for c in failing:
-                    i0, j0, i1, j1 = boxes[c]
-                    box = (slice(i0, i1 + 1), slice(j0, j1 + 1))
-                    lowered.append((box, np.where(kept[box] > _SNAP_TO_ZERO, np.float32(factors[c]) * kept[box],
-                                                  np.float32(0))))
-                for box, values in lowered:
-                    np.minimum(kept[box], values, out=kept[box])
+                _lower(kept, boxes[failing], factors[failing])
                 _ramp(kept)
                 continue
             region = np.ones(kept.shape, bool)  # a failure no chart owns: back off everywhere

@@ -26,15 +26,6 @@ _SCALE_MIN_FRACTION_OF_MAX = 0.25
 # guards and the rigid gutter cells between keep the rest (why this margin:
 # docs/refiner.md, "Options and defaults").
 _EDGE_SHRINK_GUTTER_MARGIN = 0.5
-# At least this share of the first lightmap's sharp light steps on texel
-# boundaries the layout's edges run along (lmrefine.alignment): the source
-# layout is returned as it is. The bundled scenes' layouts measure
-# 0.000-0.006; a grid floor on a lattice-aligned map whose shadow edges
-# fall on its grid lines by chance 0.18-0.34 (the tests' small scenes); the
-# flat-shaded sphere, cube and cylinder maps that lose when moved 0.63-0.92,
-# 0.45-0.88 and 0.26-0.74 from 1 to 16 samples per texel (0.74 and more at
-# the add-on's default 16).
-ALIGNED_STEP_SHARE = 0.5
 
 
 @dataclass
@@ -270,7 +261,7 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
         'original_gutter' (the original is tighter than padding),
         'aligned_steps' (below); empty if nothing), aligned_steps (the share
         of the lightmap's light steps on texel boundaries the layout's edges
-        run along, lmrefine.alignment; at ALIGNED_STEP_SHARE or more the
+        run along, lmrefine.alignment; at its ALIGNED_STEP_SHARE or more the
         layout is returned as it is; None with gradient= or strength 0),
         notes (list of sentences, e.g. on the original's gutter),
         passes, edge_shrink (the value used: 1.0 on a tight pack),
@@ -424,9 +415,8 @@ def _refine(lightmap, uvs, triangles, resolution, padding, mask, gradient, progr
     clock = time.perf_counter()
     identity = identity_grid(shape)
     # Light steps on texel boundaries the layout's edges run along: moving a vertex puts them inside texels.
-    aligned = (alignment.aligned_step_share(lightmap, uvs, triangles, mask)
-               if gradient_given is None and strength > 0 else None)
-    hold = aligned is not None and aligned >= ALIGNED_STEP_SHARE
+    aligned, hold = (alignment.layout_held(lightmap, uvs, triangles, mask)
+                     if gradient_given is None and strength > 0 else (None, False))
     if hold:
         run = {"grid": identity, "steps": 0, "levels": [], "converged": True}
     else:
