@@ -130,7 +130,8 @@ def test_bad_objects_are_skipped_with_their_fix_and_the_others_refined(facts):
     assert value["error"] is None and value["objects"] == ["Floor"]
     skipped = value["skipped"]
     assert len(skipped) == 4
-    for name, advice in (("FloorTwin", "share mesh 'FloorMesh'"), ("Bare", "has no UV map"),
+    twin = "share mesh 'FloorMesh': UV maps belong to the mesh, so only 'Floor' is refined; to give each its own"
+    for name, advice in (("FloorTwin", twin), ("Bare", "has no UV map"),
                          ("Flat", "has no area in 3-D"), ("Broken", "1 vertices at NaN, Inf or beyond 1e9")):
         assert any(f"'{name}'" in w and advice in w for w in skipped), (name, skipped)
     # The broken mesh is left out of the bake as an occluder too (the baker refuses NaN), and says so.
@@ -387,6 +388,21 @@ def test_atlas_groups_do_not_depend_on_the_selection_order(facts):
     groups = fact(facts, "shared_atlas_grouping_ignores_selection_order")["groups"]
     expected = [["Floor_atlas", ["Blocker", "Floor", "Post"]], ["Lonely", ["Lonely"]]]
     assert groups == [expected, expected]
+
+
+def test_copies_made_by_modifiers_skip_the_object_and_inside_out_meshes_are_named(facts):
+    value = fact(facts, "copies_and_inside_out_meshes_are_named")
+    assert value["error"] is None and value["objects"] == ["Floor", "Blocker"]
+    skipped = [w for w in value["warnings"] if w.startswith("Skipped: ")]
+    assert len(skipped) == 1 and "'Arrayed': its modifiers (Row) copy faces with their UVs" in skipped[0]
+    assert "Visual Geometry to Mesh" in skipped[0] and "Lightmap Pack" in skipped[0]
+    assert value["arrayed_layers"] == ["UVMap", "Lightmap"]  # skipped: nothing written
+    inside_out = [w for w in value["warnings"] if "inside out" in w]
+    assert len(inside_out) == 1 and inside_out[0].startswith("'Blocker': it is inside out")
+    assert "Recalculate Outside" in inside_out[0]
+    black = [w for w in value["warnings"] if "first lightmap is black" in w]
+    assert len(black) == 1 and "(its faces point inward)" in black[0]
+    assert not any(w.startswith("'Floor'") for w in value["warnings"])
 
 
 def test_black_first_lightmap_warns_and_keeps_the_layout(facts):
@@ -746,10 +762,14 @@ def test_batch_objects_all_selected_and_collection():
         "group = bpy.data.collections.new('Walls'); scene.collection.children.link(group)\n"
         "inner = bpy.data.collections.new('Inner'); group.children.link(inner)\n"
         "group.objects.link(bpy.data.objects['LowWall']); inner.objects.link(bpy.data.objects['Well'])\n"
+        "ghost = bpy.data.objects.new('Ghost', bpy.data.objects['Well'].data.copy()); ghost.hide_render = True\n"
+        "inner.objects.link(ghost)\n"
         "for obj in scene.objects: obj.select_set(obj.name in ('Floor', 'Well'))\n"
         "out = {}\n"
         "for spec_text in ('all', 'selected', 'collection:Walls', 'Floor,Well', 'collection:Nope', 'Nope'):\n"
-        "    try: out[spec_text] = batch.object_names(batch._csv(spec_text), scene)\n"
+        "    try:\n"
+        "        names = batch.object_names(batch._csv(spec_text), scene)\n"
+        "        out[spec_text] = names; out[spec_text + ' left out'] = names.left_out\n"
         "    except batch.pipeline.UserError as error: out[spec_text] = 'error: ' + str(error)\n"
         "print('PROBE', json.dumps(out))\n"
     )
@@ -759,6 +779,9 @@ def test_batch_objects_all_selected_and_collection():
     assert names["all"] == ["ArcadeNorth", "ArcadeWest", "Floor", "LowWall", "Well"]
     assert names["selected"] == ["Floor", "Well"]
     assert names["collection:Walls"] == ["LowWall", "Well"]  # child collections count
+    # A mesh the bake does not see (disabled for render) is left out of all and collections, and listed.
+    assert names["all left out"] == names["collection:Walls left out"] == ["Ghost"]
+    assert names["selected left out"] == names["Floor,Well left out"] == []
     assert names["Floor,Well"] == ["Floor", "Well"]
     assert names["collection:Nope"].startswith("error: --objects collection:Nope: no such collection")
     assert "Walls" in names["collection:Nope"]

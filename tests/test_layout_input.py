@@ -90,3 +90,57 @@ def test_a_refined_layout_fails_exactly_where_it_is_worse_than_its_source(change
 def test_the_gutter_allowed_is_the_padding_unless_the_original_was_tighter():
     assert backoff.allowed_gutter(2, {"min_gutter_texels": 5.0}) == pytest.approx(2 - 1e-4)
     assert backoff.allowed_gutter(2, {"min_gutter_texels": 1.5}) == pytest.approx(1.5 - 1e-4)
+
+
+def _cube(offset=(0.0, 0.0, 0.0), first=0):
+    """A unit cube's 8 vertices and 12 outward-wound triangles (vertex indices from `first`)."""
+    positions = np.array([[x, y, z] for z in (0, 1) for y in (0, 1) for x in (0, 1)], float) + offset
+    quads = [(0, 2, 3, 1), (4, 5, 7, 6), (0, 1, 5, 4), (2, 6, 7, 3), (0, 4, 6, 2), (1, 3, 7, 5)]
+    triangles = [t for a, b, c, d in quads for t in ((a, b, c), (a, c, d))]
+    return positions, np.array(triangles) + first
+
+
+def _signed_volume(positions, triangles):  # the plain rule, for the fixture's own check
+    p = positions[triangles]
+    return sum(np.dot(a, np.cross(b, c)) for a, b, c in p) / 6.0
+
+
+def test_a_closed_mesh_wound_inward_is_inside_out_an_open_or_outward_one_is_not():
+    positions, triangles = _cube()
+    assert _signed_volume(positions, triangles) == pytest.approx(1.0)  # the fixture winds outward
+    assert layout_input.inside_out_shells(positions, triangles) == (0, 1)
+    assert layout_input.inside_out_shells(positions, triangles[:, ::-1]) == (1, 1)
+    # One face gone: open, not judged either way.
+    assert layout_input.inside_out_shells(positions, triangles[2:][:, ::-1]) == (0, 0)
+    # One face flipped on its own: not consistently wound, so not judged.
+    mixed = triangles.copy()
+    mixed[:2] = mixed[:2, ::-1]
+    assert layout_input.inside_out_shells(positions, mixed) == (0, 0)
+
+
+def test_inside_out_is_judged_per_shell_far_from_the_origin_too():
+    a, ta = _cube((1e6, 1e6, 0.0))
+    b, tb = _cube((3e6, 0.0, 5.0), first=8)
+    positions = np.concatenate([a, b])
+    triangles = np.concatenate([ta, tb[:, ::-1]])  # the second cube inside out
+    assert layout_input.inside_out_shells(positions, triangles) == (1, 2)
+    # A quad doubled back to back (each side its own diagonal) is closed but has no inside: not judged.
+    quad = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
+    doubled = np.array([[0, 1, 2], [0, 2, 3], [0, 3, 1], [1, 3, 2]])
+    assert layout_input.inside_out_shells(quad, doubled) == (0, 1)
+    assert layout_input.inside_out_shells(np.zeros((0, 3)), np.zeros((0, 3), int)) == (0, 0)
+
+
+def test_charts_copied_onto_each_other_by_modifiers_are_told_from_the_source_layouts_own_overlaps():
+    quad = np.array([[0.1, 0.1], [0.5, 0.1], [0.5, 0.5], [0.1, 0.5], [0.6, 0.6], [0.9, 0.6], [0.9, 0.9]], np.float32)
+    source = np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6]])
+    source_check = lmrefine.check_layout(quad, source, 64)
+    # An Array modifier's three copies: the same UVs three times.
+    copies = np.concatenate([source + 7 * k for k in range(3)])
+    copied_check = lmrefine.check_layout(np.tile(quad, (3, 1)), copies, 64)
+    assert source_check["overlapping"] == 0 and copied_check["overlapping"] == 9
+    assert layout_input.copied_overlap(source_check, 3, copied_check, 9) == 9
+    # A source that overlaps by itself keeps its share after a modifier that copies nothing.
+    assert layout_input.copied_overlap({"overlapping": 2}, 10, {"overlapping": 8}, 40) == 0
+    assert layout_input.copied_overlap({"overlapping": 2}, 10, {"overlapping": 30}, 40) == 22
+    assert layout_input.copied_overlap(source_check, 3, {"overlapping": 0}, 0) == 0

@@ -25,7 +25,7 @@ for _path in (os.path.dirname(_HERE), os.path.join(_HERE, "..", "..", "python"))
 import bpy  # noqa: E402
 
 import lmrefine_blender  # noqa: E402
-from lmrefine_blender import pipeline  # noqa: E402
+from lmrefine_blender import bridge, pipeline  # noqa: E402
 from lmrefine_blender.journal import Journal  # noqa: E402
 
 PASSES = ("direct", "indirect", "combined", "ao")
@@ -174,13 +174,30 @@ def _meshes_with_uvs(objects):
     return [obj.name for obj in objects if obj.type == 'MESH' and len(obj.data.uv_layers) > 0]
 
 
+class Names(list):
+    """Object names, plus the mesh objects with UV maps that `all` or a collection left out (`left_out`):
+    those the bake does not see (hidden, disabled for render, an excluded collection's instance sources)."""
+
+    def __init__(self, names=(), left_out=()):
+        super().__init__(names)
+        self.left_out = sorted(left_out)
+
+
+def _baked_meshes(objects):
+    """Names(the mesh objects with UV maps that take part in a bake, left_out=the others)."""
+    candidates = [bpy.data.objects[name] for name in _meshes_with_uvs(objects)]
+    return Names([o.name for o in candidates if bridge.renders(o)], [o.name for o in candidates if not bridge.renders(o)])
+
+
 def object_names(spec, scene):
-    """The object names an --objects value means in this scene (raises pipeline.UserError when it means none)."""
+    """The object names an --objects value means in this scene, a Names (raises pipeline.UserError when it
+    means none). `all` and `collection:NAME` take the mesh objects with UV maps the bake sees; named
+    objects are taken as named (a hidden one is then skipped with its fix)."""
     if spec == ["all"]:
-        names = _meshes_with_uvs(scene.objects)
+        names = _baked_meshes(scene.objects)
         what = "the scene"
     elif spec == ["selected"]:
-        names = [obj.name for obj in scene.objects if obj.select_get()]
+        names = Names(obj.name for obj in scene.objects if obj.select_get())
         what = "the selection saved in the .blend"
     elif len(spec) == 1 and spec[0].startswith("collection:"):
         wanted = spec[0][len("collection:"):]
@@ -188,7 +205,7 @@ def object_names(spec, scene):
         if collection is None:
             known = ", ".join(sorted(c.name for c in bpy.data.collections)) or "none"
             raise pipeline.UserError(f"--objects collection:{wanted}: no such collection (collections: {known})")
-        names = _meshes_with_uvs(collection.all_objects)
+        names = _baked_meshes(collection.all_objects)
         what = f"collection '{wanted}'"
     else:
         missing = [name for name in spec if name not in bpy.data.objects]
@@ -196,10 +213,11 @@ def object_names(spec, scene):
             meshes = ", ".join(sorted(_meshes_with_uvs(scene.objects))[:20]) or "none"
             raise pipeline.UserError(f"no object(s) named {', '.join(missing)} in {bpy.data.filepath} "
                                      f"(mesh objects with UV maps: {meshes}; or use --objects all)")
-        return list(spec)
+        return Names(spec)
     if not names:
-        raise pipeline.UserError(f"--objects {','.join(spec)}: no mesh object with a UV map in {what}")
-    return sorted(names)
+        hidden = f" the bake sees ({len(names.left_out)} hidden or disabled for render)" if names.left_out else ""
+        raise pipeline.UserError(f"--objects {','.join(spec)}: no mesh object with a UV map{hidden} in {what}")
+    return Names(sorted(names), names.left_out)
 
 
 def run(args):
@@ -229,6 +247,11 @@ def run(args):
         journal.rollback()
         raise
     journal.commit()
+    if names.left_out:
+        shown = ", ".join(names.left_out[:10]) + (", ..." if len(names.left_out) > 10 else "")
+        outcome.warnings.append(f"Left out of --objects {','.join(args.objects)}: {len(names.left_out)} mesh "
+                                f"object(s) the bake does not see ({shown}; hidden, disabled for render, or in an "
+                                "excluded collection): show them and enable them for render to refine them")
     for warning in outcome.warnings:
         print(f"lmrefine: warning: {warning}", file=sys.stderr, flush=True)
     filepaths = bpy.context.preferences.filepaths

@@ -130,6 +130,17 @@ def write_uv_layer(mesh, uv_name, uvs):
     return layer
 
 
+def inside_out_shells(mesh):
+    """lmrefine.layout_input.inside_out_shells of an (original) mesh, in its own space."""
+    from lmrefine.layout_input import inside_out_shells
+    mesh.calc_loop_triangles()
+    triangles = np.empty(len(mesh.loop_triangles) * 3, dtype=np.int32)
+    mesh.loop_triangles.foreach_get("vertices", triangles)
+    positions = np.empty(len(mesh.vertices) * 3, dtype=np.float64)
+    mesh.vertices.foreach_get("co", positions)
+    return inside_out_shells(positions.reshape(-1, 3), triangles.reshape(-1, 3))
+
+
 def geometry_problems(obj, layout, resolution):
     """lmrefine.layout_input.geometry_problems of `obj` (world space, as baked)."""
     from lmrefine.layout_input import geometry_problems
@@ -225,10 +236,12 @@ def export_mesh(obj_eval, matrix_world, uv_name=None, name=None):
         obj_eval.to_mesh_clear()
 
 
-def evaluated_problem(depsgraph, obj, uv_name):
+def evaluated_problem(depsgraph, obj, uv_name, layout, resolution):
     """What keeps `obj`, as its modifiers and transform make it, from being
-    baked (a message naming the fix), or None. The bake exports the same."""
-    from lmrefine.layout_input import MAX_COORDINATE
+    baked (a message naming the fix), or None. The bake exports the same.
+    `layout` is the source map before the modifiers (read_layout)."""
+    import lmrefine
+    from lmrefine.layout_input import COPYING_MODIFIERS, MAX_COORDINATE, copied_overlap
     obj_eval = obj.evaluated_get(depsgraph)
     try:
         export = export_mesh(obj_eval, obj_eval.matrix_world, uv_name=uv_name, name=obj.name)
@@ -243,6 +256,20 @@ def evaluated_problem(depsgraph, obj, uv_name):
     if not np.isfinite(export.uvs).all():
         return (f"'{obj.name}' has NaN or Inf UVs in '{uv_name}' after its modifiers: disable the modifier that "
                 "makes them, or re-unwrap")
+    # Unchanged by modifiers up to the weld (read_layout moves a UV by at most the connect limit): no copies.
+    if export.uvs.shape != layout.uvs.shape or not np.allclose(export.uvs, layout.uvs, rtol=0.0, atol=1e-4):
+        copied = copied_overlap(lmrefine.check_layout(layout.uvs, layout.triangles, resolution),
+                                len(layout.triangles),
+                                lmrefine.check_layout(export.uvs, export.triangles, resolution),
+                                len(export.triangles))
+        if copied:
+            # A lightmap texel holds the light of one place: copies sharing their UVs share their light.
+            copying = [m.name for m in obj.modifiers if m.type in COPYING_MODIFIERS and m.show_render]
+            which = f"modifiers ({', '.join(copying)})" if copying else "modifiers"
+            return (f"'{obj.name}': its {which} copy faces with their UVs, so {copied} triangles of UV map "
+                    f"'{uv_name}' lie on top of others and would share one lightmap: apply the modifiers (Object > "
+                    "Apply > Visual Geometry to Mesh), then unwrap the map again (UV > Lightmap Pack) so every "
+                    "copy has texels of its own")
     return None
 
 

@@ -94,6 +94,7 @@ class Target:
     layout: bridge.Layout
     image: object = None  # first lightmap, when it comes from an existing image
     zero_area: int = 0  # triangles of zero area in 3-D: they need no texels, the baker skips them
+    inside_out: tuple = (0, 0)  # (closed parts whose normals point inward, closed parts): they bake black
 
 
 @dataclass
@@ -223,6 +224,11 @@ def validate(context, objects, options):
     resolution = options["resolution"]
     owners = {}
     targets = Targets()
+    # Both bakes see the evaluated meshes. A script that set UVs or positions with foreach_set and no
+    # update() leaves them stale, and the bake would use other UVs than the ones refined.
+    for obj in meshes:
+        if obj.data.library is None:
+            obj.data.update()
     depsgraph = context.evaluated_depsgraph_get()
     # Bad geometry in one object skips it (reported, with its fix); the
     # others are refined. Only when every object is skipped does the run stop.
@@ -256,7 +262,8 @@ def _validate_object(obj, options, owners, resolution, depsgraph):
                         "both bakers only see visible objects")
     if mesh.name in owners:
         raise UserError(f"'{owners[mesh.name]}' and '{obj.name}' share mesh '{mesh.name}': UV maps belong "
-                        "to the mesh, so select only one of them")
+                        f"to the mesh, so only '{owners[mesh.name]}' is refined; to give each its own lightmap, "
+                        "make the mesh single-user (Object > Relations > Make Single User > Object & Data)")
     owners[mesh.name] = obj.name
     if len(mesh.uv_layers) == 0:
         raise UserError(f"'{obj.name}' has no UV map: add one for the lightmap (Object Data > UV Maps > +, "
@@ -297,14 +304,14 @@ def _validate_object(obj, options, owners, resolution, depsgraph):
     if zero_uv:
         raise UserError(f"'{obj.name}' has {zero_uv} triangles of zero area in UV map '{source}': "
                         "re-unwrap it (UV > Lightmap Pack) so every face has its own texels")
-    problem = bridge.evaluated_problem(depsgraph, obj, source)
+    problem = bridge.evaluated_problem(depsgraph, obj, source, layout, resolution)
     if problem:
         raise UserError(problem)
     if options.get("tessellate") is not None:
         problem = tessellation.problem(obj)
         if problem:
             raise UserError(problem)
-    target = Target(obj, source, refined, layout, zero_area=zero_3d)
+    target = Target(obj, source, refined, layout, zero_area=zero_3d, inside_out=bridge.inside_out_shells(mesh))
     if options["first_lightmap"] == 'IMAGE':
         target.image = _first_image(obj, source, options)
     return target
@@ -384,10 +391,22 @@ def run(context, targets, options, journal, image_dir=None):
         done += maps
         outcome.timings["first bake"] = time.perf_counter() - clock
 
+    for target in targets:
+        inward, closed = target.inside_out
+        if inward:
+            parts, bake = ("it is", "it bakes") if closed == 1 else (f"{inward} of its {closed} closed parts are",
+                                                                       "they bake")
+            outcome.warnings.append(f"'{target.obj.name}': {parts} inside out (the normals point inward), and "
+                                    f"both bakers light the side a face's normal points to, so {bake} black: "
+                                    "recalculate its normals (Edit Mode > Mesh > Normals > Recalculate Outside)")
     for group in groups:
         if not np.any(lightmaps[group.name][..., :3] > 0.0):
-            outcome.warnings.append(f"{group.label()}: the first lightmap is black (no light reaches it), so "
-                                    "there is nothing to refine for: add lights or a world colour")
+            if all(t.inside_out[0] and t.inside_out[0] == t.inside_out[1] for t in group.targets):
+                cause, fix = "its faces point inward", "recalculate its normals (above)"
+            else:
+                cause, fix = "no light reaches it", "add lights or a world colour"
+            outcome.warnings.append(f"{group.label()}: the first lightmap is black ({cause}), so there is "
+                                    f"nothing to refine for: {fix}")
 
     # 1b. Opt-in: split the triangles that strong transitions of the first lightmap cross, in the mesh.
     if options.get("tessellate") is not None:

@@ -3,8 +3,10 @@
 The Blender add-on reads a UV map and a mesh into numpy and asks these
 functions what to do with them, so the rules are tested here with plain
 arrays: corners of one vertex that differ by a rounding error get one UV
-(`weld_uvs`), and broken vertices or UV triangles of zero area are found
-before they reach the refiner (`geometry_problems`). Whether a refined
+(`weld_uvs`), broken vertices or UV triangles of zero area are found
+before they reach the refiner (`geometry_problems`), and so are modifiers
+that copy charts onto each other (`copied_overlap`) and closed meshes
+whose normals point inward, which bake black (`inside_out_shells`). Whether a refined
 layout is worse than its source is `lmrefine.backoff.failures`, the rule
 refine_uvs itself applies.
 """
@@ -98,3 +100,71 @@ def describe_problems(check, padding):
     if check["min_gutter_texels"] < padding:
         problems.append(f"charts {check['min_gutter_texels']:.2f} texels apart, padding is {padding}")
     return ", ".join(problems)
+
+
+# Modifiers that copy faces with their UVs (the copies then share texels);
+# named in the message when a layout's copies overlap.
+COPYING_MODIFIERS = ("ARRAY", "MIRROR", "SOLIDIFY", "SCREW")
+# More than this share of the evaluated triangles overlapping beyond the
+# source layout's own share: the modifiers copied charts onto each other. A
+# copy overlaps with all its triangles (a half or more of the mesh); a
+# subdivided layout's rounding far fewer.
+COPIED_OVERLAP_SHARE = 0.01
+
+
+def copied_overlap(source_check, source_triangles, evaluated_check, evaluated_triangles):
+    """Triangles of the evaluated layout (modifiers applied) that overlap
+    beyond the source layout's own share, when that is more than
+    COPIED_OVERLAP_SHARE of them (else 0). The checks are check_layout's of
+    the same UV map before and after the modifiers."""
+    if evaluated_triangles == 0:
+        return 0
+    expected = source_check["overlapping"] / max(source_triangles, 1) * evaluated_triangles
+    extra = evaluated_check["overlapping"] - expected
+    return int(round(extra)) if extra > COPIED_OVERLAP_SHARE * evaluated_triangles else 0
+
+
+def inside_out_shells(positions, triangles):
+    """(closed shells whose faces point inward, closed shells) of a mesh.
+
+    positions: (V, 3) vertex positions in the mesh's own space (its winding
+    makes its normals there; an object's negative scale is not a flip);
+    triangles: (T, 3) vertex indices. A shell is a connected part; it is
+    closed when every edge joins exactly two of its triangles, wound
+    opposite ways, and then its normals point inward exactly when its signed
+    volume is negative. Both bakers light the side a face's normal points
+    to, so an inside-out shell bakes black. Open shells are not judged.
+    """
+    from ._native import find_charts
+    positions = np.asarray(positions, np.float64).reshape(-1, 3)
+    triangles = np.asarray(triangles, np.int64).reshape(-1, 3)
+    if len(triangles) == 0:
+        return 0, 0
+    # find_charts joins triangles that share an index: with one distinct
+    # point per vertex, its charts are the mesh's connected shells.
+    points = np.zeros((len(positions), 2), np.float64)
+    points[:, 0] = np.arange(len(positions))
+    shell = find_charts(points, triangles.astype(np.int32))
+    shells = int(shell.max()) + 1
+    start, end = triangles.reshape(-1), np.roll(triangles, -1, axis=1).reshape(-1)
+    count = max(len(positions), 1)
+    forward, backward = start * count + end, end * count + start
+    keys, uses = np.unique(forward, return_counts=True)
+    # An edge is closed when it is used once each way; anything else opens its shell.
+    index = np.clip(np.searchsorted(keys, backward), 0, len(keys) - 1)
+    closed_edge = (uses[np.searchsorted(keys, forward)] == 1) & (keys[index] == backward) & (uses[index] == 1)
+    open_shell = np.zeros(shells, bool)
+    np.logical_or.at(open_shell, np.repeat(shell, 3), ~closed_edge)
+    corners = positions[triangles]
+    # Volume about each shell's centre, so far-away shells keep their digits.
+    centre = np.zeros((shells, 3))
+    np.add.at(centre, shell, corners.mean(axis=1))
+    centre /= np.maximum(np.bincount(shell, minlength=shells), 1)[:, None]
+    local = corners - centre[shell][:, None, :]
+    volume = np.zeros(shells)
+    np.add.at(volume, shell, np.einsum("ij,ij->i", local[:, 0], np.cross(local[:, 1], local[:, 2])) / 6.0)
+    extent = np.zeros(shells)
+    np.maximum.at(extent, shell, np.abs(local).max(axis=(1, 2)))
+    # A flat closed shell (a doubled plane) has no inside: not judged.
+    solid = ~open_shell & (np.abs(volume) > 1e-6 * extent ** 3)
+    return int(np.count_nonzero(solid & (volume < 0))), int(np.count_nonzero(~open_shell))

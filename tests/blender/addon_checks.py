@@ -292,6 +292,31 @@ def skip_bad_objects_refines_the_others():
 
 
 @check("refine", "bake")
+def copies_and_inside_out_meshes_are_named():
+    """An Array modifier's copies share their UVs: the object is skipped, the message names the modifier and
+    the fix. An inside-out box is refined with a warning saying why it bakes black. The floor, under a
+    Subdivision Surface modifier (which moves UVs but copies none), is refined."""
+    fresh_shadow_scene(first_lightmap='EMBREE', backend='EMBREE', bake_passes={'DIRECT'})
+    import bmesh
+    floor, blocker = bpy.data.objects["Floor"], bpy.data.objects["Blocker"]
+    floor.modifiers.new("Subdivision", 'SUBSURF')
+    arrayed = bpy.data.objects.new("Arrayed", blocker.data.copy())
+    arrayed.location = (-1.2, -1.2, 0.5)
+    bpy.context.scene.collection.objects.link(arrayed)
+    array = arrayed.modifiers.new("Row", 'ARRAY')
+    array.count = 3
+    mesh = bmesh.new()
+    mesh.from_mesh(blocker.data)
+    bmesh.ops.reverse_faces(mesh, faces=mesh.faces)
+    mesh.to_mesh(blocker.data)
+    mesh.free()
+    scenes.select_only(floor, arrayed, blocker)
+    outcome, warnings, error = _run_pipeline([floor, arrayed, blocker])
+    return {"error": error, "objects": outcome and outcome.objects, "warnings": warnings,
+            "arrayed_layers": [layer.name for layer in arrayed.data.uv_layers]}
+
+
+@check("refine", "bake")
 def zero_area_faces_are_skipped_and_counted():
     """A mesh with one face of zero area in 3-D is refined; the face is counted in a warning."""
     fresh_shadow_scene(first_lightmap='EMBREE', backend='EMBREE', bake_passes={'DIRECT'})

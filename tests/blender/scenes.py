@@ -165,7 +165,8 @@ def coarse_shadow_scene(quads=4):
 
 
 def _fit_layer(mesh, box, name="Lightmap"):
-    """Squeeze UV map `name` of `mesh` into the rectangle box = (u0, v0, u1, v1)."""
+    """Squeeze UV map `name` of `mesh` into the rectangle box = (u0, v0, u1, v1). No mesh.update(), as
+    a user's script may forget it: the add-on must bake the UVs it refines all the same."""
     layer = mesh.uv_layers[name]
     uvs = np.empty(len(mesh.loops) * 2, dtype=np.float32)
     layer.data.foreach_get("uv", uvs)
