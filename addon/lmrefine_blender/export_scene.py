@@ -111,7 +111,8 @@ def export(out, objects_spec, uv_map):
         if not any(len(obj.data.uv_layers) for obj in meshes):
             raise UserError(f"none of the {len(meshes)} mesh objects in {bpy.data.filepath} has a UV map: give the "
                             f"objects that get a lightmap a lightmap UV map in Blender ({UNWRAP_HINT})")
-    objects = [bpy.data.objects[name] for name in object_names(spec, scene)]
+    names = object_names(spec, scene)  # all and collection:NAME leave out what the bake does not see
+    objects = [bpy.data.objects[name] for name in names]
     not_meshes = [f"'{obj.name}' ({obj.type.lower()})" for obj in objects if obj.type != 'MESH']
     if not_meshes:
         raise UserError(f"--objects names objects that are not meshes: {', '.join(not_meshes)}")
@@ -120,6 +121,7 @@ def export(out, objects_spec, uv_map):
     if hidden and named:
         raise UserError(f"{', '.join(hidden)}: hidden or disabled for render; show them in Blender, or leave them "
                         "out of --objects")
+    hidden = sorted(hidden + names.left_out)
     if hidden:
         print(f"lmrefine: note: left out (hidden or disabled for render): {', '.join(hidden)}", flush=True)
         objects = [obj for obj in objects if bridge.renders(obj)]

@@ -7,7 +7,8 @@ the whole refinement for one tight spot, the deformation is blended back
 towards the identity only around the charts that fail: every node keeps a
 fraction t of its displacement; t halves, round by round, in the
 neighbourhood of each failing chart (and of any grid cell the blend made
-invalid) until the layout passes. A chart with flipped triangles backs off
+invalid) until the layout passes, and rises from there no faster than the
+nodes' displacement allows, so the blend itself shears no cell much. A chart with flipped triangles backs off
 just enough to unflip them instead: scaling the fraction kept in its
 neighbourhood scales each of its corners' moves alike (the warp is linear
 in the nodes), so a triangle's area is a quadratic in the scale, whose root
@@ -154,8 +155,16 @@ def _bounded_ramp(kept, slope):
     node n from a neighbour: the lowest over paths of the start value plus
     the slopes the path enters. Along a line that bound is a running minimum
     of kept - cumsum(slope), so sweeps along rows and columns, both ways,
-    repeat until nothing changes (a path needs one round per turn)."""
-    values, slope = kept.astype(np.float64), slope.astype(np.float64)
+    repeat until nothing changes (a path needs one round per turn). Only
+    the window of the dips, grown by the farthest a dip can reach at the
+    lowest slope, can change: elsewhere every path has climbed back to 1."""
+    dip_rows, dip_cols = np.flatnonzero(np.any(kept < 1, axis=1)), np.flatnonzero(np.any(kept < 1, axis=0))
+    if not len(dip_rows):
+        return
+    reach = int(np.ceil((1.0 - float(kept.min())) / float(slope.min())))
+    window = (slice(max(dip_rows[0] - reach, 0), dip_rows[-1] + reach + 1),
+              slice(max(dip_cols[0] - reach, 0), dip_cols[-1] + reach + 1))
+    values, slope = kept[window].astype(np.float64), slope[window].astype(np.float64)
     while True:
         before = values.copy()
         for axis in (0, 1):
@@ -166,28 +175,7 @@ def _bounded_ramp(kept, slope):
                 np.minimum(line, bound, out=line)  # a view of `values` when reversed
         if np.array_equal(values, before):
             break
-    np.minimum(kept, values.astype(np.float32), out=kept)
-
-
-def _ramp(kept):
-    """Lower `kept` in place around its dips so it changes gradually (a step
-    in the fraction kept would shear the cells across it). Only the window
-    of the dips, grown by the ramp's reach, can change: elsewhere the mean
-    is 1."""
-    dip_rows, dip_cols = np.flatnonzero(np.any(kept < 1, axis=1)), np.flatnonzero(np.any(kept < 1, axis=0))
-    if not len(dip_rows):
-        return
-    i0, i1 = max(dip_rows[0] - _MARGIN, 0), min(dip_rows[-1] + _MARGIN + 1, kept.shape[0])
-    j0, j1 = max(dip_cols[0] - _MARGIN, 0), min(dip_cols[-1] + _MARGIN + 1, kept.shape[1])
-    # The window and its ring of neighbours; past the grid's edge, the edge repeated.
-    a0, a1, b0, b1 = max(i0 - 1, 0), min(i1 + 1, kept.shape[0]), max(j0 - 1, 0), min(j1 + 1, kept.shape[1])
-    edges = ((1 - (i0 - a0), 1 - (a1 - i1)), (1 - (j0 - b0), 1 - (b1 - j1)))
-    rows, cols = i1 - i0, j1 - j0
-    for _ in range(_MARGIN):
-        padded = np.pad(kept[a0:a1, b0:b1], edges, mode="edge")
-        mean = sum(padded[1 + di:1 + di + rows, 1 + dj:1 + dj + cols]
-                   for di in (-1, 0, 1) for dj in (-1, 0, 1)) / 9
-        np.minimum(kept[i0:i1, j0:j1], mean.astype(np.float32), out=kept[i0:i1, j0:j1])
+    np.minimum(kept[window], values.astype(np.float32), out=kept[window])
 
 
 def unflip_factors(uvs, new_uvs, triangles, charts, count):
@@ -237,6 +225,12 @@ def _passed(check, threshold):
     return check
 
 
+def _slopes(displacement, shape):
+    """Per node, the most the fraction kept may change into it from a neighbour: _SLOPE over the node's
+    displacement in texels (at most 1)."""
+    return _SLOPE / np.maximum(np.linalg.norm(displacement * np.array(shape[::-1], np.float32), axis=2), _SLOPE)
+
+
 def _unflip_locally(kept, displacement, identity, uvs, new_uvs, triangles, shape, padding, original, checker,
                     threshold):
     """Back off around flipped triangles only, from the fractions `kept`
@@ -247,7 +241,7 @@ def _unflip_locally(kept, displacement, identity, uvs, new_uvs, triangles, shape
     or None if it fails in another way or is still flipped after
     _LOCAL_ROUNDS (the caller then backs off whole charts)."""
     kept = kept.copy()
-    slope = _SLOPE / np.maximum(np.linalg.norm(displacement * np.array(shape[::-1], np.float32), axis=2), _SLOPE)
+    slope = _slopes(displacement, shape)
     for _ in range(_LOCAL_ROUNDS):
         flipped, factor = flipped_triangles(uvs, new_uvs, triangles)
         # Each triangle its own box: every node its corners are warped with, so its corners' moves scale alike.
@@ -316,7 +310,7 @@ def accept(full, identity, uvs, triangles, shape, padding, original, checker=Non
                 factors = np.where(np.isnan(unflip), factors, unflip)
             if len(failing):
                 _lower(kept, boxes[failing], factors[failing])
-                _ramp(kept)
+                _bounded_ramp(kept, _slopes(displacement, shape))
                 continue
             region = np.ones(kept.shape, bool)  # a failure no chart owns: back off everywhere
         else:
@@ -324,6 +318,6 @@ def accept(full, identity, uvs, triangles, shape, padding, original, checker=Non
                 limited_by.append("grid")
             region = _around(bad_cells, _MARGIN)
         kept[region] = np.where(kept[region] > _SNAP_TO_ZERO, 0.5 * kept[region], 0.0)
-        _ramp(kept)
+        _bounded_ramp(kept, _slopes(displacement, shape))
     kept[:] = 0.0
     return identity, uvs.copy(), original, kept, limited_by
