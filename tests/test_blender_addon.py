@@ -613,6 +613,8 @@ def test_tessellation_adds_vertices_within_the_budget_and_keeps_every_attribute(
     assert value["uvmap_residual"] < 1e-6 and value["lightmap_residual"] < 1e-6
     assert value["tint_residual"] < 1e-6
     assert value["refined_triangles"] > 32  # the refinement ran on the tessellated layout (32 before)
+    # Its quads were one chart each before the split (the split put vertices inside them): re-charted still.
+    assert value["panel_recharted"] == 1
     assert value["leftover_meshes"] == ["Cube", "FloorMesh"]  # the rollback copy is gone after success
     # Ctrl+Z: one step back restores the original mesh exactly.
     assert value["undo_vertices"] == 25 and value["undo_coordinates_equal"]

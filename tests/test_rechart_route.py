@@ -27,11 +27,12 @@ def _floor_layouts():
     return corners, per_face, one_chart
 
 
-def _shadowed_floor(uvs, triangles):
+def _shadowed_floor(uvs, triangles, corners=None):
     """The floor under a sun, half of it in the shadow of a roof (a hard
-    edge across the quads), baked on the layout (uvs, triangles)."""
+    edge across the quads), baked on the layout (uvs, triangles); `corners`:
+    its positions per corner (default the CELLS x CELLS floor's)."""
     scene = lmrefine.Scene()
-    scene.add_mesh(_corner_positions(), triangles, uvs=uvs)
+    scene.add_mesh(_corner_positions() if corners is None else corners, triangles, uvs=uvs)
     roof = np.array([(-2, -2, 1), (0.13, -2, 1), (0.13, 2, 1), (-2, 2, 1)], np.float32)
     scene.add_mesh(roof, np.array([(0, 1, 2), (0, 2, 3)], np.int32), receiver=False)
     scene.add_light("sun", energy=3.0, angle=0.01, direction=(0.25, 0.1, -1.0))
@@ -301,6 +302,36 @@ def test_later_stages_of_a_recharted_layout_with_no_room_refine_inside_its_chart
     assert lmrefine.check_layout(second.uvs, triangles, RESOLUTION, padding=2)["valid"]
 
 
+def test_a_tessellated_lightmap_pack_source_keeps_the_route():
+    # A floor of 3 x 3 quads, one chart each, under a roof's shadow edge. Splitting the triangles the edge
+    # crosses puts vertices inside their charts: the split layout reads as having room and would keep its
+    # 9 charts. The options from the layout before the split ask for the route.
+    positions, vertex_triangles = floor_grid(3, 1.0)
+    uvs, triangles = lightmap_pack(charts_across=3, margin_texels=2, resolution=RESOLUTION)
+    lightmap = _shadowed_floor(uvs, triangles, positions[vertex_triangles].reshape(-1, 3).astype(np.float32))
+    strength = lmrefine.transition_strength_of(lightmap, uvs, triangles)
+    split = lmrefine.tessellate(positions, vertex_triangles, uvs[triangles].reshape(-1, 2), strength, budget=4.0)
+    split_triangles = np.arange(len(split.uvs), dtype=np.int32).reshape(-1, 3)
+    split_corners = split.positions[split.triangles].reshape(-1, 3)
+    assert rechart_route.layout_room(uvs, triangles)["no_room"]
+    assert not rechart_route.layout_room(split.uvs, split_triangles)["no_room"]
+    gated = lmrefine.refine_uvs(lightmap, split.uvs, split_triangles, RESOLUTION, padding=2, positions=split_corners)
+    assert not gated.report["rechart"]["used"] and "has room" in gated.report["rechart"]["reason"]
+    options = lmrefine.tessellated_refine_options({"strength": 24.0}, uvs, triangles)
+    assert options == {"strength": 24.0, "rechart": "always"}
+    routed = lmrefine.refine_uvs(lightmap, split.uvs, split_triangles, RESOLUTION, padding=2,
+                                 positions=split_corners, **options)
+    info = routed.report["rechart"]
+    assert info["used"] and info["always"] and info["charts"] == 1, info
+    assert routed.report["notes"][0].startswith("re-charted: the source layout's 9 charts were asked")
+    assert lmrefine.check_layout(routed.uvs, split_triangles, RESOLUTION, padding=2)["valid"]
+    assert metrics.further_stage_options(routed.report) == {"repack": False}  # as for a layout with no room
+    # The route turned off, or a layout with room before the split: the options as they were.
+    assert lmrefine.tessellated_refine_options({"rechart": False}, uvs, triangles) == {"rechart": False}
+    _, _, (uvs_room, triangles_room) = _floor_layouts()
+    assert lmrefine.tessellated_refine_options({}, uvs_room, triangles_room) == {}
+
+
 def test_route_off_switch(lightmap_pack_case):
     corners, uvs, triangles, lightmap = lightmap_pack_case
     plain = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2)
@@ -371,7 +402,7 @@ def test_route_bad_positions(lightmap_pack_case, positions, error, match):
 
 def test_route_bad_switch(lightmap_pack_case):
     corners, uvs, triangles, lightmap = lightmap_pack_case
-    with pytest.raises(TypeError, match="rechart must be True or False"):
+    with pytest.raises(TypeError, match="rechart must be True, False or 'always'"):
         lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, positions=corners, rechart="yes")
 
 

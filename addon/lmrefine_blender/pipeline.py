@@ -53,16 +53,18 @@ def error_text(error):
     return text
 
 
-def refine_parts(group, options):
+def refine_parts(group, options, refine_options=None):
     """The stages refine_uvs(..., positions=group.positions) will report for `group`'s joined layout:
     REFINE_STAGES, and RECHART_STAGES more when it may take the re-chart route (the rule of refine_uvs:
     re-charting on, strength above 0, the mesh given, and a layout with no room or charts folded over
     creases; whether the folds hold enough light to be cut is known only from the bake, and a route
     not taken ends its share at once), so the progress fills the refinement's share over all of them
-    rather than standing still through the re-chart."""
-    refine_options = options["refine_options"]
+    rather than standing still through the re-chart. `refine_options`: the group's own (default the run's)."""
+    refine_options = options["refine_options"] if refine_options is None else refine_options
     if group.positions is None or not refine_options.get("rechart", True) or refine_options.get("strength") == 0:
         return REFINE_STAGES
+    if refine_options.get("rechart") == "always":
+        return REFINE_STAGES + RECHART_STAGES
     from lmrefine import folds, rechart_route
     route = (rechart_route.layout_room(group.uvs, group.triangles)["no_room"]
              or len(folds.fold_faces(group.uvs, group.triangles, group.positions, rechart_route.ANGLE)[0]) > 0)
@@ -409,8 +411,12 @@ def run(context, targets, options, journal, image_dir=None):
                                     f"nothing to refine for: {fix}")
 
     # 1b. Opt-in: split the triangles that strong transitions of the first lightmap cross, in the mesh.
+    refine_options = {group.name: options["refine_options"] for group in groups}
     if options.get("tessellate") is not None:
         clock = time.perf_counter()
+        for group in groups:  # from the layouts before the split: a one-face-per-chart map keeps its route
+            refine_options[group.name] = lmrefine.tessellated_refine_options(options["refine_options"],
+                                                                             group.uvs, group.triangles)
         for target in targets:
             yield from _tessellate(lmrefine, target, lightmaps[group_of[target.obj.name].name],
                                    options["tessellate"], journal, outcome, done * span, span)
@@ -429,8 +435,8 @@ def run(context, targets, options, journal, image_dir=None):
                 f"Refining {name}",
                 lambda progress, lightmap=lightmaps[name], group=group: lmrefine.refine_uvs(
                     lightmap, group.uvs, group.triangles, resolution, padding=padding, progress=progress,
-                    positions=group.positions, normals=group.normals, **options["refine_options"]),
-                done * span, span, parts=refine_parts(group, options))
+                    positions=group.positions, normals=group.normals, **refine_options[group.name]),
+                done * span, span, parts=refine_parts(group, options, refine_options[name]))
         except (ValueError, TypeError, MemoryError) as error:
             # The core refused this map's input: skip its objects, refine the others
             # (nothing of them was written yet).

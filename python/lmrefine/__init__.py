@@ -45,7 +45,7 @@ from .baker import BakeResult, bake, evaluate, trace_rays  # noqa: F401  (re-exp
 from .charting import RechartResult, rechart  # noqa: F401
 from .packer import CHART_TOLERANCE, PackResult, pack_charts  # noqa: F401
 from .refine import RefineResult, identity_grid, refine_uvs  # noqa: F401
-from .tessellation import TessellationResult, tessellate, transition_strength_of  # noqa: F401
+from .tessellation import TessellationResult, tessellate, tessellated_refine_options, transition_strength_of  # noqa: F401
 
 __version__ = _native.__version__
 
@@ -83,6 +83,7 @@ __all__ = [
     "run_automaton",
     "trace_rays",
     "tessellate",
+    "tessellated_refine_options",
     "transition_strength_of",
     "warp_uvs",
     "write_image",

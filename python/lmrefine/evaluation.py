@@ -19,7 +19,7 @@ from . import bake, check_layout, find_charts, metrics, pack_charts, refine_uvs,
 from . import evaluate as evaluate_light
 from .charting import rechart
 from .per_effect import EFFECTS, gradient_energy, parse_rules, split_fractions, split_resolutions
-from .tessellation import MAX_BUDGET
+from .tessellation import MAX_BUDGET, tessellated_refine_options
 
 DEFAULT_MULTIPLIERS = (1.0, 1.5, 2.0, 3.0, 4.0)
 # A transition-point RMSE at least this much lower counts as a gain.
@@ -498,10 +498,12 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
     else:
         baseline = stages.run("bake baseline", lambda p: _bake_map(sample, uvs, resolution, options, p))
     tessellation = unsplit = None
+    refine_options = options.refine_options
     if options.tessellate is not None:
         # Same surface, same lightmap mapping: the baseline bake stays valid and
         # every later bake and the ground truth use the split triangles.
         unsplit = sample
+        refine_options = tessellated_refine_options(refine_options, uvs, triangles)
         sample, tessellation, to_unsplit = stages.run("tessellate", lambda p: _tessellated(
             sample, variant, baseline, options.tessellate))
         uvs, triangles = sample.layout(variant)
@@ -510,7 +512,7 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
     positions, normals = _route_mesh(sample, options)
     refined = stages.run("refine", lambda p: refine_uvs(baseline, uvs, triangles, resolution, padding=padding,
                                                         progress=p, positions=positions, normals=normals,
-                                                        **options.refine_options))
+                                                        **refine_options))
     refined_map = stages.run("bake refined", lambda p: _bake_map(sample, refined.uvs, resolution, options, p))
 
     # Ground truth at area-uniform points, and at two neighbours each along

@@ -258,11 +258,19 @@ def layout_text(r):
         text = f"Layout: the scene's own `{layout.get('variant', r['variant'])}` lightmap UVs."
         rechart = (r.get("refine") or {}).get("rechart") or {}
         if rechart.get("used"):
-            room = rechart["room"]
+            room, folds = rechart["room"], rechart.get("folds") or {}
+            if room["no_room"]:
+                why = (f"the source gives the refiner no room ({room['charts']} charts for {room['triangles']} "
+                       f"triangles, {room['room_fraction']:.0%} of its area in triangles with a UV inside their "
+                       "chart)")
+            elif rechart.get("always"):
+                why = (f"the source's {room['charts']} charts were one face each before the tessellation split "
+                       "their triangles")
+            else:
+                why = (f"the source's charts fold over {folds.get('count', 0)} creases holding "
+                       f"{folds.get('energy_fraction', 0.0):.0%} of the first bake's light changes")
             text += (f" The refined map's layout was **re-charted from the mesh** by refine_uvs (the route a user "
-                     f"gets): the source gives the refiner no room ({room['charts']} charts for "
-                     f"{room['triangles']} triangles, {room['room_fraction']:.0%} of its area in triangles with a "
-                     f"UV inside their chart), so {rechart['charts']} charts at {rechart['angle']:g} degrees were "
+                     f"gets): {why}, so {rechart['charts']} charts at {rechart['angle']:g} degrees were "
                      f"refined; the model predicted {rechart['predicted_error']:.2f} of the source's error. The "
                      "baseline is the source layout baked plain.")
         elif rechart.get("room", {}).get("no_room"):

@@ -224,7 +224,11 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
             The result keeps the input's indexing: result.uvs (N, 2) for
             the same triangles.
         rechart: False turns the re-chart route off (the source layout
-            is refined as without positions).
+            is refined as without positions); 'always' tries it whatever
+            the layout's room and folds (the keep rule still decides), for
+            a layout whose charts were one face each before its triangles
+            were split (lmrefine.tessellate adds vertices inside them);
+            report["rechart"]["always"] is then True.
         normals: (N, 3) the shading normal of each UV (the uvs' indexing),
             or None (flat shading: every crease is a step in the light).
             Used with positions: where the mesh is smooth-shaded across a
@@ -278,8 +282,8 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
                "directional": directional, "wavelet": wavelet, "diffusion": diffusion, "max_steps": max_steps,
                "repack": repack, "min_chart_scale": min_chart_scale, "max_chart_scale": max_chart_scale,
                "world_areas": world_areas, "max_stretch": max_stretch}
-    if not isinstance(rechart, (bool, np.bool_)):
-        raise TypeError(f"rechart must be True or False, got {type(rechart).__name__}")
+    if not (isinstance(rechart, (bool, np.bool_)) or (isinstance(rechart, str) and rechart == "always")):
+        raise TypeError(f"rechart must be True, False or 'always', got {rechart!r}")
     if normals is not None and positions is None:
         raise ValueError("normals= is read only with positions= (the re-chart route): pass the UVs' 3-D positions "
                          "too, or leave normals out")
@@ -293,17 +297,19 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
     if normals is not None:
         normals = rechart_route.normals_array(normals, len(uvs))
     room = rechart_route.layout_room(uvs, triangles)
+    # 'always': the caller knows the layout's charts are one face each under its split triangles.
+    opened = room["no_room"] or rechart == "always"
     result, energy, source_mask = _refine(lightmap, uvs, triangles, resolution, padding, mask, gradient, progress,
                                           options)
     folds = None
-    if rechart and not room["no_room"] and gradient is None and lightmap is not None:
+    if rechart and not opened and gradient is None and lightmap is not None:
         folds = find_folds(uvs, triangles, positions, rechart_route.ANGLE, energy, source_mask, normals)
     # Any fold opens the route; the keep rule decides (a re-charted layout
     # also changes charts and packing, so a fold's share alone does not).
     folded = folds is not None and len(folds.faces) > 0
     if not rechart:
         info = {"used": False, "room": room, "reason": "re-charting is off (rechart=False)"}
-    elif not room["no_room"] and not folded:
+    elif not opened and not folded:
         info = {"used": False, "room": room, "folds": rechart_route.fold_report(folds),
                 "reason": f"the source layout has room ({room['room_fraction']:.0%} of its area is in triangles "
                 f"with a UV inside their chart) and its charts fold over no crease sharper than "
@@ -318,9 +324,11 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
             lambda carried, new_uvs, new_mask, new_padding: _refine(carried, new_uvs, triangles, shape, new_padding,
                                                                     new_mask, None, progress, options)[0],
             lightmap, uvs, triangles, shape, padding, positions, room, energy, result, progress, folds, normals)
+        if rechart == "always":
+            info["always"] = True
         if recharted is not None:
             result = _recharted_result(recharted, result, uvs, triangles, energy, source_mask, info)
-    if not info["used"] and (room["no_room"] or folded) and rechart:
+    if not info["used"] and (opened or folded) and rechart:
         result.report["notes"].append(f"not re-charted: {info['reason']}")
     result.report["rechart"] = info
     result.report["seconds"] = time.perf_counter() - start
@@ -338,6 +346,9 @@ def _recharted_result(recharted, source_result, uvs, triangles, energy, mask, in
     if room["no_room"]:
         why = (f"the source layout gives the refiner no room ({room['charts']} charts for {room['triangles']} "
                f"triangles, {room['room_fraction']:.0%} of its area in triangles with a UV inside their chart)")
+    elif info.get("always"):
+        why = (f"the source layout's {room['charts']} charts were asked to be re-charted (rechart='always': "
+               "one face each before the tessellation split their triangles)")
     else:
         folds = info["folds"]
         smooth = f", {folds['smooth']} of them smooth-shaded" if folds.get("smooth") else ""

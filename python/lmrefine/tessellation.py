@@ -311,3 +311,23 @@ def transition_strength_of(lightmap, uvs, triangles, wavelet="d4"):
     lightmap = np.ascontiguousarray(_array("lightmap", raw, np.float32))
     gradient = gradient_map(lightmap, mask, wavelet=wavelet)
     return transition_strength(np.where(mask, gradient.sum(axis=2), 0.0), mask)
+
+
+def tessellated_refine_options(options, uvs, triangles):
+    """refine_uvs keywords for a layout once tessellate has split it, from the
+    keywords `options` and the layout (uvs, triangles) before the split.
+
+    refine_uvs opens its re-chart route when the layout gives it no room
+    (rechart_route.layout_room: one chart per face, as Lightmap Pack cuts).
+    Splitting a face's triangles puts vertices inside its chart, so the split
+    layout would read as having room and keep its one-face charts. When the
+    layout before the split has none, the route is asked for
+    (rechart='always'; its keep rule still decides), unless the caller
+    turned it off.
+    """
+    from .rechart_route import layout_room
+    if not isinstance(options, dict):
+        raise TypeError(f"options must be a dict of refine_uvs keywords, got {type(options).__name__}")
+    if not options.get("rechart", True) or not layout_room(uvs, triangles)["no_room"]:
+        return dict(options)
+    return {**options, "rechart": "always"}

@@ -1223,6 +1223,7 @@ def tessellation_writes_the_split_into_the_mesh():
         "outcome": outcome, "message": message, "result_message": result.message,
         "vertices_before": len(vertices_before), "vertices_after": len(mesh.vertices),
         "panel_vertices_added": result.vertices_added, "panel_tessellated": result.tessellated,
+        "panel_recharted": result.recharted,
         "triangles_after": sum(1 for polygon in mesh.polygons if polygon.loop_total == 3),
         "largest_height": float(np.abs(positions[:, 2]).max()),
         "uvmap_residual": _affine_residual(positions, maps["UVMap"], np.zeros(len(positions))),

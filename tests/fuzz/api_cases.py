@@ -21,7 +21,7 @@ COVERED = ("check_layout", "coverage_mask", "dwt", "dwt2", "find_charts", "gradi
            "idwt", "idwt2", "read_image", "run_automaton", "warp_uvs", "write_image", "LayoutChecker", "Scene",
            "bake", "evaluate", "identity_grid", "refine_uvs", "CancelledError", "BakeResult", "RefineResult",
            "pack_charts", "PackResult", "CHART_TOLERANCE", "trace_rays", "tessellate", "TessellationResult",
-           "transition_strength_of", "rechart", "RechartResult")
+           "transition_strength_of", "tessellated_refine_options", "rechart", "RechartResult")
 
 VALID_FRACTION = 0.2  # cases left entirely valid: the ok path must hold its promises too
 WAVELETS = ("haar", "d4", "d12", "d20", "cdf53", "cdf97")
@@ -632,6 +632,14 @@ def case_transition_strength_of(lm, rng):
     return _case("transition_strength_of", lm.transition_strength_of, kwargs, rng, makers)
 
 
+def case_tessellated_refine_options(lm, rng):
+    r = int(rng.choice([8, 16, 32]))
+    uvs, triangles = random_layout(rng, r)
+    kwargs = {"options": {"strength": 24.0, "rechart": bool(rng.random() < 0.8)}, "uvs": uvs, "triangles": triangles}
+    makers = {"options": lambda v, r: hostile.scalar(r), "uvs": as_array, "triangles": as_array}
+    return _case("tessellated_refine_options", lm.tessellated_refine_options, kwargs, rng, makers)
+
+
 BUILDERS = (
     case_gradient_map, case_dwt2, case_idwt2, case_dwt, case_idwt,
     case_layout_function("check_layout"), case_layout_function("coverage_mask"),
@@ -640,7 +648,7 @@ BUILDERS = (
     case_refine_uvs, case_refine_uvs,  # the whole pipeline gets twice the share
     case_pack_charts, case_rechart, case_refine_uvs_rechart, case_refine_uvs_folds,
     case_write_image, case_read_image, case_scene, case_bake, case_evaluate, case_trace_rays,
-    case_tessellate, case_transition_strength_of,
+    case_tessellate, case_transition_strength_of, case_tessellated_refine_options,
 )
 
 
