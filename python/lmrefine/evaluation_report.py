@@ -264,8 +264,8 @@ def layout_text(r):
                        f"triangles, {room['room_fraction']:.0%} of its area in triangles with a UV inside their "
                        "chart)")
             elif rechart.get("always"):
-                why = (f"the source's {room['charts']} charts were one face each before the tessellation split "
-                       "their triangles")
+                charts = f"{room['charts']} chart" + ("s were" if room["charts"] != 1 else " was")
+                why = f"the source's {charts} one face each before the tessellation split their triangles"
             else:
                 why = (f"the source's charts fold over {folds.get('count', 0)} creases holding "
                        f"{folds.get('energy_fraction', 0.0):.0%} of the first bake's light changes")

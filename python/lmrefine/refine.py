@@ -347,8 +347,9 @@ def _recharted_result(recharted, source_result, uvs, triangles, energy, mask, in
         why = (f"the source layout gives the refiner no room ({room['charts']} charts for {room['triangles']} "
                f"triangles, {room['room_fraction']:.0%} of its area in triangles with a UV inside their chart)")
     elif info.get("always"):
-        why = (f"the source layout's {room['charts']} charts were asked to be re-charted (rechart='always': "
-               "one face each before the tessellation split their triangles)")
+        charts = f"{room['charts']} chart" + ("s were" if room["charts"] != 1 else " was")
+        why = (f"the source layout's {charts} asked to be re-charted (rechart='always': one face each before "
+               "the tessellation split their triangles)")
     else:
         folds = info["folds"]
         smooth = f", {folds['smooth']} of them smooth-shaded" if folds.get("smooth") else ""
