@@ -186,7 +186,8 @@ class Names(list):
 def _baked_meshes(objects):
     """Names(the mesh objects with UV maps that take part in a bake, left_out=the others)."""
     candidates = [bpy.data.objects[name] for name in _meshes_with_uvs(objects)]
-    return Names([o.name for o in candidates if bridge.renders(o)], [o.name for o in candidates if not bridge.renders(o)])
+    seen = [bridge.renders(obj) for obj in candidates]
+    return Names([o.name for o, s in zip(candidates, seen) if s], [o.name for o, s in zip(candidates, seen) if not s])
 
 
 def object_names(spec, scene):

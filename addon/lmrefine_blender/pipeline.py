@@ -96,7 +96,6 @@ class Target:
     layout: bridge.Layout
     image: object = None  # first lightmap, when it comes from an existing image
     zero_area: int = 0  # triangles of zero area in 3-D: they need no texels, the baker skips them
-    inside_out: tuple = (0, 0)  # (closed parts whose normals point inward, closed parts): they bake black
 
 
 @dataclass
@@ -313,7 +312,7 @@ def _validate_object(obj, options, owners, resolution, depsgraph):
         problem = tessellation.problem(obj)
         if problem:
             raise UserError(problem)
-    target = Target(obj, source, refined, layout, zero_area=zero_3d, inside_out=bridge.inside_out_shells(mesh))
+    target = Target(obj, source, refined, layout, zero_area=zero_3d)
     if options["first_lightmap"] == 'IMAGE':
         target.image = _first_image(obj, source, options)
     return target
@@ -393,22 +392,8 @@ def run(context, targets, options, journal, image_dir=None):
         done += maps
         outcome.timings["first bake"] = time.perf_counter() - clock
 
-    for target in targets:
-        inward, closed = target.inside_out
-        if inward:
-            parts, bake = ("it is", "it bakes") if closed == 1 else (f"{inward} of its {closed} closed parts are",
-                                                                       "they bake")
-            outcome.warnings.append(f"'{target.obj.name}': {parts} inside out (the normals point inward), and "
-                                    f"both bakers light the side a face's normal points to, so {bake} black: "
-                                    "recalculate its normals (Edit Mode > Mesh > Normals > Recalculate Outside)")
     for group in groups:
-        if not np.any(lightmaps[group.name][..., :3] > 0.0):
-            if all(t.inside_out[0] and t.inside_out[0] == t.inside_out[1] for t in group.targets):
-                cause, fix = "its faces point inward", "recalculate its normals (above)"
-            else:
-                cause, fix = "no light reaches it", "add lights or a world colour"
-            outcome.warnings.append(f"{group.label()}: the first lightmap is black ({cause}), so there is "
-                                    f"nothing to refine for: {fix}")
+        _black_warnings(group, lightmaps[group.name], resolution, outcome.warnings)
 
     # 1b. Opt-in: split the triangles that strong transitions of the first lightmap cross, in the mesh.
     refine_options = {group.name: options["refine_options"] for group in groups}
@@ -532,6 +517,33 @@ def run(context, targets, options, journal, image_dir=None):
             outcome.image_files[image_name] = _save_image(lmrefine, image, image_dir,
                                                           "float" if options["exr_float32"] else "half")
     return outcome
+
+
+def _black_warnings(group, lightmap, resolution, warnings):
+    """Warnings for the objects of `group` whose texels are all black in the first `lightmap`: an
+    inside-out mesh is named as the cause (looked for only there: it costs a pass over the mesh), and
+    a black map says so, with the fix."""
+    lit = lightmap[..., :3] > 0.0
+    black = not np.any(lit)
+    masks = group.masks(resolution) if len(group.targets) > 1 and not black else [None] * len(group.targets)
+    inside_out = []
+    for target, mask in zip(group.targets, masks):
+        if black or (mask is not None and not np.any(lit[mask])):
+            inward, closed = bridge.inside_out_shells(target.obj.data)
+            if inward:
+                parts, bake = (("it is", "it bakes") if closed == 1
+                               else (f"{inward} of its {closed} closed parts are", "they bake"))
+                warnings.append(f"'{target.obj.name}': {parts} inside out (the normals point inward), and both "
+                                f"bakers light the side a face's normal points to, so {bake} black: recalculate "
+                                "its normals (Edit Mode > Mesh > Normals > Recalculate Outside)")
+                inside_out.append(inward == closed)
+    if black:
+        if len(inside_out) == len(group.targets) and all(inside_out):
+            cause, fix = "its faces point inward", "recalculate its normals (above)"
+        else:
+            cause, fix = "no light reaches it", "add lights or a world colour"
+        warnings.append(f"{group.label()}: the first lightmap is black ({cause}), so there is nothing to "
+                        f"refine for: {fix}")
 
 
 def source_warning(label, group, source_check, padding, resolution):

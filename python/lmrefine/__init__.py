@@ -45,7 +45,8 @@ from .baker import BakeResult, bake, evaluate, trace_rays  # noqa: F401  (re-exp
 from .charting import RechartResult, rechart  # noqa: F401
 from .packer import CHART_TOLERANCE, PackResult, pack_charts  # noqa: F401
 from .refine import RefineResult, identity_grid, refine_uvs  # noqa: F401
-from .tessellation import TessellationResult, tessellate, tessellated_refine_options, transition_strength_of  # noqa: F401
+from .tessellation import (TessellationResult, tessellate, tessellated_refine_options,  # noqa: F401
+                           transition_strength_of)
 
 __version__ = _native.__version__
 

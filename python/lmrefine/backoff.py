@@ -8,8 +8,8 @@ towards the identity only around the charts that fail: every node keeps a
 fraction t of its displacement; t halves, round by round, in the
 neighbourhood of each failing chart (and of any grid cell the blend made
 invalid) until the layout passes, and rises from there no faster than the
-nodes' displacement allows, so the blend itself shears no cell much. A chart with flipped triangles backs off
-just enough to unflip them instead: scaling the fraction kept in its
+nodes' displacement allows, so the blend itself shears no cell much. A
+chart with flipped triangles backs off just enough to unflip them instead: scaling the fraction kept in its
 neighbourhood scales each of its corners' moves alike (the warp is linear
 in the nodes), so a triangle's area is a quadratic in the scale, whose root
 is found (if the chart fails in another way too, the next round halves
@@ -275,7 +275,7 @@ def accept(full, identity, uvs, triangles, shape, padding, original, checker=Non
     kept = np.ones(full.shape[:2], np.float32)
     displacement = full - identity
     threshold = max(allowed_gutter(padding, original), 0.0)
-    boxes = None
+    boxes = slope = None
     limited_by = []
     tried_locally = False
     for _ in range(_ROUNDS):
@@ -310,7 +310,8 @@ def accept(full, identity, uvs, triangles, shape, padding, original, checker=Non
                 factors = np.where(np.isnan(unflip), factors, unflip)
             if len(failing):
                 _lower(kept, boxes[failing], factors[failing])
-                _bounded_ramp(kept, _slopes(displacement, shape))
+                slope = _slopes(displacement, shape) if slope is None else slope
+                _bounded_ramp(kept, slope)
                 continue
             region = np.ones(kept.shape, bool)  # a failure no chart owns: back off everywhere
         else:
@@ -318,6 +319,7 @@ def accept(full, identity, uvs, triangles, shape, padding, original, checker=Non
                 limited_by.append("grid")
             region = _around(bad_cells, _MARGIN)
         kept[region] = np.where(kept[region] > _SNAP_TO_ZERO, 0.5 * kept[region], 0.0)
-        _bounded_ramp(kept, _slopes(displacement, shape))
+        slope = _slopes(displacement, shape) if slope is None else slope
+        _bounded_ramp(kept, slope)
     kept[:] = 0.0
     return identity, uvs.copy(), original, kept, limited_by

@@ -148,23 +148,24 @@ def inside_out_shells(positions, triangles):
     shells = int(shell.max()) + 1
     start, end = triangles.reshape(-1), np.roll(triangles, -1, axis=1).reshape(-1)
     count = max(len(positions), 1)
-    forward, backward = start * count + end, end * count + start
-    keys, uses = np.unique(forward, return_counts=True)
-    # An edge is closed when it is used once each way; anything else opens its shell.
-    index = np.clip(np.searchsorted(keys, backward), 0, len(keys) - 1)
-    closed_edge = (uses[np.searchsorted(keys, forward)] == 1) & (keys[index] == backward) & (uses[index] == 1)
-    open_shell = np.zeros(shells, bool)
-    np.logical_or.at(open_shell, np.repeat(shell, 3), ~closed_edge)
+    # An edge is closed when it is used once each way: its undirected key twice, the two directions summing to 0.
+    _, inverse, uses = np.unique(np.minimum(start, end) * count + np.maximum(start, end), return_inverse=True,
+                                 return_counts=True)
+    direction = np.where(start < end, 1.0, -1.0)
+    closed_edge = (uses[inverse] == 2) & (np.bincount(inverse, weights=direction, minlength=len(uses))[inverse] == 0)
+    corner_shell = np.repeat(shell, 3)
+    open_shell = np.bincount(corner_shell, weights=~closed_edge, minlength=shells) > 0
     corners = positions[triangles]
     # Volume about each shell's centre, so far-away shells keep their digits.
-    centre = np.zeros((shells, 3))
-    np.add.at(centre, shell, corners.mean(axis=1))
-    centre /= np.maximum(np.bincount(shell, minlength=shells), 1)[:, None]
+    size = np.maximum(np.bincount(shell, minlength=shells), 1)
+    centre = np.stack([np.bincount(shell, weights=corners[:, :, k].mean(axis=1), minlength=shells) / size
+                       for k in range(3)], axis=1)
     local = corners - centre[shell][:, None, :]
-    volume = np.zeros(shells)
-    np.add.at(volume, shell, np.einsum("ij,ij->i", local[:, 0], np.cross(local[:, 1], local[:, 2])) / 6.0)
-    extent = np.zeros(shells)
-    np.maximum.at(extent, shell, np.abs(local).max(axis=(1, 2)))
-    # A flat closed shell (a doubled plane) has no inside: not judged.
-    solid = ~open_shell & (np.abs(volume) > 1e-6 * extent ** 3)
+    volume = np.bincount(shell, weights=np.einsum("ij,ij->i", local[:, 0], np.cross(local[:, 1], local[:, 2])) / 6.0,
+                         minlength=shells)
+    area = np.bincount(shell, weights=0.5 * np.linalg.norm(np.cross(local[:, 1] - local[:, 0],
+                                                                   local[:, 2] - local[:, 0]), axis=1),
+                       minlength=shells)
+    # A flat closed shell (a quad doubled back to back) has no inside: not judged.
+    solid = ~open_shell & (np.abs(volume) > 1e-6 * area ** 1.5)
     return int(np.count_nonzero(solid & (volume < 0))), int(np.count_nonzero(~open_shell))

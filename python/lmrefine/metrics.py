@@ -98,8 +98,9 @@ def further_stage_options(first_report):
     """refine_uvs keywords that stages 2, 3, ... add to the user's, from
     stage 1's report: on a source layout with no room (Lightmap Pack's one
     chart per face; report["rechart"]["room"], so only when stage 1 had the
-    positions, or rechart='always': such a layout tessellated) stage 1's gain is its charts' scales, re-charted or not, and
-    scaling them again from a bake on that non-uniform layout loses, so the
+    positions, or rechart='always': such a layout tessellated) stage 1's
+    gain is its charts' scales, re-charted or not, and scaling them again
+    from a bake on that non-uniform layout loses, so the
     later stages refine inside the charts only (docs/refiner.md,
     "Multi-stage refinement"). Every other layout repacks as stage 1 did."""
     rechart = (first_report or {}).get("rechart") or {}
