@@ -444,6 +444,10 @@ def test_a_texture_map_as_source_is_named_with_the_fix(facts):
     assert value["panel_warnings"] == len(value["warnings"]) >= 1
     texture = [w for w in value["per_effect_warnings"] if "looks like a texture map" in w]
     assert [w.split(":")[0] for w in texture] == ["'Blocker' (direct)", "'Blocker' (indirect)"]
+    # Gutters under the padding are said per effect too (judged at the user's padding, not the lowered one).
+    tight = [w for w in value["per_effect_tight_warnings"] if "was already invalid" in w]
+    assert [w.split(":")[0] for w in tight] == ["'Blocker' (direct)", "'Blocker' (indirect)"]
+    assert all("padding is 8" in w for w in tight)
 
 
 def test_progress_moves_per_map_and_per_stage(facts):

@@ -95,8 +95,8 @@ def run(context, targets, options, journal, image_dir=None):
         for group in groups:
             label = f"{group.label()} ({name})"
             # The source's own gutter at this side: a smaller map may not hold the full padding.
-            gutter = lmrefine.check_layout(group.uvs, group.triangles, side, padding=padding)["min_gutter_texels"]
-            pad = max(0.0, min(float(padding), float(gutter)))
+            source_at_padding = lmrefine.check_layout(group.uvs, group.triangles, side, padding=padding)
+            pad = max(0.0, min(float(padding), float(source_at_padding["min_gutter_texels"])))
             try:
                 result = yield pipeline.NativeWork(
                     f"Refining {group.name} ({name})",
@@ -112,7 +112,8 @@ def run(context, targets, options, journal, image_dir=None):
             check, source_check = pipeline._check_refined(lmrefine, label, result.uvs,
                                                           bridge.Layout(group.uvs, group.triangles), group.uvs, side,
                                                           pad)
-            warning = pipeline.source_warning(label, group, source_check, pad, side)
+            # Judged at the user's padding, as a One run does: the lowered `pad` would hide the bleeding.
+            warning = pipeline.source_warning(label, group, source_at_padding, padding, side)
             if warning is not None:
                 outcome.warnings.append(warning)
             if not result.report["moved"]:  # say why, as a One run does

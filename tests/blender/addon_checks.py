@@ -937,8 +937,12 @@ def texture_map_as_source_warns():
     run = pipeline.run_blocking(pipeline.run(bpy.context, targets, options, Journal()))
     options["per_effect"] = "sqrt"  # Layouts: Per Effect says it per effect
     per_effect = pipeline.run_blocking(pipeline.run(bpy.context, targets, options, Journal()))
+    # The box's own lightmap map (gutters of 6 texels at 64^2, fewer at the effects' sides) at a padding of 8.
+    options.update(source_layer="Lightmap", padding=8)
+    targets = pipeline.validate(bpy.context, [box], options)
+    tight = pipeline.run_blocking(pipeline.run(bpy.context, targets, options, Journal()))
     return {"outcome": outcome, "message": message, "warnings": run.warnings, "panel_warnings": result.warnings,
-            "per_effect_warnings": per_effect.warnings}
+            "per_effect_warnings": per_effect.warnings, "per_effect_tight_warnings": tight.warnings}
 
 
 # ---------------------------------------------------------------- preview
