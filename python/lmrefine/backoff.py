@@ -157,13 +157,22 @@ def _bounded_ramp(kept, slope):
     of kept - cumsum(slope), so sweeps along rows and columns, both ways,
     repeat until nothing changes (a path needs one round per turn). Only
     the window of the dips, grown by the farthest a dip can reach at the
-    lowest slope, can change: elsewhere every path has climbed back to 1."""
+    window's lowest slope, can change: a path out of it climbs that far
+    first, back to 1."""
     dip_rows, dip_cols = np.flatnonzero(np.any(kept < 1, axis=1)), np.flatnonzero(np.any(kept < 1, axis=0))
     if not len(dip_rows):
         return
-    reach = int(np.ceil((1.0 - float(kept.min())) / float(slope.min())))
-    window = (slice(max(dip_rows[0] - reach, 0), dip_rows[-1] + reach + 1),
-              slice(max(dip_cols[0] - reach, 0), dip_cols[-1] + reach + 1))
+    climb_needed, reach = 1.0 - float(kept.min()), 0
+
+    def grown(by):
+        return (slice(max(dip_rows[0] - by, 0), dip_rows[-1] + by + 1),
+                slice(max(dip_cols[0] - by, 0), dip_cols[-1] + by + 1))
+    while True:  # the reach grows with the window, whose lowest slope can only fall
+        needed = int(np.ceil(climb_needed / float(slope[grown(reach)].min())))
+        if needed <= reach:
+            break
+        reach = needed
+    window = grown(reach)
     values, slope = kept[window].astype(np.float64), slope[window].astype(np.float64)
     while True:
         before = values.copy()
@@ -228,7 +237,8 @@ def _passed(check, threshold):
 def _slopes(displacement, shape):
     """Per node, the most the fraction kept may change into it from a neighbour: _SLOPE over the node's
     displacement in texels (at most 1)."""
-    return _SLOPE / np.maximum(np.linalg.norm(displacement * np.array(shape[::-1], np.float32), axis=2), _SLOPE)
+    across, down = displacement[..., 0] * np.float32(shape[1]), displacement[..., 1] * np.float32(shape[0])
+    return _SLOPE / np.maximum(np.sqrt(across * across + down * down), _SLOPE)  # as np.linalg.norm, bit for bit
 
 
 def _unflip_locally(kept, displacement, identity, uvs, new_uvs, triangles, shape, padding, original, checker,
