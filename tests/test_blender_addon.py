@@ -405,6 +405,15 @@ def test_copies_made_by_modifiers_skip_the_object_and_inside_out_meshes_are_name
     assert not any(w.startswith("'Floor'") for w in value["warnings"])
 
 
+def test_tight_source_gutters_the_refined_map_fixes_are_reported_as_fixed(facts):
+    value = fact(facts, "tight_source_gutters_fixed_by_the_refined_map")
+    assert value["error"] is None and value["source_gutter"] < 8 and value["refined_check"]["valid"]
+    gutter = [w for w in value["warnings"] if "UV map 'Lightmap'" in w]
+    assert len(gutter) == 1 and "was invalid at 64 texels" in gutter[0] and "padding is 8" in gutter[0]
+    assert "the refined map is valid" in gutter[0] and "only the first lightmap" in gutter[0]
+    assert "no worse, but" not in gutter[0]
+
+
 def test_black_first_lightmap_warns_and_keeps_the_layout(facts):
     value = fact(facts, "black_first_lightmap_warns")
     assert len(value["warnings"]) == 1 and "the first lightmap is black" in value["warnings"][0]

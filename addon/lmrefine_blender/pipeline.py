@@ -434,7 +434,7 @@ def run(context, targets, options, journal, image_dir=None):
         done += 1
         joined = bridge.Layout(group.uvs, group.triangles)
         check, source_check = _check_refined(lmrefine, label, result.uvs, joined, group.uvs, resolution, padding)
-        warning = source_warning(label, group, source_check, padding, resolution)
+        warning = source_warning(label, group, source_check, padding, resolution, check)
         if warning is not None:
             outcome.warnings.append(warning)
         black = f"{label}: the first lightmap is black"  # already said, with its advice
@@ -546,9 +546,10 @@ def _black_warnings(group, lightmap, resolution, warnings):
                         f"refine for: {fix}")
 
 
-def source_warning(label, group, source_check, padding, resolution):
+def source_warning(label, group, source_check, padding, resolution, refined_check=None):
     """What the user should know about a group's source map that fails check_layout at `resolution`
-    (`source_check`), or None when it passes."""
+    (`source_check`), or None when it passes; `refined_check`, the refined map's check at `padding`,
+    says whether what the user gets still has the problem."""
     from lmrefine.layout_input import describe_problems
     if source_check["valid"]:
         return None
@@ -559,6 +560,13 @@ def source_warning(label, group, source_check, padding, resolution):
                 f"({describe_problems(source_check, padding)}): faces share texels, so light bleeds between "
                 "them whatever the refinement does; add a UV map for the lightmap (Object Data > UV Maps > +, "
                 "then UV > Lightmap Pack) and pick it as Source")
+    if refined_check is not None and refined_check["valid"]:
+        # Repacked or re-charted at the padding: only the source map's own bake (Before) bleeds.
+        gutter = refined_check["min_gutter_texels"]
+        apart = "one chart" if not np.isfinite(gutter) else f"charts {gutter:.2f} texels apart or more"
+        return (f"{label}: UV map '{source}' was invalid at {resolution} texels "
+                f"({describe_problems(source_check, padding)}); the refined map is valid ({apart}), so only "
+                "the first lightmap, baked with the source map, may show bleeding")
     return (f"{label}: UV map '{source}' was already invalid at {resolution} texels "
             f"({describe_problems(source_check, padding)}); the refined map is no worse, but lightmap "
             "bleeding may show: repack the source map (UV > Lightmap Pack)")

@@ -317,6 +317,23 @@ def copies_and_inside_out_meshes_are_named():
 
 
 @check("refine", "bake")
+def tight_source_gutters_fixed_by_the_refined_map():
+    """A coarse floor of one chart per face, its gutters under the padding: the route re-charts it at the
+    padding, and the warning says the refined map is valid (only the source map's bake bleeds)."""
+    scenes.coarse_shadow_scene()
+    register()
+    settings(resolution=RESOLUTION, padding=8, samples=4, first_lightmap='EMBREE', backend='EMBREE',
+             bake_passes={'DIRECT'})  # its gutters: 6.4 texels
+    floor = bpy.data.objects["Floor"]
+    source = bridge.read_layout(floor.data, "Lightmap")
+    outcome, warnings, error = _run_pipeline([floor])
+    refined = bridge.read_uv_layer(floor.data, "Lightmap_refined")
+    return {"error": error, "warnings": warnings,
+            "source_gutter": lmrefine.check_layout(source.uvs, source.triangles, RESOLUTION)["min_gutter_texels"],
+            "refined_check": lmrefine.check_layout(refined, source.triangles, RESOLUTION, padding=8)}
+
+
+@check("refine", "bake")
 def zero_area_faces_are_skipped_and_counted():
     """A mesh with one face of zero area in 3-D is refined; the face is counted in a warning."""
     fresh_shadow_scene(first_lightmap='EMBREE', backend='EMBREE', bake_passes={'DIRECT'})
