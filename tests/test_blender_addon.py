@@ -414,6 +414,14 @@ def test_tight_source_gutters_the_refined_map_fixes_are_reported_as_fixed(facts)
     assert "no worse, but" not in gutter[0]
 
 
+def test_an_inside_out_member_of_a_lit_shared_atlas_is_named(facts):
+    value = fact(facts, "inside_out_member_of_a_shared_atlas_is_named")
+    assert value["error"] is None and sorted(value["atlases"]["Floor_atlas"]) == ["Blocker", "Floor", "Post"]
+    inside_out = [w for w in value["warnings"] if "inside out" in w]
+    assert len(inside_out) == 1 and inside_out[0].startswith("'Post': it is inside out")
+    assert not any("first lightmap is black" in w for w in value["warnings"])
+
+
 def test_black_first_lightmap_warns_and_keeps_the_layout(facts):
     value = fact(facts, "black_first_lightmap_warns")
     assert len(value["warnings"]) == 1 and "the first lightmap is black" in value["warnings"][0]

@@ -334,6 +334,26 @@ def tight_source_gutters_fixed_by_the_refined_map():
 
 
 @check("refine", "bake")
+def inside_out_member_of_a_shared_atlas_is_named():
+    """Floor, Blocker and Post share one atlas; Post is inside out. The atlas is lit, so no black-map
+    warning, but Post's own texels are black and the warning names it."""
+    import bmesh
+    scenes.atlas_scene()
+    register()
+    settings(resolution=RESOLUTION, padding=2, samples=4, first_lightmap='EMBREE', backend='EMBREE',
+             bake_passes={'DIRECT'})
+    post = bpy.data.objects["Post"]
+    mesh = bmesh.new()
+    mesh.from_mesh(post.data)
+    bmesh.ops.reverse_faces(mesh, faces=mesh.faces)
+    mesh.to_mesh(post.data)
+    mesh.free()
+    objects = [bpy.data.objects[name] for name in ATLAS]
+    outcome, warnings, error = _run_pipeline(objects)
+    return {"error": error, "warnings": warnings, "atlases": outcome and outcome.atlases}
+
+
+@check("refine", "bake")
 def zero_area_faces_are_skipped_and_counted():
     """A mesh with one face of zero area in 3-D is refined; the face is counted in a warning."""
     fresh_shadow_scene(first_lightmap='EMBREE', backend='EMBREE', bake_passes={'DIRECT'})
