@@ -9,11 +9,11 @@ fraction t of its displacement; t halves, round by round, in the
 neighbourhood of each failing chart (and of any grid cell the blend made
 invalid) until the layout passes, and rises from there no faster than the
 nodes' displacement allows, so the blend itself shears no cell much. A
-chart with flipped triangles backs off just enough to unflip them instead: scaling the fraction kept in its
-neighbourhood scales each of its corners' moves alike (the warp is linear
-in the nodes), so a triangle's area is a quadratic in the scale, whose root
-is found (if the chart fails in another way too, the next round halves
-it). Before a chart backs off for flips, backing off around the flipped
+chart with flipped triangles backs off just enough to unflip them instead:
+scaling the fraction kept in its neighbourhood scales each of its corners'
+moves alike (the warp is linear in the nodes), so a triangle's area is a
+quadratic in the scale, whose root is found (if the chart fails in another
+way too, the next round halves it). Before a chart backs off for flips, backing off around the flipped
 triangles alone is tried, with the fraction kept rising from them no
 faster than the nodes' displacement allows. The original layout is the
 last resort.

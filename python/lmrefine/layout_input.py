@@ -13,6 +13,8 @@ refine_uvs itself applies.
 
 import numpy as np
 
+from ._native import find_charts
+
 # Blender's own tolerance for "these face corners share a UV" (STD_UV_CONNECT_LIMIT).
 UV_CONNECT_LIMIT = 1e-4
 
@@ -135,7 +137,6 @@ def inside_out_shells(positions, triangles):
     volume is negative. Both bakers light the side a face's normal points
     to, so an inside-out shell bakes black. Open shells are not judged.
     """
-    from ._native import find_charts
     positions = np.asarray(positions, np.float64).reshape(-1, 3)
     triangles = np.asarray(triangles, np.int64).reshape(-1, 3)
     if len(triangles) == 0:

@@ -27,6 +27,7 @@ import numpy as np
 
 from . import _native
 from ._native import coverage_mask, gradient_map
+from .rechart_route import layout_room
 from .refine import transition_strength
 
 DEFAULT_BUDGET = 0.25       # at most +25% vertices
@@ -325,7 +326,6 @@ def tessellated_refine_options(options, uvs, triangles):
     (rechart='always'; its keep rule still decides), unless the caller
     turned it off.
     """
-    from .rechart_route import layout_room
     if not isinstance(options, dict):
         raise TypeError(f"options must be a dict of refine_uvs keywords, got {type(options).__name__}")
     if not options.get("rechart", True) or not layout_room(uvs, triangles)["no_room"]:
