@@ -25,6 +25,7 @@ import argparse
 import json
 import inspect
 import os
+import re
 import subprocess
 import sys
 import tempfile
@@ -242,7 +243,7 @@ def main():
             print(f"{row['name']:<{width}}  {'':>6}  {'':>7}  {other['seconds']:>7.3f}  DIFFERENT: missing in the base build")
             failures += 1
             continue
-        problems = []
+        problems, added = [], {"new": set(), "base": set()}
         if other is None:
             problems.append("missing in the new build")
         elif row["error"] or other["error"]:
@@ -254,9 +255,11 @@ def main():
                 a = base_arrays.get(f"{row['index']}{key}")
                 b = new_arrays.get(f"{other['index']}{key}")
                 if a is None or b is None:
-                    problems.append(f"{key or 'result'} only in {'new' if a is None else 'base'}")
+                    # A report field one build adds: listed apart, list indices folded ([*]).
+                    added["new" if a is None else "base"].add(re.sub(r"\[\d+\]", "[*]", key or "result"))
                 elif not same(a, b):
                     problems.append(f"{key or 'result'}: {describe(a, b)}")
+        problems += [f"{', '.join(sorted(keys))} only in {build}" for build, keys in added.items() if keys]
         failures += bool(problems)
         result = "identical" if not problems else "DIFFERENT: " + "; ".join(problems[:4]) + \
             (f"; ... {len(problems) - 4} more" if len(problems) > 4 else "")

@@ -591,11 +591,69 @@ def stairs():
     return {"passes": ["direct"]}
 
 
+def hillside():
+    """Organic ground (holdout: never used to tune constants; added in the
+    round of the route's concurrency test and run once): smooth-shaded,
+    gently rolling terrain whose triangles follow no axis, five
+    smooth-shaded boulders (displaced spheres) and a dead tree of slanted
+    branches that is not lightmapped; a mid-height sun throws the boulders'
+    soft-edged shadows and the branches' thin ones across the slopes, and a
+    campfire-coloured point light near the ground lights the boulders'
+    sides."""
+    rng = np.random.default_rng(11)
+    size, count = 12.0, cells(12.0, 0.35)
+    phases = rng.uniform(0, 2 * math.pi, 4)
+
+    def height(x, y):
+        return (0.45 * math.sin(0.55 * x + phases[0]) * math.cos(0.4 * y + phases[1])
+                + 0.2 * math.sin(1.3 * x + 0.7 * y + phases[2]) + 0.08 * math.cos(2.1 * y - 0.9 * x + phases[3]))
+
+    def terrain(bm):
+        verts = [[bm.verts.new((x, y, height(x, y)))
+                  for y in np.linspace(-size / 2, size / 2, count + 1)]
+                 for x in np.linspace(-size / 2, size / 2, count + 1)]
+        for i in range(count):
+            for j in range(count):
+                bm.faces.new((verts[i][j], verts[i + 1][j], verts[i + 1][j + 1], verts[i][j + 1]))
+    make_object("Terrain", terrain, (0.42, 0.46, 0.3), closed=False, smooth=True)
+
+    def boulders(bm):
+        for cx, cy, radius in ((-2.5, 1.0, 1.1), (1.8, -1.5, 0.8), (3.2, 2.4, 1.3), (-1.0, -3.2, 0.6),
+                               (0.4, 3.6, 0.7)):
+            centre = Vector((cx, cy, height(cx, cy) + 0.45 * radius))
+            made = bmesh.ops.create_icosphere(bm, subdivisions=3, radius=radius)
+            for vert in made["verts"]:
+                d = vert.co.normalized()
+                bump = 1 + 0.12 * math.sin(3.1 * d.x + 1.7 * d.y * cx) + 0.08 * math.cos(4.3 * d.z + cy)
+                vert.co = centre + Vector((vert.co.x * bump, vert.co.y * bump * 0.9, vert.co.z * bump * 0.7))
+    make_object("Boulders", boulders, (0.55, 0.52, 0.5), smooth=True)
+
+    def dead_tree(bm):
+        base = (-0.2, 0.2, height(-0.2, 0.2) - 0.1)
+        cylinder_faces(bm, base, 0.14, 3.2, segments=10, cell=3.5)
+        for k in range(9):
+            angle = 2 * math.pi * k / 9 + rng.uniform(-0.3, 0.3)
+            start = Vector(base) + Vector((0, 0, 1.6 + 0.18 * k))
+            direction = Vector((math.cos(angle), math.sin(angle), rng.uniform(0.3, 0.8))).normalized()
+            length = rng.uniform(1.2, 2.2)
+            made = bmesh.ops.create_cone(bm, cap_ends=True, segments=6, radius1=0.05, radius2=0.015, depth=length)
+            rotation = direction.to_track_quat("Z", "Y").to_matrix()
+            for vert in made["verts"]:  # the cone runs from -length / 2 to length / 2 along z
+                vert.co = start + rotation @ (vert.co + Vector((0, 0, length / 2)))
+    make_object("DeadTree", dead_tree, (0.35, 0.3, 0.25), receiver=False)
+    add_light("Sun", "SUN", (0, 0, 10), (math.radians(58), 0.0, math.radians(-35)), energy=4.5,
+              angle=math.radians(1.0))
+    add_light("Campfire", "POINT", (1.0, 0.6, height(1.0, 0.6) + 0.5), energy=90.0, shadow_soft_size=0.15,
+              color=(1.0, 0.6, 0.3))
+    set_world((0.05, 0.07, 0.1))
+    return {"passes": ["direct"]}
+
+
 # Which scenes tune the refiner's constants and which only report is in
 # docs/evaluation.md ("Tuning scenes and holdout scenes").
 SCENES = {"courtyard": courtyard, "room": room, "fence_and_tree": fence_and_tree, "game_level": game_level,
           "atrium": atrium, "plaza": plaza, "alley": alley, "village": village, "cloister": cloister,
-          "depot": depot, "stairs": stairs}
+          "depot": depot, "stairs": stairs, "hillside": hillside}
 
 
 # --------------------------------------------------------------------------- UVs and export

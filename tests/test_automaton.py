@@ -229,8 +229,12 @@ def test_levels_report_the_fit_to_bounds_rounds():
     # Only the finest level is fitted; a flat map starts inside every bound.
     flat = lmrefine.run_automaton(np.ones((64, 64), np.float32))["levels"]
     assert [level["fit_rounds"] for level in flat] == [0] * len(flat)
+    assert not any(level["fit_reset"] for level in flat)
     rng = np.random.default_rng(3)
     energy = ((rng.random((96, 96)) ** 6) * 0.96 + 0.04).astype(np.float32)
     levels = lmrefine.run_automaton(energy)["levels"]
     assert all(level["fit_rounds"] == 0 for level in levels[:-1])
     assert levels[-1]["block"] == 1 and levels[-1]["fit_rounds"] >= 1
+    # A fit that blended its way inside: nothing sent back to rest (a cascading
+    # fit is in test_rechart_route.py, on the bundled hillside).
+    assert not any(level["fit_reset"] for level in levels)

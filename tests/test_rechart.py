@@ -72,11 +72,12 @@ def split_per_triangle(positions, triangles):
 
 # --- a plain reference of the charting ----------------------------------------
 
-def reference_charts(positions, triangles, angle):
+def reference_charts(positions, triangles, angle, polygons=None):
     """Chart id per triangle, as grow_charts defines it: exact weld, edges of
     two oppositely wound faces, largest area class (log2 in 64ths) first,
     then index; a chart takes every face reachable across such edges whose
-    normal is within `angle` of its seed's."""
+    normal is within `angle` of its seed's, and with a face every face of
+    its polygon (`polygons`: an id per triangle, None: each its own)."""
     positions = np.asarray(positions, np.float32).astype(np.float64)
     keys = {}
     weld = np.array([keys.setdefault(tuple(p), i) for i, p in enumerate(positions)])
@@ -94,20 +95,28 @@ def reference_charts(positions, triangles, angle):
         if len(edge_uses) == 2 and edge_uses[0][1] != edge_uses[1][1]:
             neighbours[edge_uses[0][0]].append(edge_uses[1][0])
             neighbours[edge_uses[1][0]].append(edge_uses[0][0])
+    polygons = np.arange(len(tris)) if polygons is None else np.asarray(polygons)
+    mates = collections.defaultdict(list)
+    for t, polygon in enumerate(polygons.tolist()):
+        mates[polygon].append(t)
     order = sorted(range(len(tris)), key=lambda t: (-np.floor(np.log2(area[t]) * 64), t))
     chart = np.full(len(tris), -1)
     count = 0
     for seed in order:
         if chart[seed] >= 0:
             continue
-        chart[seed] = count
-        stack = [seed]
+        stack = []
+        for g in mates[polygons[seed]]:
+            chart[g] = count
+            stack.append(g)
         while stack:
             f = stack.pop()
             for g in neighbours[f]:
                 if chart[g] < 0 and normal[g] @ normal[seed] >= np.cos(np.radians(angle)):
-                    chart[g] = count
-                    stack.append(g)
+                    for h in mates[polygons[g]]:
+                        if chart[h] < 0:
+                            chart[h] = count
+                            stack.append(h)
         count += 1
     return chart
 
@@ -235,6 +244,86 @@ def test_charting_matches_the_reference_on_a_bumpy_surface(angle):
     if report["split_charts"] == 0:
         assert same_partition(charts, reference_charts(positions, triangles, angle))
     assert report["charts"] >= report["grown_charts"]
+
+
+def quad_polygons(count):
+    """grid()'s polygons: triangles 2k and 2k + 1 are quad k."""
+    return np.arange(count) // 2
+
+
+def split_polygons(charts, polygons):
+    """How many polygons have triangles in more than one chart."""
+    pairs = {(p, c) for p, c in zip(polygons.tolist(), charts.tolist())}
+    return len(pairs) - len(set(polygons.tolist()))
+
+
+@pytest.mark.parametrize("angle", [15.0, 20.0, 40.0])
+def test_a_polygons_triangles_stay_in_one_chart(angle):
+    # The bumpy quad grid: its angle cuts run through quads' diagonals unless the
+    # quads are given as polygons (the triangles of a quad share two corners' UVs
+    # in Blender, so a cut there cannot be written to a UV map).
+    positions, triangles = grid(14)
+    x, y = positions[:, 0], positions[:, 1]
+    positions[:, 2] = 0.15 * np.sin(7 * x) * np.cos(5 * y) + 0.3 * x * y
+    polygons = quad_polygons(len(triangles))
+    _, alone, _ = _native.rechart_mesh(positions, triangles, angle)
+    assert split_polygons(alone, polygons) > 0  # the cut the polygons prevent
+    _, charts, report = _native.rechart_mesh(positions, triangles, angle, polygons=polygons)
+    assert split_polygons(charts, polygons) == 0
+    if report["split_charts"] == 0:
+        assert same_partition(charts, reference_charts(positions, triangles, angle, polygons))
+    # Ids are labels: any int32 values, in any order.
+    _, relabelled, _ = _native.rechart_mesh(positions, triangles, angle, polygons=7 - 3 * polygons)
+    assert same_partition(charts, relabelled)
+    packed, packed_report = lmrefine.rechart(positions, triangles, angle, 128, 2.0, polygons=polygons)
+    assert packed_report["layout"]["valid"] and split_polygons(packed_report["chart_ids"], polygons) == 0
+
+
+def test_a_split_chart_is_cut_between_polygons():
+    # test_a_chart_that_would_overlap_itself_is_split's helical fan, its triangles
+    # paired into polygons: the chart that overlaps itself is split between pairs.
+    turns = np.radians(30.0) * np.arange(16)
+    rim = np.stack([np.cos(turns), np.sin(turns), 0.02 * np.arange(16)], axis=1)
+    positions = np.concatenate([[[0.0, 0.0, 0.0]], rim])
+    triangles = np.array([(0, k, k + 1) for k in range(1, 16)], np.int32)
+    polygons = np.arange(15) // 2
+    _, alone, _ = _native.rechart_mesh(positions, triangles, 66.0)
+    assert split_polygons(alone, polygons) > 0
+    uvs, charts, report = _native.rechart_mesh(positions, triangles, 66.0, polygons=polygons)
+    assert report["split_charts"] >= 1 and report["charts"] >= 2 and split_polygons(charts, polygons) == 0
+    for c in range(report["charts"]):
+        mine = np.flatnonzero(charts == c)
+        assert overlapping_pairs(uvs, corner_triangles(len(triangles))[mine]) == [], c
+    # The fan flat (every normal +z: no angle tells its triangles apart, so the
+    # chart is bisected at once) and widening: the halves still end between pairs.
+    rim[:, 2] = 0.0
+    rim[:, :2] *= (1 + 0.03 * np.arange(16))[:, None]
+    positions = np.concatenate([[[0.0, 0.0, 0.0]], rim])
+    _, alone, _ = _native.rechart_mesh(positions, triangles, 66.0)
+    assert split_polygons(alone, polygons) > 0
+    uvs, charts, report = _native.rechart_mesh(positions, triangles, 66.0, polygons=polygons)
+    assert report["charts"] >= 2 and split_polygons(charts, polygons) == 0
+    for c in range(report["charts"]):
+        mine = np.flatnonzero(charts == c)
+        assert overlapping_pairs(uvs, corner_triangles(len(triangles))[mine]) == [], c
+    # The folded grid with its quads as polygons: still a layout that overlaps nowhere.
+    positions, triangles = grid(20, jitter=0.45, seed=0)
+    polygons = quad_polygons(len(triangles))
+    packed, packed_report = lmrefine.rechart(positions, triangles, 10.0, 128, 2.0, polygons=polygons)
+    assert packed_report["layout"]["valid"] and split_polygons(packed_report["chart_ids"], polygons) == 0
+
+
+@pytest.mark.parametrize("polygons,words", [
+    (np.zeros(5, np.int32), "polygons must have shape (12,)"),
+    (np.zeros((12, 1), np.int32), "polygons must have shape (12,)"),
+    (np.zeros(12) + 0.5, "polygons must be an integer array"),
+    (np.full(12, 1 << 40), "outside the int32 range"),
+])
+def test_bad_polygons_raise_a_clear_error(polygons, words):
+    positions, triangles = cube()
+    with pytest.raises(ValueError) as caught:
+        lmrefine.rechart(positions, triangles, 66.0, 64, polygons=polygons)
+    assert words in str(caught.value)
 
 
 # --- the conformal map --------------------------------------------------------

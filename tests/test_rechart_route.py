@@ -9,6 +9,7 @@ import pytest
 
 import lmrefine
 from lmrefine import metrics, rechart_route
+from lmrefine.allocation import signed_areas
 from layouts import floor_grid, grid_chart, lightmap_pack, smart_uv
 from test_metrics import bilinear_reference
 
@@ -278,6 +279,90 @@ def test_route_recharts_a_lightmap_pack_source(lightmap_pack_case):
     assert np.array_equal(again.uvs, result.uvs)  # deterministic
 
 
+def test_polygon_ids_join_the_triangles_that_share_uvs():
+    triangles = np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6], [7, 8, 9], [7, 9, 10], [10, 11, 7], [12, 13, 14]])
+    assert rechart_route.polygon_ids(triangles).tolist() == [0, 0, 4, 7, 7, 7, 12]
+    assert rechart_route.polygon_ids(np.arange(12).reshape(-1, 3)).tolist() == [0, 3, 6, 9]  # per corner
+    # A long fan closes in a few rounds (pointer jumping), to one polygon.
+    fan = np.array([[0, k, k + 1] for k in range(1, 2000)])
+    assert set(rechart_route.polygon_ids(fan[::-1]).tolist()) == {0}
+    assert rechart_route.polygon_ids(np.zeros((0, 3), np.int32)).shape == (0,)
+
+
+def _bumpy_quads_per_loop():
+    """A hilly floor of CELLS x CELLS quads as Blender hands it over: four
+    loops per quad (positions and Lightmap Pack UVs per loop), its two
+    triangles sharing the diagonal's loops. The hills turn faces more than
+    the route's angle, so chart borders would cross quads."""
+    positions, triangles = floor_grid(CELLS, 1.0)
+    positions = positions.astype(np.float64)
+    positions[:, 2] = 0.35 * np.sin(3 * positions[:, 0]) * np.cos(2 * positions[:, 1])
+    quads = triangles.reshape(-1, 6)[:, [0, 1, 2, 5]]  # (a, b, c), (a, c, d) -> a, b, c, d
+    per_face, _ = lightmap_pack(charts_across=CELLS, margin_texels=2, resolution=RESOLUTION)
+    uvs = per_face.reshape(-1, 6, 2)[:, [0, 1, 2, 5]].reshape(-1, 2)
+    loops = np.arange(4 * len(quads)).reshape(-1, 4)
+    loop_triangles = np.concatenate([loops[:, [0, 1, 2]], loops[:, [0, 2, 3]]], axis=1).reshape(-1, 3)
+    return positions[quads.reshape(-1)], uvs, loop_triangles.astype(np.int32)
+
+
+def test_route_keeps_a_polygons_triangles_in_one_chart(monkeypatch):
+    """Found on the bundled hillside in a real Blender window: the add-on's layout is per loop, so a
+    chart border through a quad's diagonal cannot be written, and the route gave up ("corners that
+    share a UV into different charts") and left the Lightmap Pack source repacked at its own gutter."""
+    corners, uvs, triangles = _bumpy_quads_per_loop()
+    # The baker reads a mesh per corner.
+    lightmap = _shadowed_floor(uvs[triangles].reshape(-1, 2), np.arange(3 * len(triangles)).reshape(-1, 3),
+                               corners[triangles].reshape(-1, 3))
+    result = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, positions=corners)
+    info = result.report["rechart"]
+    assert info["used"], info
+    assert result.uvs.shape == uvs.shape  # one UV per loop, as the source
+    assert lmrefine.check_layout(result.uvs, triangles, RESOLUTION, padding=2)["valid"]
+    # Every triangle of a quad in one chart of the refined layout.
+    charts = lmrefine.find_charts(result.uvs, triangles, lmrefine.CHART_TOLERANCE)
+    assert (charts[0::2] == charts[1::2]).all()
+    # Without the polygons the re-charting cuts quads and the route gives up.
+    monkeypatch.setattr(rechart_route, "polygon_ids", lambda triangles: np.arange(len(triangles)))
+    cut = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, positions=corners)
+    assert not cut.report["rechart"]["used"] and "different charts" in cut.report["rechart"]["reason"]
+
+
+def test_route_packs_charts_apart_when_the_automaton_fit_undid_a_region(monkeypatch):
+    """The bundled hillside's Lightmap Pack source at 256^2: its re-charted terrain is one large chart,
+    packed exactly the padding from the boulders' charts, so every edge texel is rigid, and the finest
+    automaton level's fit sent a region back to rest (fit_reset). The route then packs the charts half a
+    texel farther apart, where the edge texels may shrink, and keeps that layout (its fit still resets,
+    over fewer rounds): the terrain's shadow edges gain the texels the cascade had taken back."""
+    from lmrefine.sample_scenes import load_sample
+    scene = load_sample("hillside")
+    uvs, triangles = scene.layout("lightmap")
+    positions = scene.positions[scene.triangles].reshape(-1, 3)
+    lightmap = lmrefine.bake(scene.to_scene(uvs), 256, passes="direct", samples=8, seed=0)[0][..., :3]
+    result = lmrefine.refine_uvs(lightmap, uvs, triangles, 256, positions=positions, normals=scene.normals)
+    info = result.report["rechart"]
+    assert info["used"] and info["edge_room"] is True, info
+    assert lmrefine.check_layout(result.uvs, triangles, 256, padding=2)["valid"]
+    assert "packed half a texel farther apart" in result.report["notes"][0]
+    from lmrefine.evaluation_report import layout_text
+    text = layout_text({"variant": "lightmap", "refine": result.report})
+    assert "packed half a texel farther apart and refined again: kept." in text
+    # The same route without the retry: the layout the cascade left.
+    monkeypatch.setattr(rechart_route, "fit_reset", lambda result: False)
+    first = lmrefine.refine_uvs(lightmap, uvs, triangles, 256, positions=positions, normals=scene.normals)
+    assert first.report["rechart"]["used"] and first.report["rechart"]["edge_room"] is None
+    assert first.report["levels"][-1]["fit_reset"]  # the automaton's own report of the cascade
+    assert info["predicted_error"] < first.report["rechart"]["predicted_error"]
+    terrain = scene.object_id == scene.objects.index("Terrain")
+
+    def terrain_spread(layout):
+        """95th over 5th percentile of the terrain triangles' texel density against the source."""
+        density = np.abs(signed_areas(layout, triangles) / signed_areas(uvs, triangles))[terrain]
+        return np.percentile(density, 95) / np.percentile(density, 5)
+
+    assert terrain_spread(result.uvs) > 1.5 * terrain_spread(first.uvs)  # measured 4.4 against 2.1
+    assert result.report["levels"][-1]["fit_rounds"] < first.report["levels"][-1]["fit_rounds"]
+
+
 def test_later_stages_of_a_recharted_layout_with_no_room_refine_inside_its_charts(lightmap_pack_case):
     """The stage rule (metrics.further_stage_options): from a source layout with no room, re-charted or not,
     stages 2, 3, ... keep the charts' scales and places; a layout with room repacks again."""
@@ -361,26 +446,37 @@ def test_route_needs_the_lightmap(lightmap_pack_case):
     assert "not re-charted: re-charting needs the lightmap" in " ".join(result.report["notes"])
 
 
-def test_route_refuses_a_uv_shared_across_new_charts():
-    # Quads folded 60 degrees along their diagonal, one chart each, the two triangles of a quad
-    # sharing the diagonal's two UVs (as Blender's loops of one face): the re-chart angle cuts each
-    # quad in two charts, and one UV cannot sit in both.
-    n = 4
+def _quads_per_loop(n, fourth_corner):
+    """n x n quads, one chart each, the two triangles of a quad sharing the diagonal's two UVs (as
+    Blender's loops of one face); `fourth_corner(x, y)` places each quad's corner over (x, y + 1)."""
     positions, uvs, triangles = [], [], []
     for k in range(n * n):
         x, y = k % n, k // n
-        lift = np.sin(np.radians(60))
-        quad = [(x, y, 0), (x + 1, y, 0), (x + 1, y + 1, 0), (x, y + 1, lift)]
+        quad = [(x, y, 0), (x + 1, y, 0), (x + 1, y + 1, 0), fourth_corner(x, y)]
         base = len(positions)
         positions += quad
         cell = 1.0 / n
         uvs += [(x * cell + 0.02, y * cell + 0.02), ((x + 1) * cell - 0.02, y * cell + 0.02),
                 ((x + 1) * cell - 0.02, (y + 1) * cell - 0.02), (x * cell + 0.02, (y + 1) * cell - 0.02)]
         triangles += [(base, base + 1, base + 2), (base, base + 2, base + 3)]
-    positions, uvs = np.array(positions, np.float64), np.array(uvs, np.float32)
-    triangles = np.array(triangles, np.int32)
+    return np.array(positions, np.float64), np.array(uvs, np.float32), np.array(triangles, np.int32)
+
+
+def test_route_keeps_a_folded_quad_whole_and_refuses_a_uv_shared_across_charts():
     y, x = np.mgrid[0:64, 0:64]
     lightmap = np.where(x > 27, 1.0, 0.1).astype(np.float32)
+    # Quads folded 60 degrees along their diagonal: the re-chart angle would cut each in two, but
+    # a polygon's triangles stay in one chart, so the route runs (the model keeps the source here).
+    lift = np.sin(np.radians(60))
+    positions, uvs, triangles = _quads_per_loop(4, lambda x, y: (x, y + 1, lift))
+    result = lmrefine.refine_uvs(lightmap, uvs, triangles, 64, padding=2, positions=positions)
+    info = result.report["rechart"]
+    assert info["room"]["no_room"] and "charts" in info, info
+    assert "corners that share a UV" not in info.get("reason", "")
+    assert lmrefine.check_layout(result.uvs, triangles, 64, padding=2)["valid"]
+    # A quad whose second triangle has no area: that triangle gets a chart of its own, and one UV
+    # cannot sit in both charts, so the route gives up and says why.
+    positions, uvs, triangles = _quads_per_loop(4, lambda x, y: (x + 0.5, y + 0.5, 0))
     result = lmrefine.refine_uvs(lightmap, uvs, triangles, 64, padding=2, positions=positions)
     info = result.report["rechart"]
     assert info["room"]["no_room"] and not info["used"]

@@ -10,7 +10,7 @@ from lmrefine import sample_scenes
 
 ROOT = Path(__file__).resolve().parents[1]
 NAMES = ("courtyard", "room", "fence_and_tree", "game_level", "atrium", "plaza", "alley", "village", "cloister",
-         "depot", "stairs")
+         "depot", "stairs", "hillside")
 # Coarse on purpose (for the tessellation option): its triangles are metres long.
 COARSE = ("plaza",)
 FINE = tuple(name for name in NAMES if name not in COARSE)
@@ -138,6 +138,28 @@ def test_stairs_have_a_comb_of_baluster_shadows_over_treads_and_risers_over_vali
     heights = np.unique(np.round(scene.positions[scene.triangles[flight]][..., 2], 4))
     assert len(heights) == 13  # ground level and the twelve steps' tops
     _assert_valid_small_sample(scene, "stairs")
+
+
+def test_hillside_is_smooth_shaded_organic_ground_with_a_tight_lightmap_pack():
+    # The organic holdout: rolling terrain and displaced boulders, smooth-shaded (the other
+    # samples are flat-shaded), under a dead tree that casts but is not lightmapped.
+    scene = sample_scenes.load_sample("hillside")
+    assert sorted(light["kind"] for light in scene.lights) == ["point", "sun"]
+    assert set(scene.objects) == {"Terrain", "Boulders"} and len(scene.occluder_triangles) > 0
+    corner_normals = scene.normals.reshape(-1, 3, 3)
+    smooth = np.linalg.norm(corner_normals - corner_normals[:, :1], axis=2).max(axis=1) > 1e-3
+    assert smooth.mean() > 0.9  # corners of one triangle shade with different normals
+    heights = scene.positions[scene.triangles[scene.object_id == scene.objects.index("Terrain")]][..., 2]
+    assert heights.max() - heights.min() > 0.8  # rolling, not a floor
+    uvs, triangles = scene.layout("smart")
+    report = lmrefine.check_layout(uvs, triangles, 256, padding=2)
+    assert report["valid"] and report["min_gutter_texels"] >= 2.0, report
+    # Lightmap Pack boxes the boulders' triangles in pairs: those pairs sit closer than the
+    # margin's 2 texels at 512^2, as Blender makes them for any triangulated mesh.
+    uvs, triangles = scene.layout("lightmap")
+    report = lmrefine.check_layout(uvs, triangles, 512, padding=1)
+    assert report["valid"] and 1.0 <= report["min_gutter_texels"] < 2.0, report
+    assert (ROOT / "blend_samples" / "hillside.blend").stat().st_size < 300_000
 
 
 def test_receivers_are_tessellated_finely_enough_to_move_texels():

@@ -80,6 +80,7 @@ py::dict run(const py::handle& energy_in, const py::handle& mask_in, const py::h
         level["settled"] = s.settled;
         level["seconds"] = s.seconds;
         level["fit_rounds"] = s.fit_rounds;
+        level["fit_reset"] = s.fit_reset;
         levels.append(level);
     }
     py::dict out;
@@ -178,7 +179,8 @@ Returns:
     dict: grid (H + 1, W + 1, 2) float32 node positions in UV space,
     cell_area (H, W) float32 in texels, energy (final energies, the input's
     shape), steps (int), converged (bool), levels (list of per-level dicts:
-    block, rows, cols, steps, max_difference, converged, settled, seconds, fit_rounds; coarsest first).
+    block, rows, cols, steps, max_difference, converged, settled, seconds, fit_rounds, fit_reset (the
+    finest level's fit sent nodes back to rest: it cascaded); coarsest first).
 )doc");
 }
 

@@ -1,6 +1,7 @@
 #include <pybind11/pybind11.h>
 
 #include <cmath>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -16,7 +17,7 @@ namespace {
 
 py::tuple rechart_mesh(const py::handle& positions_in, const py::handle& triangles_in, const py::handle& angle_in,
                        const py::handle& weld_tolerance_in, py::object progress_callback, const py::handle& normals_in,
-                       const py::handle& smooth_angle_in) {
+                       const py::handle& smooth_angle_in, const py::handle& polygons_in) {
     RechartOptions options;
     options.angle_degrees = py_util::real_param(angle_in, "angle");
     options.smooth_angle_degrees = py_util::real_param(smooth_angle_in, "smooth_angle");
@@ -50,6 +51,29 @@ py::tuple rechart_mesh(const py::handle& positions_in, const py::handle& triangl
         }
         mesh.corner_normals = corner_normals.data();
     }
+    // Polygon ids are labels: any int32 value, one per triangle.
+    std::vector<int32_t> polygons;
+    if (!polygons_in.is_none()) {
+        py::array array = py::array::ensure(polygons_in);
+        if (!array || (array.dtype().kind() != 'i' && array.dtype().kind() != 'u')) {
+            throw py::value_error("polygons must be an integer array: one polygon id per triangle");
+        }
+        if (array.ndim() != 1 || array.shape(0) != triangles.shape(0)) {
+            throw py::value_error("polygons must have shape (" + std::to_string(triangles.shape(0)) +
+                                  ",): one polygon id per triangle, got " + py_util::shape_string(array));
+        }
+        py::array_t<int64_t, py::array::c_style | py::array::forcecast> wide(array);
+        polygons.resize(size_t(triangles.shape(0)));
+        for (py::ssize_t t = 0; t < wide.size(); ++t) {
+            const int64_t id = wide.data()[t];
+            if (id < std::numeric_limits<int32_t>::min() || id > std::numeric_limits<int32_t>::max()) {
+                throw py::value_error("polygons[" + std::to_string(t) + "] is " + std::to_string(id) +
+                                      ", outside the int32 range: number the polygons 0..P-1");
+            }
+            polygons[size_t(t)] = int32_t(id);
+        }
+        mesh.polygons = polygons.data();
+    }
     py_util::PythonProgress progress(std::move(progress_callback));
     RechartResult result = progress.run([&](Progress& p) { return rechart(mesh, options, &p); });
     py::dict report;
@@ -68,7 +92,7 @@ py::tuple rechart_mesh(const py::handle& positions_in, const py::handle& triangl
 void bind_rechart(py::module_& m) {
     m.def("rechart_mesh", &rechart_mesh, py::arg("positions"), py::arg("triangles"), py::arg("angle") = 10.0,
           py::arg("weld_tolerance") = py::none(), py::arg("progress") = py::none(), py::arg("normals") = py::none(),
-          py::arg("smooth_angle") = 45.0,
+          py::arg("smooth_angle") = 45.0, py::arg("polygons") = py::none(),
           R"doc(Charts of a mesh, each unwrapped with a least-squares conformal map (not packed).
 
 lmrefine.rechart is the public entry (it packs the charts too).
@@ -86,6 +110,9 @@ Args:
         at both its ends is smooth-shaded; None: every edge is hard.
     smooth_angle (float): the angle in (0, 90) used instead of ``angle``
         across smooth-shaded edges.
+    polygons (numpy.ndarray or None): (T,) integer polygon id per
+        triangle: triangles with one id (a quad's or an n-gon's, which
+        share their corners' UVs) always join one chart.
 
 Returns:
     (uvs, charts, report): uvs float32 (3T, 2), corner k of triangle t at

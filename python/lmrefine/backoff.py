@@ -24,6 +24,13 @@ import numpy as np
 from . import _native
 from .allocation import signed_areas
 
+# Chart edges facing the gutter shrink (refine_uvs' edge_shrink) only when
+# every chart pair is at least this many texels farther apart than the
+# padding: their cells may move a chart's boundary a fraction of a texel
+# closer, and the guards and the rigid gutter cells between keep the rest
+# (why this margin: docs/refiner.md, "Options and defaults").
+EDGE_SHRINK_GUTTER_MARGIN = 0.5
+
 # Nodes this many texels around a failing chart's bounding box back off with it.
 _MARGIN = 3
 _ROUNDS = 10

@@ -46,7 +46,7 @@ def corner_triangles(triangle_count):
 
 
 def rechart(positions, triangles, angle=DEFAULT_ANGLE, resolution=256, padding=2.0, *, weld_tolerance=None,
-            rotations=True, progress=None, normals=None, smooth_angle=SMOOTH_ANGLE):
+            rotations=True, progress=None, normals=None, smooth_angle=SMOOTH_ANGLE, polygons=None):
     """A new lightmap layout for a triangle mesh: conformal charts, uniform texel density, packed.
 
     Faces sharing an edge in 3D (positions closer than ``weld_tolerance``
@@ -82,6 +82,12 @@ def rechart(positions, triangles, angle=DEFAULT_ANGLE, resolution=256, padding=2
             instead of ``angle``. A zero or non-finite normal makes its
             edges hard.
         smooth_angle: degrees, in (0, 90).
+        polygons: (T,) integer polygon id per triangle, or None (every
+            triangle its own polygon). Triangles with one id are one polygon
+            of the source mesh (a quad's or an n-gon's triangles, which share
+            their corners' UVs in Blender) and always join one chart, so no
+            chart border runs through a polygon; ``rechart_route`` passes
+            them (``polygon_ids``).
         progress: callable ``progress(fraction, stage)``; returning False
             cancels (lmrefine.CancelledError). The native work runs with the
             GIL released.
@@ -118,7 +124,8 @@ def rechart(positions, triangles, angle=DEFAULT_ANGLE, resolution=256, padding=2
             normals = np.asarray(normals).astype(np.float32)
     world_uvs, charts, report = _native.rechart_mesh(positions, triangles, angle=angle,
                                                      weld_tolerance=weld_tolerance, progress=progress,
-                                                     normals=normals, smooth_angle=smooth_angle)
+                                                     normals=normals, smooth_angle=smooth_angle,
+                                                     polygons=polygons)
     layout_triangles = corner_triangles(len(charts))
     packed, pack_report = pack_charts(world_uvs, layout_triangles, charts, None, resolution, padding,
                                       rotations=rotations, progress=progress)

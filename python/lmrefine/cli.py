@@ -256,7 +256,7 @@ def build_parser():
                     "error, transition widening, equal-error resolution). Writes report.md, report.json and "
                     "pictures per scene. Metrics: docs/evaluation.md.")
     evaluate.add_argument("scenes", nargs="*",
-                          help="bundled sample names (courtyard, room, fence_and_tree, game_level, atrium, plaza, alley, village, cloister, depot, stairs), scene .npz "
+                          help="bundled sample names (courtyard, room, fence_and_tree, game_level, atrium, plaza, alley, village, cloister, depot, stairs, hillside), scene .npz "
                                "files or .blend files (exported with headless Blender into OUT/scenes/, as "
                                "export-scene does) (default: every bundled sample)")
     evaluate.add_argument("--variant", choices=("smart", "lightmap", "both"), default="smart",

@@ -273,6 +273,11 @@ def layout_text(r):
                      f"gets): {why}, so {rechart['charts']} charts at {rechart['angle']:g} degrees were "
                      f"refined; the model predicted {rechart['predicted_error']:.2f} of the source's error. The "
                      "baseline is the source layout baked plain.")
+            if rechart.get("edge_room") is not None:
+                kept = "kept" if rechart["edge_room"] else "not kept"
+                text += (" The first packing's refinement had its automaton fit reset a region (every chart edge "
+                         "rigid, the charts exactly the padding apart), so they were packed half a texel farther "
+                         f"apart and refined again: {kept}.")
         elif rechart.get("room", {}).get("no_room"):
             text += f" Not re-charted although the source gives no room: {rechart.get('reason')}."
         return text

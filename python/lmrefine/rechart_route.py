@@ -231,6 +231,52 @@ def normals_array(normals, count):
         return array.astype(np.float32)
 
 
+def polygon_ids(triangles):
+    """(T,) int32: per triangle, the smallest UV index of its polygon, the
+    triangles that share UV indices, chained (in Blender's per-loop layout a
+    quad's or an n-gon's triangles: one loop, one UV, so one chart)."""
+    triangles = np.asarray(triangles)
+    if len(triangles) == 0:
+        return np.zeros(0, np.int32)
+    label = np.arange(int(triangles.max()) + 1)
+    while True:
+        smallest = label[triangles].min(axis=1)
+        joined = label.copy()
+        np.minimum.at(joined, triangles.ravel(), np.repeat(smallest, 3))
+        joined = joined[joined]  # pointer jumping: a long chain closes in log steps
+        if np.array_equal(joined, label):
+            return label[triangles[:, 0]].astype(np.int32)
+        label = joined
+
+
+def _recharted_refinement(refine, lightmap, uvs, triangles, shape, positions, normals, padding, gutter,
+                          progress):
+    """The mesh re-charted with its charts `gutter` texels apart and refined
+    at `padding` from `lightmap` carried over: (re-charting report,
+    result), or (None, why not)."""
+    try:
+        recharted = rechart(positions, triangles, ANGLE, shape, gutter, progress=progress,
+                            normals=None if normals is None else normals[triangles].reshape(-1, 3),
+                            polygons=polygon_ids(triangles))
+    except ValueError as error:
+        return None, f"the mesh could not be re-charted: {error}"
+    new_uvs = _per_index(recharted.uvs, uvs, triangles)
+    if new_uvs is None:
+        return None, ("the re-charted layout puts corners that share a UV into different charts "
+                      "(a polygon with a degenerate triangle, or one that folds over itself)")
+    new_mask = _native.coverage_mask(new_uvs, triangles, shape)
+    carried = resample_lightmap(lightmap, uvs, triangles, new_uvs, triangles, new_mask)
+    return recharted.report, refine(carried, new_uvs, new_mask, padding)
+
+
+def fit_reset(result):
+    """Whether the automaton's finest level of `result` started with a fit
+    that sent a region back to rest (it cascaded: run_automaton's
+    `fit_reset`), undoing that region's deformation."""
+    levels = result.report["levels"]
+    return bool(levels) and bool(levels[-1].get("fit_reset"))
+
+
 def refine_recharted(refine, lightmap, uvs, triangles, shape, padding, positions, room, energy, source_result,
                      progress, folds=None, normals=None):
     """The re-chart route: `refine(lightmap, uvs, mask, padding)` (refine_uvs without
@@ -239,34 +285,46 @@ def refine_recharted(refine, lightmap, uvs, triangles, shape, padding, positions
     the source layout's own refinement, `energy` the first bake's gradient
     energy on the source layout, `folds` its charts' folds (lmrefine.folds;
     None: counted as none), `normals` the shading normals per UV (None: flat
-    shading). Returns (result or None, rechart report)."""
-    info = {"used": False, "room": room, "angle": float(ANGLE), "folds": fold_report(folds)}
+    shading). When the refinement's automaton fit reset a region of a layout
+    whose chart edges were all rigid, the charts are packed once more half a
+    texel farther apart and refined (report "edge_room"). Returns (result or
+    None, rechart report)."""
+    info = {"used": False, "room": room, "angle": float(ANGLE), "folds": fold_report(folds), "edge_room": None}
     original = source_result.report["original_check"]
     # The new layout is not held to the source's gutter: at least PADDING.
     pack_padding = max(float(padding), PADDING)
-    try:
-        recharted = rechart(positions, triangles, ANGLE, shape, pack_padding, progress=progress,
-                            normals=None if normals is None else normals[triangles].reshape(-1, 3))
-    except ValueError as error:
-        info["reason"] = f"the mesh could not be re-charted: {error}"
+    recharted, result = _recharted_refinement(refine, lightmap, uvs, triangles, shape, positions, normals,
+                                              pack_padding, pack_padding, progress)
+    if recharted is None:
+        info["reason"] = result
         return None, info
-    info.update({key: recharted.report[key] for key in ("charts", "split_charts", "degenerate_triangles",
-                                                        "utilisation", "area_utilisation")})
-    new_uvs = _per_index(recharted.uvs, uvs, triangles)
-    if new_uvs is None:
-        info["reason"] = ("the re-charted layout puts corners that share a UV into different charts "
-                          "(a face that is not flat within the re-chart angle)")
-        return None, info
-    new_mask = _native.coverage_mask(new_uvs, triangles, shape)
-    carried = resample_lightmap(lightmap, uvs, triangles, new_uvs, triangles, new_mask)
-    result = refine(carried, new_uvs, new_mask, pack_padding)
-    worse, check = backoff.worse_than_source(result.uvs, uvs, triangles, shape, padding, source=original)
+    # One model of the source layout for every prediction (its texel sizes, slope and error).
+    model = ErrorModel(uvs, triangles, energy, positions, lightmap, folds=folds)
+    predicted = model.relative(result.uvs)
+    if fit_reset(result) and result.report["edge_shrink"] == 1.0:
+        # Charts exactly the padding apart keep every edge texel rigid, and
+        # the automaton's fit undid a region's deformation: charts packed
+        # farther apart let the edge texels shrink (docs/refiner.md, "Edge
+        # room when the automaton's fit cascades"). Kept when the model
+        # prefers it and it passes the same checks.
+        roomier, retried = _recharted_refinement(
+            refine, lightmap, uvs, triangles, shape, positions, normals, pack_padding,
+            pack_padding + backoff.EDGE_SHRINK_GUTTER_MARGIN, progress)
+        info["edge_room"] = False
+        if roomier is not None:
+            retried_predicted = model.relative(retried.uvs)
+            retried_check = backoff.worse_than_source(retried.uvs, uvs, triangles, shape, padding, source=original)
+            if retried_predicted < predicted and not retried_check[0]:
+                recharted, result, predicted = roomier, retried, retried_predicted
+                info["edge_room"] = True
+    info.update({key: recharted[key] for key in ("charts", "split_charts", "degenerate_triangles",
+                                                 "utilisation", "area_utilisation")})
+    worse, check = (retried_check if info["edge_room"] else
+                    backoff.worse_than_source(result.uvs, uvs, triangles, shape, padding, source=original))
     if worse:
         info["reason"] = f"the re-charted layout failed {', '.join(worse)} against the source layout"
         return None, info
-    # One model of the source layout for both predictions (its texel sizes, slope and error).
-    model = ErrorModel(uvs, triangles, energy, positions, lightmap, folds=folds)
-    info["predicted_error"] = model.relative(result.uvs)
+    info["predicted_error"] = predicted
     info["predicted_error_source_route"] = model.relative(source_result.uvs)
     # Both against the source layout; the lower prediction wins (the source
     # layout's own refinement is never worse than the source by its checks).

@@ -20,12 +20,6 @@ BORDER_MODES = ("same", "border_rule", "extra_ring")
 # at least a quarter of its maximum (so plain noise is not blown up to 1).
 _SCALE_PERCENTILE = 99.0
 _SCALE_MIN_FRACTION_OF_MAX = 0.25
-# Chart edges facing the gutter shrink (edge_shrink) only when every chart
-# pair is at least this many texels farther apart than the padding: their
-# cells may move a chart's boundary a fraction of a texel closer, and the
-# guards and the rigid gutter cells between keep the rest (why this margin:
-# docs/refiner.md, "Options and defaults").
-_EDGE_SHRINK_GUTTER_MARGIN = 0.5
 
 
 @dataclass
@@ -219,8 +213,10 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
             report["rechart"] says what happened: used, room (the rule's
             figures), folds (count, length, smooth (how many are
             smooth-shaded), energy_fraction; None when not looked for), reason when not used, the new layout's charts and
-            the model's predicted_error when re-charted (None without
-            positions).
+            the model's predicted_error when re-charted, edge_room (None,
+            or whether charts packed farther apart were kept after the
+            automaton's fit reset a region: rechart_route.refine_recharted)
+            (None without positions).
             The result keeps the input's indexing: result.uvs (N, 2) for
             the same triangles.
         rechart: False turns the re-chart route off (the source layout
@@ -356,8 +352,10 @@ def _recharted_result(recharted, source_result, uvs, triangles, energy, mask, in
         why = (f"the source layout's charts fold over {folds['count']} creases sharper than {info['angle']:g} "
                f"degrees ({folds['length']:.3g} world units{smooth}), which hold {folds['energy_fraction']:.0%} "
                f"of its light changes")
+    roomier = (", packed half a texel farther apart than the padding so that their edge texels could shrink"
+               if info.get("edge_room") else "")
     notes.insert(0, f"re-charted: {why}, so the mesh was re-charted ({info['charts']} charts at "
-                    f"{info['angle']:g} degrees) and refined; the error model predicts "
+                    f"{info['angle']:g} degrees{roomier}) and refined; the error model predicts "
                     f"{info['predicted_error']:.2f} of the source layout's error "
                     f"(refining the source layout: {info['predicted_error_source_route']:.2f})")
     report.update({"moved": True, "notes": notes, "original_check": source_result.report["original_check"]})
@@ -416,7 +414,7 @@ def _refine(lightmap, uvs, triangles, resolution, padding, mask, gradient, progr
     # edge_shrink at most (if the gutter is wide): chart pairs keep their distance.
     rigid = checker.gutter_texels()
     original = checker.check()
-    edge_shrink_used = (float(edge_shrink) if original["min_gutter_texels"] >= padding + _EDGE_SHRINK_GUTTER_MARGIN
+    edge_shrink_used = (float(edge_shrink) if original["min_gutter_texels"] >= padding + backoff.EDGE_SHRINK_GUTTER_MARGIN
                         else 1.0)
     timings = {"setup": time.perf_counter() - start}
     clock = time.perf_counter()

@@ -22,7 +22,7 @@ SAMPLES_DIR = os.path.normpath(os.environ.get("LMREFINE_SAMPLES") or
 # Constants of the refiner are chosen on the tuning scenes only; the others
 # report (docs/evaluation.md, "Tuning scenes and holdout scenes").
 TUNING_SCENES = ("courtyard", "game_level", "fence_and_tree")
-REPORTING_SCENES = ("room", "atrium", "plaza", "alley", "village", "cloister", "depot", "stairs")
+REPORTING_SCENES = ("room", "atrium", "plaza", "alley", "village", "cloister", "depot", "stairs", "hillside")
 
 # UV variant name -> array name in the .npz.
 # "own": the lightmap UV map of a scene exported from a user's .blend

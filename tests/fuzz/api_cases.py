@@ -344,9 +344,14 @@ def case_rechart(lm, rng):
     if rng.random() < 0.5:
         kwargs["normals"] = shading_normals(rng, positions)
         kwargs["smooth_angle"] = float(rng.uniform(5, 85))
+    if rng.random() < 0.4 and len(np.shape(triangles)) == 2:
+        # Polygon labels: pairs, a few large ones, or any ints (negative, huge).
+        count = len(triangles)
+        kwargs["polygons"] = [np.arange(count) // 2, rng.integers(0, 3, count),
+                              rng.integers(-2 ** 31, 2 ** 31 - 1, count)][int(rng.integers(3))]
     makers = {"positions": as_array, "triangles": as_array, "angle": as_number, "resolution": as_resolution,
               "padding": as_number, "weld_tolerance": as_number, "rotations": as_number, "progress": as_progress,
-              "normals": as_array, "smooth_angle": as_number}
+              "normals": as_array, "smooth_angle": as_number, "polygons": as_array}
     kwargs, chosen = mutate(kwargs, rng, makers)
     return Case("rechart", _call(lm.rechart, dict(kwargs)), list(kwargs.values()),
                 layout=(None, kwargs["triangles"], kwargs["resolution"], kwargs["padding"]), recharted=True,

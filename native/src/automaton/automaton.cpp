@@ -227,7 +227,11 @@ void run_level(Level& level, const AutomatonOptions& options, bool ring, LevelSt
                Progress* progress) {
     automaton_detail::prepare_level(level, options, ring);
     // The finest level's grid: every bound holds from its start.
-    if (level.block == 1) stats.fit_rounds = automaton_detail::fit_to_bounds(level);
+    if (level.block == 1) {
+        const automaton_detail::Fit fit = automaton_detail::fit_to_bounds(level);
+        stats.fit_rounds = fit.rounds;
+        stats.fit_reset = fit.reset;
+    }
     automaton_detail::measure_cells(level);
     if (options.check_invariants) {
         level.start_nodes = level.grid.nodes;

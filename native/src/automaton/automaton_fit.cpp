@@ -23,7 +23,7 @@ constexpr int kFitSmoothRounds = 20;
 
 }  // namespace
 
-int fit_to_bounds(Level& level) {
+Fit fit_to_bounds(Level& level) {
     const int rows = level.rows(), cols = level.cols();
     const NodeGrid& grid = level.grid;
     // The bounds of `validity` (automaton_cell.h), except that a convex cell
@@ -51,7 +51,7 @@ int fit_to_bounds(Level& level) {
         }
     });
     for (const auto& r : row_bad) bad.insert(bad.end(), r.begin(), r.end());
-    if (bad.empty()) return 0;
+    if (bad.empty()) return {};
 
     // Blended towards rest from round kFitSmoothRounds on (made then: most
     // fits end before, and a per-node array is costly to fault in).
@@ -61,6 +61,7 @@ int fit_to_bounds(Level& level) {
     std::vector<uint8_t> is_lowered(grid.nodes.size(), 0);
     std::vector<int32_t> lowered;
     std::vector<glm::dvec2> smoothed;
+    bool reset = false;
     for (int round = 0;; ++round) {
         // Halve the move of every node within kFitMargin nodes of a bad
         // cell (once per round), to 0 below kFitSnap: a cell whose nodes
@@ -110,6 +111,7 @@ int fit_to_bounds(Level& level) {
                 kept.assign(grid.nodes.size(), 1.0);
             }
             const bool last = round >= kFitRounds + kFitSmoothRounds;
+            reset = reset || last;
             for (int32_t node : lowered) {
                 const size_t n = size_t(node);
                 const int i = int(n / size_t(cols + 1)), j = int(n % size_t(cols + 1));
@@ -127,7 +129,7 @@ int fit_to_bounds(Level& level) {
                                stamp, checked);
         }
         judge_cells(level, checked, out_of_bounds, verdicts, bad);
-        if (bad.empty()) return round + 1;
+        if (bad.empty()) return {round + 1, reset};
     }
 }
 

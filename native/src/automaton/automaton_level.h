@@ -78,8 +78,12 @@ void prepare_level(Level& level, const AutomatonOptions& options, bool ring);
 // their bounds (area, a rigid cell's width and height). Smooths the nodes
 // around every such cell for a few rounds, then blends them back towards
 // rest until every cell is inside, so
-// the steps' guards keep every bound from the start. Returns the rounds.
-int fit_to_bounds(Level& level);
+// the steps' guards keep every bound from the start.
+struct Fit {
+    int rounds = 0;
+    bool reset = false;  // nodes went straight back to rest after the blending rounds
+};
+Fit fit_to_bounds(Level& level);
 
 // Measures every cell (area, move radius, quality) from the current nodes;
 // run before the first step of a level, after any change to the nodes that

@@ -191,6 +191,19 @@ SurfaceFaces surface_faces(const SurfaceMesh& mesh, const std::vector<int32_t>& 
         const uint8_t smooth = same_normal(mesh, f_start, g_end) && same_normal(mesh, f_end, g_start);
         faces.smooth[size_t(f)] = faces.smooth[size_t(g)] = smooth;
     }
+    faces.polygon_next.resize(size_t(count));
+    std::iota(faces.polygon_next.begin(), faces.polygon_next.end(), int64_t(0));
+    if (mesh.polygons) {
+        // Each polygon's faces linked into a cycle, in index order.
+        std::unordered_map<int32_t, std::pair<int64_t, int64_t>> ends;  // polygon -> (first, last) face
+        for (int64_t t = 0; t < count; ++t) {
+            const auto [it, inserted] = ends.emplace(mesh.polygons[t], std::make_pair(t, t));
+            if (inserted) continue;
+            faces.polygon_next[size_t(it->second.second)] = t;
+            faces.polygon_next[size_t(t)] = it->second.first;
+            it->second.second = t;
+        }
+    }
     return faces;
 }
 
@@ -210,13 +223,23 @@ std::vector<std::vector<int64_t>> grow_charts(const SurfaceFaces& faces, const s
     const double smooth_min_cos = std::cos(smooth_angle_radians);
     std::vector<std::vector<int64_t>> charts;
     std::deque<int64_t> queue;
+    // f joins chart `id`, and the offered faces of its polygon with it.
+    const auto join = [&](int64_t f, int64_t id) {
+        for (int64_t g = f;;) {
+            if (state[size_t(g)] == -1) {
+                state[size_t(g)] = id;
+                queue.push_back(g);
+            }
+            g = faces.polygon_next[size_t(g)];
+            if (g == f) break;
+        }
+    };
     for (const auto& [size_class, seed] : seeds) {
         if (state[size_t(seed)] != -1) continue;
         const int64_t id = int64_t(charts.size());
         const glm::dvec3 axis = faces.normal[size_t(seed)];
         std::vector<int64_t> members;
-        state[size_t(seed)] = id;
-        queue.push_back(seed);
+        join(seed, id);
         while (!queue.empty()) {
             const int64_t f = queue.front();
             queue.pop_front();
@@ -226,8 +249,7 @@ std::vector<std::vector<int64_t>> grow_charts(const SurfaceFaces& faces, const s
                 if (g < 0 || state[size_t(g)] != -1) continue;
                 const double limit = faces.smooth[size_t(3 * f + k)] ? smooth_min_cos : min_cos;
                 if (glm::dot(faces.normal[size_t(g)], axis) < limit) continue;
-                state[size_t(g)] = id;
-                queue.push_back(g);
+                join(g, id);
             }
         }
         std::sort(members.begin(), members.end());
@@ -247,16 +269,48 @@ std::vector<std::vector<int64_t>> bisect_chart(const SurfaceMesh& mesh, const Su
     }
     const glm::dvec3 extent = hi - lo;
     const int axis = extent.x >= extent.y && extent.x >= extent.z ? 0 : (extent.y >= extent.z ? 1 : 2);
+    // A face sorts at its polygon's centroid, after its polygon's smallest
+    // face, so a polygon's faces are neighbours in the order.
+    std::unordered_map<int64_t, size_t> position_in_chart;
+    for (size_t i = 0; i < chart.size(); ++i) position_in_chart.emplace(chart[i], i);
+    std::vector<double> key(chart.size());
+    std::vector<int64_t> polygon(chart.size());  // the polygon's smallest face in the chart
+    for (size_t i = 0; i < chart.size(); ++i) {
+        double sum = 0.0;
+        int count = 0;
+        int64_t smallest = chart[i];
+        for (int64_t g = chart[i];;) {
+            const auto found = position_in_chart.find(g);
+            if (found != position_in_chart.end()) {
+                sum += centroid[found->second][axis], ++count;
+                smallest = std::min(smallest, g);
+            }
+            g = faces.polygon_next[size_t(g)];
+            if (g == chart[i]) break;
+        }
+        key[i] = sum / count, polygon[i] = smallest;
+    }
     std::vector<size_t> order(chart.size());
     std::iota(order.begin(), order.end(), size_t(0));
     std::sort(order.begin(), order.end(), [&](size_t a, size_t b) {
-        return centroid[a][axis] < centroid[b][axis] || (centroid[a][axis] == centroid[b][axis] && chart[a] < chart[b]);
+        if (key[a] != key[b]) return key[a] < key[b];
+        if (polygon[a] != polygon[b]) return polygon[a] < polygon[b];
+        return chart[a] < chart[b];
     });
+    // The cut at the median, moved past the polygon it falls in (back to its
+    // start when that polygon reaches the end).
+    size_t cut = order.size() / 2;
+    while (cut < order.size() && polygon[order[cut]] == polygon[order[cut - 1]]) ++cut;
+    if (cut == order.size()) {
+        cut = order.size() / 2;
+        while (cut > 0 && polygon[order[cut]] == polygon[order[cut - 1]]) --cut;
+        if (cut == 0) cut = order.size() / 2;  // one polygon: cut it
+    }
     // Each half grown with no angle limit: its edge-connected parts.
     std::vector<std::vector<int64_t>> parts;
     for (int half = 0; half < 2; ++half) {
         std::vector<int64_t> ids;
-        const size_t begin = half == 0 ? 0 : order.size() / 2, end = half == 0 ? order.size() / 2 : order.size();
+        const size_t begin = half == 0 ? 0 : cut, end = half == 0 ? cut : order.size();
         for (size_t k = begin; k < end; ++k) ids.push_back(chart[order[k]]);
         for (auto& part : grow_charts(faces, ids, 4.0, 4.0)) parts.push_back(std::move(part));
     }

@@ -80,6 +80,10 @@ struct LevelStats {
     // interpolated from the level above inside their bounds (0: none
     // outside; dozens: the deformation was partly undone, see docs/refiner.md).
     int fit_rounds = 0;
+    // The finest level: fit_to_bounds gave up blending and sent the nodes
+    // around the cells still outside back to rest, round after round (it
+    // cascaded: a region's deformation was undone, see docs/refiner.md).
+    bool fit_reset = false;
 };
 
 struct AutomatonResult {

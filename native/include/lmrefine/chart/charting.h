@@ -23,6 +23,10 @@ struct SurfaceMesh {
     // two faces of an edge have the same shading normals at both its ends
     // the mesh is smooth-shaded there: the light has no step to cut at.
     const float* corner_normals = nullptr;
+    // (triangle_count) polygon id per triangle, or null: triangles with one
+    // id are one polygon of the source mesh (a quad's or an n-gon's
+    // triangles, which share their corners' UVs) and always join one chart.
+    const int32_t* polygons = nullptr;
 };
 
 // Throws InvalidArgument naming the first index out of range or
@@ -47,6 +51,9 @@ struct SurfaceFaces {
     // smooth-shaded across it (SurfaceMesh::corner_normals); all 0 without
     // shading normals (every edge hard).
     std::vector<uint8_t> smooth;       // (triangle_count * 3)
+    // Per face, the next face of its polygon (SurfaceMesh::polygons), round
+    // a cycle back to it; itself for a face alone in its polygon.
+    std::vector<int64_t> polygon_next;  // (triangle_count)
 };
 
 SurfaceFaces surface_faces(const SurfaceMesh& mesh, const std::vector<int32_t>& welded);
@@ -55,15 +62,18 @@ SurfaceFaces surface_faces(const SurfaceMesh& mesh, const std::vector<int32_t>& 
 // yet in a chart (faces within about 1% of one size: the first index) seeds one, which takes every face reachable through edge
 // neighbours in `faces` whose normal is within `angle_radians` of the
 // seed's, or within `smooth_angle_radians` when the edge crossed is smooth
-// (SurfaceFaces::smooth). Every chart is edge-connected, and for angles
-// below 90 degrees no face of a chart turns its back to the seed's plane.
+// (SurfaceFaces::smooth); a face that joins brings the other faces of its
+// polygon in `faces` with it, whatever their normals. Every chart is
+// edge-connected, and for angles below 90 degrees no face of a chart turns
+// its back to the seed's plane unless a polygon's other face does.
 // Deterministic.
 std::vector<std::vector<int64_t>> grow_charts(const SurfaceFaces& faces, const std::vector<int64_t>& face_ids,
                                               double angle_radians, double smooth_angle_radians);
 
 // A chart (two or more face ids) cut in two halves at the median of its
-// face centroids along their widest axis, each half split into its
-// edge-connected parts: for a chart whose faces all lie within a small
+// face centroids along their widest axis (a polygon's faces at the
+// centroid of their polygon, so that no polygon is cut, unless the chart is
+// one polygon), each half split into its edge-connected parts: for a chart whose faces all lie within a small
 // angle and that still folds (a folded or self-intersecting input), so the
 // fold ends up in a small chart instead of the whole chart in single faces.
 std::vector<std::vector<int64_t>> bisect_chart(const SurfaceMesh& mesh, const SurfaceFaces& faces,
