@@ -193,11 +193,13 @@ SurfaceFaces surface_faces(const SurfaceMesh& mesh, const std::vector<int32_t>& 
     }
     faces.polygon_next.resize(size_t(count));
     std::iota(faces.polygon_next.begin(), faces.polygon_next.end(), int64_t(0));
+    faces.polygon_root = faces.polygon_next;
     if (mesh.polygons) {
         // Each polygon's faces linked into a cycle, in index order.
         std::unordered_map<int32_t, std::pair<int64_t, int64_t>> ends;  // polygon -> (first, last) face
         for (int64_t t = 0; t < count; ++t) {
             const auto [it, inserted] = ends.emplace(mesh.polygons[t], std::make_pair(t, t));
+            faces.polygon_root[size_t(t)] = it->second.first;
             if (inserted) continue;
             faces.polygon_next[size_t(it->second.second)] = t;
             faces.polygon_next[size_t(t)] = it->second.first;
@@ -269,26 +271,19 @@ std::vector<std::vector<int64_t>> bisect_chart(const SurfaceMesh& mesh, const Su
     }
     const glm::dvec3 extent = hi - lo;
     const int axis = extent.x >= extent.y && extent.x >= extent.z ? 0 : (extent.y >= extent.z ? 1 : 2);
-    // A face sorts at its polygon's centroid, after its polygon's smallest
-    // face, so a polygon's faces are neighbours in the order.
-    std::unordered_map<int64_t, size_t> position_in_chart;
-    for (size_t i = 0; i < chart.size(); ++i) position_in_chart.emplace(chart[i], i);
-    std::vector<double> key(chart.size());
-    std::vector<int64_t> polygon(chart.size());  // the polygon's smallest face in the chart
+    // A face sorts at the mean centroid of its polygon's faces in the chart,
+    // then by polygon, so a polygon's faces are neighbours in the order.
+    std::unordered_map<int64_t, std::pair<double, int>> polygon_sum;  // polygon root -> (sum, count)
     for (size_t i = 0; i < chart.size(); ++i) {
-        double sum = 0.0;
-        int count = 0;
-        int64_t smallest = chart[i];
-        for (int64_t g = chart[i];;) {
-            const auto found = position_in_chart.find(g);
-            if (found != position_in_chart.end()) {
-                sum += centroid[found->second][axis], ++count;
-                smallest = std::min(smallest, g);
-            }
-            g = faces.polygon_next[size_t(g)];
-            if (g == chart[i]) break;
-        }
-        key[i] = sum / count, polygon[i] = smallest;
+        auto& entry = polygon_sum[faces.polygon_root[size_t(chart[i])]];
+        entry.first += centroid[i][axis], ++entry.second;
+    }
+    std::vector<double> key(chart.size());
+    std::vector<int64_t> polygon(chart.size());
+    for (size_t i = 0; i < chart.size(); ++i) {
+        polygon[i] = faces.polygon_root[size_t(chart[i])];
+        const auto& entry = polygon_sum[polygon[i]];
+        key[i] = entry.first / entry.second;
     }
     std::vector<size_t> order(chart.size());
     std::iota(order.begin(), order.end(), size_t(0));

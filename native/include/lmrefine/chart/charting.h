@@ -52,8 +52,10 @@ struct SurfaceFaces {
     // shading normals (every edge hard).
     std::vector<uint8_t> smooth;       // (triangle_count * 3)
     // Per face, the next face of its polygon (SurfaceMesh::polygons), round
-    // a cycle back to it; itself for a face alone in its polygon.
+    // a cycle back to it, and the polygon's smallest face; itself for a face
+    // alone in its polygon.
     std::vector<int64_t> polygon_next;  // (triangle_count)
+    std::vector<int64_t> polygon_root;  // (triangle_count)
 };
 
 SurfaceFaces surface_faces(const SurfaceMesh& mesh, const std::vector<int32_t>& welded);
