@@ -1188,6 +1188,16 @@ def test_addon_recharts_a_source_folded_over_a_lit_ridge(facts):
     assert fractions[first] < fractions[-1]
 
 
+def test_addon_recharts_a_hilly_floor_of_quads(facts):
+    # Found on the bundled hillside in a window: the re-charting cut quads along their diagonals,
+    # which one UV per loop cannot hold, and the route gave up ("corners that share a UV"); on this
+    # floor it did so too without the polygons (measured: the same check with polygons=None).
+    value = fact(facts, "rechart_hilly_quads")
+    assert value["source_charts"] == 144 and value["largest_angle"] > 45.0  # steep enough to cut quads
+    assert value["rechart"]["used"], value["rechart"]
+    assert 1 < value["rechart"]["charts"] < 144 and value["valid"]
+
+
 def test_addon_tells_the_core_a_ridge_is_smooth_shaded(facts):
     value = fact(facts, "rechart_smooth_shaded_ridge")
     assert value["outcome"] == "FINISHED", value["message"]

@@ -1870,6 +1870,32 @@ def rechart_folded_source():
 
 
 @check("refine", "bake")
+def rechart_hilly_quads():
+    """A hilly floor of quads, one chart each (Lightmap Pack's kind): the re-charted charts keep each
+    quad whole (its two triangles share the diagonal's loops), so the route is not refused."""
+    scenes.hilly_floor_scene(quads=12)
+    register()
+    settings(resolution=RESOLUTION, padding=2, samples=4, first_lightmap='EMBREE', backend='EMBREE',
+             bake_passes={'DIRECT'})
+    floor = bpy.data.objects["Floor"]
+    mesh = floor.data
+    layout = bridge.read_layout(mesh, "Lightmap", floor.matrix_world)
+    options = pipeline.settings_snapshot(bpy.context.scene.lmrefine)
+    run = pipeline.run_blocking(pipeline.run(bpy.context, pipeline.validate(bpy.context, [floor], options),
+                                             options, Journal()))
+    refined = bridge.read_uv_layer(mesh, "Lightmap_refined")
+    positions = layout.positions[layout.triangles]
+    normals = np.cross(positions[:, 1] - positions[:, 0], positions[:, 2] - positions[:, 0])
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    return {"rechart": {key: value for key, value in run.reports["Floor"]["rechart"].items()
+                        if key in ("used", "reason", "charts")},
+            "valid": bool(lmrefine.check_layout(refined, layout.triangles, RESOLUTION, padding=2)["valid"]),
+            "largest_angle": float(np.degrees(np.arccos(np.clip(normals @ [0.0, 0.0, 1.0], -1, 1))).max()),
+            "source_charts": int(len(np.unique(lmrefine.find_charts(layout.uvs, layout.triangles,
+                                                                     lmrefine.CHART_TOLERANCE))))}
+
+
+@check("refine", "bake")
 def rechart_smooth_shaded_ridge():
     """The same folded roof shaded smooth (Shade Smooth: one normal per vertex, so the light does not
     step at the ridge): the ridge still folds, but the core is told it is smooth-shaded and credits a

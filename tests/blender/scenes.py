@@ -200,6 +200,21 @@ def atlas_scene():
     return scene
 
 
+def hilly_floor_scene(quads=12):
+    """coarse_shadow_scene's floor made hilly (heights of 1.8 m over its 4 m, faces up to 52 degrees
+    apart), quads x quads faces, each its own chart of the Lightmap map: the re-charting's angle would
+    cut chart borders through quads' diagonals, which a UV map (one UV per loop) cannot hold."""
+    scene = coarse_shadow_scene(quads)
+    mesh = bpy.data.objects["Floor"].data
+    positions = np.empty(len(mesh.vertices) * 3, np.float32)
+    mesh.vertices.foreach_get("co", positions)
+    positions = positions.reshape(-1, 3)
+    positions[:, 2] = 0.9 * np.sin(1.5 * positions[:, 0]) * np.cos(positions[:, 1])
+    mesh.vertices.foreach_set("co", positions.ravel())
+    mesh.update()
+    return scene
+
+
 def roof_scene(quads=8):
     """A ridge roof 'Roof' (two slopes 90 degrees apart, quads x quads faces) under a sun that lights one
     slope more than the other, with a 'Lightmap' map that is one chart over the ridge, the roof unfolded
