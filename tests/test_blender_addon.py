@@ -1193,6 +1193,7 @@ def test_addon_recharts_a_hilly_floor_of_quads(facts):
     # which one UV per loop cannot hold, and the route gave up ("corners that share a UV"); on this
     # floor it did so too without the polygons (measured: the same check with polygons=None).
     value = fact(facts, "rechart_hilly_quads")
+    assert "error" not in value, value.get("error")
     assert value["source_charts"] == 144 and value["largest_angle"] > 45.0  # steep enough to cut quads
     assert value["rechart"]["used"], value["rechart"]
     assert 1 < value["rechart"]["charts"] < 144 and value["valid"]

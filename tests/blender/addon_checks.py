@@ -1880,9 +1880,9 @@ def rechart_hilly_quads():
     floor = bpy.data.objects["Floor"]
     mesh = floor.data
     layout = bridge.read_layout(mesh, "Lightmap", floor.matrix_world)
-    options = pipeline.settings_snapshot(bpy.context.scene.lmrefine)
-    run = pipeline.run_blocking(pipeline.run(bpy.context, pipeline.validate(bpy.context, [floor], options),
-                                             options, Journal()))
+    run, _, error = _run_pipeline([floor])
+    if error:
+        return {"error": error}
     refined = bridge.read_uv_layer(mesh, "Lightmap_refined")
     positions = layout.positions[layout.triangles]
     normals = np.cross(positions[:, 1] - positions[:, 0], positions[:, 2] - positions[:, 0])
