@@ -302,6 +302,29 @@ def test_a_layout_that_did_not_move_is_reported_as_such():
     assert any("no light change" in note for note in flat.report["notes"])
 
 
+def test_a_layout_whose_every_uv_is_on_a_chart_border_skips_the_automaton():
+    # One quad per chart, gutters wide enough for edge_shrink: a warp could only reshape each chart's
+    # affine map, so the automaton is not run and, without the repack, nothing moves.
+    uvs, tris = lightmap_pack(charts_across=8, margin_texels=6, resolution=128, quads=1)
+    mask = lmrefine.coverage_mask(uvs, tris, 128)
+    gradient = finite_difference_gradient(shadow_edge_lightmap(128), mask)
+    result = lmrefine.refine_uvs(None, uvs, tris, 128, padding=2, gradient=gradient, repack=False)
+    report = result.report
+    assert report["edge_shrink"] < 1  # the chart edges could have shrunk
+    assert report["steps"] == 0 and report["levels"] == [] and report["moved"] is False
+    np.testing.assert_array_equal(result.uvs, uvs)
+    assert any(note.startswith("nothing moved: every UV lies on its chart's border") for note in report["notes"])
+    # With the repack the charts are still scaled by their light changes.
+    packed = lmrefine.refine_uvs(None, uvs, tris, 128, padding=2, gradient=gradient)
+    assert packed.report["steps"] == 0 and packed.report["repack"]["used"] is True
+    # One quad more per chart side gives every chart an inner UV: the automaton runs.
+    roomy, roomy_tris = lightmap_pack(charts_across=8, margin_texels=6, resolution=128, quads=2)
+    mask = lmrefine.coverage_mask(roomy, roomy_tris, 128)
+    gradient = finite_difference_gradient(shadow_edge_lightmap(128), mask)
+    assert lmrefine.refine_uvs(None, roomy, roomy_tris, 128, padding=2, gradient=gradient,
+                               repack=False).report["steps"] > 0
+
+
 def two_chart_scene(resolution=64):
     """Two equal square charts side by side; a hard shadow edge crosses only the left one. The edge sits
     between two texel columns but not on one of the chart's grid lines (u = 0.05 + k / 40): on one, the

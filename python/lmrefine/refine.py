@@ -427,7 +427,12 @@ def _refine(lightmap, uvs, triangles, resolution, padding, mask, gradient, progr
     # Light steps on texel boundaries the layout's edges run along: moving a vertex puts them inside texels.
     aligned, hold = (alignment.layout_held(lightmap, uvs, triangles, mask)
                      if gradient_given is None and strength > 0 else (None, False))
-    if hold:
+    # Every UV on its chart's border (one chart per face, as Lightmap Pack
+    # makes): the warp can only reshape each chart's one affine map, which
+    # puts no more texels where the light changes inside it, so the
+    # automaton is not run (docs/refiner.md, "Layouts without room").
+    no_room = not hold and rechart_route.layout_room(uvs, triangles)["room_fraction"] == 0.0
+    if hold or no_room:
         run = {"grid": identity, "steps": 0, "levels": [], "converged": True}
     else:
         run = _native.run_automaton(energy, mask, rigid=rigid, diffusion=diffusion, delta=delta,
@@ -521,6 +526,8 @@ def _refine(lightmap, uvs, triangles, resolution, padding, mask, gradient, progr
                "the lightmap has no light change inside the charts"
                if not np.any(scalar_energy[mask] > 0) else
                "every deformation broke the layout and was backed off (" + ", ".join(broke) + ")" if broke else
+               "every UV lies on its chart's border (small charts, e.g. one per face), where a warp could only "
+               "reshape each chart's one affine map, so the automaton was not run" if no_room else
                "the deformation left every UV in place: UVs on chart borders keep their place, and here every "
                "UV is on one (small charts, e.g. one per face)")
         notes.append(f"nothing moved: {why}; the layout returned is the input")

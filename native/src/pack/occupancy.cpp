@@ -10,11 +10,17 @@ namespace {
 void keep_inside(const std::vector<Span>& candidates, const std::vector<Span>& runs, int lo, int hi,
                  std::vector<Span>& out) {
     out.clear();
+    if (candidates.empty()) return;
     size_t k = 0;
-    for (const Span& run : runs) {
-        if (run.second - run.first < hi - lo) continue;
+    // Only the runs that can hold the span at a candidate corner: from the
+    // first ending past the first candidate's span to the first starting past
+    // the last candidate's (a row of a filled atlas has hundreds of runs).
+    const int from = candidates.front().first + hi - 1, to = candidates.back().second + lo;
+    auto run = std::upper_bound(runs.begin(), runs.end(), from, [](int c, const Span& r) { return c < r.second; });
+    for (; run != runs.end() && run->first < to; ++run) {
+        if (run->second - run->first < hi - lo) continue;
         // Corners x with [x + lo, x + hi) inside the run.
-        const int first = run.first - lo, last = run.second - hi + 1;
+        const int first = run->first - lo, last = run->second - hi + 1;
         while (k < candidates.size() && candidates[k].second <= first) ++k;
         for (size_t m = k; m < candidates.size() && candidates[m].first < last; ++m) {
             const int a = std::max(first, candidates[m].first), b = std::min(last, candidates[m].second);
