@@ -59,16 +59,20 @@ def refine_parts(group, options, refine_options=None):
     re-charting on, strength above 0, the mesh given, and a layout with no room or charts folded over
     creases; whether the folds hold enough light to be cut is known only from the bake, and a route
     not taken ends its share at once), so the progress fills the refinement's share over all of them
-    rather than standing still through the re-chart. `refine_options`: the group's own (default the run's)."""
-    refine_options = options["refine_options"] if refine_options is None else refine_options
-    if group.positions is None or not refine_options.get("rechart", True) or refine_options.get("strength") == 0:
-        return REFINE_STAGES
-    if refine_options.get("rechart") == "always":
-        return REFINE_STAGES + RECHART_STAGES
+    rather than standing still through the re-chart. A layout whose every UV lies on its chart's border (one
+    chart per face) reports no automaton: refine_uvs does not run it there. `refine_options`: the group's own
+    (default the run's)."""
     from lmrefine import folds, rechart_route
-    route = (rechart_route.layout_room(group.uvs, group.triangles)["no_room"]
-             or len(folds.fold_faces(group.uvs, group.triangles, group.positions, rechart_route.ANGLE)[0]) > 0)
-    return REFINE_STAGES + (RECHART_STAGES if route else 0)
+    refine_options = options["refine_options"] if refine_options is None else refine_options
+    room = rechart_route.layout_room(group.uvs, group.triangles)
+    source = REFINE_STAGES - 1 if room["room_fraction"] == 0 else REFINE_STAGES
+    if group.positions is None or not refine_options.get("rechart", True) or refine_options.get("strength") == 0:
+        return source
+    if refine_options.get("rechart") == "always":
+        return source + RECHART_STAGES
+    route = room["no_room"] or len(folds.fold_faces(group.uvs, group.triangles, group.positions,
+                                                     rechart_route.ANGLE)[0]) > 0
+    return source + (RECHART_STAGES if route else 0)
 
 
 @dataclass
