@@ -87,9 +87,8 @@ def measure(sample, options, parts, refine_options):
     resolution = options.resolution
     padding = min(float(options.padding),
                   float(lmrefine.check_layout(uvs, triangles, resolution, options.padding)["min_gutter_texels"]))
-    positions, normals = _route_mesh(sample, options)
     result = lmrefine.refine_uvs(parts["baseline"], uvs, triangles, resolution, padding=padding,
-                                 positions=positions, normals=normals, **refine_options)
+                                 **_route_mesh(sample, options), **refine_options)
     refined = _bake_map(sample, result.uvs, resolution, options, None)
     lookup = metrics.bilinear_lookup(refined, metrics.interpolate_corners(result.uvs, parts["triangle"],
                                                                           parts["bary"]))

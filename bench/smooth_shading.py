@@ -57,7 +57,7 @@ def auto_smooth(path, out_path, angle):
 def evaluate(path, out, variant, resolution, with_normals):
     route_mesh = evaluation._route_mesh
     if not with_normals:
-        evaluation._route_mesh = lambda sample, options: (route_mesh(sample, options)[0], None)
+        evaluation._route_mesh = lambda sample, options: {**route_mesh(sample, options), "normals": None}
     try:
         cli.main(["evaluate", path, "--variant", variant, "--resolution", str(resolution), "--view-width", "0",
                   "--out", out])

@@ -2,6 +2,11 @@
 
     blender -b --factory-startup --python-exit-code 1 \
         --python blend_samples/make_samples.py -- [OUT_DIR] [SCENE ...]
+    blender -b --factory-startup --python-exit-code 1 \
+        --python blend_samples/make_samples.py -- --export-only [OUT_DIR] [SCENE ...]
+
+(The second writes the .npz again from the saved .blend, its layouts as
+they are, when the file gains a field.)
 
 Writes, per scene, ``<name>.blend`` (small: no images, compressed) and
 ``<name>.npz``, the same scene for lmrefine without Blender (read it with
@@ -14,6 +19,8 @@ Writes, per scene, ``<name>.blend`` (small: no images, compressed) and
     uv_smart      (3T, 2) float32  per corner, Smart UV Project atlas
     base_color    (T, 3) float32   albedo per triangle
     object_id     (T,) int32       index into meta["objects"]
+    polygons      (T,) int32       the face each triangle was cut from (the
+                  receivers' faces numbered one after another)
     occluder_positions (U, 3), occluder_triangles (S, 3): casters without a
                   lightmap (foliage, fence), same conventions
     meta          JSON string: objects, lights (Blender's light properties,
@@ -711,13 +718,15 @@ def mesh_arrays(obj, with_uvs):
     mesh.loop_triangles.foreach_get("vertices", triangles)
     loops = np.empty(count * 3, np.int32)
     mesh.loop_triangles.foreach_get("loops", loops)
+    polygons = np.empty(count, np.int32)
+    mesh.loop_triangles.foreach_get("polygon_index", polygons)
     normals = np.empty(count * 9, np.float32)
     mesh.loop_triangles.foreach_get("split_normals", normals)
     normal_matrix = np.array(matrix.to_3x3().inverted().transposed(), np.float32)
     normals = normals.reshape(-1, 3) @ normal_matrix.T
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
     result = {"positions": positions.astype(np.float32), "triangles": triangles.reshape(-1, 3),
-              "normals": normals.astype(np.float32)}
+              "normals": normals.astype(np.float32), "polygons": polygons, "polygon_count": len(mesh.polygons)}
     if with_uvs:
         for layer, key in (("Lightmap", "uv_lightmap"), ("LightmapSmart", "uv_smart")):
             uv = np.empty(len(mesh.loops) * 2, np.float32)
@@ -727,11 +736,13 @@ def mesh_arrays(obj, with_uvs):
 
 
 def concatenate(parts, keys):
-    out, offset = {k: [] for k in keys}, 0
+    out, offset, faces = {k: [] for k in keys}, 0, 0
     for part in parts:
         for key in keys:
-            out[key].append(part[key] + offset if key == "triangles" else part[key])
+            shift = offset if key == "triangles" else faces if key == "polygons" else None
+            out[key].append(part[key] if shift is None else part[key] + shift)
         offset += len(part["positions"])
+        faces += part.get("polygon_count", 0)
     return {k: (np.concatenate(v) if v else np.zeros((0, 3), np.float32 if k != "triangles" else np.int32))
             for k, v in out.items()}
 
@@ -755,7 +766,7 @@ def export(path, info):
         color = obj.data.materials[0].diffuse_color[:3]
         colors.append(np.tile(np.array(color, np.float32), (len(part["triangles"]), 1)))
         object_ids.append(np.full(len(part["triangles"]), index, np.int32))
-    arrays = concatenate(parts, ("positions", "triangles", "normals", "uv_lightmap", "uv_smart"))
+    arrays = concatenate(parts, ("positions", "triangles", "normals", "uv_lightmap", "uv_smart", "polygons"))
     blockers = concatenate([mesh_arrays(o, with_uvs=False) for o in occluders], ("positions", "triangles"))
     name = os.path.splitext(os.path.basename(path))[0]
     SampleScene(
@@ -766,20 +777,37 @@ def export(path, info):
         lights=[light_description(o) for o in bpy.context.scene.objects if o.type == "LIGHT"],
         world=world_color(bpy.context.scene), passes=tuple(info["passes"]),
         occluder_positions=blockers["positions"].astype(np.float32),
-        occluder_triangles=blockers["triangles"].astype(np.int32),
+        occluder_triangles=blockers["triangles"].astype(np.int32), polygons=arrays["polygons"].astype(np.int32),
     ).save(path, occluders=[obj.name for obj in occluders],
            uv_variants={"lightmap": "Lightmap (Lightmap Pack)", "smart": "LightmapSmart (Smart UV Project)"},
            min_resolution=MIN_RESOLUTION)
     return len(arrays["triangles"]), len(blockers["triangles"])
 
 
+def export_again(out_dir, name):
+    """The .npz of a scene written again from its saved .blend (no rebuild, no
+    new unwrap: the layouts stay the ones the .blend holds), for a field
+    added to the file."""
+    blend = os.path.join(out_dir, name + ".blend")
+    with np.load(os.path.join(out_dir, name + ".npz")) as data:
+        passes = json.loads(str(data["meta"]))["passes"]
+    bpy.ops.wm.open_mainfile(filepath=blend)
+    triangles, blockers = export(os.path.join(out_dir, name + ".npz"), {"passes": passes})
+    print(f"{name}: {triangles} receiver triangles, {blockers} occluder triangles, exported again from {blend}")
+
+
 def main():
     args = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
+    again = "--export-only" in args
+    args = [arg for arg in args if arg != "--export-only"]
     out_dir = os.path.abspath(args[0] if args else os.path.dirname(os.path.abspath(__file__)))
     names = args[1:] or list(SCENES)
     for name in names:
         if name not in SCENES:
             raise SystemExit(f"unknown scene '{name}'; known: {', '.join(SCENES)}")
+        if again:
+            export_again(out_dir, name)
+            continue
         bpy.ops.wm.read_factory_settings(use_empty=True)
         bpy.context.preferences.filepaths.save_version = 0  # no .blend1 backups
         info = SCENES[name]()

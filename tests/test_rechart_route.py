@@ -322,9 +322,55 @@ def test_route_keeps_a_polygons_triangles_in_one_chart(monkeypatch):
     charts = lmrefine.find_charts(result.uvs, triangles, lmrefine.CHART_TOLERANCE)
     assert (charts[0::2] == charts[1::2]).all()
     # Without the polygons the re-charting cuts quads and the route gives up.
-    monkeypatch.setattr(rechart_route, "polygon_ids", lambda triangles: np.arange(len(triangles)))
+    monkeypatch.setattr(rechart_route, "polygon_ids", lambda triangles, polygons=None: np.arange(len(triangles)))
     cut = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, positions=corners)
     assert not cut.report["rechart"]["used"] and "different charts" in cut.report["rechart"]["reason"]
+
+
+def test_route_keeps_the_faces_it_is_given_of_a_per_corner_layout_whole():
+    """A per-corner layout (the sample .npz files, a caller's numpy arrays) shares no UV index, so only
+    polygons= tells the route which triangles were one quad."""
+    corners, uvs, triangles = _bumpy_quads_per_loop()
+    corner_uvs, corner_triangles = uvs[triangles].reshape(-1, 2), np.arange(3 * len(triangles)).reshape(-1, 3)
+    corner_positions = corners[triangles].reshape(-1, 3)
+    lightmap = _shadowed_floor(corner_uvs, corner_triangles, corner_positions)
+    faces = np.repeat(np.arange(len(triangles) // 2) * 7 + 100, 2)  # any integer ids, one per quad
+    kept = lmrefine.refine_uvs(lightmap, corner_uvs, corner_triangles, RESOLUTION, padding=2,
+                               positions=corner_positions, polygons=faces)
+    assert kept.report["rechart"]["used"], kept.report["rechart"]
+    charts = lmrefine.find_charts(kept.uvs, corner_triangles, lmrefine.CHART_TOLERANCE)
+    assert (charts[0::2] == charts[1::2]).all()
+    # The same layout per loop gives the same layout (within float32 rounding: UVs are welded per index).
+    per_loop = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, positions=corners)
+    np.testing.assert_allclose(per_loop.uvs[triangles].reshape(-1, 2), kept.uvs, rtol=0, atol=1e-6)
+    # Without the faces the hills cut quads along their diagonals.
+    cut = lmrefine.refine_uvs(lightmap, corner_uvs, corner_triangles, RESOLUTION, padding=2,
+                              positions=corner_positions)
+    charts = lmrefine.find_charts(cut.uvs, corner_triangles, lmrefine.CHART_TOLERANCE)
+    assert cut.report["rechart"]["used"] and (charts[0::2] != charts[1::2]).any()
+
+
+def test_polygon_ids_join_the_faces_given_with_the_shared_uvs():
+    triangles = np.arange(18).reshape(-1, 3)  # per corner: nothing shared
+    faces = rechart_route.polygons_array([5, 5, -2, 9, 9, 9], 6)
+    assert faces.tolist() == [1, 1, 0, 2, 2, 2]
+    assert rechart_route.polygon_ids(triangles, faces).tolist() == [0, 0, 6, 9, 9, 9]
+    shared = triangles.copy()
+    shared[2, 0] = 0  # the third triangle shares a UV with the first: one face with it
+    assert rechart_route.polygon_ids(shared, faces).tolist() == [0, 0, 0, 9, 9, 9]
+
+
+@pytest.mark.parametrize("polygons, match", [
+    (np.zeros(5, np.int32), r"one integer face id per triangle, shape \(\d+,\)"),
+    (np.zeros(CELLS * CELLS * 2, np.float32), "one integer face id per triangle"),
+    (np.zeros(CELLS * CELLS * 2, bool), "one integer face id per triangle"),
+])
+def test_route_bad_polygons(lightmap_pack_case, polygons, match):
+    corners, uvs, triangles, lightmap = lightmap_pack_case
+    with pytest.raises(ValueError, match=match):
+        lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, positions=corners, polygons=polygons)
+    with pytest.raises(ValueError, match=r"polygons= is read only with positions="):
+        lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, polygons=np.zeros(len(triangles), np.int32))
 
 
 def test_route_packs_charts_apart_when_the_automaton_fit_undid_a_region(monkeypatch):

@@ -37,6 +37,14 @@ def test_every_bundled_scene_loads_with_consistent_arrays():
         assert scene.base_color.shape == (triangles, 3) and 0 <= scene.base_color.min() <= scene.base_color.max() <= 1
         assert set(np.unique(scene.object_id)) == set(range(len(scene.objects)))
         assert scene.lights and all(light["kind"] in sample_scenes.LIGHT_PROPERTIES for light in scene.lights)
+        # The face each triangle was cut from: a face's triangles share an edge with one another, and
+        # one object's faces are never another's.
+        faces = scene.polygons
+        assert faces.shape == (triangles,) and faces.min() >= 0
+        for face in np.flatnonzero(np.bincount(faces) > 1)[:200]:
+            members = scene.triangles[faces == face]
+            assert len(set(members.ravel().tolist())) == len(members) + 2, (name, face)
+            assert len(set(scene.object_id[faces == face].tolist())) == 1
 
 
 def test_every_bundled_scene_is_either_for_tuning_or_for_reporting():
@@ -160,6 +168,10 @@ def test_hillside_is_smooth_shaded_organic_ground_with_a_tight_lightmap_pack():
     report = lmrefine.check_layout(uvs, triangles, 512, padding=1)
     assert report["valid"] and 1.0 <= report["min_gutter_texels"] < 2.0, report
     assert (ROOT / "blend_samples" / "hillside.blend").stat().st_size < 300_000
+    # The terrain is quads (two triangles a face), the boulders triangles.
+    per_face = np.bincount(scene.polygons)
+    terrain = scene.object_id == scene.objects.index("Terrain")
+    assert (per_face[scene.polygons[terrain]] == 2).all() and (per_face[scene.polygons[~terrain]] == 1).all()
 
 
 def test_receivers_are_tessellated_finely_enough_to_move_texels():
@@ -246,6 +258,7 @@ def test_scene_files_place_lights_by_matrix_and_older_files_still_load(tmp_path)
             objects=["Floor"], lights=[light])
         scene.save(tmp_path / "strip.npz")
         loaded = sample_scenes.load_sample(str(tmp_path / "strip.npz"))
+        assert loaded.polygons is None  # a file without faces (written before them) loads
         built = loaded.to_scene(loaded.uvs["smart"])
         values[light["name"]] = lmrefine.evaluate(built, points, normals, samples=1024, seed=1)[:, 0]
     expected = {}
@@ -284,3 +297,13 @@ def test_lmrefine_samples_names_the_sample_folder_for_a_copy_of_python(tmp_path)
     assert folder == str(samples) and names == "['plaza']" and int(triangles) > 0
     lost = run(LMREFINE_SAMPLES="")  # unset: the copy looks beside itself, where there are no scenes
     assert lost.returncode != 0 and "no sample scene 'plaza'" in lost.stderr
+
+
+def test_scene_files_keep_the_face_of_each_triangle(tmp_path):
+    scene = sample_scenes.load_sample("plaza")
+    scene.save(tmp_path / "plaza.npz")
+    np.testing.assert_array_equal(sample_scenes.load_sample(str(tmp_path / "plaza.npz")).polygons, scene.polygons)
+    scene.polygons = scene.polygons[:-1]  # one short: not a face per triangle
+    scene.save(tmp_path / "short.npz")
+    with pytest.raises(ValueError, match="not one integer face id per triangle"):
+        sample_scenes.load_sample(str(tmp_path / "short.npz"))

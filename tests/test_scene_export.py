@@ -52,6 +52,10 @@ def test_export_scene_writes_the_receivers_occluders_lights_and_camera(level, tm
     np.testing.assert_allclose(uvs, 0.05 + 0.9 * (corners[:, :2] + 2.0) / 4.0, atol=1e-6)
     np.testing.assert_allclose(scene.normals, np.tile([0, 0, 1], (384, 1)), atol=1e-6)
     np.testing.assert_allclose(scene.base_color, 0.6, atol=1e-6)
+    # The face each triangle was cut from: each quad's two triangles, the 64 quads apart.
+    assert scene.polygons.shape == (128,) and len(np.unique(scene.polygons)) == 64
+    assert all(len(set(scene.triangles[scene.polygons == face].ravel().tolist())) == 4
+               for face in np.unique(scene.polygons))
     assert scene.occluder_triangles.shape == (12, 3)  # the cube; the hidden plane casts nothing
     np.testing.assert_allclose(scene.occluder_positions.min(axis=0), (-0.5, -0.5, 0.5), atol=1e-6)
     [sun] = scene.lights

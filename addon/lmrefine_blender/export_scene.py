@@ -151,6 +151,10 @@ def export(out, objects_spec, uv_map):
             "uvs": np.concatenate([p.uvs[p.triangles.ravel()] for p in parts]) if with_uvs else None,
         }
 
+    # The face each triangle was cut from, numbered on across the receivers (refine_uvs' polygons=).
+    faces = np.cumsum([0] + [int(e.polygons.max()) + 1 if len(e.polygons) else 0 for e in receivers])
+    polygons = (np.concatenate([e.polygons + offset for e, offset in zip(receivers, faces)]).astype(np.int32)
+                if receivers else np.zeros(0, np.int32))
     receiving = joined(receivers, with_uvs=True)
     blocking = joined(occluders, with_uvs=False)
     name = os.path.splitext(os.path.basename(bpy.data.filepath))[0] or "scene"
@@ -164,7 +168,7 @@ def export(out, objects_spec, uv_map):
         occluder_positions=blocking["positions"].astype(np.float32), occluder_triangles=blocking["triangles"],
         description=f"exported from {os.path.basename(bpy.data.filepath)}: {len(receivers)} receivers "
                     f"({', '.join(sorted(set(uv_name_of.values())))}), {len(occluders)} occluders",
-        camera=camera_description(scene), uv_maps=uv_name_of)
+        camera=camera_description(scene), uv_maps=uv_name_of, polygons=polygons)
     directory = os.path.dirname(os.path.abspath(out))
     os.makedirs(directory, exist_ok=True)
     sample.save(out)

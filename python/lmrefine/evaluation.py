@@ -169,7 +169,8 @@ def _tessellated(sample, variant, baseline, budget):
     scene = replace(sample, positions=np.concatenate(new_positions).astype(np.float32),
                     triangles=np.concatenate([t for _, _, t in pieces]).astype(np.int32),
                     normals=normals.astype(np.float32), uvs={name: layouts[name] for name in sample.uvs},
-                    base_color=sample.base_color[parent], object_id=sample.object_id[parent])
+                    base_color=sample.base_color[parent], object_id=sample.object_id[parent],
+                    polygons=None if sample.polygons is None else sample.polygons[parent])
     report = {key: sum(r[key] for r in reports) for key in ("vertices_added", "vertex_budget", "triangles_before",
                                                            "triangles_after", "candidates_left")}
     report.update(vertices_before=len(sample.positions), vertices_after=vertex_count)
@@ -203,11 +204,14 @@ def _connected_objects(triangles, object_id):
 
 
 def _route_mesh(sample, options):
-    """The mesh for refine_uvs' re-chart route, one row per corner UV:
-    (positions, shading normals), or (None, None) when the route is off."""
+    """refine_uvs' keyword arguments for its re-chart route: the mesh, one
+    row per corner UV (positions, shading normals), and the face each
+    triangle was cut from (polygons: None for a scene file without them);
+    {} when the route is off."""
     if not (options.auto_rechart and options.rechart is None):
-        return None, None
-    return sample.positions[sample.triangles].reshape(-1, 3), sample.normals
+        return {}
+    return {"positions": sample.positions[sample.triangles].reshape(-1, 3), "normals": sample.normals,
+            "polygons": sample.polygons}
 
 
 def _plain_refinement(unsplit, variant, baseline, to_unsplit, points, truth, transitions, sweep, resolution,
@@ -218,10 +222,10 @@ def _plain_refinement(unsplit, variant, baseline, to_unsplit, points, truth, tra
     tessellation's own gain, free of the points' sampling noise."""
     uvs, triangles = unsplit.layout(variant)
     # refine_uvs' re-chart route as for the tessellated mesh (evaluate_sample).
-    positions, normals = _route_mesh(unsplit, options)
+    route = _route_mesh(unsplit, options)
     refined = stages.run("refine unsplit", lambda p: refine_uvs(baseline, uvs, triangles, resolution,
-                                                                padding=padding, progress=p, positions=positions,
-                                                                normals=normals, **options.refine_options))
+                                                                padding=padding, progress=p, **route,
+                                                                **options.refine_options))
     refined_map = stages.run("bake unsplit", lambda p: _bake_map(unsplit, refined.uvs, resolution, options, p))
     parent, parent_bary = to_unsplit
     bary = metrics.interpolate_corners(parent_bary, points.triangle, points.bary)
@@ -356,7 +360,7 @@ def _per_effect(sample, uvs, triangles, resolution, options, stages, points, tru
     combined_transition_errors = [metrics.error_stats(s["lookup"], truth, transitions)["rmse"] for s in sweep]
     rules, layouts = [], {}
     # Each effect's refinement takes the re-chart route as the add-on's per-effect maps do.
-    positions, normals = _route_mesh(sample, options)
+    route = _route_mesh(sample, options)
     for rule in options.per_effect:
         fractions = split_fractions(rule, energies)
         sides = split_resolutions(resolution, fractions)
@@ -367,8 +371,7 @@ def _per_effect(sample, uvs, triangles, resolution, options, stages, points, tru
             padding = min(float(options.padding), float(gutter))
             first, plain = lookup(name, uvs, side, "input", keep_map=True)
             refined = stages.run("per-effect refine", lambda p: refine_uvs(
-                first, uvs, triangles, side, padding=padding, progress=p, positions=positions, normals=normals,
-                **options.refine_options))
+                first, uvs, triangles, side, padding=padding, progress=p, **route, **options.refine_options))
             _, refined_lookup = lookup(name, refined.uvs, side, f"{rule} refined")
             layouts[(rule, name)] = refined.uvs
             # The effect's own uniform bakes at side x multipliers, against its own truth.
@@ -509,10 +512,9 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
         uvs, triangles = sample.layout(variant)
     original_check = check_layout(uvs, triangles, resolution, options.padding)
     padding = min(float(options.padding), float(original_check["min_gutter_texels"]))
-    positions, normals = _route_mesh(sample, options)
+    route = _route_mesh(sample, options)
     refined = stages.run("refine", lambda p: refine_uvs(baseline, uvs, triangles, resolution, padding=padding,
-                                                        progress=p, positions=positions, normals=normals,
-                                                        **refine_options))
+                                                        progress=p, **route, **refine_options))
     refined_map = stages.run("bake refined", lambda p: _bake_map(sample, refined.uvs, resolution, options, p))
 
     # Ground truth at area-uniform points, and at two neighbours each along

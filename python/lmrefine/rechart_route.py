@@ -231,33 +231,51 @@ def normals_array(normals, count):
         return array.astype(np.float32)
 
 
-def polygon_ids(triangles):
-    """(T,) int32: per triangle, the smallest UV index of its polygon, the
+def polygons_array(polygons, count):
+    """`polygons` (a face id per triangle) validated: (count,) int64, ids
+    renumbered 0..P-1 in the order of their values."""
+    array = np.asarray(polygons)
+    if array.shape != (count,) or not (np.issubdtype(array.dtype, np.integer) and array.dtype != np.bool_):
+        raise ValueError(f"polygons must hold one integer face id per triangle, shape ({count},), got "
+                         f"{array.dtype} {array.shape}: pass the face each triangle was cut from (Blender's "
+                         "loop_triangles' polygon_index), or polygons=None")
+    return np.unique(array, return_inverse=True)[1].astype(np.int64).reshape(count)
+
+
+def polygon_ids(triangles, polygons=None):
+    """(T,) int32: per triangle, the smallest UV index of its polygon: the
     triangles that share UV indices, chained (in Blender's per-loop layout a
-    quad's or an n-gon's triangles: one loop, one UV, so one chart)."""
+    quad's or an n-gon's triangles: one loop, one UV, so one chart), joined
+    with the triangles of the same face in `polygons` (polygons_array; a
+    per-corner layout shares no UV index, so only its caller knows its
+    faces; None: none given)."""
     triangles = np.asarray(triangles)
     if len(triangles) == 0:
         return np.zeros(0, np.int32)
+    if polygons is not None:
+        # A face id is one more index its triangles share (after every UV index).
+        triangles = np.column_stack([triangles, int(triangles.max()) + 1 + np.asarray(polygons)])
     label = np.arange(int(triangles.max()) + 1)
     while True:
         smallest = label[triangles].min(axis=1)
         joined = label.copy()
-        np.minimum.at(joined, triangles.ravel(), np.repeat(smallest, 3))
+        np.minimum.at(joined, triangles.ravel(), np.repeat(smallest, triangles.shape[1]))
         joined = joined[joined]  # pointer jumping: a long chain closes in log steps
         if np.array_equal(joined, label):
             return label[triangles[:, 0]].astype(np.int32)
         label = joined
 
 
-def _recharted_refinement(refine, lightmap, uvs, triangles, shape, positions, normals, padding, gutter,
+def _recharted_refinement(refine, lightmap, uvs, triangles, shape, positions, normals, polygons, padding, gutter,
                           progress):
-    """The mesh re-charted with its charts `gutter` texels apart and refined
-    at `padding` from `lightmap` carried over: (re-charting report,
-    result), or (None, why not)."""
+    """The mesh re-charted with its charts `gutter` texels apart (each of
+    `polygons`, a label per triangle, kept whole) and refined at `padding`
+    from `lightmap` carried over: (re-charting report, result), or (None,
+    why not)."""
     try:
         recharted = rechart(positions, triangles, ANGLE, shape, gutter, progress=progress,
                             normals=None if normals is None else normals[triangles].reshape(-1, 3),
-                            polygons=polygon_ids(triangles))
+                            polygons=polygons)
     except ValueError as error:
         return None, f"the mesh could not be re-charted: {error}"
     new_uvs = _per_index(recharted.uvs, uvs, triangles)
@@ -278,22 +296,25 @@ def fit_reset(result):
 
 
 def refine_recharted(refine, lightmap, uvs, triangles, shape, padding, positions, room, energy, source_result,
-                     progress, folds=None, normals=None):
+                     progress, folds=None, normals=None, polygons=None):
     """The re-chart route: `refine(lightmap, uvs, mask, padding)` (refine_uvs without
     positions, with the caller's options) on the re-charted mesh, from
     `lightmap` carried over to it. `source_result` is
     the source layout's own refinement, `energy` the first bake's gradient
     energy on the source layout, `folds` its charts' folds (lmrefine.folds;
     None: counted as none), `normals` the shading normals per UV (None: flat
-    shading). When the refinement's automaton fit reset a region of a layout
-    whose chart edges were all rigid, the charts are packed once more half a
-    texel farther apart and refined (report "edge_room"). Returns (result or
-    None, rechart report)."""
+    shading), `polygons` the caller's face id per triangle (polygons_array;
+    None: the faces are read from the UV indices the triangles share). When
+    the refinement's automaton fit reset a region of a layout whose chart
+    edges were all rigid, the charts are packed once more half a texel
+    farther apart and refined (report "edge_room"). Returns (result or None,
+    rechart report)."""
     info = {"used": False, "room": room, "angle": float(ANGLE), "folds": fold_report(folds), "edge_room": None}
     original = source_result.report["original_check"]
     # The new layout is not held to the source's gutter: at least PADDING.
     pack_padding = max(float(padding), PADDING)
-    recharted, result = _recharted_refinement(refine, lightmap, uvs, triangles, shape, positions, normals,
+    faces = polygon_ids(triangles, polygons)
+    recharted, result = _recharted_refinement(refine, lightmap, uvs, triangles, shape, positions, normals, faces,
                                               pack_padding, pack_padding, progress)
     if recharted is None:
         info["reason"] = result
@@ -308,7 +329,7 @@ def refine_recharted(refine, lightmap, uvs, triangles, shape, padding, positions
         # room when the automaton's fit cascades"). Kept when the model
         # prefers it and it passes the same checks.
         roomier, retried = _recharted_refinement(
-            refine, lightmap, uvs, triangles, shape, positions, normals, pack_padding,
+            refine, lightmap, uvs, triangles, shape, positions, normals, faces, pack_padding,
             pack_padding + backoff.EDGE_SHRINK_GUTTER_MARGIN, progress)
         info["edge_room"] = False
         if roomier is not None:

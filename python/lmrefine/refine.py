@@ -147,7 +147,7 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
                max_magnification=8.0, min_shrink=0.25, edge_shrink=0.8, delta=0.02, passes=1, border="same",
                directional=False, wavelet="d4", diffusion=0.05, max_steps=8, progress=None, repack=True,
                min_chart_scale=0.5, max_chart_scale=2.0, positions=None, rechart=True, world_areas=None,
-               normals=None, max_stretch=2.0):
+               normals=None, max_stretch=2.0, polygons=None):
     """Refine a lightmap UV layout: more texels where light changes fast.
 
     Args:
@@ -235,6 +235,13 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
             charting.SMOOTH_ANGLE (docs/refiner.md, "Smooth-shaded
             meshes"). A zero or non-finite normal makes its edges count as
             hard.
+        polygons: (T,) integer face id per triangle (the face of the mesh
+            each triangle was cut from: Blender's loop_triangles'
+            polygon_index), or None. Used with positions: the re-chart route
+            keeps each face's triangles in one chart, so a curved quad is
+            not cut along its diagonal. Triangles that share UV indices (a
+            per-loop layout, as the add-on passes) are one face anyway; a
+            per-corner layout shares none, so only this tells its faces.
         world_areas: (T,) the triangles' surface areas (any unit), for
             repack: a chart's light changes count on the surface its
             texels cover, so a layout whose texel density is not uniform
@@ -280,9 +287,10 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
                "world_areas": world_areas, "max_stretch": max_stretch}
     if not (isinstance(rechart, (bool, np.bool_)) or (isinstance(rechart, str) and rechart == "always")):
         raise TypeError(f"rechart must be True, False or 'always', got {rechart!r}")
-    if normals is not None and positions is None:
-        raise ValueError("normals= is read only with positions= (the re-chart route): pass the UVs' 3-D positions "
-                         "too, or leave normals out")
+    for name, value in (("normals", normals), ("polygons", polygons)):
+        if value is not None and positions is None:
+            raise ValueError(f"{name}= is read only with positions= (the re-chart route): pass the UVs' 3-D "
+                             f"positions too, or leave {name} out")
     if positions is None:
         result, _, _ = _refine(lightmap, uvs, triangles, resolution, padding, mask, gradient, progress, options)
         result.report["rechart"] = None
@@ -292,6 +300,8 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
     positions = rechart_route.positions_array(positions, len(uvs))
     if normals is not None:
         normals = rechart_route.normals_array(normals, len(uvs))
+    if polygons is not None:
+        polygons = rechart_route.polygons_array(polygons, len(triangles))
     room = rechart_route.layout_room(uvs, triangles)
     # 'always': the caller knows the layout's charts are one face each under its split triangles.
     opened = room["no_room"] or rechart == "always"
@@ -319,7 +329,8 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
         recharted, info = rechart_route.refine_recharted(
             lambda carried, new_uvs, new_mask, new_padding: _refine(carried, new_uvs, triangles, shape, new_padding,
                                                                     new_mask, None, progress, options)[0],
-            lightmap, uvs, triangles, shape, padding, positions, room, energy, result, progress, folds, normals)
+            lightmap, uvs, triangles, shape, padding, positions, room, energy, result, progress, folds, normals,
+            polygons)
         if rechart == "always":
             info["always"] = True
         if recharted is not None:

@@ -3,7 +3,7 @@
 ``blend_samples/make_samples.py`` builds each scene in headless Blender, saves
 the .blend and exports the same scene as an .npz (world-space receiver
 triangles, per-corner normals, two lightmap UV variants, base colours, object
-ids, occluder-only casters, lights with Blender's properties, world colour).
+ids, the face each triangle was cut from, occluder-only casters, lights with Blender's properties, world colour).
 :func:`load_sample` reads one; :meth:`SampleScene.to_scene` turns it into an
 :class:`lmrefine.Scene` with the UV layout to bake.
 """
@@ -80,6 +80,7 @@ class SampleScene:
     description: str = ""
     camera: dict = None              # the scene's own camera (surface_view.Camera.to_dict), if it has one
     uv_maps: dict = None             # exported scenes: receiver name -> the Blender UV map of variant "own"
+    polygons: np.ndarray = None      # (T,) int32: the face of its mesh each triangle was cut from, or None
 
     @property
     def corner_triangles(self):
@@ -138,6 +139,7 @@ class SampleScene:
             path, positions=self.positions, triangles=self.triangles, normals=self.normals,
             base_color=self.base_color, object_id=self.object_id, occluder_positions=self.occluder_positions,
             occluder_triangles=self.occluder_triangles, meta=np.array(json.dumps(meta)),
+            **({} if self.polygons is None else {"polygons": self.polygons}),
             **{UV_VARIANTS[variant]: uvs for variant, uvs in self.uvs.items()})
 
     def triangle_areas(self):
@@ -194,7 +196,19 @@ def load_sample(name_or_path):
                 description=meta.get("description", ""),
                 camera=meta.get("camera"),
                 uv_maps=meta.get("uv_maps"),
+                polygons=_polygons(data, path),
             )
         except KeyError as error:
             raise ValueError(f"'{path}' is not a scene .npz (missing {error}); make one with "
                              "`python3 -m lmrefine export-scene LEVEL.blend`") from None
+
+
+def _polygons(data, path):
+    """The file's face id per triangle, or None (files written before it)."""
+    if "polygons" not in data:
+        return None
+    polygons = data["polygons"]
+    if polygons.shape != data["triangles"].shape[:1] or not np.issubdtype(polygons.dtype, np.integer):
+        raise ValueError(f"'{path}' has polygons {polygons.dtype} {polygons.shape}, not one integer face id per "
+                         "triangle: write it again with `python3 -m lmrefine export-scene`")
+    return polygons.astype(np.int32)

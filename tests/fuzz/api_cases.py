@@ -381,8 +381,12 @@ def _route_case(lm, rng, r, uvs, positions, what, extra_makers, normals=False):
               "padding": float(rng.choice([0, 1, 2])), "positions": positions, "max_steps": 2, "progress": None}
     if normals and rng.random() < 0.5:
         kwargs["normals"] = shading_normals(rng, positions)
+    if rng.random() < 0.5:  # faces of the triangles: pairs (quads), random ids, or one face
+        count = len(kwargs["triangles"])
+        kwargs["polygons"] = [np.arange(count) // 2, rng.integers(-3, 3, count), np.zeros(count, np.int64)][
+            int(rng.integers(0, 3))]
     makers = {"lightmap": as_array, "positions": as_array, "rechart": as_number, "resolution": as_resolution,
-              "padding": as_number, "progress": as_progress, **extra_makers}
+              "padding": as_number, "progress": as_progress, "polygons": as_array, **extra_makers}
     kwargs, chosen = mutate(kwargs, rng, makers)
     layout = (kwargs["uvs"], kwargs["triangles"], kwargs["resolution"], kwargs["padding"])
     return Case("refine_uvs", _call(lm.refine_uvs, dict(kwargs)), list(kwargs.values()), layout=layout,
