@@ -440,8 +440,9 @@ def _refine(lightmap, uvs, triangles, resolution, padding, mask, gradient, progr
                      if gradient_given is None and strength > 0 else (None, False))
     # Every UV on its chart's border (one chart per face, as Lightmap Pack
     # makes): the warp can only reshape each chart's one affine map, which
-    # puts no more texels where the light changes inside it, so the
-    # automaton is not run (docs/refiner.md, "Layouts without room").
+    # puts no more texels where the light changes inside it (scaling whole
+    # charts is the repack's job), so the automaton is not run
+    # (docs/refiner.md, "Layouts without room").
     no_room = not hold and rechart_route.layout_room(uvs, triangles)["room_fraction"] == 0.0
     if hold or no_room:
         run = {"grid": identity, "steps": 0, "levels": [], "converged": True}
