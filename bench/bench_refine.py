@@ -5,7 +5,8 @@
    shadow edge; baseline: the 256^2 run's cost per texel.
 2. The chart repack at 1024^2 on a Smart UV atlas (game_level), against
    the in-chart refinement alone, and its chart stretch against the
-   repack without it; a Lightmap Pack layout at 1024^2; and
+   repack without it; a Lightmap Pack layout at 1024^2, and two of
+   thousands of one-face charts without the mesh against the plane; and
    the re-chart route on a Smart UV atlas with folds (courtyard), against
    the same refinement without the mesh; the chart stretch on the re-chart
    route of a Lightmap Pack layout (courtyard), where its turned fallback
@@ -85,6 +86,32 @@ def lightmap_pack_layout(resolution=1024, runs=2):
     print("  " + " / ".join(f"{k} {v:.3f}" for k, v in report["timings"].items()))
     print("  automaton levels (block: seconds/steps): "
           + " ".join(f"{level['block']}: {level['seconds']:.3f}/{level['steps']}" for level in report["levels"]))
+
+
+def one_face_charts_without_the_mesh(resolution=1024, runs=2):
+    """Lightmap Pack layouts of thousands of one-face charts refined without
+    the mesh (courtyard's 2,854 charts, hillside's 2,825: quads and
+    triangles) at 1024^2, each scene's 256^2 direct-light bake scaled up,
+    against the bench plane's whole refinement at 1024^2 in the same run.
+    Every UV of such a layout is on its chart's border, so the automaton is
+    not run (docs/refiner.md, "Layouts without room"): what is left is the
+    repack."""
+    from lmrefine.sample_scenes import load_sample
+
+    uvs, tris, lightmap = scene(resolution)
+    t_plane, _ = best_of(runs, lambda: refine(lightmap, uvs, tris, resolution))
+    print(f"\nLightmap Pack layouts without the mesh at {resolution}^2 (baseline: the bench plane's whole refinement, "
+          f"{t_plane:.3f} s; target 1 s):")
+    for name in ("courtyard", "hillside"):
+        sample = load_sample(name)
+        uvs, tris = sample.layout("lightmap")
+        small = lmrefine.bake(sample.to_scene(uvs), resolution // 4, passes="direct", samples=8, seed=0)[0][..., :3]
+        lightmap = np.ascontiguousarray(np.kron(small, np.ones((4, 4, 1))), dtype=np.float32)
+        seconds, result = best_of(runs, lambda: lmrefine.refine_uvs(lightmap, uvs, tris, resolution))
+        report = result.report
+        print(f"  {name} ({(report['repack'] or {}).get('charts', 0)} charts): {seconds:.3f} s "
+              f"({seconds / t_plane:.2f}x the plane), automaton steps {report['steps']}; "
+              + " / ".join(f"{k} {v:.3f}" for k, v in report["timings"].items()))
 
 
 def smart_uv_repack(resolution=1024, runs=2):
@@ -201,6 +228,7 @@ def border_modes(resolution=256):
 if __name__ == "__main__":
     whole_refinement()
     lightmap_pack_layout()
+    one_face_charts_without_the_mesh()
     smart_uv_repack()
     folded_smart_uv()
     stretch_on_lightmap_pack_route()
