@@ -540,8 +540,7 @@ def _refine(lightmap, uvs, triangles, resolution, padding, mask, gradient, progr
                "every deformation broke the layout and was backed off (" + ", ".join(broke) + ")" if broke else
                "every UV lies on its chart's border (small charts, e.g. one per face), where a warp could only "
                "reshape each chart's one affine map, so the automaton was not run" if no_room else
-               "the deformation left every UV in place: UVs on chart borders keep their place, and here every "
-               "UV is on one (small charts, e.g. one per face)")
+               "the automaton's deformation moved no UV")
         notes.append(f"nothing moved: {why}; the layout returned is the input")
 
     report = {

@@ -3,7 +3,8 @@
 ``blend_samples/make_samples.py`` builds each scene in headless Blender, saves
 the .blend and exports the same scene as an .npz (world-space receiver
 triangles, per-corner normals, two lightmap UV variants, base colours, object
-ids, the face each triangle was cut from, occluder-only casters, lights with Blender's properties, world colour).
+ids, the face each triangle was cut from, occluder-only casters, lights with
+Blender's properties, world colour).
 :func:`load_sample` reads one; :meth:`SampleScene.to_scene` turns it into an
 :class:`lmrefine.Scene` with the UV layout to bake.
 """
