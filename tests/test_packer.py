@@ -303,17 +303,18 @@ def test_progress_reports_and_cancels():
         lmrefine.pack_charts(uvs, tris, None, None, 128, 2.0, progress=lambda f, stage: False)
 
 
-def reference_first_fit(occupied, chart, padding):
+def reference_first_fit(occupied, chart, padding, first_row=0):
     """The placement rule, plainly: the first (x, y) in scan order (rows,
-    then columns) where every covered texel of `chart` is inside the atlas
-    and farther than `padding` from every occupied texel, measured between
-    texel squares (hypot(max(0, |di| - 1), max(0, |dj| - 1)), a shared texel
-    always too close); distance exactly `padding` is allowed."""
+    then columns, from first_row on) where every covered texel of `chart` is
+    inside the atlas and farther than `padding` from every occupied texel,
+    measured between texel squares (hypot(max(0, |di| - 1), max(0, |dj| -
+    1)), a shared texel always too close); distance exactly `padding` is
+    allowed."""
     height, width = occupied.shape
     ch, cw = chart.shape
     taken = np.argwhere(occupied)
     covered = np.argwhere(chart)
-    for y in range(height - ch + 1):
+    for y in range(first_row, height - ch + 1):
         for x in range(width - cw + 1):
             if len(taken) == 0:
                 return x, y
@@ -336,6 +337,10 @@ def test_placement_rule_matches_the_plain_reference(seed):
     chart[0, 0] |= not chart.any()
     padding = float(rng.choice([0.0, 0.5, 1.0, 1.5, 2.0, 2.5, 3.0]))
     assert lmrefine._native._first_fit(occupied, chart, padding) == reference_first_fit(occupied, chart, padding)
+    # A trial starts a chart's scan at the row where the last chart of its shape went (packer.cpp, shape_ids).
+    first_row = int(rng.integers(0, height))
+    assert (lmrefine._native._first_fit(occupied, chart, padding, first_row)
+            == reference_first_fit(occupied, chart, padding, first_row))
 
 
 @pytest.mark.parametrize("seed", range(30))

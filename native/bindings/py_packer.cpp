@@ -136,12 +136,14 @@ void bind_packer(py::module_& m) {
     m.def(
         "_first_fit",
         [](const py::array_t<uint8_t, py::array::c_style | py::array::forcecast>& occupied,
-           const py::array_t<uint8_t, py::array::c_style | py::array::forcecast>& chart, double padding) -> py::object {
+           const py::array_t<uint8_t, py::array::c_style | py::array::forcecast>& chart, double padding,
+           int first_row) -> py::object {
             if (occupied.ndim() != 2 || chart.ndim() != 2 || chart.shape(0) < 1 || chart.shape(1) < 1 ||
                 occupied.shape(0) < 1 || occupied.shape(1) < 1) {
                 throw py::value_error("occupied and chart must be non-empty 2-D masks");
             }
             if (!(padding >= 0.0) || padding > 1e4) throw py::value_error("padding must be in [0, 1e4] texels");
+            if (first_row < 0) throw py::value_error("first_row must be >= 0");
             // The kernel's masks hold 0 or 1; any nonzero value here is covered.
             std::vector<uint8_t> atlas(size_t(occupied.size())), bits(size_t(chart.size()));
             std::transform(occupied.data(), occupied.data() + occupied.size(), atlas.begin(),
@@ -149,14 +151,14 @@ void bind_packer(py::module_& m) {
             std::transform(chart.data(), chart.data() + chart.size(), bits.begin(), [](uint8_t v) { return uint8_t(v != 0); });
             int x = 0, y = 0;
             if (!first_fit_position(atlas, int(occupied.shape(1)), int(occupied.shape(0)), bits, int(chart.shape(1)),
-                                    int(chart.shape(0)), padding, x, y)) {
+                                    int(chart.shape(0)), padding, x, y, first_row)) {
                 return py::none();
             }
             return py::make_tuple(x, y);
         },
-        py::arg("occupied"), py::arg("chart"), py::arg("padding"),
-        "The packer's placement rule on masks (tests): the first (x, y) in scan order where `chart` fits "
-        "`occupied` with the padding, or None.");
+        py::arg("occupied"), py::arg("chart"), py::arg("padding"), py::arg("first_row") = 0,
+        "The packer's placement rule on masks (tests): the first (x, y) in scan order, from row `first_row` "
+        "on, where `chart` fits `occupied` with the padding, or None.");
     m.def("pack_charts", &pack, py::arg("uvs"), py::arg("triangles"), py::arg("resolution"), py::arg("padding") = py::float_(2.0),
           py::kw_only(), py::arg("charts") = py::none(), py::arg("scales") = py::none(),
           py::arg("rotate") = py::bool_(true), py::arg("progress") = py::none(), py::arg("tolerance") = py::float_(1e-5),

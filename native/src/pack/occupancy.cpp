@@ -56,7 +56,7 @@ void Occupancy::block(int row, int lo, int hi) {
     }
 }
 
-bool Occupancy::first_fit(const Footprint& fp, int& out_x, int& out_y, int last_row) const {
+bool Occupancy::first_fit(const Footprint& fp, int& out_x, int& out_y, int last_row, int first_row) const {
     const int fw = fp.covered.width, fh = fp.covered.height;
     if (fw > width_ || fh > height_) return false;
     // Atlas row q is too short for footprint row r: no corner row up to q
@@ -85,7 +85,7 @@ bool Occupancy::first_fit(const Footprint& fp, int& out_x, int& out_y, int last_
         for (int b = 0; b < bits; ++b) reversed |= (k >> b & 1) << (bits - 1 - b);
         if (reversed < fh && reversed != fp.tightest) row_order_.push_back(reversed);
     }
-    for (int y = 0; y + fh <= height_ && y <= last_row;) {
+    for (int y = std::max(first_row, 0); y + fh <= height_ && y <= last_row;) {
         // A row whose longest free run is too short rules the row out at once.
         if (longest_[size_t(y + fp.tightest)] < fp.longest[size_t(fp.tightest)]) {
             y = next_row(y + fp.tightest, fp.tightest);

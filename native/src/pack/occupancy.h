@@ -18,8 +18,8 @@ public:
     Occupancy(int width, int height);
 
     // The first position (column, row) of the footprint's corner where it
-    // fits, in rows up to last_row; false if none.
-    bool first_fit(const Footprint& fp, int& x, int& y, int last_row = INT32_MAX) const;
+    // fits, in rows first_row to last_row; false if none.
+    bool first_fit(const Footprint& fp, int& x, int& y, int last_row = INT32_MAX, int first_row = 0) const;
     // Blocks the footprint's dilation at (x, y).
     void place(const Footprint& fp, int x, int y);
 

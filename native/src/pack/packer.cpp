@@ -99,6 +99,52 @@ std::vector<int32_t> placement_order(size_t count, Size size_of) {
     return order;
 }
 
+// Footprints of the same cells (charts of one shape at one scale: Lightmap
+// Pack's faces often are) get one id, so a trial can remember where the last
+// of them was placed: blocking only adds cells, so every corner the scan
+// passed for it before is still ruled out for the next.
+std::vector<int32_t> shape_ids(const std::vector<Footprint>& footprints) {
+    const auto hash_of = [](const Footprint& f) {
+        uint64_t h = 1469598103934665603ull;
+        const auto mix = [&h](uint64_t v) { h = (h ^ v) * 1099511628211ull; };
+        mix(uint64_t(uint32_t(f.covered.width)));
+        mix(uint64_t(uint32_t(f.covered.height)));
+        for (const int32_t o : f.covered.offsets) mix(uint64_t(uint32_t(o)));
+        for (const pack::Span& span : f.covered.spans) mix(uint64_t(uint32_t(span.first)) << 32 | uint32_t(span.second));
+        return h;
+    };
+    const auto same = [](const Footprint& a, const Footprint& b) {
+        return a.covered.width == b.covered.width && a.covered.height == b.covered.height &&
+               a.covered.offsets == b.covered.offsets && a.covered.spans == b.covered.spans;
+    };
+    std::vector<uint64_t> hashes(footprints.size());
+    for (size_t i = 0; i < footprints.size(); ++i) hashes[i] = hash_of(footprints[i]);
+    std::vector<int32_t> order(footprints.size());
+    std::iota(order.begin(), order.end(), 0);
+    std::sort(order.begin(), order.end(), [&](int32_t a, int32_t b) {
+        return hashes[size_t(a)] != hashes[size_t(b)] ? hashes[size_t(a)] < hashes[size_t(b)] : a < b;
+    });
+    std::vector<int32_t> ids(footprints.size(), -1);
+    int32_t next = 0;
+    for (size_t begin = 0; begin < order.size();) {
+        size_t end = begin;
+        while (end < order.size() && hashes[size_t(order[end])] == hashes[size_t(order[begin])]) ++end;
+        // Equal hashes: compare the cells (a collision gets ids of its own).
+        for (size_t i = begin; i < end; ++i) {
+            const int32_t a = order[i];
+            if (ids[size_t(a)] >= 0) continue;
+            ids[size_t(a)] = next;
+            for (size_t j = i + 1; j < end; ++j) {
+                const int32_t b = order[j];
+                if (ids[size_t(b)] < 0 && same(footprints[size_t(a)], footprints[size_t(b)])) ids[size_t(b)] = next;
+            }
+            ++next;
+        }
+        begin = end;
+    }
+    return ids;
+}
+
 // Places every chart at one global scale, or stops at the first that does not fit.
 Trial run_trial(const Problem& problem, double global_scale, Progress* progress) {
     const size_t count = problem.pieces.size();
@@ -128,6 +174,9 @@ Trial run_trial(const Problem& problem, double global_scale, Progress* progress)
     trial.placements.resize(count);
     for (size_t c = 0; c < count; ++c) trial.total_texels += footprints[c * size_t(turn_options)].texels;
     pack::Occupancy occupancy(problem.options.width, problem.options.height);
+    // Per footprint shape, the first row where one of its shape may still fit.
+    const std::vector<int32_t> shape = shape_ids(footprints);
+    std::vector<int32_t> first_row(footprints.size(), 0);
     for (size_t n = 0; n < count; ++n) {
         if ((n & 63) == 0 && progress && progress->cancelled()) return trial;
         const int32_t c = order[n];
@@ -136,8 +185,16 @@ Trial run_trial(const Problem& problem, double global_scale, Progress* progress)
         for (int turns = 0; turns < turn_options; ++turns) {
             int x, y;
             // The other turn only wins at an earlier row (or the same row, further left).
-            const Footprint& f = footprints[size_t(c) * size_t(turn_options) + size_t(turns)];
-            if (!occupancy.first_fit(f, x, y, found ? best.y : INT32_MAX)) continue;
+            const size_t index = size_t(c) * size_t(turn_options) + size_t(turns);
+            const Footprint& f = footprints[index];
+            const int last_row = found ? int(best.y) : INT32_MAX;
+            int32_t& from = first_row[size_t(shape[index])];
+            if (!occupancy.first_fit(f, x, y, last_row, from)) {
+                // No corner of this shape fits in rows up to last_row now, nor will later.
+                if (last_row != INT32_MAX) from = std::max(from, last_row + 1);
+                continue;
+            }
+            from = y;  // corners before (x, y) were ruled out, and stay so
             if (!found || std::make_pair(double(y), double(x)) < std::make_pair(best.y, best.x)) best = {double(x), double(y), turns};
             found = true;
         }
@@ -482,10 +539,11 @@ PackResult pack_charts(const UvLayout& layout, const std::vector<int32_t>& trian
 
 bool first_fit_position(const std::vector<uint8_t>& occupied, int width, int height,
                         const std::vector<uint8_t>& chart, int chart_width, int chart_height, double padding, int& x,
-                        int& y) {
+                        int& y, int first_row) {
     pack::Occupancy occupancy(width, height);
     occupancy.place(pack::footprint_of_bits(occupied, width, height, padding), 0, 0);
-    return occupancy.first_fit(pack::footprint_of_bits(chart, chart_width, chart_height, padding), x, y);
+    return occupancy.first_fit(pack::footprint_of_bits(chart, chart_width, chart_height, padding), x, y, INT32_MAX,
+                               first_row);
 }
 
 }  // namespace lmrefine

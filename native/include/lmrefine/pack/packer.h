@@ -56,9 +56,9 @@ PackResult pack_charts(const UvLayout& layout, const std::vector<int32_t>& trian
 // the first (x, y) in scan order where `chart` ((chart_height * chart_width)
 // bytes, nonzero = covered) fits inside the atlas with no covered texel
 // closer than `padding` (texel-square distance) to a texel of `occupied`
-// ((height * width) bytes). False if none.
+// ((height * width) bytes), in rows from first_row on. False if none.
 bool first_fit_position(const std::vector<uint8_t>& occupied, int width, int height,
                         const std::vector<uint8_t>& chart, int chart_width, int chart_height, double padding, int& x,
-                        int& y);
+                        int& y, int first_row = 0);
 
 }  // namespace lmrefine
