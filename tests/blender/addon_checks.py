@@ -89,10 +89,19 @@ def settings(**values):
     return target
 
 
-def fresh_shadow_scene(**values):
-    scenes.shadow_scene()
+def fresh_scene(build, **values):
+    """build() a test scene, register the add-on and set the checks' settings (and `values`)."""
+    build()
     register()
     settings(resolution=RESOLUTION, padding=2, samples=4, **values)
+
+
+def fresh_shadow_scene(**values):
+    fresh_scene(scenes.shadow_scene, **values)
+
+
+# The checks' usual first map and second bake: the Embree baker, direct light.
+EMBREE_DIRECT = {"first_lightmap": 'EMBREE', "backend": 'EMBREE', "bake_passes": {'DIRECT'}}
 
 
 @check()
@@ -338,10 +347,7 @@ def inside_out_member_of_a_shared_atlas_is_named():
     """Floor, Blocker and Post share one atlas; Post is inside out. The atlas is lit, so no black-map
     warning, but Post's own texels are black and the warning names it."""
     import bmesh
-    scenes.atlas_scene()
-    register()
-    settings(resolution=RESOLUTION, padding=2, samples=4, first_lightmap='EMBREE', backend='EMBREE',
-             bake_passes={'DIRECT'})
+    fresh_scene(scenes.atlas_scene, **EMBREE_DIRECT)
     post = bpy.data.objects["Post"]
     mesh = bmesh.new()
     mesh.from_mesh(post.data)
@@ -1152,10 +1158,7 @@ def shared_atlas_stages_and_tessellation():
 def shared_atlas_from_an_existing_image():
     """First Map Image: the three members' materials sample one atlas image through 'Lightmap' (the
     'before' image of an Embree run); it drives the one refinement and stays the preview's 'before'."""
-    scenes.atlas_scene()
-    register()
-    settings(resolution=RESOLUTION, padding=2, samples=4, first_lightmap='EMBREE', backend='EMBREE',
-             bake_passes={'DIRECT'})
+    fresh_scene(scenes.atlas_scene, **EMBREE_DIRECT)
     members = [bpy.data.objects[name] for name in ATLAS]
     scenes.select_only(*members)
     first = refine()
@@ -1182,10 +1185,7 @@ def shared_atlas_from_an_existing_image():
 def shared_atlas_preview_removal():
     """Remove Preview on the atlas members puts back every material and active UV map; only the refined
     maps and the images stay."""
-    scenes.atlas_scene()
-    register()
-    settings(resolution=RESOLUTION, padding=2, samples=4, first_lightmap='EMBREE', backend='EMBREE',
-             bake_passes={'DIRECT'})
+    fresh_scene(scenes.atlas_scene, **EMBREE_DIRECT)
     before = fingerprint()
     outcome, message = refine()
     window = bpy.context.window_manager.windows[0]
@@ -1240,10 +1240,7 @@ def tessellation_writes_the_split_into_the_mesh():
     budget, all on the floor; every UV map and the colour attribute interpolated (UVMap and Tint stay
     one affine function of the position over the whole floor, Lightmap one per original quad, seams
     included); then Ctrl+Z restores the original mesh exactly."""
-    scenes.coarse_shadow_scene()
-    register()
-    settings(resolution=RESOLUTION, padding=2, samples=4, first_lightmap='EMBREE', backend='EMBREE',
-             bake_passes={'DIRECT'}, tessellate=True)
+    fresh_scene(scenes.coarse_shadow_scene, **EMBREE_DIRECT, tessellate=True)
     mesh = bpy.data.objects["Floor"].data
     before_positions, before_polygon, _ = _corner_arrays(mesh)
     vertices_before = _array(mesh.vertices, "co", 3).reshape(-1, 3)
@@ -1312,10 +1309,7 @@ def preview_in_a_shared_material():
 def tessellation_rolls_back_exactly():
     """A run cancelled at the second bake, after the mesh was tessellated and the refined map written:
     the journal puts back the original mesh (same datablock name, vertices, coordinates, every digest)."""
-    scenes.coarse_shadow_scene()
-    register()
-    settings(resolution=RESOLUTION, padding=2, samples=4, first_lightmap='EMBREE', backend='EMBREE',
-             bake_passes={'DIRECT'}, tessellate=True, tessellate_budget=1.0)
+    fresh_scene(scenes.coarse_shadow_scene, **EMBREE_DIRECT, tessellate=True, tessellate_budget=1.0)
     floor = bpy.data.objects["Floor"]
     vertices_before = _array(floor.data.vertices, "co", 3).reshape(-1, 3)
     before = fingerprint()
@@ -1735,10 +1729,7 @@ def per_effect_nothing_moved_warns():
 def per_effect_shared_atlas():
     """Per Effect on the atlas scene: one image per effect per atlas group, every member's preview adding
     its group's effect images through its own per-effect UV maps."""
-    scenes.atlas_scene()
-    register()
-    settings(resolution=RESOLUTION, padding=2, samples=4, first_lightmap='EMBREE', backend='EMBREE',
-             bake_passes={'DIRECT'}, layouts='PER_EFFECT')
+    fresh_scene(scenes.atlas_scene, **EMBREE_DIRECT, layouts='PER_EFFECT')
     objects = [bpy.data.objects[name] for name in ATLAS + ("Lonely",)]
     before = fingerprint()
     outcome, message = refine()
@@ -1796,10 +1787,7 @@ def rechart_lightmap_pack_source():
     untouched; the panel and the Info line say so). With the setting off it refines the source layout."""
     facts = {}
     for rechart in (True, False):
-        scenes.coarse_shadow_scene(quads=8)
-        register()
-        settings(resolution=RESOLUTION, padding=2, samples=4, first_lightmap='EMBREE', backend='EMBREE',
-                 bake_passes={'DIRECT'}, rechart=rechart)
+        fresh_scene(lambda: scenes.coarse_shadow_scene(quads=8), **EMBREE_DIRECT, rechart=rechart)
         floor = bpy.data.objects["Floor"]
         mesh = floor.data
         layout = bridge.read_layout(mesh, "Lightmap")
@@ -1841,10 +1829,7 @@ def rechart_folded_source():
     """A source map whose one chart folds over a lit ridge (Smart UV Project's kind, with room): the run
     re-charts the roof into its two slopes (the panel and the message say so, the Info line says why) and
     the progress runs through the route's stages, never back."""
-    scenes.roof_scene(quads=8)
-    register()
-    settings(resolution=RESOLUTION, padding=2, samples=4, first_lightmap='EMBREE', backend='EMBREE',
-             bake_passes={'DIRECT'})
+    fresh_scene(lambda: scenes.roof_scene(quads=8), **EMBREE_DIRECT)
     roof = bpy.data.objects["Roof"]
     mesh = roof.data
     layout = bridge.read_layout(mesh, "Lightmap")
@@ -1873,10 +1858,7 @@ def rechart_folded_source():
 def rechart_hilly_quads():
     """A hilly floor of quads, one chart each (Lightmap Pack's kind): the re-charted charts keep each
     quad whole (its two triangles share the diagonal's loops), so the route is not refused."""
-    scenes.hilly_floor_scene(quads=12)
-    register()
-    settings(resolution=RESOLUTION, padding=2, samples=4, first_lightmap='EMBREE', backend='EMBREE',
-             bake_passes={'DIRECT'})
+    fresh_scene(lambda: scenes.hilly_floor_scene(quads=12), **EMBREE_DIRECT)
     floor = bpy.data.objects["Floor"]
     mesh = floor.data
     layout = bridge.read_layout(mesh, "Lightmap", floor.matrix_world)
