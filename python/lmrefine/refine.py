@@ -306,7 +306,7 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
     # 'always': the caller knows the layout's charts are one face each under its split triangles.
     opened = room["no_room"] or rechart == "always"
     result, energy, source_mask = _refine(lightmap, uvs, triangles, resolution, padding, mask, gradient, progress,
-                                          options)
+                                          options, room)
     folds = None
     if rechart and not opened and gradient is None and lightmap is not None:
         folds = find_folds(uvs, triangles, positions, rechart_route.ANGLE, energy, source_mask, normals)
@@ -373,9 +373,10 @@ def _recharted_result(recharted, source_result, uvs, triangles, energy, mask, in
     return recharted
 
 
-def _refine(lightmap, uvs, triangles, resolution, padding, mask, gradient, progress, options):
+def _refine(lightmap, uvs, triangles, resolution, padding, mask, gradient, progress, options, room=None):
     """refine_uvs without the re-chart route: (RefineResult, the first bake's
-    gradient energy per texel (H, W), the source layout's coverage)."""
+    gradient energy per texel (H, W), the source layout's coverage). `room`:
+    rechart_route.layout_room of the layout, when the caller has it."""
     strength, max_magnification, min_shrink = options["strength"], options["max_magnification"], \
         options["min_shrink"]
     edge_shrink, delta, passes, border = options["edge_shrink"], options["delta"], options["passes"], \
@@ -443,7 +444,7 @@ def _refine(lightmap, uvs, triangles, resolution, padding, mask, gradient, progr
     # puts no more texels where the light changes inside it (scaling whole
     # charts is the repack's job), so the automaton is not run
     # (docs/refiner.md, "Layouts without room").
-    no_room = not hold and rechart_route.layout_room(uvs, triangles)["room_fraction"] == 0.0
+    no_room = not hold and (room or rechart_route.layout_room(uvs, triangles))["room_fraction"] == 0.0
     if hold or no_room:
         run = {"grid": identity, "steps": 0, "levels": [], "converged": True}
     else:
