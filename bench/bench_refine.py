@@ -10,7 +10,9 @@
    the re-chart route on a Smart UV atlas with folds (courtyard), against
    the same refinement without the mesh; the chart stretch on the re-chart
    route of a Lightmap Pack layout (courtyard), where its turned fallback
-   is packed too, against the same call with max_stretch=1.
+   is packed too, against the same call with max_stretch=1; the route of
+   Lightmap Pack layouts where a bound rules out the source layout's
+   repack, against that repack always made.
 3. Coarse-to-fine against one level at 256^2: steps (and time) one level
    needs to give the shadow edge 90% of the texels the pyramid gives it.
 4. The three border treatments, on an edge across the middle and one near
@@ -191,6 +193,44 @@ def stretch_on_lightmap_pack_route(resolution=1024, runs=2):
           f"{stretch.get('charts_turned', 0)} turned)")
 
 
+def route_without_the_source_repack(resolution=1024, runs=3):
+    """The re-chart route of Lightmap Pack layouts at 1024^2 (each scene's
+    256^2 direct bake scaled up, with its faces) as refine_uvs runs it,
+    where a lower bound may rule out the source layout's repack
+    (docs/refiner.md, "The source repack the route need not make"), against
+    the same call with that repack always made (refine._source_lowest
+    off), the two alternated in the same run."""
+    from lmrefine import refine as refine_module
+    from lmrefine.sample_scenes import load_sample
+
+    always = lambda stage: None  # noqa: E731
+    bounded = refine_module._source_lowest
+    print(f"\nthe re-chart route of Lightmap Pack layouts at {resolution}^2 (target 1 s), against the source "
+          f"repack always made:")
+    for name in ("courtyard", "game_level", "hillside"):
+        sample = load_sample(name)
+        uvs, tris = sample.layout("lightmap")
+        positions = sample.positions[sample.triangles].reshape(-1, 3)
+        small = lmrefine.bake(sample.to_scene(uvs), resolution // 4, passes="direct", samples=8, seed=0)[0][..., :3]
+        lightmap = np.ascontiguousarray(np.kron(small, np.ones((4, 4, 1))), dtype=np.float32)
+        times = {"bounded": [], "always": []}
+        for _ in range(runs):
+            for label, rule in (("always", always), ("bounded", bounded)):
+                refine_module._source_lowest = rule
+                try:
+                    seconds, result = best_of(1, lambda: lmrefine.refine_uvs(
+                        lightmap, uvs, tris, resolution, positions=positions, polygons=sample.polygons))
+                finally:
+                    refine_module._source_lowest = bounded
+                times[label].append(seconds)
+        info = result.report["rechart"]
+        made = "made" if info["predicted_error_source_route"] is not None else "not made"
+        print(f"  {name}: {min(times['bounded']):.3f} s against {min(times['always']):.3f} s "
+              f"({min(times['bounded']) / min(times['always']):.2f}x); re-charted {info['used']} predicting "
+              f"{info['predicted_error']:.3f}, the bound {info['source_route_bound'] or float('nan'):.3f}: "
+              f"source repack {made}")
+
+
 def coarse_to_fine_against_one_level(resolution=256):
     energy = np.full((resolution, resolution), 1 / 7, np.float32)
     energy[:, resolution // 2 - 2:resolution // 2 + 2] = 1.0  # a 4-texel band, as strength 6 makes it
@@ -232,5 +272,6 @@ if __name__ == "__main__":
     smart_uv_repack()
     folded_smart_uv()
     stretch_on_lightmap_pack_route()
+    route_without_the_source_repack()
     coarse_to_fine_against_one_level()
     border_modes()

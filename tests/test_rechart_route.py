@@ -254,6 +254,75 @@ def test_predicted_error_counts_chart_borders():
         pytest.approx(1.0)
 
 
+def test_lowest_packed_of_one_square_chart():
+    # One chart of L x L texels with light changes and no slope (a flat map: the border term is 0) packs
+    # at most g = (R + p - sqrt(pi) p / 2) / L across an R^2 atlas at padding p (Brunn-Minkowski is exact
+    # for a disc, close for a square); the edge term falls as 1 / g.
+    corners, _, (one_chart, triangles) = _floor_layouts()
+    energy = np.ones((RESOLUTION, RESOLUTION), np.float32)
+    flat = np.full((RESOLUTION, RESOLUTION, 3), 0.5, np.float32)
+    model = rechart_route.ErrorModel(one_chart, triangles, energy, corners, flat)
+    side = 0.9 * RESOLUTION
+    for padding in (0.0, 2.0, 3.5):
+        g = (RESOLUTION + padding - np.sqrt(np.pi) * padding / 2) / side
+        assert model.lowest_packed((RESOLUTION, RESOLUTION), padding, [1.0]) == pytest.approx(1 / g, rel=1e-5)
+    assert model.lowest_packed((RESOLUTION, RESOLUTION), 2.0, [0.0]) is None  # no live chart
+    assert rechart_route.ErrorModel(one_chart, triangles, energy).lowest_packed((128, 128), 2.0, [1.0]) is None
+
+
+def test_lowest_packed_bounds_every_packing_at_its_scales(lightmap_pack_case):
+    # Whatever the packer makes of the source's charts at g x scales (turned, or stretched at equal
+    # area first), the model predicts no less than the bound at those scales; the bound is close.
+    corners, uvs, triangles, lightmap = lightmap_pack_case
+    mask = lmrefine.coverage_mask(uvs, triangles, RESOLUTION)
+    energy = lmrefine.gradient_map(lightmap, mask).sum(axis=2)
+    model = rechart_route.ErrorModel(uvs, triangles, energy, corners, lightmap)
+    charts, signal, _, _ = lmrefine.allocation.signal_scales(uvs, triangles, energy, 0.5, 2.0, lightmap, mask)
+    rng = np.random.default_rng(3)
+    from lmrefine import stretch
+    for scales in (signal, np.sqrt(signal), np.ones_like(signal), rng.uniform(0.5, 2.0, len(signal))):
+        for padding in (1.0, 2.0):
+            bound = model.lowest_packed((RESOLUTION, RESOLUTION), padding, scales)
+            packed, _ = lmrefine.pack_charts(uvs, triangles, charts, scales, RESOLUTION, padding)
+            predicted = model.relative(packed)
+            assert bound <= predicted and bound > 0.8 * predicted, (bound, predicted)
+            factor = rng.uniform(1.0, 2.0, len(scales))
+            direction = np.column_stack([np.cos(factor), np.sin(factor)])
+            stretched = stretch.stretch_charts(uvs, triangles, charts, factor, direction)
+            packed, _ = lmrefine.pack_charts(stretched, triangles, charts, scales, RESOLUTION, padding)
+            assert bound <= model.relative(packed)
+
+
+def test_route_does_not_make_the_source_repack_the_bound_rules_out(lightmap_pack_case, monkeypatch):
+    # The re-charted floor predicts less than any packing of the source's one-quad charts can:
+    # the source's repack is not made, and the layout returned is the one the full comparison picks.
+    corners, uvs, triangles, lightmap = lightmap_pack_case
+    from lmrefine import refine
+    made = []
+    repacked = refine._repacked
+    monkeypatch.setattr(refine, "_repacked", lambda stage: made.append(stage) or repacked(stage))
+    skipped = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, positions=corners)
+    info = skipped.report["rechart"]
+    assert info["used"] and info["predicted_error_source_route"] is None
+    assert info["predicted_error"] < info["source_route_bound"] < 1.0
+    assert "at least" in skipped.report["notes"][0] and len(made) == 1  # the re-charted layout's alone
+    monkeypatch.setattr(refine, "_source_lowest", lambda stage: None)
+    made.clear()
+    full = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, positions=corners)
+    assert len(made) == 2 and np.array_equal(full.uvs, skipped.uvs)
+    assert full.report["rechart"]["predicted_error_source_route"] >= info["source_route_bound"]
+
+
+def test_no_bound_for_a_source_the_repack_may_reshape():
+    from lmrefine.refine import _source_lowest
+    stage = {"moved_inside": False, "hold": False, "original": {"overlapping": 0},
+             "options": {"repack": True, "strength": 24.0}}
+    assert _source_lowest(stage) is not None
+    for change in ({"moved_inside": True}, {"hold": True}, {"original": {"overlapping": 3}},
+                   {"options": {"repack": False, "strength": 24.0}}, {"options": {"repack": True, "strength": 0}}):
+        assert _source_lowest({**stage, **change}) is None, change
+
+
 # --- the route ----------------------------------------------------------------
 
 def test_route_recharts_a_lightmap_pack_source(lightmap_pack_case):

@@ -303,8 +303,19 @@ def padded_utilisation(area, perimeter, padding, shape):
     return float(grown[area > 0].sum() / (shape[0] * shape[1]))
 
 
+def signal_scales(source_uvs, triangles, energy, min_scale, max_scale, lightmap=None, mask=None, world_areas=None):
+    """repack's charts of `source_uvs` and their relative linear scales by
+    their signal, with the model's terms: (charts (T,), scales (C,), edge,
+    smooth). The repack packs the charts at these scales times one global
+    scale (or at their square roots: `repack`)."""
+    charts = find_charts(source_uvs, triangles, tolerance=CHART_TOLERANCE)
+    scales, edge, smooth, _ = chart_scales(source_uvs, triangles, charts, energy, min_scale, max_scale,
+                                           lightmap, mask, world_areas=world_areas)
+    return charts, scales, edge, smooth
+
+
 def repack(source_uvs, refined_uvs, triangles, energy, resolution, padding, min_scale, max_scale, progress=None,
-           lightmap=None, mask=None, world_areas=None, max_stretch=1.0):
+           lightmap=None, mask=None, world_areas=None, max_stretch=1.0, signal=None):
     """Scale the charts of `refined_uvs` by their signal (measured on the
     source layout `source_uvs`, where `energy` and `lightmap` were baked;
     `mask` its coverage; `world_areas` the triangles' surface areas, or
@@ -316,12 +327,12 @@ def repack(source_uvs, refined_uvs, triangles, energy, resolution, padding, min_
     to their smallest boxes, and a fourth stretches each chart by the square
     root of its factor. A packing the model takes but the density rule
     refuses is packed again at the square roots of the scales (and judged
-    the same way). Returns (uvs, report); uvs is None when the packed layout
-    is not better than `refined_uvs` by the error model (the report says
-    so)."""
-    charts = find_charts(source_uvs, triangles, tolerance=CHART_TOLERANCE)
-    scales, edge, smooth, _ = chart_scales(source_uvs, triangles, charts, energy, min_scale, max_scale,
-                                           lightmap, mask, world_areas=world_areas)
+    the same way). `signal`: signal_scales' result for these arguments, when
+    the caller has it. Returns (uvs, report); uvs is None when the packed
+    layout is not better than `refined_uvs` by the error model (the report
+    says so)."""
+    charts, scales, edge, smooth = signal if signal is not None else signal_scales(
+        source_uvs, triangles, energy, min_scale, max_scale, lightmap, mask, world_areas)
     # No packing can scale the charts beyond filling the whole atlas, gutters
     # aside: when the model's error at that scale is no clear gain, the
     # packer need not run (a single chart filling its atlas, for example).

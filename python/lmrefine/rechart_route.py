@@ -39,6 +39,10 @@ ANGLE = 20.0
 # re-charted courtyard (tuning) measured 2.00x at the source's 1.03-texel
 # gutter against 2.35x at 2 (docs/evaluation.md, "The re-chart route").
 PADDING = 2.0
+# The re-charted layout wins without the source layout's repack being made
+# when its prediction is this much (relative) below the repack's lower bound:
+# the packed charts' float32 UVs scale each triangle to a few ulps.
+_BOUND_MARGIN = 1e-4
 # UVs closer than this (a power of two near CHART_TOLERANCE) are one vertex
 # of a chart when telling border corners from inner ones.
 _VERTEX_GRID = float(1 << 17)
@@ -187,6 +191,49 @@ class ErrorModel:
         source_error = self._source_error[key]
         return float(error(uvs, size_after) / source_error) if source_error > 0 else 1.0
 
+    def lowest_packed(self, shape, padding, scales):
+        """A lower bound on `relative(uvs)` over every layout that keeps each
+        of the source layout's charts whole, turned, moved or stretched at
+        equal area, scaled linearly by g * scales[c] for one g (the scales
+        of allocation.signal_scales: the repack's packings), at least
+        `padding` texels apart inside the (H, W) = `shape` atlas. None
+        without positions or with folds (their terms are not per chart).
+
+        Chart c scaled by s predicts A_c / s + B_c / s^2 (the edge term by
+        texel size, the border term by its square), falling as g grows.
+        Grown by a disc of radius r = padding / 2, a chart of texel area a_c
+        s^2 covers at least (sqrt(a_c) s + sqrt(pi) r)^2 texels
+        (Brunn-Minkowski), and the grown charts are disjoint inside the atlas
+        grown by r: the largest g that allows bounds the error from below.
+        A chart whose triangles overlap covers less than their areas: the
+        caller gives only layouts without overlaps."""
+        if self.world is None or self.folds is not None:
+            return None
+        keep = (self.before > 0) & (self.world > 0)
+        size = np.where(keep, self.size_before, 0.0)
+        slope_world = np.where(keep, self.slope_texel / np.maximum(size, 1e-300), 0.0)
+        charts, _, border = _chart_borders(self.source_uvs, self.triangles)
+        count = len(scales)
+        edge = np.bincount(charts[keep], (allocation.EDGE_ERROR * self.edge * size * size)[keep], minlength=count)
+        slope = np.bincount(charts[keep], (allocation.BORDER_ERROR * slope_world * (border * self.lengths).sum(axis=1)
+                                           * size * size)[keep], minlength=count)
+        total = float(edge.sum() + slope.sum())
+        area = np.bincount(charts, self.before, minlength=count) * self.texels
+        scales = np.asarray(scales, np.float64)
+        live = (area > 0) & (scales > 0)
+        if total <= 0 or not live.any():
+            return None
+        grown = np.sqrt(np.pi) * 0.5 * padding
+        root = np.sqrt(area[live]) * scales[live]
+        # sum (root g + grown)^2 <= budget, a quadratic in g.
+        quadratic, linear = float((root * root).sum()), 2.0 * grown * float(root.sum())
+        constant = live.sum() * grown * grown - (shape[0] + padding) * (shape[1] + padding)
+        if constant >= 0:
+            return None  # no packing could hold the charts: nothing to bound
+        g = (-linear + np.sqrt(linear * linear - 4.0 * quadratic * constant)) / (2.0 * quadratic)
+        scaled = g * scales[live]
+        return float((edge[live] / scaled + slope[live] / scaled ** 2).sum() / total)
+
 
 def _per_index(recharted, uvs, triangles):
     """The per-corner re-charted UVs (3T, 2) in the source's indexing (N, 2),
@@ -295,12 +342,16 @@ def fit_reset(result):
     return bool(levels) and bool(levels[-1].get("fit_reset"))
 
 
-def refine_recharted(refine, lightmap, uvs, triangles, shape, padding, positions, room, energy, source_result,
-                     progress, folds=None, normals=None, polygons=None):
+def refine_recharted(refine, lightmap, uvs, triangles, shape, padding, positions, room, energy, source_route,
+                     original, progress, folds=None, normals=None, polygons=None, source_lowest=None):
     """The re-chart route: `refine(lightmap, uvs, mask, padding)` (refine_uvs without
     positions, with the caller's options) on the re-charted mesh, from
-    `lightmap` carried over to it. `source_result` is
-    the source layout's own refinement, `energy` the first bake's gradient
+    `lightmap` carried over to it. `source_route()` makes the source
+    layout's own refinement (called at most once, and not at all when
+    `source_lowest(model)`, given, bounds its prediction from below
+    (ErrorModel.lowest_packed) above the re-charted layout's, which then
+    wins: report predicted_error_source_route None, source_route_bound the
+    bound), `original` the source layout's check_layout report, `energy` the first bake's gradient
     energy on the source layout, `folds` its charts' folds (lmrefine.folds;
     None: counted as none), `normals` the shading normals per UV (None: flat
     shading), `polygons` the caller's face id per triangle (polygons_array;
@@ -309,8 +360,8 @@ def refine_recharted(refine, lightmap, uvs, triangles, shape, padding, positions
     edges were all rigid, the charts are packed once more half a texel
     farther apart and refined (report "edge_room"). Returns (result or None,
     rechart report)."""
-    info = {"used": False, "room": room, "angle": float(ANGLE), "folds": fold_report(folds), "edge_room": None}
-    original = source_result.report["original_check"]
+    info = {"used": False, "room": room, "angle": float(ANGLE), "folds": fold_report(folds), "edge_room": None,
+            "source_route_bound": None}
     # The new layout is not held to the source's gutter: at least PADDING.
     pack_padding = max(float(padding), PADDING)
     faces = polygon_ids(triangles, polygons)
@@ -346,7 +397,15 @@ def refine_recharted(refine, lightmap, uvs, triangles, shape, padding, positions
         info["reason"] = f"the re-charted layout failed {', '.join(worse)} against the source layout"
         return None, info
     info["predicted_error"] = predicted
-    info["predicted_error_source_route"] = model.relative(source_result.uvs)
+    if source_lowest is not None:
+        info["source_route_bound"] = source_lowest(model)
+    bound = info["source_route_bound"]
+    if bound is not None and predicted < REQUIRED_GAIN and predicted <= bound * (1.0 - _BOUND_MARGIN):
+        # The source layout's refinement could only predict more error: not made.
+        info.update(used=True, predicted_error_source_route=None)
+        result.report["check"] = check
+        return result, info
+    info["predicted_error_source_route"] = model.relative(source_route().uvs)
     # Both against the source layout; the lower prediction wins (the source
     # layout's own refinement is never worse than the source by its checks).
     if not (info["predicted_error"] < REQUIRED_GAIN

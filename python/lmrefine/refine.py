@@ -5,6 +5,7 @@ warp of every UV through the deformed grid -> validity check, backing off
 towards the original layout until the result is valid. See docs/refiner.md.
 """
 
+import functools
 import time
 from dataclasses import dataclass, field
 
@@ -213,7 +214,11 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
             report["rechart"] says what happened: used, room (the rule's
             figures), folds (count, length, smooth (how many are
             smooth-shaded), energy_fraction; None when not looked for), reason when not used, the new layout's charts and
-            the model's predicted_error when re-charted, edge_room (None,
+            the model's predicted_error when re-charted, predicted_error_source_route
+            (the source layout's own refinement; None when it was not made:
+            source_route_bound, the least the model can predict for a
+            source whose charts can only be packed whole, is above the
+            re-charted layout's prediction), edge_room (None,
             or whether charts packed farther apart were kept after the
             automaton's fit reset a region: rechart_route.refine_recharted)
             (None without positions).
@@ -305,8 +310,15 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
     room = rechart_route.layout_room(uvs, triangles)
     # 'always': the caller knows the layout's charts are one face each under its split triangles.
     opened = room["no_room"] or rechart == "always"
-    result, energy, source_mask = _refine(lightmap, uvs, triangles, resolution, padding, mask, gradient, progress,
-                                          options, room)
+    stage = _in_charts(lightmap, uvs, triangles, resolution, padding, mask, gradient, progress, options, room)
+    energy, source_mask = stage["energy"], stage["mask"]
+
+    @functools.lru_cache(maxsize=None)
+    def source_route():
+        """The source layout's own refinement, repacked: made only when
+        asked for (the re-chart route may win without it)."""
+        return _repacked(stage)[0]
+
     folds = None
     if rechart and not opened and gradient is None and lightmap is not None:
         folds = find_folds(uvs, triangles, positions, rechart_route.ANGLE, energy, source_mask, normals)
@@ -329,12 +341,14 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
         recharted, info = rechart_route.refine_recharted(
             lambda carried, new_uvs, new_mask, new_padding: _refine(carried, new_uvs, triangles, shape, new_padding,
                                                                     new_mask, None, progress, options)[0],
-            lightmap, uvs, triangles, shape, padding, positions, room, energy, result, progress, folds, normals,
-            polygons)
+            lightmap, uvs, triangles, shape, padding, positions, room, energy, source_route, stage["original"],
+            progress, folds, normals, polygons, source_lowest=_source_lowest(stage))
         if rechart == "always":
             info["always"] = True
         if recharted is not None:
-            result = _recharted_result(recharted, result, uvs, triangles, energy, source_mask, info)
+            result = _recharted_result(recharted, stage["original"], uvs, triangles, energy, source_mask, info)
+    if not info["used"]:
+        result = source_route()
     if not info["used"] and (opened or folded) and rechart:
         result.report["notes"].append(f"not re-charted: {info['reason']}")
     result.report["rechart"] = info
@@ -342,9 +356,34 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
     return result
 
 
-def _recharted_result(recharted, source_result, uvs, triangles, energy, mask, info):
+def _source_lowest(stage):
+    """None, or for a source refinement (`stage`, _in_charts) that moved no
+    UV inside the charts and has no overlaps: model -> the least error the
+    ErrorModel `model` can predict for it, the source layout itself (1.0)
+    or its charts packed whole at the repack's scales or their square roots
+    (ErrorModel.lowest_packed). The scales are kept for its repack."""
+    options = stage["options"]
+    if stage["moved_inside"] or stage["hold"] or stage["original"]["overlapping"] or not options["repack"] \
+            or not options["strength"] > 0:
+        return None
+
+    def lowest(model):
+        stage["signal"] = allocation.signal_scales(
+            stage["uvs"], stage["triangles"], stage["energy"], float(options["min_chart_scale"]),
+            float(options["max_chart_scale"]), stage["lightmap"] if stage["gradient_given"] is None else None,
+            stage["mask"], options["world_areas"])
+        scales = stage["signal"][1]
+        padding = pack_padding(stage["padding"], stage["original"])
+        bounds = [model.lowest_packed(stage["shape"], padding, variant) for variant in (scales, np.sqrt(scales))]
+        return None if None in bounds else min([1.0] + bounds)
+
+    return lowest
+
+
+def _recharted_result(recharted, original, uvs, triangles, energy, mask, info):
     """The re-charted refinement's result, its figures measured against the
-    source layout (the user's), its notes saying why it was re-charted."""
+    source layout (the user's, `original` its check), its notes saying why
+    it was re-charted."""
     report = recharted.report
     report.update(_layout_figures(uvs, recharted.uvs, triangles, energy, mask))
     room = info["room"]
@@ -368,8 +407,11 @@ def _recharted_result(recharted, source_result, uvs, triangles, energy, mask, in
     notes.insert(0, f"re-charted: {why}, so the mesh was re-charted ({info['charts']} charts at "
                     f"{info['angle']:g} degrees{roomier}) and refined; the error model predicts "
                     f"{info['predicted_error']:.2f} of the source layout's error "
-                    f"(refining the source layout: {info['predicted_error_source_route']:.2f})")
-    report.update({"moved": True, "notes": notes, "original_check": source_result.report["original_check"]})
+                    + (f"(refining the source layout: {info['predicted_error_source_route']:.2f})"
+                       if info["predicted_error_source_route"] is not None else
+                       f"(repacking the source layout's charts: at least {info['source_route_bound']:.2f}, so it "
+                       f"was not made)"))
+    report.update({"moved": True, "notes": notes, "original_check": original})
     return recharted
 
 
@@ -377,15 +419,22 @@ def _refine(lightmap, uvs, triangles, resolution, padding, mask, gradient, progr
     """refine_uvs without the re-chart route: (RefineResult, the first bake's
     gradient energy per texel (H, W), the source layout's coverage). `room`:
     rechart_route.layout_room of the layout, when the caller has it."""
+    return _repacked(_in_charts(lightmap, uvs, triangles, resolution, padding, mask, gradient, progress, options,
+                                room))
+
+
+def _in_charts(lightmap, uvs, triangles, resolution, padding, mask, gradient, progress, options, room=None):
+    """_refine up to the repack: the gradient map, the automaton and the warp
+    kept by the checks, as a dict _repacked finishes. Its `moved_inside` is
+    False when no UV moved (the repack can then only scale the charts
+    whole)."""
     strength, max_magnification, min_shrink = options["strength"], options["max_magnification"], \
         options["min_shrink"]
     edge_shrink, delta, passes, border = options["edge_shrink"], options["delta"], options["passes"], \
         options["border"]
     directional, wavelet, diffusion, max_steps = options["directional"], options["wavelet"], \
         options["diffusion"], options["max_steps"]
-    repack, min_chart_scale, max_chart_scale = options["repack"], options["min_chart_scale"], \
-        options["max_chart_scale"]
-    world_areas, max_stretch = options["world_areas"], options["max_stretch"]
+    world_areas = options["world_areas"]
     start = time.perf_counter()
     shape = _resolution(resolution)
     uvs, triangles = _layout(uvs, triangles)
@@ -476,6 +525,37 @@ def _refine(lightmap, uvs, triangles, resolution, padding, mask, gradient, progr
         limited_by += failed
 
     timings["warp_and_check"] = time.perf_counter() - clock
+    return {"lightmap": lightmap, "uvs": uvs, "triangles": triangles, "shape": shape, "padding": padding,
+            "mask": mask, "progress": progress, "options": options, "start": start, "checker": checker,
+            "original": original, "edge_shrink_used": edge_shrink_used, "timings": timings,
+            "gradient_given": gradient_given, "energy": scalar_energy, "aligned": aligned, "hold": hold,
+            "no_room": no_room, "run": run, "limited_by": limited_by, "notes": notes, "grid": grid,
+            "new_uvs": new_uvs, "check": check, "kept": kept, "moved_inside": not np.array_equal(new_uvs, uvs)}
+
+
+def pack_padding(padding, original):
+    """The gutter the repack packs at: the padding, or the input's gutter
+    (`original`, its check_layout report) where that is narrower
+    (backoff.allowed_gutter), never below a texel unless the padding is
+    (dilation needs a texel between charts)."""
+    return min(float(padding), max(float(original["min_gutter_texels"]), min(float(padding), 1.0)))
+
+
+def _repacked(stage):
+    """_refine from the in-chart `stage` (_in_charts) on: the chart repack,
+    the figures and the report."""
+    (options, lightmap, uvs, triangles, shape, padding, mask, progress, original, checker, gradient_given, hold,
+     aligned, no_room, run, scalar_energy, limited_by, notes, timings, grid, new_uvs, check, kept, start,
+     edge_shrink_used) = (stage[key] for key in (
+        "options", "lightmap", "uvs", "triangles", "shape", "padding", "mask", "progress", "original", "checker",
+        "gradient_given", "hold", "aligned", "no_room", "run", "energy", "limited_by", "notes", "timings", "grid",
+        "new_uvs", "check", "kept", "start", "edge_shrink_used"))
+    strength, max_magnification, min_shrink = options["strength"], options["max_magnification"], \
+        options["min_shrink"]
+    repack, min_chart_scale, max_chart_scale = options["repack"], options["min_chart_scale"], \
+        options["max_chart_scale"]
+    world_areas, max_stretch = options["world_areas"], options["max_stretch"]
+    passes, border = options["passes"], options["border"]
     repack_report = None
     if repack and strength > 0 and not hold:
         clock = time.perf_counter()
@@ -485,14 +565,12 @@ def _refine(lightmap, uvs, triangles, resolution, padding, mask, gradient, progr
         if isinstance(max_stretch, (bool, np.bool_)) or not isinstance(max_stretch, (int, float, np.number)) \
                 or not 1.0 <= float(max_stretch) < np.inf:
             raise ValueError(f"max_stretch must be a finite number >= 1 (1 = no stretch), got {max_stretch!r}")
-        # Pack at the gutter the checks ask for: the padding, or the input's
-        # gutter where that is narrower (backoff.allowed_gutter), never below
-        # a texel unless the padding is (dilation needs a texel between charts).
-        pack_padding = min(float(padding), max(float(original["min_gutter_texels"]), min(float(padding), 1.0)))
-        packed, repack_report = allocation.repack(uvs, new_uvs, triangles, scalar_energy, shape, pack_padding,
+        packed, repack_report = allocation.repack(uvs, new_uvs, triangles, scalar_energy, shape,
+                                                  pack_padding(padding, original),
                                                   float(min_chart_scale), float(max_chart_scale), progress,
                                                   lightmap=lightmap if gradient_given is None else None, mask=mask,
-                                                  world_areas=world_areas, max_stretch=float(max_stretch))
+                                                  world_areas=world_areas, max_stretch=float(max_stretch),
+                                                  signal=stage.get("signal"))
         if packed is not None:
             packed_check = _native.check_layout(packed, triangles, shape, padding, failing_charts=True)
             failing = set(packed_check.pop("failing_charts").tolist())
