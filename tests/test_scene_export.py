@@ -28,7 +28,8 @@ def level(tmp_path_factory):
     folder = tmp_path_factory.mktemp("level")
     subprocess.run([BLENDER, "-b", "--factory-startup", "--python-exit-code", "1", "--python",
                     os.path.join(REPO, "tests", "blender", "make_export_scene.py"), "--", str(folder / "level.blend"),
-                    str(folder / "twin.blend"), str(folder / "empty.blend")], check=True, capture_output=True)
+                    str(folder / "twin.blend"), str(folder / "empty.blend"), str(folder / "arrayed.blend")],
+                   check=True, capture_output=True)
     return str(folder / "level.blend")
 
 
@@ -94,6 +95,25 @@ def test_objects_that_do_not_share_one_atlas_are_refused_with_the_fix(level, tmp
     assert "the lightmap UV maps of 'Floor' and 'Twin' cover the same part of the UV square" in error
     assert "--objects NAME" in error and not (tmp_path / "s.npz").exists()
     assert cli.main(["export-scene", twin, "-o", str(tmp_path / "s.npz"), "--objects", "Floor"]) == 0
+
+
+@blender
+@needs_blender
+def test_copies_a_modifier_makes_with_their_uvs_receive_no_lightmap(level, tmp_path, capsys):
+    # The rail's Array copies its quad and its lightmap UVs: three places would share one set of
+    # texels. Named, it is refused with the fix; picked by 'all', it only casts shadows, as the
+    # add-on's run skips it.
+    arrayed = os.path.join(os.path.dirname(level), "arrayed.blend")
+    assert cli.main(["export-scene", arrayed, "-o", str(tmp_path / "s.npz"), "--objects", "Rail"]) == 2
+    error = capsys.readouterr().err
+    assert "'Rail': its modifiers (Array) copy faces with their UVs, so " in error
+    assert "Apply > Visual Geometry to Mesh" in error and "or leave the object out of --objects" in error
+    assert not (tmp_path / "s.npz").exists()
+    assert cli.main(["export-scene", arrayed, "-o", str(tmp_path / "s.npz")]) == 0
+    assert "left out as a receiver (it casts shadows): 'Rail': its modifiers (Array)" in capsys.readouterr().out
+    scene = load_sample(str(tmp_path / "s.npz"))
+    assert scene.objects == ["Floor"] and scene.uv_maps == {"Floor": "Lightmap"}
+    assert len(scene.occluder_triangles) == 12 + 3 * 2  # the cube and the rail's three quads
 
 
 @blender

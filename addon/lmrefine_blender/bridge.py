@@ -240,8 +240,7 @@ def evaluated_problem(depsgraph, obj, uv_name, layout, resolution):
     """What keeps `obj`, as its modifiers and transform make it, from being
     baked (a message naming the fix), or None. The bake exports the same.
     `layout` is the source map before the modifiers (read_layout)."""
-    import lmrefine
-    from lmrefine.layout_input import COPYING_MODIFIERS, MAX_COORDINATE, copied_overlap
+    from lmrefine.layout_input import MAX_COORDINATE
     obj_eval = obj.evaluated_get(depsgraph)
     try:
         export = export_mesh(obj_eval, obj_eval.matrix_world, uv_name=uv_name, name=obj.name)
@@ -256,21 +255,30 @@ def evaluated_problem(depsgraph, obj, uv_name, layout, resolution):
     if not np.isfinite(export.uvs).all():
         return (f"'{obj.name}' has NaN or Inf UVs in '{uv_name}' after its modifiers: disable the modifier that "
                 "makes them, or re-unwrap")
+    return copied_faces_problem(obj, uv_name, layout, export, resolution)
+
+
+def copied_faces_problem(obj, uv_name, layout, export, resolution):
+    """A message naming the fix when `obj`'s modifiers copy faces with their
+    UVs (an Array, a Mirror), so that copies of UV map `uv_name` lie on top
+    of each other at `resolution`, else None. `layout` is the map before the
+    modifiers (read_layout), `export` the object as the bake exports it."""
+    import lmrefine
+    from lmrefine.layout_input import COPYING_MODIFIERS, copied_overlap
     # Unchanged by modifiers up to the weld (read_layout moves a UV by at most the connect limit): no copies.
-    if export.uvs.shape != layout.uvs.shape or not np.allclose(export.uvs, layout.uvs, rtol=0.0, atol=1e-4):
-        copied = copied_overlap(lmrefine.check_layout(layout.uvs, layout.triangles, resolution),
-                                len(layout.triangles),
-                                lmrefine.check_layout(export.uvs, export.triangles, resolution),
-                                len(export.triangles))
-        if copied:
-            # A lightmap texel holds the light of one place: copies sharing their UVs share their light.
-            copying = [m.name for m in obj.modifiers if m.type in COPYING_MODIFIERS and m.show_render]
-            which = f"modifiers ({', '.join(copying)})" if copying else "modifiers"
-            return (f"'{obj.name}': its {which} copy faces with their UVs, so {copied} triangles of UV map "
-                    f"'{uv_name}' lie on top of others and would share one lightmap: apply the modifiers (Object > "
-                    "Apply > Visual Geometry to Mesh), then unwrap the map again (UV > Lightmap Pack) so every "
-                    "copy has texels of its own")
-    return None
+    if export.uvs.shape == layout.uvs.shape and np.allclose(export.uvs, layout.uvs, rtol=0.0, atol=1e-4):
+        return None
+    copied = copied_overlap(lmrefine.check_layout(layout.uvs, layout.triangles, resolution), len(layout.triangles),
+                            lmrefine.check_layout(export.uvs, export.triangles, resolution), len(export.triangles))
+    if not copied:
+        return None
+    # A lightmap texel holds the light of one place: copies sharing their UVs share their light.
+    copying = [m.name for m in obj.modifiers if m.type in COPYING_MODIFIERS and m.show_render]
+    which = f"modifiers ({', '.join(copying)})" if copying else "modifiers"
+    return (f"'{obj.name}': its {which} copy faces with their UVs, so {copied} triangles of UV map "
+            f"'{uv_name}' lie on top of others and would share one lightmap: apply the modifiers (Object > "
+            "Apply > Visual Geometry to Mesh), then unwrap the map again (UV > Lightmap Pack) so every "
+            "copy has texels of its own")
 
 
 def renders(obj):

@@ -34,6 +34,7 @@ import numpy as np  # noqa: E402
 from lmrefine_blender import bridge  # noqa: E402
 from lmrefine_blender.batch import object_names  # noqa: E402
 from lmrefine_blender.errors import UserError  # noqa: E402
+from lmrefine.scene_export import ATLAS_CHECK_RESOLUTION  # noqa: E402
 
 UNWRAP_HINT = "Object Data > UV Maps > +, then UV > Smart UV Project or Lightmap Pack"
 
@@ -137,8 +138,27 @@ def export(out, objects_spec, uv_map):
     receivers, occluders = bridge.export_scene(bpy.context, objects, uv_name_of, left_out)
     for name in left_out:
         print(f"lmrefine: note: '{name}' casts no shadow: it has vertices at NaN, Inf or beyond 1e9 units", flush=True)
+    kept = []
     for export in receivers:
-        check_uvs(export, uv_name_of[export.name])
+        uv_name = uv_name_of[export.name]
+        check_uvs(export, uv_name)
+        # Copies sharing their UVs, which the add-on's run skips (checked at the atlas check's resolution):
+        # named, an error; picked by all, selected or a collection, an occluder only, as the run leaves it.
+        obj = bpy.data.objects[export.name]
+        copied = bridge.copied_faces_problem(obj, uv_name, bridge.read_layout(obj.data, uv_name), export,
+                                             ATLAS_CHECK_RESOLUTION)
+        if copied and named:
+            raise UserError(f"{copied}; or leave the object out of --objects")
+        if copied:
+            print(f"lmrefine: note: left out as a receiver (it casts shadows): {copied}", flush=True)
+            occluders.append(export)
+            del uv_name_of[export.name]
+        else:
+            kept.append(export)
+    receivers = kept
+    if not receivers:
+        raise UserError(f"--objects {objects_spec}: every such object was left out (above): fix them as the notes "
+                        "say, or name other objects")
 
     def joined(parts, with_uvs):
         offsets = np.cumsum([0] + [len(p.positions) for p in parts])

@@ -1,11 +1,14 @@
 """A small level for the export-scene tests (tests/test_scene_export.py).
 
-    blender -b --factory-startup --python-exit-code 1 --python make_export_scene.py -- OUT.blend [TWIN.blend [EMPTY.blend]]
+    blender -b --factory-startup --python-exit-code 1 --python make_export_scene.py -- OUT.blend [TWIN.blend [EMPTY.blend [ARRAYED.blend]]]
 
 A 4 x 4 m floor of 8 x 8 quads with two UV maps: "UVMap" (a texture map
 tiled 0..2, outside [0, 1]) and "Lightmap" (the floor mapped onto
 [0.05, 0.95]^2); a cube floating over it without a UV map (an occluder); a
-hidden mesh with a UV map; a sun; a camera looking at the floor.
+hidden mesh with a UV map; a sun; a camera looking at the floor. TWIN adds
+a plane on its own UV square, EMPTY has no mesh, ARRAYED adds a rail: one
+quad with a lightmap map and an Array modifier that copies it (and its
+UVs) three times.
 """
 
 import math
@@ -70,7 +73,20 @@ if len(paths) > 1:
     bpy.ops.mesh.primitive_plane_add(size=1.0, location=(3.0, 0.0, 0.0))
     bpy.context.active_object.name = "Twin"
     bpy.ops.wm.save_as_mainfile(filepath=paths[1])
+if len(paths) > 3:
+    bpy.ops.wm.open_mainfile(filepath=paths[0])
+    rail = bpy.data.meshes.new("Rail")
+    rail.from_pydata([(-1.5, 1.5, 0.5), (-1.0, 1.5, 0.5), (-1.0, 1.7, 0.5), (-1.5, 1.7, 0.5)], [], [(0, 1, 2, 3)])
+    for name, uv in (("UVMap", [(0, 0), (1, 0), (1, 1), (0, 1)]), ("Lightmap", [(0.1, 0.1), (0.4, 0.1), (0.4, 0.4),
+                                                                              (0.1, 0.4)])):
+        rail.uv_layers.new(name=name).data.foreach_set("uv", np.ascontiguousarray(uv, np.float32).ravel())
+    rail_object = bpy.data.objects.new("Rail", rail)
+    bpy.context.scene.collection.objects.link(rail_object)
+    array = rail_object.modifiers.new("Array", "ARRAY")
+    array.count, array.relative_offset_displace = 3, (1.5, 0.0, 0.0)
+    bpy.ops.wm.save_as_mainfile(filepath=paths[3])
 if len(paths) > 2:
+    bpy.ops.wm.open_mainfile(filepath=paths[0])
     for obj in [obj for obj in bpy.data.objects if obj.type == "MESH"]:
         bpy.data.objects.remove(obj)
     bpy.ops.wm.save_as_mainfile(filepath=paths[2])
