@@ -272,6 +272,50 @@ def test_the_summary_gives_the_tessellation_gain_over_plain(tmp_path):
     assert f"**{scene['tessellation']['gain_over_plain']:.2f}x** over plain" in line
 
 
+def test_welded_joins_one_objects_corners_at_one_position():
+    from lmrefine.evaluation import welded
+
+    # Two quads of object 0 with a vertex per corner (as export-scene writes them), a triangle of
+    # object 1 on their shared edge, and an unused vertex.
+    quad = np.array([(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)], np.float32)
+    positions = np.concatenate([quad, quad + (1, 0, 0), [(1, 0, 0), (1, 1, 0), (2, 2, 0)], [(0, 0, 0)]])
+    triangles = np.array([(0, 1, 2), (0, 2, 3), (4, 5, 6), (4, 6, 7), (8, 9, 10)], np.int32)
+    welded_positions, welded_triangles = welded(positions, triangles, np.array([0, 0, 0, 0, 1]))
+    # The quads share their edge now; object 1's corners and the unused vertex keep their own.
+    assert len(welded_positions) == len(positions) - 2
+    np.testing.assert_array_equal(welded_positions[welded_triangles], positions[triangles])
+    assert len(np.intersect1d(welded_triangles[:2], welded_triangles[2:4])) == 2
+    assert not np.intersect1d(welded_triangles[4], welded_triangles[:4]).size
+    assert welded_triangles.dtype == triangles.dtype
+    # Nothing to join: the same arrays back.
+    scene = tiny_scene(3)
+    same = welded(scene.positions, scene.triangles, scene.object_id)
+    assert same[0] is scene.positions and same[1] is scene.triangles
+
+
+def test_tessellating_a_scene_with_a_vertex_per_corner_keeps_its_faces_joined():
+    """A scene file exported from Blender has a vertex per face corner: the
+    split must still be conforming (an edge split in both faces), or the
+    re-chart route finds T-junctions and refuses the split layout."""
+    from lmrefine.evaluation import _tessellated
+
+    scene = tiny_scene(4)
+    corners = scene.triangles.reshape(-1)
+    loose = replace(scene, positions=scene.positions[corners], object_id=np.zeros(len(scene.triangles), np.int32),
+                    triangles=np.arange(len(corners), dtype=np.int32).reshape(-1, 3))
+    u = (np.arange(64) + 0.5) / 64
+    baseline = np.repeat(np.where(u < 0.45, 1.0, 0.1)[None, :, None], 64, axis=0).repeat(3, axis=2)
+    split, report, _ = _tessellated(loose, "smart", baseline.astype(np.float32), 1.0)
+    assert report["vertices_before"] == 25 and report["vertices_added"] > 0  # the budget of the real vertices
+    assert report["triangles_after"] > report["triangles_before"]
+    # No T-junction: every edge of the flat floor is in two triangles or on its outline.
+    edges = np.sort(np.stack([split.triangles, np.roll(split.triangles, -1, axis=1)], axis=2).reshape(-1, 2), axis=1)
+    _, uses = np.unique(edges, axis=0, return_counts=True)
+    outline = 4 * 4  # the floor's border: 4 cells a side, split edges counted once more each
+    assert (uses == 1).sum() <= outline + report["vertices_added"]
+    assert lmrefine.rechart(split.positions, split.triangles, 20.0, 64).report["charts"] == 1
+
+
 def test_objects_that_share_vertices_are_split_together():
     from lmrefine.evaluation import _connected_objects
 

@@ -140,6 +140,9 @@ def _tessellated(sample, variant, baseline, budget):
 
     uvs, corner_triangles = sample.layout(variant)
     strength = transition_strength_of(baseline, uvs, corner_triangles)
+    # A split edge stays conforming only where its two faces share its vertices.
+    sample = replace(sample, **dict(zip(("positions", "triangles"), welded(sample.positions, sample.triangles,
+                                                                          sample.object_id))))
     others = {name: values for name, values in sample.uvs.items() if name != variant}
     # Each output corner's barycentric coordinates in its input triangle: a
     # point of the split mesh is then a point of the input mesh too.
@@ -177,6 +180,33 @@ def _tessellated(sample, variant, baseline, budget):
     report.update(rounds=max(r["rounds"] for r in reports), stopped="; ".join(sorted({r["stopped"] for r in reports})),
                   min_texels=reports[0]["min_texels"], threshold=reports[0]["threshold"], objects=reports)
     return scene, report, (parent, corner["parent_bary"])
+
+
+def welded(positions, triangles, object_id):
+    """(positions, triangles) with the vertices of one object at the same
+    position joined: a scene file exported from Blender (export-scene) has a
+    vertex per face corner, so its faces share no vertex. A vertex that
+    triangles of several objects use, or none, keeps its own index; the
+    vertices keep their order (first index of each position), so a scene
+    without such vertices comes back as it was."""
+    positions = np.asarray(positions)
+    triangles = np.asarray(triangles)
+    count = len(positions)
+    lowest = np.full(count, np.iinfo(np.int64).max, np.int64)
+    highest = np.full(count, -1, np.int64)
+    corner_object = np.repeat(np.asarray(object_id, np.int64), 3)
+    np.minimum.at(lowest, triangles.ravel(), corner_object)
+    np.maximum.at(highest, triangles.ravel(), corner_object)
+    # One owner per vertex: its object, or a key of its own when several objects (or none) use it.
+    owner = np.where(lowest == highest, lowest, -1 - np.arange(count)).astype(np.float64)
+    _, first, inverse = np.unique(np.column_stack([owner, positions.astype(np.float64)]), axis=0,
+                                  return_index=True, return_inverse=True)
+    if len(first) == count:
+        return positions, triangles
+    order = np.argsort(first, kind="stable")
+    renumber = np.empty(len(first), np.int64)
+    renumber[order] = np.arange(len(first))
+    return positions[first[order]], renumber[inverse.ravel()][triangles].astype(triangles.dtype)
 
 
 def _connected_objects(triangles, object_id):

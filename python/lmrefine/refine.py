@@ -373,7 +373,7 @@ def _source_lowest(stage):
             float(options["max_chart_scale"]), stage["lightmap"] if stage["gradient_given"] is None else None,
             stage["mask"], options["world_areas"])
         scales = stage["signal"][1]
-        padding = pack_padding(stage["padding"], stage["original"])
+        padding = _pack_padding(stage["padding"], stage["original"])
         bounds = [model.lowest_packed(stage["shape"], padding, variant) for variant in (scales, np.sqrt(scales))]
         return None if None in bounds else min([1.0] + bounds)
 
@@ -533,7 +533,7 @@ def _in_charts(lightmap, uvs, triangles, resolution, padding, mask, gradient, pr
             "new_uvs": new_uvs, "check": check, "kept": kept, "moved_inside": not np.array_equal(new_uvs, uvs)}
 
 
-def pack_padding(padding, original):
+def _pack_padding(padding, original):
     """The gutter the repack packs at: the padding, or the input's gutter
     (`original`, its check_layout report) where that is narrower
     (backoff.allowed_gutter), never below a texel unless the padding is
@@ -566,7 +566,7 @@ def _repacked(stage):
                 or not 1.0 <= float(max_stretch) < np.inf:
             raise ValueError(f"max_stretch must be a finite number >= 1 (1 = no stretch), got {max_stretch!r}")
         packed, repack_report = allocation.repack(uvs, new_uvs, triangles, scalar_energy, shape,
-                                                  pack_padding(padding, original),
+                                                  _pack_padding(padding, original),
                                                   float(min_chart_scale), float(max_chart_scale), progress,
                                                   lightmap=lightmap if gradient_given is None else None, mask=mask,
                                                   world_areas=world_areas, max_stretch=float(max_stretch),
