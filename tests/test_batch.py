@@ -103,6 +103,28 @@ def test_addon_flags_pass_through_in_order():
     assert args.workers == 2 and args.levels == ["lv"]
 
 
+def test_the_summary_names_the_objects_a_level_skipped():
+    from lmrefine.batch.summary import skipped_objects, summary_table
+
+    warnings = ["Skipped: 'Posts': its modifiers (Array) copy faces with their UVs, so 129 triangles ...",
+                "'Ground': UV map 'Lightmap' was invalid at 256 texels ...",
+                "Skipped: atlas 'Floor_atlas' (Floor, Box) could not be refined: ...",
+                "Skipped: 'Cube' has no UV map: ..."]
+    assert skipped_objects(warnings) == ["Posts", "Floor", "Box", "Cube"]
+    assert skipped_objects(warnings[1:2]) == [] and skipped_objects(None) == []
+    row = {"level": "stall", "status": "done", "seconds": 5.0, "objects": 4, "attempts": 1, "warnings": warnings,
+           "skipped_objects": skipped_objects(warnings), "outputs": {"report": "/out/stall/report.json"},
+           "log": "/out/stall/blender.log", "error": None}
+    quiet = {**row, "level": "plaza", "warnings": [], "skipped_objects": []}
+    table = summary_table([row, quiet]).splitlines()
+    assert table[0].split() == ["level", "status", "seconds", "objects", "warnings", "attempts"]
+    assert table[2].split() == ["stall", "done", "5.0", "4", "4", "1"]
+    assert table[3].split() == ["plaza", "done", "5.0", "4", "0", "1"]
+    assert table[4] == ("stall: 4 object(s) skipped, not refined: Posts, Floor, Box, Cube (why, and every warning: "
+                        "/out/stall/report.json)")
+    assert len(table) == 5
+
+
 # ------------------------------------------------------------ with Blender and Dask
 
 
@@ -205,7 +227,7 @@ def test_failing_level_is_reported_while_the_rest_finish(level_dir, tmp_path):
     assert log.count("===== attempt") == 2 and "File format is not supported" in log
     assert not os.path.exists(out / "broken") and not os.path.exists(out / ".work")
     table = process.stderr[re.search(r"^level +status", process.stderr, re.M).start():]
-    assert re.search(r"^broken +failed +[\d.]+ +- +2$", table, re.M) and record["log"] in table
+    assert re.search(r"^broken +failed +[\d.]+ +- +- +2$", table, re.M) and record["log"] in table
     summary = load(out / "summary.json")
     assert summary["ok"] is False and summary["counts"] == {"done": 2, "failed": 1}
 
@@ -344,8 +366,11 @@ def test_evaluate_puts_the_equal_error_figure_in_the_summary(level_dir, tmp_path
     assert row["equal_error"] == min(ratios.values()) and row["equal_error"] > 0, (row, ratios)
     assert all(r["resolution"] == int(FLAGS[FLAGS.index("--resolution") + 1]) for r in reports.values())
     table = stream.getvalue()
-    assert re.search(r"^level +status +seconds +objects +attempts +equal-error$", table, re.M)
-    assert re.search(rf"^a +done +[\d.]+ +2 +1 +{row['equal_error']:.2f}x$", table, re.M)
+    assert re.search(r"^level +status +seconds +objects +warnings +attempts +equal-error$", table, re.M)
+    # The level's warnings (the cube's too-narrow gutter, its coarse triangles): counted, none skipped.
+    warnings = load(out / "a" / "report.json")["warnings"]
+    assert row["warnings"] == warnings and row["skipped_objects"] == [] and len(warnings) >= 1
+    assert re.search(rf"^a +done +[\d.]+ +2 +{len(warnings)} +1 +{row['equal_error']:.2f}x$", table, re.M)
     manifest = load(out / "manifest.json")["levels"]["a"]
     assert manifest["equal_error"] == row["equal_error"] and manifest["options"][-1] == "--evaluate"
     # Done without the evaluation before: a run that asks for it redoes the level; the same run again skips it.

@@ -113,7 +113,8 @@ def run_level(name, level_path, out_dir, flags, threads=None, blender=None, batc
         except ValueError:
             report = None
     if returncode == 0 and report and report.get("ok"):
-        result.update(ok=True, retry=False, objects=len(report.get("objects", {})), error=None)
+        result.update(ok=True, retry=False, objects=len(report.get("objects", {})), error=None,
+                      warnings=list(report.get("warnings", [])))
         if evaluate:
             _emit({"name": name, "state": "running", "fraction": 0.95, "stage": "evaluating", "attempt": attempt})
             result.update(evaluate_level(level_path, os.path.join(target, "evaluation"), flags, blender, log_path,

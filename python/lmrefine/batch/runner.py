@@ -206,7 +206,8 @@ def _finish(future, name, out_dir, options, manifest, progress):
     if result["ok"]:
         outputs = commit(out_dir, name, result)
         manifest.update(name, status="done", outputs=outputs, attempts=attempts, seconds=result["seconds"],
-                        objects=result.get("objects"), log=os.path.join(outputs["dir"], "blender.log"),
+                        objects=result.get("objects"), warnings=result.get("warnings") or [],
+                        log=os.path.join(outputs["dir"], "blender.log"),
                         error=None, host=result.get("host"), equal_error=result.get("equal_error"),
                         equal_error_objects=result.get("equal_error_objects"),
                         evaluation_error=result.get("evaluation_error"))
