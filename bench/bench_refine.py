@@ -10,9 +10,9 @@
    the re-chart route on a Smart UV atlas with folds (courtyard), against
    the same refinement without the mesh; the chart stretch on the re-chart
    route of a Lightmap Pack layout (courtyard), where its turned fallback
-   is packed too, against the same call with max_stretch=1; the route of
-   Lightmap Pack layouts where a bound rules out the source layout's
-   repack, against that repack always made.
+   is packed too, against the same call with max_stretch=1; the route
+   where a bound rules out the source layout's repack, against that
+   repack always made.
 3. Coarse-to-fine against one level at 256^2: steps (and time) one level
    needs to give the shadow edge 90% of the texels the pyramid gives it.
 4. The three border treatments, on an edge across the middle and one near
@@ -194,22 +194,23 @@ def stretch_on_lightmap_pack_route(resolution=1024, runs=2):
 
 
 def route_without_the_source_repack(resolution=1024, runs=3):
-    """The re-chart route of Lightmap Pack layouts at 1024^2 (each scene's
-    256^2 direct bake scaled up, with its faces) as refine_uvs runs it,
-    where a lower bound may rule out the source layout's repack
-    (docs/refiner.md, "The source repack the route need not make"), against
-    the same call with that repack always made (refine._source_lowest
-    off), the two alternated in the same run."""
+    """The re-chart route at 1024^2 of Lightmap Pack layouts and of a Smart
+    UV atlas whose charts fold over creases (each scene's 256^2 direct bake
+    scaled up, with its faces) as refine_uvs runs it, where a lower bound
+    may rule out the source layout's repack (docs/refiner.md, "The source
+    repack the route need not make"), against the same call with that
+    repack always made (refine._source_lowest off), the two alternated in
+    the same run."""
     from lmrefine import refine as refine_module
     from lmrefine.sample_scenes import load_sample
 
     always = lambda stage: None  # noqa: E731
     bounded = refine_module._source_lowest
-    print(f"\nthe re-chart route of Lightmap Pack layouts at {resolution}^2 (target 1 s), against the source "
-          f"repack always made:")
-    for name in ("courtyard", "game_level", "hillside"):
+    print(f"\nthe re-chart route at {resolution}^2 (target 1 s), against the source repack always made:")
+    for name, variant in (("courtyard", "lightmap"), ("game_level", "lightmap"), ("hillside", "lightmap"),
+                          ("courtyard", "smart")):
         sample = load_sample(name)
-        uvs, tris = sample.layout("lightmap")
+        uvs, tris = sample.layout(variant)
         positions = sample.positions[sample.triangles].reshape(-1, 3)
         small = lmrefine.bake(sample.to_scene(uvs), resolution // 4, passes="direct", samples=8, seed=0)[0][..., :3]
         lightmap = np.ascontiguousarray(np.kron(small, np.ones((4, 4, 1))), dtype=np.float32)
@@ -225,7 +226,7 @@ def route_without_the_source_repack(resolution=1024, runs=3):
                 times[label].append(seconds)
         info = result.report["rechart"]
         made = "made" if info["predicted_error_source_route"] is not None else "not made"
-        print(f"  {name}: {min(times['bounded']):.3f} s against {min(times['always']):.3f} s "
+        print(f"  {name} ({variant}): {min(times['bounded']):.3f} s against {min(times['always']):.3f} s "
               f"({min(times['bounded']) / min(times['always']):.2f}x); re-charted {info['used']} predicting "
               f"{info['predicted_error']:.3f}, the bound {info['source_route_bound'] or float('nan'):.3f}: "
               f"source repack {made}")

@@ -119,7 +119,9 @@ def test_route_recharts_a_folded_layout_with_room(roof_case):
     assert not info["room"]["no_room"]
     assert info["folds"]["count"] == CELLS and info["folds"]["energy_fraction"] > 0.5
     assert info["used"], info
-    assert info["predicted_error"] < min(rechart_route.REQUIRED_GAIN, info["predicted_error_source_route"])
+    # The source layout's refinement predicts more, or could not predict less (its repack not made).
+    source = info["predicted_error_source_route"] or info["source_route_bound"]
+    assert info["predicted_error"] < min(rechart_route.REQUIRED_GAIN, source)
     assert result.report["notes"][0].startswith("re-charted: the source layout's charts fold over 12 creases")
     charts = lmrefine.find_charts(result.uvs, triangles, lmrefine.CHART_TOLERANCE)
     assert len(np.unique(charts)) == 2  # the two slopes
@@ -142,14 +144,32 @@ def test_route_on_a_folded_layout_equals_its_plain_pieces(roof_case, monkeypatch
     fast = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, positions=positions)
     model = rechart_route.ErrorModel
     monkeypatch.setattr(rechart_route, "resample_lightmap", _resample_numpy)
-    monkeypatch.setattr(rechart_route, "ErrorModel", lambda *args, **kwargs: type(
-        "Fresh", (), {"relative": staticmethod(lambda layout: model(*args, **kwargs).relative(layout))})())
+    monkeypatch.setattr(rechart_route, "ErrorModel", lambda *args, **kwargs: type("Fresh", (), {
+        "relative": staticmethod(lambda layout: model(*args, **kwargs).relative(layout)),
+        "lowest_packed": staticmethod(lambda *bound: model(*args, **kwargs).lowest_packed(*bound))})())
     plain = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, positions=positions)
     assert fast.report["rechart"]["used"] and plain.report["rechart"]["used"]
     assert np.array_equal(fast.uvs, plain.uvs) and np.array_equal(fast.grid, plain.grid)
-    for key in ("predicted_error", "predicted_error_source_route"):
+    for key in ("predicted_error", "predicted_error_source_route", "source_route_bound"):
         assert fast.report["rechart"][key] == plain.report["rechart"][key]
     assert fast.report["notes"] == plain.report["notes"]
+
+
+def test_the_folded_source_is_bounded_after_its_automaton(roof_case, monkeypatch):
+    # The source refinement moved UVs inside its one chart: the bound starts from that layout, and
+    # the route picks what the full comparison picks, with or without the source's repack made.
+    from lmrefine import refine
+
+    positions, uvs, triangles, lightmap = roof_case
+    bounded = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, positions=positions)
+    monkeypatch.setattr(refine, "_source_lowest", lambda stage: None)
+    full = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, positions=positions)
+    info, made = bounded.report["rechart"], full.report["rechart"]
+    assert np.array_equal(bounded.uvs, full.uvs) and info["used"] == made["used"]
+    assert info["source_route_bound"] is not None and made["source_route_bound"] is None
+    assert info["source_route_bound"] <= made["predicted_error_source_route"] * (1 + 1e-9)
+    if info["predicted_error_source_route"] is None:  # not made: the bound ruled it out
+        assert info["predicted_error"] < info["source_route_bound"]
 
 
 def test_route_without_folds_is_not_tried_and_says_why():
@@ -181,8 +201,8 @@ def test_route_over_folds_in_flat_light_is_decided_by_the_model():
     info = result.report["rechart"]
     assert info["folds"]["count"] == CELLS and info["folds"]["energy_fraction"] < 0.05
     assert "predicted_error" in info and "predicted_error_source_route" in info
-    assert info["used"] == (info["predicted_error"] < min(rechart_route.REQUIRED_GAIN,
-                                                          info["predicted_error_source_route"] + 1e-12))
+    source = info["predicted_error_source_route"] or info["source_route_bound"]  # made, or its bound
+    assert info["used"] == (info["predicted_error"] < min(rechart_route.REQUIRED_GAIN, source + 1e-12))
     assert lmrefine.check_layout(result.uvs, triangles, RESOLUTION, padding=2)["valid"]
 
 

@@ -313,14 +313,35 @@ def test_route_does_not_make_the_source_repack_the_bound_rules_out(lightmap_pack
     assert full.report["rechart"]["predicted_error_source_route"] >= info["source_route_bound"]
 
 
-def test_no_bound_for_a_source_the_repack_may_reshape():
+def test_the_source_lowest_is_its_own_prediction_without_a_repack_and_none_with_overlaps():
     from lmrefine.refine import _source_lowest
-    stage = {"moved_inside": False, "hold": False, "original": {"overlapping": 0},
-             "options": {"repack": True, "strength": 24.0}}
-    assert _source_lowest(stage) is not None
-    for change in ({"moved_inside": True}, {"hold": True}, {"original": {"overlapping": 3}},
-                   {"options": {"repack": False, "strength": 24.0}}, {"options": {"repack": True, "strength": 0}}):
-        assert _source_lowest({**stage, **change}) is None, change
+
+    model = type("Model", (), {"relative": staticmethod(lambda layout: 0.75)})()
+    stage = {"hold": False, "check": {"overlapping": 0}, "new_uvs": None,
+             "options": {"repack": False, "strength": 24.0}}
+    assert _source_lowest(stage)(model) == 0.75  # the in-chart layout is what the source route returns
+    assert _source_lowest({**stage, "options": {"repack": True, "strength": 0}})(model) == 0.75
+    assert _source_lowest({**stage, "hold": True, "options": {"repack": True, "strength": 24.0}})(model) == 0.75
+    assert _source_lowest({**stage, "check": {"overlapping": 3}}) is None
+
+
+def test_lowest_packed_bounds_the_packings_of_a_layout_moved_inside_its_charts(lightmap_pack_case):
+    # The one-chart floor deformed by the automaton (repack off), then packed at several scales: the
+    # model predicts no less than the bound from the deformed layout.
+    corners, _, (one_chart, triangles) = _floor_layouts()
+    lightmap = _shadowed_floor(one_chart, triangles)
+    mask = lmrefine.coverage_mask(one_chart, triangles, RESOLUTION)
+    energy = lmrefine.gradient_map(lightmap, mask).sum(axis=2)
+    moved = lmrefine.refine_uvs(lightmap, one_chart, triangles, RESOLUTION, repack=False).uvs
+    assert not np.array_equal(moved, one_chart)
+    model = rechart_route.ErrorModel(one_chart, triangles, energy, corners, lightmap)
+    charts = lmrefine.find_charts(moved, triangles, lmrefine.CHART_TOLERANCE)
+    for scale in (0.6, 0.9, 1.0):
+        bound = model.lowest_packed((RESOLUTION, RESOLUTION), 2.0, [scale], moved)
+        packed, _ = lmrefine.pack_charts(moved, triangles, charts, [scale], RESOLUTION, 2.0)
+        assert bound <= model.relative(packed) < 1.05 * bound
+    assert model.lowest_packed((RESOLUTION, RESOLUTION), 2.0, [1.0], moved) < \
+        model.lowest_packed((RESOLUTION, RESOLUTION), 2.0, [1.0])  # the automaton's gain counts
 
 
 # --- the route ----------------------------------------------------------------

@@ -171,60 +171,79 @@ class ErrorModel:
             if total <= 0:
                 return 1.0
             return float((edge[keep] / np.sqrt(np.maximum(after[keep], 1e-300) / before[keep])).sum() / total)
-        keep = (before > 0) & (after > 0) & (self.world > 0)
+        keep, size_after = self._kept(after)
+        edge_terms, border_terms = self._terms(uvs, size_after, keep)
+        source_error = self._source(keep)
+        error = (allocation.EDGE_ERROR * edge_terms[keep].sum()
+                 + allocation.BORDER_ERROR * border_terms[keep].sum())
+        return float(error / source_error) if source_error > 0 else 1.0
+
+    def _kept(self, after):
+        """The triangles with area in the source, in a layout of UV areas
+        `after` and on the surface, and their texel size in that layout."""
+        keep = (self.before > 0) & (after > 0) & (self.world > 0)
+        return keep, np.where(keep, np.sqrt(self.world / np.maximum(after * self.texels, 1e-300)), 0.0)
+
+    def _terms(self, layout, size, keep):
+        """Per triangle, the edge term's and the border term's products
+        (before their constants) of `layout`, whose texel sizes are `size`:
+        the light changes it keeps inside its charts times the source's and
+        its texel size; the slope along its charts' borders times its texel
+        size squared."""
         size_before = np.where(keep, self.size_before, 0.0)
-        size_after = np.where(keep, np.sqrt(self.world / np.maximum(after * self.texels, 1e-300)), 0.0)
         slope_world = np.where(keep, self.slope_texel / np.maximum(size_before, 1e-300), 0.0)
+        border = (_chart_borders(layout, self.triangles)[2] * self.lengths).sum(axis=1)
+        held = self.edge if self.folds is None else np.maximum(
+            self.edge - self.folds.energy_removed(layout, self.triangles), 0.0)
+        return held * size_before * size, slope_world * border * size * size
 
-        def error(layout, size):
-            border = (_chart_borders(layout, self.triangles)[2] * self.lengths).sum(axis=1)
-            held = edge if self.folds is None else np.maximum(edge - self.folds.energy_removed(layout,
-                                                                                               self.triangles), 0.0)
-            return (allocation.EDGE_ERROR * (held * size_before * size)[keep].sum()
-                    + allocation.BORDER_ERROR * (slope_world * border * size * size)[keep].sum())
-
-        # The source's error depends on the layout only through `keep` (the
-        # triangles with area in both): computed once per keep mask.
+    def _source(self, keep):
+        """The source layout's error over the `keep` triangles. It depends on
+        the layout compared only through `keep`: computed once per mask."""
         key = keep.tobytes()
         if key not in self._source_error:
-            self._source_error[key] = error(self.source_uvs, size_before)
-        source_error = self._source_error[key]
-        return float(error(uvs, size_after) / source_error) if source_error > 0 else 1.0
+            edge_terms, border_terms = self._terms(self.source_uvs, np.where(keep, self.size_before, 0.0), keep)
+            self._source_error[key] = (allocation.EDGE_ERROR * edge_terms[keep].sum()
+                                       + allocation.BORDER_ERROR * border_terms[keep].sum())
+        return self._source_error[key]
 
-    def lowest_packed(self, shape, padding, scales):
+    def lowest_packed(self, shape, padding, scales, base_uvs=None):
         """A lower bound on `relative(uvs)` over every layout that keeps each
-        of the source layout's charts whole, turned, moved or stretched at
-        equal area, scaled linearly by g * scales[c] for one g (the scales
-        of allocation.signal_scales: the repack's packings), at least
-        `padding` texels apart inside the (H, W) = `shape` atlas. None
-        without positions or with folds (their terms are not per chart).
+        chart of `base_uvs` (default the source layout; the same charts,
+        moved inside by the automaton) whole, turned, moved or stretched at
+        equal area, scaled linearly by g * scales[c] for one g (the scales of
+        allocation.signal_scales: the repack's packings), at least `padding`
+        texels apart inside the (H, W) = `shape` atlas. None without
+        positions.
 
-        Chart c scaled by s predicts A_c / s + B_c / s^2 (the edge term by
-        texel size, the border term by its square), falling as g grows.
-        Grown by a disc of radius r = padding / 2, a chart of texel area a_c
-        s^2 covers at least (sqrt(a_c) s + sqrt(pi) r)^2 texels
-        (Brunn-Minkowski), and the grown charts are disjoint inside the atlas
-        grown by r: the largest g that allows bounds the error from below.
-        A chart whose triangles overlap covers less than their areas: the
-        caller gives only layouts without overlaps."""
-        if self.world is None or self.folds is not None:
+        Chart c scaled by s predicts A_c / s + B_c / s^2 (its edge term by
+        texel size, its border term by its square, from `base_uvs`' texel
+        sizes), falling as g grows. Grown by a disc of radius r = padding /
+        2, a chart of texel area a_c s^2 covers at least (sqrt(a_c) s +
+        sqrt(pi) r)^2 texels (Brunn-Minkowski), and the grown charts are
+        disjoint inside the atlas grown by r: the largest g that allows
+        bounds the error from below. A chart whose triangles overlap covers
+        less than their areas: the caller gives only layouts without
+        overlaps."""
+        if self.world is None:
             return None
-        keep = (self.before > 0) & (self.world > 0)
-        size = np.where(keep, self.size_before, 0.0)
-        slope_world = np.where(keep, self.slope_texel / np.maximum(size, 1e-300), 0.0)
-        charts, _, border = _chart_borders(self.source_uvs, self.triangles)
+        base = self.source_uvs if base_uvs is None else np.asarray(base_uvs)
+        area = np.abs(allocation.signed_areas(base, self.triangles))
+        # Scaled whole, a chart keeps its triangles' areas > 0, its borders and the folds it holds.
+        keep, size = self._kept(area)
+        edge_terms, border_terms = self._terms(base, size, keep)
+        charts = _chart_borders(base, self.triangles)[0]
         count = len(scales)
-        edge = np.bincount(charts[keep], (allocation.EDGE_ERROR * self.edge * size * size)[keep], minlength=count)
-        slope = np.bincount(charts[keep], (allocation.BORDER_ERROR * slope_world * (border * self.lengths).sum(axis=1)
-                                           * size * size)[keep], minlength=count)
-        total = float(edge.sum() + slope.sum())
-        area = np.bincount(charts, self.before, minlength=count) * self.texels
+        edge = allocation.EDGE_ERROR * np.bincount(charts[keep], edge_terms[keep], minlength=count)
+        slope = allocation.BORDER_ERROR * np.bincount(charts[keep], border_terms[keep], minlength=count)
+        total = float(self._source(keep))
+        texels = np.bincount(charts, area, minlength=count) * self.texels
         scales = np.asarray(scales, np.float64)
-        live = (area > 0) & (scales > 0)
+        live = (texels > 0) & (scales > 0)
         if total <= 0 or not live.any():
             return None
         grown = np.sqrt(np.pi) * 0.5 * padding
-        root = np.sqrt(area[live]) * scales[live]
+        root = np.sqrt(texels[live]) * scales[live]
         # sum (root g + grown)^2 <= budget, a quadratic in g.
         quadratic, linear = float((root * root).sum()), 2.0 * grown * float(root.sum())
         constant = live.sum() * grown * grown - (shape[0] + padding) * (shape[1] + padding)

@@ -215,9 +215,9 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
             figures), folds (count, length, smooth (how many are
             smooth-shaded), energy_fraction; None when not looked for), reason when not used, the new layout's charts and
             the model's predicted_error when re-charted, predicted_error_source_route
-            (the source layout's own refinement; None when it was not made:
-            source_route_bound, the least the model can predict for a
-            source whose charts can only be packed whole, is above the
+            (the source layout's own refinement; None when its repack was
+            not made: source_route_bound, the least the model can predict
+            for any repack of the source's refined charts, is above the
             re-charted layout's prediction), edge_room (None,
             or whether charts packed farther apart were kept after the
             automaton's fit reset a region: rechart_route.refine_recharted)
@@ -357,25 +357,30 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
 
 
 def _source_lowest(stage):
-    """None, or for a source refinement (`stage`, _in_charts) that moved no
-    UV inside the charts and has no overlaps: model -> the least error the
-    ErrorModel `model` can predict for it, the source layout itself (1.0)
-    or its charts packed whole at the repack's scales or their square roots
-    (ErrorModel.lowest_packed). The scales are kept for its repack."""
+    """None, or for the source refinement's in-chart `stage` (_in_charts)
+    without overlaps: model -> the least error the ErrorModel `model` can
+    predict for the source layout's refinement made from it: the in-chart
+    layout itself, or its charts packed whole at the repack's scales or
+    their square roots (ErrorModel.lowest_packed). The scales are kept for
+    its repack."""
     options = stage["options"]
-    if stage["moved_inside"] or stage["hold"] or stage["original"]["overlapping"] or not options["repack"] \
-            or not options["strength"] > 0:
+    if stage["check"]["overlapping"]:
         return None
+    repacks = options["repack"] and options["strength"] > 0 and not stage["hold"]
 
     def lowest(model):
+        unpacked = model.relative(stage["new_uvs"])
+        if not repacks:
+            return unpacked
         stage["signal"] = allocation.signal_scales(
             stage["uvs"], stage["triangles"], stage["energy"], float(options["min_chart_scale"]),
             float(options["max_chart_scale"]), stage["lightmap"] if stage["gradient_given"] is None else None,
             stage["mask"], options["world_areas"])
         scales = stage["signal"][1]
         padding = _pack_padding(stage["padding"], stage["original"])
-        bounds = [model.lowest_packed(stage["shape"], padding, variant) for variant in (scales, np.sqrt(scales))]
-        return None if None in bounds else min([1.0] + bounds)
+        bounds = [model.lowest_packed(stage["shape"], padding, variant, stage["new_uvs"])
+                  for variant in (scales, np.sqrt(scales))]
+        return None if None in bounds else min([unpacked] + bounds)
 
     return lowest
 
@@ -409,7 +414,7 @@ def _recharted_result(recharted, original, uvs, triangles, energy, mask, info):
                     f"{info['predicted_error']:.2f} of the source layout's error "
                     + (f"(refining the source layout: {info['predicted_error_source_route']:.2f})"
                        if info["predicted_error_source_route"] is not None else
-                       f"(repacking the source layout's charts: at least {info['source_route_bound']:.2f}, so it "
+                       f"(refining the source layout: at least {info['source_route_bound']:.2f}, so its repack "
                        f"was not made)"))
     report.update({"moved": True, "notes": notes, "original_check": original})
     return recharted
@@ -425,9 +430,7 @@ def _refine(lightmap, uvs, triangles, resolution, padding, mask, gradient, progr
 
 def _in_charts(lightmap, uvs, triangles, resolution, padding, mask, gradient, progress, options, room=None):
     """_refine up to the repack: the gradient map, the automaton and the warp
-    kept by the checks, as a dict _repacked finishes. Its `moved_inside` is
-    False when no UV moved (the repack can then only scale the charts
-    whole)."""
+    kept by the checks, as a dict _repacked finishes."""
     strength, max_magnification, min_shrink = options["strength"], options["max_magnification"], \
         options["min_shrink"]
     edge_shrink, delta, passes, border = options["edge_shrink"], options["delta"], options["passes"], \
@@ -530,7 +533,7 @@ def _in_charts(lightmap, uvs, triangles, resolution, padding, mask, gradient, pr
             "original": original, "edge_shrink_used": edge_shrink_used, "timings": timings,
             "gradient_given": gradient_given, "energy": scalar_energy, "aligned": aligned, "hold": hold,
             "no_room": no_room, "run": run, "limited_by": limited_by, "notes": notes, "grid": grid,
-            "new_uvs": new_uvs, "check": check, "kept": kept, "moved_inside": not np.array_equal(new_uvs, uvs)}
+            "new_uvs": new_uvs, "check": check, "kept": kept}
 
 
 def _pack_padding(padding, original):
