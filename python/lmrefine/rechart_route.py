@@ -172,7 +172,7 @@ class ErrorModel:
                 return 1.0
             return float((edge[keep] / np.sqrt(np.maximum(after[keep], 1e-300) / before[keep])).sum() / total)
         keep, size_after = self._kept(after)
-        edge_terms, border_terms = self._terms(uvs, size_after, keep)
+        edge_terms, border_terms, _ = self._terms(uvs, size_after, keep)
         source_error = self._source(keep)
         error = (allocation.EDGE_ERROR * edge_terms[keep].sum()
                  + allocation.BORDER_ERROR * border_terms[keep].sum())
@@ -189,20 +189,21 @@ class ErrorModel:
         (before their constants) of `layout`, whose texel sizes are `size`:
         the light changes it keeps inside its charts times the source's and
         its texel size; the slope along its charts' borders times its texel
-        size squared."""
+        size squared; and each triangle's chart."""
         size_before = np.where(keep, self.size_before, 0.0)
         slope_world = np.where(keep, self.slope_texel / np.maximum(size_before, 1e-300), 0.0)
-        border = (_chart_borders(layout, self.triangles)[2] * self.lengths).sum(axis=1)
+        charts, _, border = _chart_borders(layout, self.triangles)
+        border = (border * self.lengths).sum(axis=1)
         held = self.edge if self.folds is None else np.maximum(
             self.edge - self.folds.energy_removed(layout, self.triangles), 0.0)
-        return held * size_before * size, slope_world * border * size * size
+        return held * size_before * size, slope_world * border * size * size, charts
 
     def _source(self, keep):
         """The source layout's error over the `keep` triangles. It depends on
         the layout compared only through `keep`: computed once per mask."""
         key = keep.tobytes()
         if key not in self._source_error:
-            edge_terms, border_terms = self._terms(self.source_uvs, np.where(keep, self.size_before, 0.0), keep)
+            edge_terms, border_terms, _ = self._terms(self.source_uvs, np.where(keep, self.size_before, 0.0), keep)
             self._source_error[key] = (allocation.EDGE_ERROR * edge_terms[keep].sum()
                                        + allocation.BORDER_ERROR * border_terms[keep].sum())
         return self._source_error[key]
@@ -231,8 +232,7 @@ class ErrorModel:
         area = np.abs(allocation.signed_areas(base, self.triangles))
         # Scaled whole, a chart keeps its triangles' areas > 0, its borders and the folds it holds.
         keep, size = self._kept(area)
-        edge_terms, border_terms = self._terms(base, size, keep)
-        charts = _chart_borders(base, self.triangles)[0]
+        edge_terms, border_terms, charts = self._terms(base, size, keep)
         count = len(scales)
         edge = allocation.EDGE_ERROR * np.bincount(charts[keep], edge_terms[keep], minlength=count)
         slope = allocation.BORDER_ERROR * np.bincount(charts[keep], border_terms[keep], minlength=count)
