@@ -78,6 +78,22 @@ def test_hard_shadow_edge_gets_three_times_the_texels_and_flat_areas_shrink():
     assert report["check"]["valid"]
 
 
+@pytest.mark.parametrize("quads", [64, 4])
+def test_the_report_gives_the_texels_of_a_triangle_at_the_light_changes(quads):
+    # Every triangle of the plane has the same area: the median at the shadow edge is that area in
+    # texels, measured on the input layout however far the refinement moved the UVs.
+    from lmrefine.tessellation import COARSE_TRIANGLE_TEXELS, coarse_refinement
+
+    uvs, tris, gradient = edge_scene(quads=quads)
+    report = lmrefine.refine_uvs(None, uvs, tris, R, gradient=gradient).report
+    texels = float(np.abs(allocation.signed_areas(uvs, tris))[0]) * R * R
+    assert report["transition_triangle_texels"] == pytest.approx(texels, rel=1e-5)
+    # 64 x 64 quads: 1.9 texels a triangle, and the edge gained texels: not coarse. 4 x 4: 480 texels.
+    assert coarse_refinement(report) == (texels >= COARSE_TRIANGLE_TEXELS) == (quads == 4)
+    assert coarse_refinement({"transition_widening": 1.1, "transition_triangle_texels": 2.0})
+    assert not coarse_refinement({"transition_widening": 1.3})
+
+
 def test_input_arrays_are_never_modified():
     uvs, tris, gradient = edge_scene(64, 16)
     copies = uvs.copy(), tris.copy(), gradient.copy()

@@ -268,3 +268,23 @@ def test_coarse_transitions_counts_what_tessellation_would_split():
     # No light change: nothing either.
     assert coarse_transitions(np.ones((R, R, 3), np.float32), uvs,
                               np.arange(3 * len(triangles)).reshape(-1, 3))["triangles"] == 0
+
+
+def test_light_contrast_tells_a_shadow_edge_from_a_falloff():
+    from lmrefine.tessellation import COARSE_CONTRAST, light_contrast
+
+    mask = np.ones((64, 64), bool)
+    x = (np.arange(64) + 0.5) / 64
+    step = np.repeat(np.where(x < 0.5, 1.0, 0.2)[None, :, None], 64, axis=0).repeat(3, axis=2)
+    ramp = np.repeat((0.8 + 0.1 * x)[None, :, None], 64, axis=0).repeat(3, axis=2)  # 10% over the map
+    assert light_contrast(step, mask) == pytest.approx(0.8 / 0.6)  # a 0.8 step over the median 0.6
+    assert light_contrast(ramp, mask) == pytest.approx(0.1 / 64 / 0.85, rel=0.02)
+    assert light_contrast(ramp, mask) < COARSE_CONTRAST < light_contrast(step, mask)
+    assert light_contrast(np.full((64, 64, 3), 0.5), mask) == 0.0
+    lonely = np.zeros((64, 64), bool)
+    lonely[::2, ::2] = True  # no two covered texels side by side
+    assert light_contrast(step, lonely) == 0.0
+    # The step only counts where both texels are covered.
+    left = mask.copy()
+    left[:, 32:] = False
+    assert light_contrast(step, left) == 0.0

@@ -38,8 +38,6 @@ TRANSPORTS = {"direct": {"direct"}, "indirect": {"indirect"}, "combined": {"dire
 BAKE_MARGIN = 16
 # The baker's own count in its progress stages, "(map 3/5)".
 _BAKER_MAP = re.compile(r"\(map (\d+/\d+)\)")
-# Below this transition widening a run says when large triangles are why (see _coarse_warning).
-COARSE_WIDENING = 1.25
 
 
 def error_text(error):
@@ -449,7 +447,7 @@ def run(context, targets, options, journal, image_dir=None):
         # texel boundaries: the nothing-moved warning says why, Tessellate is no fix.
         if (options.get("tessellate") is None and options["refine_options"]["strength"] > 0
                 and "aligned_steps" not in result.report["limited_by"]
-                and result.report["transition_widening"] < COARSE_WIDENING):
+                and lmrefine.tessellation.coarse_refinement(result.report)):
             _coarse_warning(lmrefine, label, lightmaps[name], group, result.report, outcome,
                             options.get("tessellate_budget", 0.25))
         report = {key: value for key, value in result.report.items() if key != "triangle_density"}
@@ -624,11 +622,15 @@ def _check_refined(lmrefine, label, uvs, layout, reference_uvs, resolution, padd
 
 
 def _coarse_warning(lmrefine, label, lightmap, group, report, outcome, budget):
-    """Edges hardly gained and light changes cross large triangles: say that tessellation is the fix
-    (a warp moves vertices; inside a triangle the mapping stays affine)."""
-    from lmrefine.tessellation import DEFAULT_MIN_TEXELS, coarse_transitions
+    """Edges hardly gained, or the triangles at light changes are large (tessellation.coarse_refinement),
+    and light changes that are no mere falloff (tessellation.light_contrast) cross triangles tessellate
+    would split: say that tessellation is the fix (a warp moves vertices; inside a triangle the mapping
+    stays affine)."""
+    from lmrefine.tessellation import COARSE_CONTRAST, DEFAULT_MIN_TEXELS, coarse_transitions, light_contrast
     coarse = coarse_transitions(lightmap, group.uvs, group.triangles)
-    if coarse["triangles"]:
+    # Nearly flat light (a point light's falloff, bake noise) has a top decile too: no reason to split.
+    hard = light_contrast(lightmap, lmrefine.coverage_mask(group.uvs, group.triangles, lightmap.shape[:2]))
+    if coarse["triangles"] and hard >= COARSE_CONTRAST:
         # The default budget is a fraction of the vertices: on a mesh of few it adds next to nothing.
         vertices = sum(len(target.obj.data.vertices) for target in group.targets)
         allowed = sum(int(budget * len(target.obj.data.vertices)) for target in group.targets)
@@ -637,7 +639,9 @@ def _coarse_warning(lmrefine, label, lightmap, group, report, outcome, budget):
         outcome.warnings.append(
             f"{label}: light changes cross {coarse['triangles']} triangle(s) of more than "
             f"{DEFAULT_MIN_TEXELS:g} texels, and moving UVs cannot put more texels inside a triangle "
-            f"(edges {report['transition_widening']:.2f}x): turn on Tessellate (Stages and Tessellation)"
+            f"(edges {report['transition_widening']:.2f}x, the median triangle there "
+            f"{report.get('transition_triangle_texels', 0.0):.0f} texels): turn on Tessellate (Stages and "
+            "Tessellation)"
             f"{raise_budget} to split them in the mesh, as one undo step")
 
 

@@ -262,6 +262,9 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
         when the output equals the input; notes then say why),
         transition_widening (summed new / old UV area of the triangles on
         the top decile of gradient energy; 1.0 when nothing moved),
+        transition_triangle_texels (the median texel area of those
+        triangles in the input layout: far above a few texels, only
+        tessellation puts more texels at their light changes),
         density_min, density_max (smallest and largest new / old UV area
         of a triangle), triangle_density (T,) new / old UV area, steps,
         levels, converged, backoff (the smallest fraction of the full
@@ -670,26 +673,31 @@ def layout_figures(lightmap, old_uvs, new_uvs, triangles, wavelet="d4"):
 def _layout_figures(old, new, triangles, energy, mask):
     density = _triangle_density(old, new, triangles)
     measured = density[np.isfinite(density) & (density > 0)]
+    widening, triangle_texels = _transition_figures(old, new, triangles, energy, mask)
     return {
-        "transition_widening": _transition_widening(old, new, triangles, energy, mask),
+        "transition_widening": widening,
+        "transition_triangle_texels": triangle_texels,
         "density_min": float(measured.min()) if measured.size else 1.0,
         "density_max": float(measured.max()) if measured.size else 1.0,
         "triangle_density": density,
     }
 
 
-def _transition_widening(old, new, triangles, energy, mask):
-    """New / old UV area of the triangles at light changes, on the output layout.
+def _transition_figures(old, new, triangles, energy, mask):
+    """(transition widening, median texels of a triangle at light changes).
 
     A triangle is at a light change when one of four points inside it (its
     centroid and the midpoints towards its corners, in the input layout)
     falls on a covered texel whose gradient energy is in the top decile of
-    the covered texels. The figure is their summed new area over their
-    summed old area; 1.0 when no covered texel has gradient energy or no
-    triangle lies on one."""
+    the covered texels. The widening is their summed new UV area over their
+    summed old area, on the output layout (1.0 when no covered texel has
+    gradient energy or no triangle lies on one); the second figure is the
+    median of their texel areas in the input layout (0.0 then): a triangle's
+    texels stay evenly spread, so one of many texels keeps a light change
+    at the input's texel density whatever the warp does."""
     covered = energy[mask]
     if covered.size == 0 or covered.max() <= 0 or len(triangles) == 0:
-        return 1.0
+        return 1.0, 0.0
     threshold = max(float(np.percentile(covered, 90.0)), np.finfo(np.float32).tiny)
     rows, cols = allocation.triangle_texels(old, triangles, energy.shape)
     at_change = (mask[rows, cols] & (energy[rows, cols] >= threshold)).any(axis=1)
@@ -698,7 +706,10 @@ def _transition_widening(old, new, triangles, energy, mask):
     before = np.abs(allocation.signed_areas(old, triangles)[at_change])
     after = np.abs(allocation.signed_areas(new, triangles)[at_change])
     keep = before > 0
-    return float(after[keep].sum() / before[keep].sum()) if keep.any() else 1.0
+    if not keep.any():
+        return 1.0, 0.0
+    texels = float(np.median(before[keep])) * energy.shape[0] * energy.shape[1]
+    return float(after[keep].sum() / before[keep].sum()), texels
 
 
 def _triangle_density(old, new, triangles):

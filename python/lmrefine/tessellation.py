@@ -32,6 +32,15 @@ from .refine import transition_strength
 
 DEFAULT_BUDGET = 0.25       # at most +25% vertices
 DEFAULT_MIN_TEXELS = 8.0    # triangles at or below this many texels are left alone
+# A refinement is coarse (tessellation is its fix) when its light changes'
+# triangles gained less than this in texels (refine_uvs' transition_widening)...
+COARSE_WIDENING = 1.25
+# ... or when their median triangle covers at least this many texels (8 x 8:
+# the tuning scenes' are 4-9, a floor of 2 m quads' 300-600).
+COARSE_TRIANGLE_TEXELS = 64.0
+# Light changes softer than this (light_contrast) are no reason to split: the
+# top decile of a nearly flat map's gradient is its noise and falloff.
+COARSE_CONTRAST = 0.05
 DEFAULT_THRESHOLD = 0.5     # peak transition strength (0..1) that marks a triangle
 MAX_ROUNDS = 32
 # A budget is a fraction of the vertex count, so a floor of one quad (4
@@ -86,6 +95,31 @@ def _candidates(corner_uvs, strength, min_texels, threshold):
     if large.size:
         peak[large] = peak_strength(corner_uvs[large], strength)
     return large[peak[large] >= threshold], peak, texels
+
+
+def light_contrast(lightmap, mask):
+    """How hard the light changes of `lightmap` are: the 99.9th percentile of
+    the luminance steps between neighbouring texels of `mask` (across and
+    down), over the median luminance of its texels (0.0 without two
+    neighbouring covered texels). A shadow edge measures 0.6-2.8 on the
+    bundled scenes; a plane under the sun with a point light's falloff
+    0.007."""
+    lightmap = np.asarray(lightmap, np.float64)
+    mask = np.asarray(mask, bool)
+    luminance = lightmap[..., :3] @ np.array([0.2126, 0.7152, 0.0722]) if lightmap.ndim == 3 else lightmap
+    steps = np.concatenate([np.abs(np.diff(luminance, axis=0))[mask[1:] & mask[:-1]],
+                            np.abs(np.diff(luminance, axis=1))[mask[:, 1:] & mask[:, :-1]]])
+    if steps.size == 0:
+        return 0.0
+    return float(np.percentile(steps, 99.9) / max(float(np.median(luminance[mask])), 1e-6))
+
+
+def coarse_refinement(report):
+    """Whether a refine_uvs `report` says its light changes sit in triangles
+    too large for a warp (COARSE_WIDENING, COARSE_TRIANGLE_TEXELS): then
+    tessellation is what puts more texels there."""
+    return (report["transition_widening"] < COARSE_WIDENING
+            or report.get("transition_triangle_texels", 0.0) >= COARSE_TRIANGLE_TEXELS)
 
 
 def coarse_transitions(lightmap, uvs, triangles, *, min_texels=DEFAULT_MIN_TEXELS, threshold=DEFAULT_THRESHOLD,
