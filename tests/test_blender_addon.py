@@ -1263,6 +1263,12 @@ def test_addon_says_tessellate_when_large_triangles_hold_the_light_changes(facts
     assert 2 < large["tessellation"]["vertices_added"] <= 64 * 9
     assert not any("Tessellate spent" in w or "turn on Tessellate" in w for w in large["warnings"])
     assert large["widening"] > on["widening"] + 0.2, (large["widening"], on["widening"])
+    # A point light's falloff over the same coarse floor: the refinement's figures would call it coarse
+    # (its triangles at light changes are large), but the light hardly steps: no advice.
+    falloff = value["falloff"]
+    assert falloff["error"] is None, falloff
+    assert falloff["report"]["transition_triangle_texels"] >= 64, falloff["report"]
+    assert not any("Tessellate" in w for w in falloff["warnings"]), falloff["warnings"]
     # Strength 0 moves nothing whatever the triangles: the run says so, and does not send the user to Tessellate.
     still = value["tessellate_False_strength_0"]
     assert still["error"] is None and any("nothing moved: strength is 0" in w for w in still["warnings"])

@@ -1966,6 +1966,22 @@ def coarse_floor_suggests_tessellation():
             "error": error, "warnings": warnings, "vertices_before": vertices,
             "tessellation": outcome and outcome.tessellation.get("Floor"),
             "widening": outcome and outcome.reports["Floor"]["transition_widening"]}
+    # No blocker, the sun turned off and a point light high over a corner: only a gentle falloff, no edge.
+    scenes.coarse_shadow_scene(quads=2)
+    floor = bpy.data.objects["Floor"]
+    floor.data.uv_layers.remove(floor.data.uv_layers["Lightmap"])
+    scenes._set_lightmap_layer(floor.data)
+    bpy.data.objects.remove(bpy.data.objects["Blocker"])
+    bpy.data.objects["Sun"].data.energy = 0.0
+    bpy.ops.object.light_add(type='POINT', location=(1.5, 1.5, 6.0))
+    bpy.context.active_object.data.energy = 3000.0
+    register()
+    settings(resolution=RESOLUTION, padding=2, samples=4, first_lightmap='EMBREE', backend='EMBREE',
+             bake_passes={'DIRECT'})
+    outcome, warnings, error = _run_pipeline([floor])
+    facts["falloff"] = {"error": error, "warnings": warnings,
+                        "report": outcome and {key: outcome.reports["Floor"][key]
+                                               for key in ("transition_widening", "transition_triangle_texels")}}
     return facts
 
 @check("refine")
