@@ -212,6 +212,10 @@ def test_tessellation_lets_a_coarse_floor_gather_texels_at_the_shadow_edge(tmp_p
     assert t["vertices_before"] == 16 and 0 < t["vertices_added"] <= 64
     assert t["triangles_after"] > t["triangles_before"] == 18
     assert "tessellation" not in plain
+    # The plain run gains, and says a larger gain is within reach (the add-on's Tessellate rule).
+    assert plain["gain"] and plain["texels_per_transition_triangle"] >= 64
+    assert any("split them with --tessellate BUDGET" in note for note in plain["notes"]), plain["notes"]
+    assert not any("--tessellate" in note for note in split["notes"])
     assert split["texels_per_transition_triangle"] < 0.5 * plain["texels_per_transition_triangle"]
     assert split["transition_widening"] > plain["transition_widening"] + 0.2
     # Each run compares with its own uniform baseline at the same points: the ratio rose (1.42x -> 1.99x).

@@ -15,11 +15,12 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from . import bake, check_layout, find_charts, metrics, pack_charts, refine_uvs, write_image
+from . import bake, check_layout, coverage_mask, find_charts, metrics, pack_charts, refine_uvs, write_image
 from . import evaluate as evaluate_light
 from .charting import rechart
 from .per_effect import EFFECTS, gradient_energy, parse_rules, split_fractions, split_resolutions
-from .tessellation import MAX_BUDGET, tessellated_refine_options
+from .tessellation import (COARSE_CONTRAST, COARSE_TRIANGLE_TEXELS, MAX_BUDGET, light_contrast,
+                           tessellated_refine_options)
 
 DEFAULT_MULTIPLIERS = (1.0, 1.5, 2.0, 3.0, 4.0)
 # A transition-point RMSE at least this much lower counts as a gain.
@@ -450,6 +451,14 @@ def _json_safe(value):
     return value
 
 
+def _coarse_note(texels):
+    """What a scene whose transitions cross triangles of `texels` texels (median) can do about it."""
+    return (f"coarse tessellation: a triangle under a transition covers {texels:.0f} texels (median), and the "
+            "texel density is constant inside a triangle, so texels cannot gather at an edge that crosses it "
+            "(docs/method.md §5): split them with --tessellate BUDGET (a fraction of the vertices; meshes of few "
+            "vertices need 4 to 64), as the add-on's Tessellate does, or subdivide the receivers")
+
+
 def _diagnose(result, context):
     """Why a scene shows no gain (or only a small one), from what we know."""
     notes = []
@@ -465,10 +474,7 @@ def _diagnose(result, context):
         notes.append(f"transition points gained little texel density (widening {widening:.2f}x)")
     small_charts = context["chart_texels_at_transitions"] < 100
     if context["texels_per_transition_triangle"] > 16 and not small_charts:
-        notes.append(f"coarse tessellation: a triangle under a transition covers "
-                     f"{context['texels_per_transition_triangle']:.0f} texels (median), and the texel density "
-                     "is constant inside a triangle, so texels cannot gather at an edge that crosses it "
-                     "(docs/method.md §5): subdivide the receivers")
+        notes.append(_coarse_note(context["texels_per_transition_triangle"]))
     if small_charts:
         notes.append(f"small charts: the charts under transitions cover {context['chart_texels_at_transitions']:.0f} "
                      "texels (median) and the gutters between charts keep their width, so texels can hardly move "
@@ -716,6 +722,10 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
     gain = (result["transition_rmse_refined"] <= (1 - GAIN_THRESHOLD) * result["transition_rmse_baseline"])
     result["gain"] = bool(gain)
     result["notes"] = [] if gain else _diagnose(result, context)
+    if gain and options.tessellate is None and context["texels_per_transition_triangle"] >= COARSE_TRIANGLE_TEXELS \
+            and light_contrast(baseline, coverage_mask(uvs, triangles, resolution)) >= COARSE_CONTRAST:
+        # A gain, and a larger one within reach: the add-on's Tessellate advice, by the same rule.
+        result["notes"].append(_coarse_note(context["texels_per_transition_triangle"]))
     if not gain and not result["notes"]:
         result["notes"].append("no cause found among tessellation, chart size and refiner limits")
     if result["equal_error_status"] == "flat":
