@@ -1948,41 +1948,46 @@ def coarse_floor_suggests_tessellation():
     """A floor of 2 x 2 quads (about 29 x 29 texels each), its Lightmap map one chart filling the
     square, under a box's shadow: the warp can move only the middle vertex and cannot put texels
     inside those triangles, so the run says Tessellate is the fix; with Tessellate on it does not."""
-    facts = {}
-    # strength 0: nothing to tessellate for; budget 64: enough for the split to end by itself.
-    for tessellate, strength, budget in ((False, 24.0, 0.25), (True, 24.0, 0.25), (False, 0.0, 0.25),
-                                         (True, 24.0, 64.0)):
+    def coarse_floor(light=None, **options):
+        """The 2 x 2-quad floor with one chart, the add-on registered with `options`; `light` edits
+        the scene first."""
         scenes.coarse_shadow_scene(quads=2)
         floor = bpy.data.objects["Floor"]
         floor.data.uv_layers.remove(floor.data.uv_layers["Lightmap"])
         scenes._set_lightmap_layer(floor.data)
+        if light:
+            light()
         register()
         settings(resolution=RESOLUTION, padding=2, samples=4, first_lightmap='EMBREE', backend='EMBREE',
-                 bake_passes={'DIRECT'}, tessellate=tessellate, strength=strength, tessellate_budget=budget)
+                 bake_passes={'DIRECT'}, **options)
+        return floor
+
+    facts = {}
+    # strength 0: nothing to tessellate for; budget 64: enough for the split to end by itself.
+    for tessellate, strength, budget in ((False, 24.0, 0.25), (True, 24.0, 0.25), (False, 0.0, 0.25),
+                                         (True, 24.0, 64.0)):
+        floor = coarse_floor(tessellate=tessellate, strength=strength, tessellate_budget=budget)
         vertices = len(floor.data.vertices)
-        outcome, warnings, error = _run_pipeline([bpy.data.objects["Floor"]])
+        outcome, warnings, error = _run_pipeline([floor])
         facts[f"tessellate_{tessellate}" + ("_strength_0" if strength == 0 else "")
               + ("_budget_64" if budget == 64.0 else "")] = {
             "error": error, "warnings": warnings, "vertices_before": vertices,
             "tessellation": outcome and outcome.tessellation.get("Floor"),
             "widening": outcome and outcome.reports["Floor"]["transition_widening"]}
-    # No blocker, the sun turned off and a point light high over a corner: only a gentle falloff, no edge.
-    scenes.coarse_shadow_scene(quads=2)
-    floor = bpy.data.objects["Floor"]
-    floor.data.uv_layers.remove(floor.data.uv_layers["Lightmap"])
-    scenes._set_lightmap_layer(floor.data)
-    bpy.data.objects.remove(bpy.data.objects["Blocker"])
-    bpy.data.objects["Sun"].data.energy = 0.0
-    bpy.ops.object.light_add(type='POINT', location=(1.5, 1.5, 6.0))
-    bpy.context.active_object.data.energy = 3000.0
-    register()
-    settings(resolution=RESOLUTION, padding=2, samples=4, first_lightmap='EMBREE', backend='EMBREE',
-             bake_passes={'DIRECT'})
-    outcome, warnings, error = _run_pipeline([floor])
+
+    def falloff():
+        """No blocker, the sun off and a point light high over a corner: a gentle falloff, no edge."""
+        bpy.data.objects.remove(bpy.data.objects["Blocker"])
+        bpy.data.objects["Sun"].data.energy = 0.0
+        bpy.ops.object.light_add(type='POINT', location=(1.5, 1.5, 6.0))
+        bpy.context.active_object.data.energy = 3000.0
+
+    outcome, warnings, error = _run_pipeline([coarse_floor(falloff, tessellate=False)])
     facts["falloff"] = {"error": error, "warnings": warnings,
                         "report": outcome and {key: outcome.reports["Floor"][key]
                                                for key in ("transition_widening", "transition_triangle_texels")}}
     return facts
+
 
 @check("refine")
 def flat_sphere_on_its_own_map_is_left_as_it_is():
