@@ -27,6 +27,7 @@ import numpy as np
 
 from . import _native
 from ._native import coverage_mask, gradient_map
+from .allocation import texel_luminance
 from .rechart_route import layout_room
 from .refine import transition_strength
 
@@ -104,9 +105,8 @@ def light_contrast(lightmap, mask):
     neighbouring covered texels). A shadow edge measures 0.6-2.8 on the
     bundled scenes; a plane under the sun with a point light's falloff
     0.007."""
-    lightmap = np.asarray(lightmap, np.float64)
     mask = np.asarray(mask, bool)
-    luminance = lightmap[..., :3] @ np.array([0.2126, 0.7152, 0.0722]) if lightmap.ndim == 3 else lightmap
+    luminance = texel_luminance(np.asarray(lightmap)).astype(np.float64)
     steps = np.concatenate([np.abs(np.diff(luminance, axis=0))[mask[1:] & mask[:-1]],
                             np.abs(np.diff(luminance, axis=1))[mask[:, 1:] & mask[:, :-1]]])
     if steps.size == 0:
