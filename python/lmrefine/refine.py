@@ -378,7 +378,7 @@ def _source_lowest(stage):
         stage["signal"] = allocation.signal_scales(
             stage["uvs"], stage["triangles"], stage["energy"], float(options["min_chart_scale"]),
             float(options["max_chart_scale"]), stage["lightmap"] if stage["gradient_given"] is None else None,
-            stage["mask"], options["world_areas"])
+            stage["mask"], stage["world_areas"])
         scales = stage["signal"][1]
         padding = _pack_padding(stage["padding"], stage["original"])
         bounds = [model.lowest_packed(stage["shape"], padding, variant, stage["new_uvs"])
@@ -536,7 +536,7 @@ def _in_charts(lightmap, uvs, triangles, resolution, padding, mask, gradient, pr
             "original": original, "edge_shrink_used": edge_shrink_used, "timings": timings,
             "gradient_given": gradient_given, "energy": scalar_energy, "aligned": aligned, "hold": hold,
             "no_room": no_room, "run": run, "limited_by": limited_by, "notes": notes, "grid": grid,
-            "new_uvs": new_uvs, "check": check, "kept": kept}
+            "new_uvs": new_uvs, "check": check, "kept": kept, "world_areas": world_areas}
 
 
 def _pack_padding(padding, original):
@@ -552,16 +552,15 @@ def _repacked(stage):
     the figures and the report."""
     (options, lightmap, uvs, triangles, shape, padding, mask, progress, original, checker, gradient_given, hold,
      aligned, no_room, run, scalar_energy, limited_by, notes, timings, grid, new_uvs, check, kept, start,
-     edge_shrink_used) = (stage[key] for key in (
+     edge_shrink_used, world_areas) = (stage[key] for key in (
         "options", "lightmap", "uvs", "triangles", "shape", "padding", "mask", "progress", "original", "checker",
         "gradient_given", "hold", "aligned", "no_room", "run", "energy", "limited_by", "notes", "timings", "grid",
-        "new_uvs", "check", "kept", "start", "edge_shrink_used"))
+        "new_uvs", "check", "kept", "start", "edge_shrink_used", "world_areas"))
     strength, max_magnification, min_shrink = options["strength"], options["max_magnification"], \
         options["min_shrink"]
     repack, min_chart_scale, max_chart_scale = options["repack"], options["min_chart_scale"], \
         options["max_chart_scale"]
-    world_areas, max_stretch = options["world_areas"], options["max_stretch"]
-    passes, border = options["passes"], options["border"]
+    max_stretch, passes, border = options["max_stretch"], options["passes"], options["border"]
     repack_report = None
     if repack and strength > 0 and not hold:
         clock = time.perf_counter()
