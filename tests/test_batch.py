@@ -377,3 +377,25 @@ def test_evaluate_puts_the_equal_error_figure_in_the_summary(level_dir, tmp_path
     again = run_batch([str(levels)], str(out), BatchOptions(flags=FLAGS, workers=1, evaluate=True),
                       stream=io.StringIO())
     assert again["counts"] == {"skipped": 1}
+
+
+def test_flags_the_addon_refuses_are_named_without_its_usage_lines(tmp_path):
+    # Blender's batch entry exits 2 after argparse's usage lines: the level's error is argparse's own
+    # sentence, not the last lines of the usage (a fake Blender stands in: no Blender needed).
+    from lmrefine.batch.level_task import run_level
+    fake = tmp_path / "blender"
+    fake.write_text("#!/bin/sh\n"
+                    "echo 'usage: blender -b scene.blend --python batch.py -- [-h] --objects OBJECTS --out OUT'\n"
+                    "echo '        [--preview | --no-preview] [--report REPORT]'\n"
+                    "echo 'blender -b scene.blend --python batch.py --: error: the following arguments are "
+                    "required: --objects'\n"
+                    "exit 2\n")
+    fake.chmod(0o755)
+    script = tmp_path / "batch.py"
+    script.write_text("")
+    level = tmp_path / "level.blend"
+    level.write_bytes(b"BLENDER")
+    result = run_level("level", str(level), str(tmp_path / "out"), [], blender=str(fake), batch_script=str(script))
+    assert result["ok"] is False and result["retry"] is False
+    assert result["error"] == ("the add-on's batch entry refused the flags: the following arguments are required: "
+                               "--objects")

@@ -28,7 +28,8 @@ def level(tmp_path_factory):
     folder = tmp_path_factory.mktemp("level")
     subprocess.run([BLENDER, "-b", "--factory-startup", "--python-exit-code", "1", "--python",
                     os.path.join(REPO, "tests", "blender", "make_export_scene.py"), "--", str(folder / "level.blend"),
-                    str(folder / "twin.blend"), str(folder / "empty.blend"), str(folder / "arrayed.blend")],
+                    str(folder / "twin.blend"), str(folder / "empty.blend"), str(folder / "arrayed.blend"),
+                    str(folder / "faceless.blend")],
                    check=True, capture_output=True)
     return str(folder / "level.blend")
 
@@ -118,6 +119,28 @@ def test_copies_a_modifier_makes_with_their_uvs_receive_no_lightmap(level, tmp_p
 
 @blender
 @needs_blender
+@pytest.mark.parametrize("name, words", [
+    ("Guide", "'Guide' is a mesh without faces (2 vertices, 1 edges): a lightmap needs faces: fill them in"),
+    ("Emptied", "'Emptied' is an empty mesh (no vertices): there is nothing to lightmap"),
+    ("Collapsed", "'Collapsed': its modifiers (Weld) remove every face: disable the modifier that removes them"),
+])
+def test_objects_with_no_face_to_lightmap_are_named_or_left_out(level, tmp_path, capsys, name, words):
+    # Named, each stops the export with its own cause and fix; picked by 'all', each is left out with a
+    # note and the rest is exported (before, one such object stopped the whole export with a message
+    # about modifiers and scale that fitted none of them).
+    faceless = os.path.join(os.path.dirname(level), "faceless.blend")
+    assert cli.main(["export-scene", faceless, "-o", str(tmp_path / "s.npz"), "--objects", f"Floor,{name}"]) == 2
+    error = capsys.readouterr().err
+    assert words in error and error.rstrip().endswith("or leave the object out of --objects")
+    assert not (tmp_path / "s.npz").exists()
+    assert cli.main(["export-scene", faceless, "-o", str(tmp_path / "s.npz")]) == 0
+    assert f"left out (nothing to lightmap): {words}" in capsys.readouterr().out
+    scene = load_sample(str(tmp_path / "s.npz"))
+    assert scene.objects == ["Floor"] and len(scene.occluder_triangles) == 12  # the cube only
+
+
+@blender
+@needs_blender
 def test_a_level_without_meshes_is_named(level, tmp_path, capsys):
     empty = os.path.join(os.path.dirname(level), "empty.blend")
     assert cli.main(["export-scene", empty, "-o", str(tmp_path / "s.npz")]) == 2
@@ -140,6 +163,28 @@ def test_shared_atlas_check_tells_side_by_side_from_overlapping_layouts():
     stacked[~west] -= (stacked[~west].min(axis=(0, 1)) - stacked[west].min(axis=(0, 1)))  # east onto west
     scene.uvs["own"] = stacked.reshape(-1, 2)
     assert "'West' and 'East'" in shared_atlas_problem(scene)
+
+
+def test_shared_atlas_check_names_the_objects_that_do_share_one():
+    # Two objects laid out together and a third whose map (a texture map the automatic choice took)
+    # covers the whole square: the message hands the user the --objects of the two.
+    from lmrefine.scene_export import shared_atlas_problem
+    from test_surface_view import plane_scene
+
+    scene = plane_scene()
+    uvs = scene.uvs.pop("smart").reshape(-1, 3, 2)
+    centres = scene.positions[scene.triangles].mean(axis=1)
+    west, south = centres[:, 0] < 0, centres[:, 1] < 0
+    scene.object_id = np.where(west & south, 2, np.where(west, 0, 1)).astype(np.int32)
+    scene.objects = ["West", "East", "Dome"]
+    scene.uv_maps = {"West": "Lightmap", "East": "Lightmap", "Dome": "UVMap"}
+    dome = scene.object_id == 2
+    low, high = uvs[dome].min(axis=(0, 1)), uvs[dome].max(axis=(0, 1))
+    uvs[dome] = 0.05 + 0.9 * (uvs[dome] - low) / (high - low)  # the whole square: over both others
+    scene.uvs["own"] = uvs.reshape(-1, 2)
+    problem = shared_atlas_problem(scene)
+    assert "cover the same part of the UV square" in problem
+    assert "these share one atlas: --objects West,East (leaving out 'Dome' (its map 'UVMap'))" in problem
 
 
 def test_evaluate_names_a_file_that_is_no_scene(tmp_path, capsys):

@@ -236,6 +236,39 @@ def export_mesh(obj_eval, matrix_world, uv_name=None, name=None):
         obj_eval.to_mesh_clear()
 
 
+def has_faces(obj_eval):
+    """Whether an evaluated object has faces to bake: faces after its
+    modifiers, under a transform that does not flatten them (export_mesh's
+    None, without the export)."""
+    if abs(np.linalg.det(np.array(obj_eval.matrix_world, dtype=np.float64)[:3, :3])) < 1e-12:
+        return False
+    try:
+        mesh = obj_eval.to_mesh()
+        return mesh is not None and len(mesh.polygons) > 0
+    finally:
+        obj_eval.to_mesh_clear()
+
+
+def faceless_problem(obj, obj_eval, matrix_world=None):
+    """Why `obj` (evaluated: `obj_eval`) has no face to bake, naming the fix:
+    a mesh without faces, a zero scale, or modifiers that remove every face.
+    For an object export_mesh returned None for (`matrix_world`: the
+    instance's, default the object's)."""
+    mesh = obj.data
+    if len(mesh.vertices) == 0:
+        return f"'{obj.name}' is an empty mesh (no vertices): there is nothing to lightmap"
+    if len(mesh.polygons) == 0:
+        return (f"'{obj.name}' is a mesh without faces ({len(mesh.vertices)} vertices, {len(mesh.edges)} edges): "
+                "a lightmap needs faces: fill them in (Edit Mode > Face > Fill)")
+    matrix = np.array(obj_eval.matrix_world if matrix_world is None else matrix_world, dtype=np.float64)
+    if abs(np.linalg.det(matrix[:3, :3])) < 1e-12:
+        return (f"'{obj.name}' has a zero scale, so its faces have no area: give it a non-zero scale "
+                "(Object Properties > Transform)")
+    removing = [m.name for m in obj.modifiers if m.show_render]
+    which = f"its modifiers ({', '.join(removing)})" if removing else "its modifiers"
+    return f"'{obj.name}': {which} remove every face: disable the modifier that removes them"
+
+
 def evaluated_problem(depsgraph, obj, uv_name, layout, resolution):
     """What keeps `obj`, as its modifiers and transform make it, from being
     baked (a message naming the fix), or None. The bake exports the same.
@@ -247,8 +280,7 @@ def evaluated_problem(depsgraph, obj, uv_name, layout, resolution):
     except UserError as error:
         return str(error)
     if export is None:
-        return (f"'{obj.name}' has no faces after its modifiers and transform: disable the modifier that removes "
-                "them, or give the object a non-zero scale")
+        return faceless_problem(obj, obj_eval)
     if not (np.abs(export.positions) <= MAX_COORDINATE).all():
         return (f"'{obj.name}' has vertices at NaN, Inf or beyond 1e9 units after its modifiers and transform: "
                 "disable the modifier that puts them there, or check the object's scale")
@@ -309,8 +341,7 @@ def export_scene(context, receivers, uv_name_of, left_out=None):
             export = export_mesh(obj_eval, instance.matrix_world, uv_name=uv_name_of[original.name],
                                  name=original.name)
             if export is None:
-                raise UserError(f"'{original.name}' has no faces after its modifiers and transform: disable "
-                                "the modifier that removes them, or give the object a non-zero scale")
+                raise UserError(faceless_problem(original, obj_eval, instance.matrix_world))
             if not (np.abs(export.positions) <= MAX_COORDINATE).all():
                 raise UserError(f"'{original.name}' has vertices at NaN, Inf or beyond 1e9 units after its "
                                 "modifiers and transform: disable the modifier that puts them there")

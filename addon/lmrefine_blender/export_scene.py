@@ -128,6 +128,18 @@ def export(out, objects_spec, uv_map):
         objects = [obj for obj in objects if bridge.renders(obj)]
     if not objects:
         raise UserError(f"--objects {objects_spec}: every such object is hidden or disabled for render")
+    # Nothing to lightmap (a mesh without faces, a zero scale, modifiers that remove every face): named, an
+    # error; picked by all, selected or a collection, left out with a note (it casts no shadow either).
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    faceless = {obj.name: bridge.faceless_problem(obj, obj.evaluated_get(depsgraph)) for obj in objects
+                if not bridge.has_faces(obj.evaluated_get(depsgraph))}
+    if faceless and named:
+        raise UserError(f"{next(iter(faceless.values()))}; or leave the object out of --objects")
+    for problem in faceless.values():
+        print(f"lmrefine: note: left out (nothing to lightmap): {problem}", flush=True)
+    objects = [obj for obj in objects if obj.name not in faceless]
+    if not objects:
+        raise UserError(f"--objects {objects_spec}: no such object has faces to lightmap (above)")
     lights = [{"name": obj.name, "kind": kind, **params}
               for obj, (kind, params) in bridge.scene_lights(bpy.context, named=True)]
     if not lights and not any(bridge.world_color(scene)):

@@ -176,17 +176,28 @@ def shared_atlas_problem(scene):
     uvs, triangles = scene.layout("own")
     if len(scene.objects) < 2:
         return None
-    masks = atlas_masks([(uvs, triangles[scene.object_id == index]) for index in range(len(scene.objects))])
+    layouts = [(uvs, triangles[scene.object_id == index]) for index in range(len(scene.objects))]
+    masks = atlas_masks(layouts)
     overlapping = [(scene.objects[a], scene.objects[b]) for a in range(len(masks)) for b in range(a + 1, len(masks))
                    if overlap(masks[a], masks[b])]
     if not overlapping:
         return None
     a, b = overlapping[0]
     more = f" (and {len(overlapping) - 1} more pairs)" if len(overlapping) > 1 else ""
+    # The largest set laid out together, when there is one: most often the level's atlas, and an object or
+    # two whose automatic map choice took a texture map (a map not named like "Lightmap").
+    largest = max(atlas_groups(layouts), key=len)
+    shared = ""
+    if len(largest) > 1:
+        maps = scene.uv_maps or {}
+        others = [f"'{name}'" + (f" (its map '{maps[name]}')" if name in maps else "")
+                  for index, name in enumerate(scene.objects) if index not in largest]
+        shared = (f"; these share one atlas: --objects {','.join(scene.objects[index] for index in largest)} "
+                  f"(leaving out {', '.join(others)})")
     return (f"the lightmap UV maps of '{a}' and '{b}'{more} cover the same part of the UV square: objects evaluated "
-            "together must share one atlas; pack their lightmap UV maps into one in Blender (select them, Edit Mode, "
-            "UV > Pack Islands), pick their lightmap map with --uv-map, or evaluate one object at a time with "
-            "--objects NAME")
+            f"together must share one atlas{shared}; pack their lightmap UV maps into one in Blender (select them, "
+            "Edit Mode, UV > Pack Islands), pick their lightmap map with --uv-map, or evaluate one object at a time "
+            "with --objects NAME")
 
 
 def _source_stamp(blend, objects, uv_map):

@@ -1,6 +1,6 @@
 """A small level for the export-scene tests (tests/test_scene_export.py).
 
-    blender -b --factory-startup --python-exit-code 1 --python make_export_scene.py -- OUT.blend [TWIN.blend [EMPTY.blend [ARRAYED.blend]]]
+    blender -b --factory-startup --python-exit-code 1 --python make_export_scene.py -- OUT.blend [TWIN.blend [EMPTY.blend [ARRAYED.blend [FACELESS.blend]]]]
 
 A 4 x 4 m floor of 8 x 8 quads with two UV maps: "UVMap" (a texture map
 tiled 0..2, outside [0, 1]) and "Lightmap" (the floor mapped onto
@@ -8,7 +8,9 @@ tiled 0..2, outside [0, 1]) and "Lightmap" (the floor mapped onto
 hidden mesh with a UV map; a sun; a camera looking at the floor. TWIN adds
 a plane on its own UV square, EMPTY has no mesh, ARRAYED adds a rail: one
 quad with a lightmap map and an Array modifier that copies it (and its
-UVs) three times.
+UVs) three times. FACELESS adds a guide (a mesh of one edge, with a UV
+map), an emptied mesh (no vertices left, its UV maps kept) and a quad with a
+lightmap map whose Weld modifier collapses it.
 """
 
 import math
@@ -90,3 +92,17 @@ if len(paths) > 2:
     for obj in [obj for obj in bpy.data.objects if obj.type == "MESH"]:
         bpy.data.objects.remove(obj)
     bpy.ops.wm.save_as_mainfile(filepath=paths[2])
+if len(paths) > 4:
+    bpy.ops.wm.open_mainfile(filepath=paths[0])
+    guide = bpy.data.meshes.new("Guide")
+    guide.from_pydata([(-1.0, -1.0, 0.2), (1.0, -1.0, 0.2)], [(0, 1)], [])
+    emptied = bpy.data.meshes.new("Emptied")
+    quad = bpy.data.meshes.new("Collapsed")
+    quad.from_pydata([(2.5, 0.0, 0.5), (3.0, 0.0, 0.5), (3.0, 0.5, 0.5), (2.5, 0.5, 0.5)], [], [(0, 1, 2, 3)])
+    for mesh in (guide, emptied, quad):
+        for name in ("UVMap", "Lightmap"):
+            mesh.uv_layers.new(name=name)
+        bpy.context.scene.collection.objects.link(bpy.data.objects.new(mesh.name, mesh))
+    weld = bpy.data.objects["Collapsed"].modifiers.new("Weld", "WELD")
+    weld.merge_threshold = 100.0  # every vertex joins one: no face left
+    bpy.ops.wm.save_as_mainfile(filepath=paths[4])

@@ -124,7 +124,7 @@ def run_level(name, level_path, out_dir, flags, threads=None, blender=None, batc
         # batch.py ran and refused the level (its message): the same again would fail the same way.
         result.update(ok=False, retry=False, error=report.get("error", f"exit code {returncode}"))
     elif returncode == 2:
-        result.update(ok=False, retry=False, error=f"the add-on's batch entry refused the flags: {_tail(log_path)}")
+        result.update(ok=False, retry=False, error=f"the add-on's batch entry refused the flags: {_refusal(log_path)}")
     else:
         how = f"killed by signal {-returncode}" if returncode < 0 else f"exit code {returncode}"
         result.update(ok=False, retry=True, error=f"Blender failed ({how}) without a report: {_tail(log_path)}")
@@ -191,6 +191,14 @@ def _evaluate(level_path, out, flags, blender, log_path, only=None):
     if scene.get("equal_error_status") == "flat":
         return None, "noise-limited: no equal-error resolution"
     return scene.get("equal_error_resolution_ratio"), None
+
+
+def _refusal(log_path):
+    """What argparse said when the add-on's batch entry refused its flags (the
+    text after "error: ", without the usage lines before it), else the log's tail."""
+    with open(log_path, encoding="utf-8", errors="replace") as stream:
+        said = [line.strip().split(": error: ", 1)[1] for line in stream if ": error: " in line]
+    return said[-1] if said else _tail(log_path)
 
 
 def _tail(log_path, lines=3):
