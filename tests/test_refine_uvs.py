@@ -476,6 +476,12 @@ def test_worse_than_source_holds_moved_charts_to_their_gaps_and_repacked_ones_to
     worse, check = worse_than_source(touching, uvs, tris, 64, 2.0)
     assert worse == ["gutter"] and check["min_gutter_texels"] == pytest.approx(1.0, abs=0.01)
     assert worse_than_source(uvs, uvs, tris, 64, 2.0)[0] == []
+    # The re-chart route knows its charts sit anew: one check of the layout itself, the report it keeps
+    # (not one against the source's chart positions, whose gutters mean nothing there).
+    worse, check = worse_than_source(closer, uvs, tris, 64, 2.0, recharted=True)
+    assert worse == [] and "gutter_violations" not in check
+    assert check["min_gutter_texels"] == pytest.approx(4.0, abs=0.01)
+    assert worse_than_source(touching, uvs, tris, 64, 2.0, recharted=True)[0] == ["gutter"]
 
 
 def test_the_packer_is_not_run_when_even_a_full_atlas_would_not_pay():

@@ -71,7 +71,7 @@ def failures(report, original, padding):
     return failed
 
 
-def worse_than_source(uvs, source_uvs, triangles, resolution, padding, source=None):
+def worse_than_source(uvs, source_uvs, triangles, resolution, padding, source=None, recharted=False):
     """The promise refine_uvs makes, checked from the outside: what makes the
     refined layout `uvs` worse than `source_uvs` (an empty list: nothing), and
     the refined layout's check_layout report. Moved inside charts, each chart
@@ -79,9 +79,14 @@ def worse_than_source(uvs, source_uvs, triangles, resolution, padding, source=No
     repacked or re-charted, the charts sit anew (a re-charted chart may be
     mirrored against the source), the gutter is held to the padding or the
     source's narrowest and flips are counted within each chart.
-    `source`: the source layout's check_layout report, if the caller has it."""
+    `source`: the source layout's check_layout report, if the caller has it.
+    `recharted`: the caller knows the charts sit anew (the re-chart route),
+    so the check against the source's chart positions is not made."""
     if source is None:
         source = _native.check_layout(source_uvs, triangles, resolution, padding)
+    if recharted:
+        check = _native.check_layout(uvs, triangles, resolution, padding)
+        return failures(check, source, padding), check
     check = _native.check_layout(uvs, triangles, resolution, padding, reference_uvs=source_uvs,
                                  relative_gutter=True)
     worse = failures(check, source, padding)

@@ -404,14 +404,16 @@ def refine_recharted(refine, lightmap, uvs, triangles, shape, padding, positions
         info["edge_room"] = False
         if roomier is not None:
             retried_predicted = model.relative(retried.uvs)
-            retried_check = backoff.worse_than_source(retried.uvs, uvs, triangles, shape, padding, source=original)
+            retried_check = backoff.worse_than_source(retried.uvs, uvs, triangles, shape, padding, source=original,
+                                                      recharted=True)
             if retried_predicted < predicted and not retried_check[0]:
                 recharted, result, predicted = roomier, retried, retried_predicted
                 info["edge_room"] = True
     info.update({key: recharted[key] for key in ("charts", "split_charts", "degenerate_triangles",
                                                  "utilisation", "area_utilisation")})
     worse, check = (retried_check if info["edge_room"] else
-                    backoff.worse_than_source(result.uvs, uvs, triangles, shape, padding, source=original))
+                    backoff.worse_than_source(result.uvs, uvs, triangles, shape, padding, source=original,
+                                              recharted=True))
     if worse:
         info["reason"] = f"the re-charted layout failed {', '.join(worse)} against the source layout"
         return None, info
