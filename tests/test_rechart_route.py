@@ -316,13 +316,19 @@ def test_route_does_not_make_the_source_repack_the_bound_rules_out(lightmap_pack
 def test_the_source_lowest_is_its_own_prediction_without_a_repack_and_none_with_overlaps():
     from lmrefine.refine import _source_lowest
 
+    from types import SimpleNamespace
+
     model = type("Model", (), {"relative": staticmethod(lambda layout: 0.75)})()
-    stage = {"hold": False, "check": {"overlapping": 0}, "new_uvs": None,
-             "options": {"repack": False, "strength": 24.0}}
-    assert _source_lowest(stage)(model) == 0.75  # the in-chart layout is what the source route returns
-    assert _source_lowest({**stage, "options": {"repack": True, "strength": 0}})(model) == 0.75
-    assert _source_lowest({**stage, "hold": True, "options": {"repack": True, "strength": 24.0}})(model) == 0.75
-    assert _source_lowest({**stage, "check": {"overlapping": 3}}) is None
+    fields = {"hold": False, "check": {"overlapping": 0}, "new_uvs": None,
+              "options": {"repack": False, "strength": 24.0}}
+
+    def stage(**changed):  # the _InCharts fields _source_lowest reads
+        return SimpleNamespace(**{**fields, **changed})
+
+    assert _source_lowest(stage())(model) == 0.75  # the in-chart layout is what the source route returns
+    assert _source_lowest(stage(options={"repack": True, "strength": 0}))(model) == 0.75
+    assert _source_lowest(stage(hold=True, options={"repack": True, "strength": 24.0}))(model) == 0.75
+    assert _source_lowest(stage(check={"overlapping": 3})) is None
 
 
 def test_lowest_packed_bounds_the_packings_of_a_layout_moved_inside_its_charts(lightmap_pack_case):

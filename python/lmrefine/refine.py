@@ -38,6 +38,41 @@ class RefineResult:
     report: dict = field(default_factory=dict)
 
 
+@dataclass
+class _InCharts:
+    """A refinement up to its repack (_in_charts), which _repacked finishes:
+    the validated input, the source layout's analysis and check, the
+    gradient energy, the automaton's run and the warp the checks kept."""
+
+    lightmap: np.ndarray
+    uvs: np.ndarray
+    triangles: np.ndarray
+    shape: tuple
+    padding: float
+    mask: np.ndarray          # the source layout's coverage
+    progress: object
+    options: dict
+    start: float              # perf_counter at the start, for the report's seconds
+    checker: object           # _native.LayoutChecker of the source layout
+    original: dict            # its check_layout report
+    edge_shrink_used: float
+    timings: dict
+    gradient_given: object    # the caller's gradient map (then the lightmap is not read), or None
+    energy: np.ndarray        # scalar gradient energy per texel
+    aligned: object           # alignment.layout_held's share, or None
+    hold: bool                # light steps on texel boundaries: nothing moves
+    no_room: bool             # every UV on its chart's border: the automaton was not run
+    run: dict                 # run_automaton's result
+    limited_by: list
+    notes: list
+    grid: np.ndarray          # the grid kept
+    new_uvs: np.ndarray       # the in-chart layout kept
+    check: dict               # its check_layout report
+    kept: np.ndarray          # the back-off's share kept per cell
+    world_areas: object       # validated world_areas, or None
+    signal: tuple = None      # allocation.signal_scales, once _source_lowest has made it
+
+
 _MAX_RESOLUTION = 1 << 24  # as the native side (numpy_util.cpp parse_resolution)
 
 
@@ -314,7 +349,7 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
     # 'always': the caller knows the layout's charts are one face each under its split triangles.
     opened = room["no_room"] or rechart == "always"
     stage = _in_charts(lightmap, uvs, triangles, resolution, padding, mask, gradient, progress, options, room)
-    energy, source_mask = stage["energy"], stage["mask"]
+    energy, source_mask = stage.energy, stage.mask
 
     @functools.lru_cache(maxsize=None)
     def source_route():
@@ -344,12 +379,12 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
         recharted, info = rechart_route.refine_recharted(
             lambda carried, new_uvs, new_mask, new_padding: _refine(carried, new_uvs, triangles, shape, new_padding,
                                                                     new_mask, None, progress, options)[0],
-            lightmap, uvs, triangles, shape, padding, positions, room, energy, source_route, stage["original"],
+            lightmap, uvs, triangles, shape, padding, positions, room, energy, source_route, stage.original,
             progress, folds, normals, polygons, source_lowest=_source_lowest(stage))
         if rechart == "always":
             info["always"] = True
         if recharted is not None:
-            result = _recharted_result(recharted, stage["original"], uvs, triangles, energy, source_mask, info)
+            result = _recharted_result(recharted, stage.original, uvs, triangles, energy, source_mask, info)
     if not info["used"]:
         result = source_route()
     if not info["used"] and (opened or folded) and rechart:
@@ -366,22 +401,22 @@ def _source_lowest(stage):
     layout itself, or its charts packed whole at the repack's scales or
     their square roots (ErrorModel.lowest_packed). The scales are kept for
     its repack."""
-    options = stage["options"]
-    if stage["check"]["overlapping"]:
+    options = stage.options
+    if stage.check["overlapping"]:
         return None
-    repacks = options["repack"] and options["strength"] > 0 and not stage["hold"]
+    repacks = options["repack"] and options["strength"] > 0 and not stage.hold
 
     def lowest(model):
-        unpacked = model.relative(stage["new_uvs"])
+        unpacked = model.relative(stage.new_uvs)
         if not repacks:
             return unpacked
-        stage["signal"] = allocation.signal_scales(
-            stage["uvs"], stage["triangles"], stage["energy"], float(options["min_chart_scale"]),
-            float(options["max_chart_scale"]), stage["lightmap"] if stage["gradient_given"] is None else None,
-            stage["mask"], stage["world_areas"])
-        scales = stage["signal"][1]
-        padding = _pack_padding(stage["padding"], stage["original"])
-        bounds = [model.lowest_packed(stage["shape"], padding, variant, stage["new_uvs"])
+        stage.signal = allocation.signal_scales(
+            stage.uvs, stage.triangles, stage.energy, float(options["min_chart_scale"]),
+            float(options["max_chart_scale"]), stage.lightmap if stage.gradient_given is None else None,
+            stage.mask, stage.world_areas)
+        scales = stage.signal[1]
+        padding = _pack_padding(stage.padding, stage.original)
+        bounds = [model.lowest_packed(stage.shape, padding, variant, stage.new_uvs)
                   for variant in (scales, np.sqrt(scales))]
         return None if None in bounds else min([unpacked] + bounds)
 
@@ -433,7 +468,7 @@ def _refine(lightmap, uvs, triangles, resolution, padding, mask, gradient, progr
 
 def _in_charts(lightmap, uvs, triangles, resolution, padding, mask, gradient, progress, options, room=None):
     """_refine up to the repack: the gradient map, the automaton and the warp
-    kept by the checks, as a dict _repacked finishes."""
+    kept by the checks, as the _InCharts _repacked finishes."""
     strength, max_magnification, min_shrink = options["strength"], options["max_magnification"], \
         options["min_shrink"]
     edge_shrink, delta, passes, border = options["edge_shrink"], options["delta"], options["passes"], \
@@ -531,12 +566,12 @@ def _in_charts(lightmap, uvs, triangles, resolution, padding, mask, gradient, pr
         limited_by += failed
 
     timings["warp_and_check"] = time.perf_counter() - clock
-    return {"lightmap": lightmap, "uvs": uvs, "triangles": triangles, "shape": shape, "padding": padding,
-            "mask": mask, "progress": progress, "options": options, "start": start, "checker": checker,
-            "original": original, "edge_shrink_used": edge_shrink_used, "timings": timings,
-            "gradient_given": gradient_given, "energy": scalar_energy, "aligned": aligned, "hold": hold,
-            "no_room": no_room, "run": run, "limited_by": limited_by, "notes": notes, "grid": grid,
-            "new_uvs": new_uvs, "check": check, "kept": kept, "world_areas": world_areas}
+    return _InCharts(lightmap=lightmap, uvs=uvs, triangles=triangles, shape=shape, padding=padding, mask=mask,
+                     progress=progress, options=options, start=start, checker=checker, original=original,
+                     edge_shrink_used=edge_shrink_used, timings=timings, gradient_given=gradient_given,
+                     energy=scalar_energy, aligned=aligned, hold=hold, no_room=no_room, run=run,
+                     limited_by=limited_by, notes=notes, grid=grid, new_uvs=new_uvs, check=check, kept=kept,
+                     world_areas=world_areas)
 
 
 def _pack_padding(padding, original):
@@ -550,19 +585,18 @@ def _pack_padding(padding, original):
 def _repacked(stage):
     """_refine from the in-chart `stage` (_in_charts) on: the chart repack,
     the figures and the report."""
-    (options, lightmap, uvs, triangles, shape, padding, mask, progress, original, checker, gradient_given, hold,
-     aligned, no_room, run, scalar_energy, limited_by, notes, timings, grid, new_uvs, check, kept, start,
-     edge_shrink_used, world_areas) = (stage[key] for key in (
-        "options", "lightmap", "uvs", "triangles", "shape", "padding", "mask", "progress", "original", "checker",
-        "gradient_given", "hold", "aligned", "no_room", "run", "energy", "limited_by", "notes", "timings", "grid",
-        "new_uvs", "check", "kept", "start", "edge_shrink_used", "world_areas"))
+    options, uvs, triangles, shape, mask, original = \
+        stage.options, stage.uvs, stage.triangles, stage.shape, stage.mask, stage.original
+    scalar_energy, limited_by, notes, timings = stage.energy, stage.limited_by, stage.notes, stage.timings
+    grid, new_uvs, check, kept = stage.grid, stage.new_uvs, stage.check, stage.kept
+    padding, progress = stage.padding, stage.progress
     strength, max_magnification, min_shrink = options["strength"], options["max_magnification"], \
         options["min_shrink"]
     repack, min_chart_scale, max_chart_scale = options["repack"], options["min_chart_scale"], \
         options["max_chart_scale"]
     max_stretch, passes, border = options["max_stretch"], options["passes"], options["border"]
     repack_report = None
-    if repack and strength > 0 and not hold:
+    if repack and strength > 0 and not stage.hold:
         clock = time.perf_counter()
         if not 0 < min_chart_scale <= 1 <= max_chart_scale < np.inf:
             raise ValueError(f"need 0 < min_chart_scale <= 1 <= max_chart_scale (finite), got {min_chart_scale} "
@@ -573,9 +607,10 @@ def _repacked(stage):
         packed, repack_report = allocation.repack(uvs, new_uvs, triangles, scalar_energy, shape,
                                                   _pack_padding(padding, original),
                                                   float(min_chart_scale), float(max_chart_scale), progress,
-                                                  lightmap=lightmap if gradient_given is None else None, mask=mask,
-                                                  world_areas=world_areas, max_stretch=float(max_stretch),
-                                                  signal=stage.get("signal"))
+                                                  lightmap=stage.lightmap if stage.gradient_given is None else None,
+                                                  mask=mask,
+                                                  world_areas=stage.world_areas, max_stretch=float(max_stretch),
+                                                  signal=stage.signal)
         if packed is not None:
             packed_check = _native.check_layout(packed, triangles, shape, padding, failing_charts=True)
             failing = set(packed_check.pop("failing_charts").tolist())
@@ -583,7 +618,7 @@ def _repacked(stage):
             if worse == ["overlapping"]:
                 # Overlaps are counted in texels, so a scaled chart that overlapped itself in the
                 # input may count a few more: acceptable when no other chart overlaps.
-                if failing <= set(checker.check(failing_charts=True)["failing_charts"].tolist()):
+                if failing <= set(stage.checker.check(failing_charts=True)["failing_charts"].tolist()):
                     worse = []
             if worse:
                 repack_report["used"] = False
@@ -616,33 +651,33 @@ def _repacked(stage):
     if not moved:
         broke = [kind for kind in limited_by if kind in ("flipped", "overlapping", "gutter", "degenerate", "grid")]
         why = ("strength is 0" if strength == 0 else
-               f"{aligned:.0%} of the first lightmap's light steps lie on texel boundaries that the layout's "
+               f"{stage.aligned:.0%} of the first lightmap's light steps lie on texel boundaries that the layout's "
                "edges run along (a flat-shaded mesh on a grid-aligned map), where no texel mixes two sides of a "
-               "step; moving the vertices would put the steps inside texels" if hold else
+               "step; moving the vertices would put the steps inside texels" if stage.hold else
                "the lightmap has no light change inside the charts"
                if not np.any(scalar_energy[mask] > 0) else
                "every deformation broke the layout and was backed off (" + ", ".join(broke) + ")" if broke else
                "every UV lies on its chart's border (small charts, e.g. one per face), where a warp could only "
-               "reshape each chart's one affine map, so the automaton was not run" if no_room else
+               "reshape each chart's one affine map, so the automaton was not run" if stage.no_room else
                "the automaton's deformation moved no UV")
         notes.append(f"nothing moved: {why}; the layout returned is the input")
 
     report = {
         "moved": moved,
-        "aligned_steps": aligned,
+        "aligned_steps": stage.aligned,
         **figures,
-        "steps": int(run["steps"]),
-        "levels": run["levels"],
-        "converged": bool(run["converged"]),
+        "steps": int(stage.run["steps"]),
+        "levels": stage.run["levels"],
+        "converged": bool(stage.run["converged"]),
         "strength_used": float(strength) * float(kept.min()),
         "backoff": float(kept.min()),
         "backoff_area": float((kept < 1).mean()),
         "limited_by": limited_by,
         "notes": notes,
         "passes": int(passes),
-        "edge_shrink": edge_shrink_used,
+        "edge_shrink": stage.edge_shrink_used,
         "border": border,
-        "seconds": time.perf_counter() - start,
+        "seconds": time.perf_counter() - stage.start,
         "timings": timings,
         "original_check": original,
         "check": check,
