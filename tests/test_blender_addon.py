@@ -141,6 +141,16 @@ def test_bad_objects_are_skipped_with_their_fix_and_the_others_refined(facts):
     assert value["operator"] == "FINISHED", value["message"]
 
 
+def test_objects_with_nothing_to_lightmap_are_skipped_with_their_cause(facts):
+    value = fact(facts, "faceless_objects_are_named_with_their_cause")
+    assert value["error"] is None and value["objects"] == ["Floor"]
+    assert sorted(value["skipped"]) == [
+        "Skipped: 'Collapsed': its modifiers (Weld) remove every face: disable the modifier that removes them",
+        "Skipped: 'Emptied' is an empty mesh (no vertices): there is nothing to lightmap",
+        "Skipped: 'Guide' is a mesh without faces (2 vertices, 1 edges): a lightmap needs faces: fill them in "
+        "(Edit Mode > Face > Fill)"]
+
+
 def test_zero_area_faces_are_skipped_and_counted(facts):
     value = fact(facts, "zero_area_faces_are_skipped_and_counted")
     assert value["error"] is None and value["objects"] == ["Sliver"] and value["refined"]

@@ -284,7 +284,7 @@ def _validate_object(obj, options, owners, resolution, depsgraph):
                         f"for '{refined}'")
     layout = bridge.read_layout(mesh, source, obj.matrix_world)
     if len(layout.triangles) == 0:
-        raise UserError(f"'{obj.name}' has no faces: nothing to lightmap")
+        raise UserError(bridge.faceless_problem(obj, obj.evaluated_get(depsgraph)))
     not_finite = int(np.count_nonzero(~np.isfinite(layout.uvs).all(axis=1)))
     if not_finite:
         raise UserError(f"UV map '{source}' of '{obj.name}' has {not_finite} UVs that are NaN or Inf: re-unwrap it "

@@ -301,6 +301,30 @@ def skip_bad_objects_refines_the_others():
 
 
 @check("refine", "bake")
+def faceless_objects_are_named_with_their_cause():
+    """Floor with three objects that have nothing to lightmap (a guide of one edge, an emptied mesh, a quad
+    a Weld collapses), each with a Lightmap map: each is skipped with its own cause."""
+    fresh_shadow_scene(first_lightmap='EMBREE', backend='EMBREE', bake_passes={'DIRECT'})
+    floor = bpy.data.objects["Floor"]
+    guide = bpy.data.meshes.new("GuideMesh")
+    guide.from_pydata([(0, 0, 0.2), (1, 0, 0.2)], [(0, 1)], [])
+    emptied = bpy.data.meshes.new("EmptiedMesh")
+    faceless = []
+    for name, mesh in (("Guide", guide), ("Emptied", emptied)):
+        mesh.uv_layers.new(name="Lightmap")
+        faceless.append(bpy.data.objects.new(name, mesh))
+        bpy.context.scene.collection.objects.link(faceless[-1])
+    collapsed = scenes._mesh_object("Collapsed", [(3, 0, 0.5), (3.5, 0, 0.5), (3.5, 0.5, 0.5), (3, 0.5, 0.5)],
+                                    [(0, 1, 2, 3)], [(0.1, 0.1), (0.4, 0.1), (0.4, 0.4), (0.1, 0.4)])
+    collapsed.modifiers.new("Weld", 'WELD').merge_threshold = 100.0
+    faceless.append(collapsed)
+    scenes.select_only(floor, *faceless)
+    outcome, warnings, error = _run_pipeline([floor, *faceless])
+    return {"error": error, "objects": outcome and outcome.objects,
+            "skipped": [w for w in warnings if w.startswith("Skipped: ")]}
+
+
+@check("refine", "bake")
 def copies_and_inside_out_meshes_are_named():
     """An Array modifier's copies share their UVs: the object is skipped, the message names the modifier and
     the fix. An inside-out box is refined with a warning saying why it bakes black. The floor, under a
