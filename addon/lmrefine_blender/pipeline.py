@@ -625,24 +625,71 @@ def _coarse_warning(lmrefine, label, lightmap, group, report, outcome, budget):
     """Edges hardly gained, or the triangles at light changes are large (tessellation.coarse_refinement),
     and light changes that are no mere falloff (tessellation.light_contrast) cross triangles tessellate
     would split: say that tessellation is the fix (a warp moves vertices; inside a triangle the mapping
-    stays affine)."""
+    stays affine), and the Vertex Budget its split needs to run to its own end (_split_needs)."""
     from lmrefine.tessellation import COARSE_CONTRAST, DEFAULT_MIN_TEXELS, coarse_transitions, light_contrast
     coarse = coarse_transitions(lightmap, group.uvs, group.triangles)
     # Nearly flat light (a point light's falloff, bake noise) has a top decile too: no reason to split.
     hard = light_contrast(lightmap, lmrefine.coverage_mask(group.uvs, group.triangles, lightmap.shape[:2]))
-    if coarse["triangles"] and hard >= COARSE_CONTRAST:
-        # The default budget is a fraction of the vertices: on a mesh of few it adds next to nothing.
+    if not (coarse["triangles"] and hard >= COARSE_CONTRAST):
+        return
+    needs = _split_needs(lmrefine, lightmap, group)
+    if needs is not None and not any(added for _, added, _ in needs):
+        return  # the split would add nothing (its thresholds are its own): Tessellate is no fix here
+    raise_budget = ""
+    if needs is None:
+        # Too large to try the split here. The default budget is a fraction of the vertices: on a mesh of
+        # few it adds next to nothing.
         vertices = sum(len(target.obj.data.vertices) for target in group.targets)
         allowed = sum(int(budget * len(target.obj.data.vertices)) for target in group.targets)
-        raise_budget = (f" with a Vertex Budget well above {budget:g} (at {budget:g} it adds at most {allowed} "
-                        f"to its {vertices} vertices)" if allowed < coarse["triangles"] else "")
-        outcome.warnings.append(
-            f"{label}: light changes cross {coarse['triangles']} triangle(s) of more than "
-            f"{DEFAULT_MIN_TEXELS:g} texels, and moving UVs cannot put more texels inside a triangle "
-            f"(edges {report['transition_widening']:.2f}x, the median triangle there "
-            f"{report.get('transition_triangle_texels', 0.0):.0f} texels): turn on Tessellate (Stages and "
-            "Tessellation)"
-            f"{raise_budget} to split them in the mesh, as one undo step")
+        if allowed < coarse["triangles"]:
+            raise_budget = (f" with a Vertex Budget well above {budget:g} (at {budget:g} it adds at most {allowed} "
+                            f"to its {vertices} vertices)")
+    else:
+        name, added, vertices = max(needs, key=lambda need: need[1] / max(need[2], 1))
+        needed = added / max(vertices, 1)
+        if needed >= SPLIT_TRIAL_BUDGET:
+            raise_budget = (f" with a Vertex Budget of {SPLIT_TRIAL_BUDGET:g} or more ('{name}' takes +{added} "
+                            f"to its {vertices} vertices and still has triangles to split)")
+        elif needed > budget:
+            raise_budget = (f" with a Vertex Budget of {_budget_above(needed):g} or more (the split of '{name}' "
+                            f"ends by itself at +{added} to its {vertices} vertices; at {budget:g} it stops short)")
+    outcome.warnings.append(
+        f"{label}: light changes cross {coarse['triangles']} triangle(s) of more than "
+        f"{DEFAULT_MIN_TEXELS:g} texels, and moving UVs cannot put more texels inside a triangle "
+        f"(edges {report['transition_widening']:.2f}x, the median triangle there "
+        f"{report.get('transition_triangle_texels', 0.0):.0f} texels): turn on Tessellate (Stages and "
+        "Tessellation)"
+        f"{raise_budget} to split them in the mesh, as one undo step")
+
+
+# The largest map (triangles, summed over its objects) whose split _coarse_warning tries, to tell the
+# Vertex Budget it needs (a plane of 20,000 or 100,000 triangles under a shadow edge at 1024^2: about a
+# second), and the largest budget it tries (a split that needs more says so).
+SPLIT_TRIAL_TRIANGLES = 100_000
+SPLIT_TRIAL_BUDGET = 64.0
+
+
+def _split_needs(lmrefine, lightmap, group):
+    """[(object name, vertices its split adds when it runs to its own end, its vertices)] for the
+    objects of `group`, from a trial of the split Tessellate makes (_tessellate's, at a budget of
+    SPLIT_TRIAL_BUDGET; nothing is written; a split that needs more counts as needing
+    SPLIT_TRIAL_BUDGET x its vertices), or None for a map too large to try (SPLIT_TRIAL_TRIANGLES)."""
+    if sum(len(target.layout.triangles) for target in group.targets) > SPLIT_TRIAL_TRIANGLES:
+        return None
+    needs = []
+    for target in group.targets:
+        positions, triangles, corner_uvs = tessellation.mesh_arrays(target.obj.data, target.layout)
+        strength = lmrefine.transition_strength_of(lightmap, target.layout.uvs, target.layout.triangles)
+        trial = lmrefine.tessellate(positions, triangles, corner_uvs, strength, budget=SPLIT_TRIAL_BUDGET)
+        needs.append((target.obj.name, int(trial.report["vertices_after"] - trial.report["vertices_before"]),
+                      len(positions)))
+    return needs
+
+
+def _budget_above(needed):
+    """A Vertex Budget just above `needed` that reads plainly: two significant digits, rounded up."""
+    step = 10.0 ** (np.floor(np.log10(needed)) - 1)
+    return float(np.ceil(needed / step - 1e-9) * step)
 
 
 def _tessellate(lmrefine, target, lightmap, budget, journal, outcome, start, span):
