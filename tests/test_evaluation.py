@@ -2,6 +2,7 @@
 ground truth, metrics, report), and its CLI."""
 
 import json
+import re
 from dataclasses import replace
 
 import numpy as np
@@ -214,7 +215,14 @@ def test_tessellation_lets_a_coarse_floor_gather_texels_at_the_shadow_edge(tmp_p
     assert "tessellation" not in plain
     # The plain run gains, and says a larger gain is within reach (the add-on's Tessellate rule).
     assert plain["gain"] and plain["texels_per_transition_triangle"] >= 64
-    assert any("split them with --tessellate BUDGET" in note for note in plain["notes"]), plain["notes"]
+    # The note gives the budget at which the split ends by itself (a trial of evaluate --tessellate's split).
+    from lmrefine.tessellation import budget_to_end
+    advice = [re.search(r"split them with --tessellate ([\d.]+) \(the split of '(.+)' ends by itself there, "
+                        r"at \+(\d+) to its 16 vertices\)", note) for note in plain["notes"]]
+    advice = [found for found in advice if found]
+    assert len(advice) == 1, plain["notes"]
+    budget, added = float(advice[0].group(1)), int(advice[0].group(3))
+    assert added >= t["vertices_added"] and budget == budget_to_end(added, 16) >= added / 16
     assert not any("--tessellate" in note for note in split["notes"])
     assert split["texels_per_transition_triangle"] < 0.5 * plain["texels_per_transition_triangle"]
     assert split["transition_widening"] > plain["transition_widening"] + 0.2

@@ -288,3 +288,11 @@ def test_light_contrast_tells_a_shadow_edge_from_a_falloff():
     left = mask.copy()
     left[:, 32:] = False
     assert light_contrast(step, left) == 0.0
+
+
+def test_the_budget_a_split_needs_reads_as_two_digits_rounded_up():
+    from lmrefine.tessellation import budget_to_end
+    # +60 vertices to 9: 6.67 -> 6.7; to 16: 2.75 -> 2.8; a budget below it would stop the split short.
+    assert [budget_to_end(a, v) for a, v in ((60, 9), (44, 16), (291, 289), (80, 915), (576, 9), (0, 9))] == \
+        [6.7, 2.8, 1.1, 0.088, 64.0, 0.0]
+    assert all(budget_to_end(a, v) >= a / v for a, v in ((1, 3), (7, 11), (1000, 7), (5, 100000)))

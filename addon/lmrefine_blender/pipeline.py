@@ -626,7 +626,8 @@ def _coarse_warning(lmrefine, label, lightmap, group, report, outcome, budget):
     and light changes that are no mere falloff (tessellation.light_contrast) cross triangles tessellate
     would split: say that tessellation is the fix (a warp moves vertices; inside a triangle the mapping
     stays affine), and the Vertex Budget its split needs to run to its own end (_split_needs)."""
-    from lmrefine.tessellation import COARSE_CONTRAST, DEFAULT_MIN_TEXELS, coarse_transitions, light_contrast
+    from lmrefine.tessellation import (COARSE_CONTRAST, DEFAULT_MIN_TEXELS, TRIAL_BUDGET, budget_to_end,
+                                       coarse_transitions, light_contrast)
     coarse = coarse_transitions(lightmap, group.uvs, group.triangles)
     # Nearly flat light (a point light's falloff, bake noise) has a top decile too: no reason to split.
     hard = light_contrast(lightmap, lmrefine.coverage_mask(group.uvs, group.triangles, lightmap.shape[:2]))
@@ -646,12 +647,12 @@ def _coarse_warning(lmrefine, label, lightmap, group, report, outcome, budget):
                             f"to its {vertices} vertices)")
     else:
         name, added, vertices = max(needs, key=lambda need: need[1] / max(need[2], 1))
-        needed = added / max(vertices, 1)
-        if needed >= SPLIT_TRIAL_BUDGET:
-            raise_budget = (f" with a Vertex Budget of {SPLIT_TRIAL_BUDGET:g} or more ('{name}' takes +{added} "
+        needed = budget_to_end(added, vertices)
+        if needed >= TRIAL_BUDGET:
+            raise_budget = (f" with a Vertex Budget of {TRIAL_BUDGET:g} or more ('{name}' takes +{added} "
                             f"to its {vertices} vertices and still has triangles to split)")
         elif needed > budget:
-            raise_budget = (f" with a Vertex Budget of {_budget_above(needed):g} or more (the split of '{name}' "
+            raise_budget = (f" with a Vertex Budget of {needed:g} or more (the split of '{name}' "
                             f"ends by itself at +{added} to its {vertices} vertices; at {budget:g} it stops short)")
     outcome.warnings.append(
         f"{label}: light changes cross {coarse['triangles']} triangle(s) of more than "
@@ -664,32 +665,26 @@ def _coarse_warning(lmrefine, label, lightmap, group, report, outcome, budget):
 
 # The largest map (triangles, summed over its objects) whose split _coarse_warning tries, to tell the
 # Vertex Budget it needs (a plane of 20,000 or 100,000 triangles under a shadow edge at 1024^2: about a
-# second), and the largest budget it tries (a split that needs more says so).
+# second).
 SPLIT_TRIAL_TRIANGLES = 100_000
-SPLIT_TRIAL_BUDGET = 64.0
 
 
 def _split_needs(lmrefine, lightmap, group):
     """[(object name, vertices its split adds when it runs to its own end, its vertices)] for the
     objects of `group`, from a trial of the split Tessellate makes (_tessellate's, at a budget of
-    SPLIT_TRIAL_BUDGET; nothing is written; a split that needs more counts as needing
-    SPLIT_TRIAL_BUDGET x its vertices), or None for a map too large to try (SPLIT_TRIAL_TRIANGLES)."""
+    lmrefine.tessellation.TRIAL_BUDGET; nothing is written; a split that needs more counts as needing
+    that budget), or None for a map too large to try (SPLIT_TRIAL_TRIANGLES)."""
+    from lmrefine.tessellation import TRIAL_BUDGET
     if sum(len(target.layout.triangles) for target in group.targets) > SPLIT_TRIAL_TRIANGLES:
         return None
     needs = []
     for target in group.targets:
         positions, triangles, corner_uvs = tessellation.mesh_arrays(target.obj.data, target.layout)
         strength = lmrefine.transition_strength_of(lightmap, target.layout.uvs, target.layout.triangles)
-        trial = lmrefine.tessellate(positions, triangles, corner_uvs, strength, budget=SPLIT_TRIAL_BUDGET)
+        trial = lmrefine.tessellate(positions, triangles, corner_uvs, strength, budget=TRIAL_BUDGET)
         needs.append((target.obj.name, int(trial.report["vertices_after"] - trial.report["vertices_before"]),
                       len(positions)))
     return needs
-
-
-def _budget_above(needed):
-    """A Vertex Budget just above `needed` that reads plainly: two significant digits, rounded up."""
-    step = 10.0 ** (np.floor(np.log10(needed)) - 1)
-    return float(np.ceil(needed / step - 1e-9) * step)
 
 
 def _tessellate(lmrefine, target, lightmap, budget, journal, outcome, start, span):

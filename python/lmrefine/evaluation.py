@@ -8,6 +8,7 @@ Used by ``python3 -m lmrefine evaluate`` and ``demo``; the metrics are defined
 in :mod:`lmrefine.metrics` and docs/evaluation.md.
 """
 
+import functools
 import math
 import os
 import time
@@ -19,8 +20,8 @@ from . import bake, check_layout, coverage_mask, find_charts, metrics, pack_char
 from . import evaluate as evaluate_light
 from .charting import rechart
 from .per_effect import EFFECTS, gradient_energy, parse_rules, split_fractions, split_resolutions
-from .tessellation import (COARSE_CONTRAST, COARSE_TRIANGLE_TEXELS, MAX_BUDGET, light_contrast,
-                           tessellated_refine_options)
+from .tessellation import (COARSE_CONTRAST, COARSE_TRIANGLE_TEXELS, MAX_BUDGET, TRIAL_BUDGET, budget_to_end,
+                           light_contrast, tessellated_refine_options)
 
 DEFAULT_MULTIPLIERS = (1.0, 1.5, 2.0, 3.0, 4.0)
 # A transition-point RMSE at least this much lower counts as a gain.
@@ -451,12 +452,33 @@ def _json_safe(value):
     return value
 
 
-def _coarse_note(texels):
-    """What a scene whose transitions cross triangles of `texels` texels (median) can do about it."""
+def _coarse_note(texels, split=None):
+    """What a scene whose transitions cross triangles of `texels` texels (median) can do about it;
+    `split`: _split_trial's (object, vertices added, its vertices), the budget the split needs."""
+    if split is None:
+        budget = ("--tessellate BUDGET (a fraction of the vertices; meshes of few vertices need 4 to 64)")
+    else:
+        name, added, vertices = split
+        needed = budget_to_end(added, vertices)
+        budget = (f"--tessellate {TRIAL_BUDGET:g} or more ('{name}' takes +{added} to its {vertices} vertices and "
+                  "still has triangles to split)" if needed >= TRIAL_BUDGET else
+                  f"--tessellate {needed:g} (the split of '{name}' ends by itself there, at +{added} to its "
+                  f"{vertices} vertices)")
     return (f"coarse tessellation: a triangle under a transition covers {texels:.0f} texels (median), and the "
             "texel density is constant inside a triangle, so texels cannot gather at an edge that crosses it "
-            "(docs/method.md §5): split them with --tessellate BUDGET (a fraction of the vertices; meshes of few "
-            "vertices need 4 to 64), as the add-on's Tessellate does, or subdivide the receivers")
+            f"(docs/method.md §5): split them with {budget}, as the add-on's Tessellate does, or subdivide the "
+            "receivers")
+
+
+def _split_trial(sample, variant, baseline):
+    """The object whose split (evaluate --tessellate's, from `baseline` baked on `variant`, at
+    TRIAL_BUDGET) adds the most vertices for its count: (its name(s), vertices added, its
+    vertices), or None when the split adds none."""
+    _, report, _ = _tessellated(sample, variant, baseline, TRIAL_BUDGET)
+    worst = max(report["objects"], key=lambda r: r["vertices_added"] / max(r["vertices_before"], 1))
+    if not worst["vertices_added"]:
+        return None
+    return "', '".join(worst["objects"]), int(worst["vertices_added"]), int(worst["vertices_before"])
 
 
 def _diagnose(result, context):
@@ -474,7 +496,9 @@ def _diagnose(result, context):
         notes.append(f"transition points gained little texel density (widening {widening:.2f}x)")
     small_charts = context["chart_texels_at_transitions"] < 100
     if context["texels_per_transition_triangle"] > 16 and not small_charts:
-        notes.append(_coarse_note(context["texels_per_transition_triangle"]))
+        split = context["split_trial"]()
+        if split is not None:  # else the split would add nothing: tessellation is no fix
+            notes.append(_coarse_note(context["texels_per_transition_triangle"], split))
     if small_charts:
         notes.append(f"small charts: the charts under transitions cover {context['chart_texels_at_transitions']:.0f} "
                      "texels (median) and the gutters between charts keep their width, so texels can hardly move "
@@ -700,11 +724,13 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
     on_transitions = points.triangle[transitions]
     context = {
         "refine_report": refined.report,
+        # The split a coarse note would advise, tried only when a note is written.
+        "split_trial": functools.lru_cache(maxsize=None)(lambda: _split_trial(sample, variant, baseline)),
         "texels_per_transition_triangle": float(np.median(texels[on_transitions])) if on_transitions.size else 0.0,
         "chart_texels_at_transitions": (float(np.median(chart_texels[charts[on_transitions]]))
                                         if on_transitions.size else 0.0),
     }
-    result.update({k: v for k, v in context.items() if k != "refine_report"})
+    result.update({k: v for k, v in context.items() if k not in ("refine_report", "split_trial")})
     result["refine"] = {k: v for k, v in refined.report.items() if k != "triangle_density"}
     result["refine"]["rechart"] = first_rechart
     if uniform is not None:
@@ -725,7 +751,9 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
     if gain and options.tessellate is None and context["texels_per_transition_triangle"] >= COARSE_TRIANGLE_TEXELS \
             and light_contrast(baseline, coverage_mask(uvs, triangles, resolution)) >= COARSE_CONTRAST:
         # A gain, and a larger one within reach: the add-on's Tessellate advice, by the same rule.
-        result["notes"].append(_coarse_note(context["texels_per_transition_triangle"]))
+        split = context["split_trial"]()
+        if split is not None:
+            result["notes"].append(_coarse_note(context["texels_per_transition_triangle"], split))
     if not gain and not result["notes"]:
         result["notes"].append("no cause found among tessellation, chart size and refiner limits")
     if result["equal_error_status"] == "flat":

@@ -49,6 +49,10 @@ MAX_ROUNDS = 32
 # every triangle a sun's shadows cross down to 8 texels at 512^2. The count
 # of splits is also held to the lightmap's texel count.
 MAX_BUDGET = 1024.0
+# The largest budget a trial of the split tries to tell the budget a mesh
+# needs (the add-on's Tessellate advice, evaluate's coarse note): a split
+# that needs more is told so.
+TRIAL_BUDGET = 64.0
 _POINTS_PER_CHUNK = 1 << 20
 _PROGRESS_SPLITS = 256
 
@@ -333,6 +337,17 @@ def _edge_users(triangles):
         for p, q in ((a, b), (b, c), (c, a)):
             users.setdefault((min(p, q), max(p, q)), []).append(t)
     return {key: np.array(value) for key, value in users.items()}
+
+
+def budget_to_end(added, vertices):
+    """The budget (a fraction of `vertices`) that lets a split adding
+    `added` vertices end by itself, as a user reads it: two significant
+    digits, rounded up (+60 to 9 vertices: 6.7)."""
+    needed = added / max(vertices, 1)
+    if needed <= 0:
+        return 0.0
+    step = 10.0 ** (np.floor(np.log10(needed)) - 1)
+    return round(float(np.ceil(needed / step - 1e-9) * step), 12)  # 2.8, not 2.8000000000000003
 
 
 def transition_strength_of(lightmap, uvs, triangles, wavelet="d4"):
