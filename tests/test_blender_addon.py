@@ -1268,6 +1268,11 @@ def test_addon_says_tessellate_when_large_triangles_hold_the_light_changes(facts
                        r"\+(\d+) to its 9 vertices; at 0.25 it stops short\)", hint[0])
     assert needed, hint[0]
     assert int(needed.group(2)) == added and added / 9 <= float(needed.group(1)) <= 1.1 * added / 9
+    # On a map too large to try the split, the rough figure from the count of crossed triangles.
+    rough = fact(value, "too_large_to_try")
+    assert rough["error"] is None
+    assert any("with a Vertex Budget well above 0.25 (at 0.25 it adds at most 2 to its 9 vertices)" in w
+               for w in rough["warnings"]), rough["warnings"]
     # With Tessellate on at the default budget, the run says the budget ran out with triangles left to split.
     spent = [w for w in on["warnings"] if "Tessellate spent its Vertex Budget" in w]
     assert on["tessellation"]["vertices_added"] == 2 and on["tessellation"]["candidates_left"] > 0

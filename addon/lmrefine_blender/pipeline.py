@@ -663,19 +663,21 @@ def _coarse_warning(lmrefine, label, lightmap, group, report, outcome, budget):
         f"{raise_budget} to split them in the mesh, as one undo step")
 
 
-# The largest map (triangles, summed over its objects) whose split _coarse_warning tries, to tell the
-# Vertex Budget it needs (a plane of 20,000 or 100,000 triangles under a shadow edge at 1024^2: about a
-# second).
+# The largest map whose split _coarse_warning tries, to tell the Vertex Budget it needs: triangles summed
+# over its objects (a plane of 20,000 or 100,000 triangles under a shadow edge at 1024^2: about a second),
+# and objects (each reads the whole lightmap's gradient map first, as Tessellate's split does).
 SPLIT_TRIAL_TRIANGLES = 100_000
+SPLIT_TRIAL_OBJECTS = 16
 
 
 def _split_needs(lmrefine, lightmap, group):
     """[(object name, vertices its split adds when it runs to its own end, its vertices)] for the
     objects of `group`, from a trial of the split Tessellate makes (_tessellate's, at a budget of
     lmrefine.tessellation.TRIAL_BUDGET; nothing is written; a split that needs more counts as needing
-    that budget), or None for a map too large to try (SPLIT_TRIAL_TRIANGLES)."""
+    that budget), or None for a map too large to try (SPLIT_TRIAL_TRIANGLES, SPLIT_TRIAL_OBJECTS)."""
     from lmrefine.tessellation import TRIAL_BUDGET
-    if sum(len(target.layout.triangles) for target in group.targets) > SPLIT_TRIAL_TRIANGLES:
+    if (len(group.targets) > SPLIT_TRIAL_OBJECTS
+            or sum(len(target.layout.triangles) for target in group.targets) > SPLIT_TRIAL_TRIANGLES):
         return None
     needs = []
     for target in group.targets:

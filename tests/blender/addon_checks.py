@@ -2010,6 +2010,14 @@ def coarse_floor_suggests_tessellation():
     facts["falloff"] = {"error": error, "warnings": warnings,
                         "report": outcome and {key: outcome.reports["Floor"][key]
                                                for key in ("transition_widening", "transition_triangle_texels")}}
+    # A map too large to try the split on (the limit lowered to this floor's size): the rough figure.
+    limit = pipeline.SPLIT_TRIAL_TRIANGLES
+    pipeline.SPLIT_TRIAL_TRIANGLES = 1
+    try:
+        outcome, warnings, error = _run_pipeline([coarse_floor(tessellate=False)])
+    finally:
+        pipeline.SPLIT_TRIAL_TRIANGLES = limit
+    facts["too_large_to_try"] = {"error": error, "warnings": warnings}
     return facts
 
 
