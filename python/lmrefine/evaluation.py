@@ -452,18 +452,15 @@ def _json_safe(value):
     return value
 
 
-def _coarse_note(texels, split=None):
+def _coarse_note(texels, split):
     """What a scene whose transitions cross triangles of `texels` texels (median) can do about it;
     `split`: _split_trial's (object, vertices added, its vertices), the budget the split needs."""
-    if split is None:
-        budget = ("--tessellate BUDGET (a fraction of the vertices; meshes of few vertices need 4 to 64)")
-    else:
-        name, added, vertices = split
-        needed = budget_to_end(added, vertices)
-        budget = (f"--tessellate {TRIAL_BUDGET:g} or more ('{name}' takes +{added} to its {vertices} vertices and "
-                  "still has triangles to split)" if needed >= TRIAL_BUDGET else
-                  f"--tessellate {needed:g} (the split of '{name}' ends by itself there, at +{added} to its "
-                  f"{vertices} vertices)")
+    name, added, vertices = split
+    needed = budget_to_end(added, vertices)
+    budget = (f"--tessellate {TRIAL_BUDGET:g} or more ('{name}' takes +{added} to its {vertices} vertices and "
+              "still has triangles to split)" if needed >= TRIAL_BUDGET else
+              f"--tessellate {needed:g} (the split of '{name}' ends by itself there, at +{added} to its "
+              f"{vertices} vertices)")
     return (f"coarse tessellation: a triangle under a transition covers {texels:.0f} texels (median), and the "
             "texel density is constant inside a triangle, so texels cannot gather at an edge that crosses it "
             f"(docs/method.md §5): split them with {budget}, as the add-on's Tessellate does, or subdivide the "
