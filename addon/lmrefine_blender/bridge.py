@@ -236,24 +236,11 @@ def export_mesh(obj_eval, matrix_world, uv_name=None, name=None):
         obj_eval.to_mesh_clear()
 
 
-def has_faces(obj_eval):
-    """Whether an evaluated object has faces to bake: faces after its
-    modifiers, under a transform that does not flatten them (export_mesh's
-    None, without the export)."""
-    if abs(np.linalg.det(np.array(obj_eval.matrix_world, dtype=np.float64)[:3, :3])) < 1e-12:
-        return False
-    try:
-        mesh = obj_eval.to_mesh()
-        return mesh is not None and len(mesh.polygons) > 0
-    finally:
-        obj_eval.to_mesh_clear()
-
-
 def faceless_problem(obj, obj_eval, matrix_world=None):
-    """Why `obj` (evaluated: `obj_eval`) has no face to bake, naming the fix:
-    a mesh without faces, a zero scale, or modifiers that remove every face.
-    For an object export_mesh returned None for (`matrix_world`: the
-    instance's, default the object's)."""
+    """Why mesh object `obj` (evaluated: `obj_eval`, placed by `matrix_world`,
+    default its own) has no face to bake, naming the fix: a mesh without
+    faces, a zero scale, or modifiers that remove every face (the cases
+    export_mesh returns None for); None when it has faces to bake."""
     mesh = obj.data
     if len(mesh.vertices) == 0:
         return f"'{obj.name}' is an empty mesh (no vertices): there is nothing to lightmap"
@@ -264,6 +251,8 @@ def faceless_problem(obj, obj_eval, matrix_world=None):
     if abs(np.linalg.det(matrix[:3, :3])) < 1e-12:
         return (f"'{obj.name}' has a zero scale, so its faces have no area: give it a non-zero scale "
                 "(Object Properties > Transform)")
+    if len(obj_eval.data.polygons):  # the evaluated mesh: its modifiers applied
+        return None
     removing = [m.name for m in obj.modifiers if m.show_render]
     which = f"its modifiers ({', '.join(removing)})" if removing else "its modifiers"
     return f"'{obj.name}': {which} remove every face: disable the modifier that removes them"

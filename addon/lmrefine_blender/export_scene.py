@@ -131,8 +131,8 @@ def export(out, objects_spec, uv_map):
     # Nothing to lightmap (a mesh without faces, a zero scale, modifiers that remove every face): named, an
     # error; picked by all, selected or a collection, left out with a note (it casts no shadow either).
     depsgraph = bpy.context.evaluated_depsgraph_get()
-    faceless = {obj.name: bridge.faceless_problem(obj, obj.evaluated_get(depsgraph)) for obj in objects
-                if not bridge.has_faces(obj.evaluated_get(depsgraph))}
+    faceless = {obj.name: problem for obj in objects
+                if (problem := bridge.faceless_problem(obj, obj.evaluated_get(depsgraph))) is not None}
     if faceless and named:
         raise UserError(f"{next(iter(faceless.values()))}; or leave the object out of --objects")
     for problem in faceless.values():
