@@ -626,7 +626,7 @@ def _coarse_warning(lmrefine, label, lightmap, group, report, outcome, budget):
     and light changes that are no mere falloff (tessellation.light_contrast) cross triangles tessellate
     would split: say that tessellation is the fix (a warp moves vertices; inside a triangle the mapping
     stays affine), and the Vertex Budget its split needs to run to its own end (_split_needs)."""
-    from lmrefine.tessellation import (COARSE_CONTRAST, DEFAULT_MIN_TEXELS, TRIAL_BUDGET, budget_to_end,
+    from lmrefine.tessellation import (COARSE_CONTRAST, COARSE_MIN_TEXELS, TRIAL_BUDGET, budget_to_end,
                                        coarse_transitions, light_contrast)
     coarse = coarse_transitions(lightmap, group.uvs, group.triangles)
     # Nearly flat light (a point light's falloff, bake noise) has a top decile too: no reason to split.
@@ -656,7 +656,7 @@ def _coarse_warning(lmrefine, label, lightmap, group, report, outcome, budget):
                             f"ends by itself at +{added} to its {vertices} vertices; at {budget:g} it stops short)")
     outcome.warnings.append(
         f"{label}: light changes cross {coarse['triangles']} triangle(s) of more than "
-        f"{DEFAULT_MIN_TEXELS:g} texels, and moving UVs cannot put more texels inside a triangle "
+        f"{COARSE_MIN_TEXELS:g} texels, and moving UVs cannot put more texels inside a triangle "
         f"(edges {report['transition_widening']:.2f}x, the median triangle there "
         f"{report.get('transition_triangle_texels', 0.0):.0f} texels): turn on Tessellate (Stages and "
         "Tessellation)"
@@ -720,10 +720,15 @@ def _tessellate(lmrefine, target, lightmap, budget, journal, outcome, start, spa
         outcome.warnings.append(
             f"'{obj.name}': Tessellate spent its Vertex Budget ({budget:g} of its {report['vertices_before']} "
             f"vertices: {added} added) with {report['candidates_left']} triangle(s) still crossed by light "
-            f"changes and larger than {DEFAULT_MIN_TEXELS:g} texels: raise Vertex Budget (Stages and "
+            f"changes and larger than {_texels(DEFAULT_MIN_TEXELS)}: raise Vertex Budget (Stages and "
             "Tessellation; a mesh of few vertices needs many times its count)")
     if added:
         target.layout = bridge.read_layout(obj.data, target.source, obj.matrix_world)
+
+
+def _texels(count):
+    """'1 texel', '8 texels'."""
+    return f"{count:g} texel" + ("" if count == 1 else "s")
 
 
 def _further_stages(context, lmrefine, groups, refined_uvs, options, journal, outcome, done, span):

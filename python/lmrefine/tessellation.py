@@ -32,7 +32,13 @@ from .rechart_route import layout_room
 from .refine import transition_strength
 
 DEFAULT_BUDGET = 0.25       # at most +25% vertices
-DEFAULT_MIN_TEXELS = 8.0    # triangles at or below this many texels are left alone
+# Triangles at or below this many texels are left alone, and a transition
+# marks a triangle from this peak strength (0..1) on. Finer and softer
+# than the first choice (8, 0.5): on the tuning scenes every split to 1
+# texel from 0.25 gained more over the plain refinement (docs/refiner.md,
+# "Where the split ends").
+DEFAULT_MIN_TEXELS = 1.0
+DEFAULT_THRESHOLD = 0.25
 # A refinement is coarse (tessellation is its fix) when its light changes'
 # triangles gained less than this in texels (refine_uvs' transition_widening)...
 COARSE_WIDENING = 1.25
@@ -42,11 +48,16 @@ COARSE_TRIANGLE_TEXELS = 64.0
 # Light changes softer than this (light_contrast) are no reason to split: the
 # top decile of a nearly flat map's gradient is its noise and falloff.
 COARSE_CONTRAST = 0.05
-DEFAULT_THRESHOLD = 0.5     # peak transition strength (0..1) that marks a triangle
+# The triangles a coarse refinement's advice counts (coarse_transitions):
+# crossed by a strong transition and larger than a warp can serve. The
+# split goes on below them, to DEFAULT_MIN_TEXELS.
+COARSE_MIN_TEXELS = 8.0
+COARSE_THRESHOLD = 0.5
 MAX_ROUNDS = 32
 # A budget is a fraction of the vertex count, so a floor of one quad (4
 # vertices) needs a large one: it took ~270x (1,074 new vertices) to split
-# every triangle a sun's shadows cross down to 8 texels at 512^2. The count
+# every triangle a sun's shadows cross down to 8 texels at 512^2 (the first
+# min_texels). The count
 # of splits is also held to the lightmap's texel count.
 MAX_BUDGET = 1024.0
 # The largest budget a trial of the split tries to tell the budget a mesh
@@ -126,11 +137,12 @@ def coarse_refinement(report):
             or report.get("transition_triangle_texels", 0.0) >= COARSE_TRIANGLE_TEXELS)
 
 
-def coarse_transitions(lightmap, uvs, triangles, *, min_texels=DEFAULT_MIN_TEXELS, threshold=DEFAULT_THRESHOLD,
+def coarse_transitions(lightmap, uvs, triangles, *, min_texels=COARSE_MIN_TEXELS, threshold=COARSE_THRESHOLD,
                        wavelet="d4"):
-    """What a refinement without tessellation cannot reach: the triangles `tessellate` would split
-    first, given `lightmap` baked on (uvs, triangles). Returns {"triangles": how many, "texels": the
-    texels they cover}. A warp moves vertices; inside such a triangle the mapping stays affine."""
+    """What a refinement without tessellation cannot reach: the triangles larger than `min_texels`
+    that a transition of at least `threshold` crosses, given `lightmap` baked on (uvs, triangles);
+    `tessellate` splits them first. Returns {"triangles": how many, "texels": the texels they cover}.
+    A warp moves vertices; inside such a triangle the mapping stays affine."""
     strength = transition_strength_of(lightmap, uvs, triangles, wavelet=wavelet)
     corner_uvs = np.asarray(uvs, dtype=np.float64)[np.asarray(triangles, dtype=np.int64)]
     candidates, _, texels = _candidates(corner_uvs, strength, min_texels, threshold)
@@ -254,14 +266,18 @@ def tessellate(positions, triangles, uvs, strength, *, budget=DEFAULT_BUDGET, mi
         next_report = len(splits) + _PROGRESS_SPLITS
         rounds += 1
         order = candidates[np.argsort(-(peak[candidates] * texels[candidates]), kind="stable")]
-        edge_users = _edge_users(triangles)
+        # Each candidate's longest edge in texels: a triangle split this round is touched and
+        # left alone after, so its corners are still the ones measured here.
+        texel_uv = corner["uv"][order] * np.array([strength.shape[1], strength.shape[0]])
+        longest = np.argmax(np.linalg.norm(texel_uv - np.roll(texel_uv, -1, axis=1), axis=2), axis=1)
+        edge_users = _EdgeUsers(triangles)
         # A triangle that repeats a vertex is never split, nor is an edge it uses:
         # it lists that edge twice and has no interior to split.
         touched = ((triangles[:, 0] == triangles[:, 1]) | (triangles[:, 1] == triangles[:, 2])
                    | (triangles[:, 2] == triangles[:, 0]))
         new_rows = {name: [] for name in corner}
         new_triangles, new_parent, round_positions = [], [], []
-        for t in order:
+        for t, local in zip(order.tolist(), longest.tolist()):
             if len(splits) >= allowed:
                 break
             if len(splits) >= next_report:
@@ -269,10 +285,8 @@ def tessellate(positions, triangles, uvs, strength, *, budget=DEFAULT_BUDGET, mi
                 next_report = len(splits) + _PROGRESS_SPLITS
             if touched[t]:
                 continue
-            texel_uv = corner["uv"][t] * np.array([strength.shape[1], strength.shape[0]])
-            local = int(np.argmax(np.linalg.norm(texel_uv - np.roll(texel_uv, -1, axis=0), axis=1)))
             a, b = triangles[t, local], triangles[t, (local + 1) % 3]
-            users = edge_users.get((min(a, b), max(a, b)), [t])
+            users = edge_users(a, b)
             if touched[users].any():
                 continue
             m = next_vertex
@@ -330,13 +344,24 @@ def _position(chunks, index):
     raise IndexError(index)
 
 
-def _edge_users(triangles):
-    """{(a, b) with a < b: [triangles using that edge]}."""
-    users = {}
-    for t, (a, b, c) in enumerate(triangles.tolist()):
-        for p, q in ((a, b), (b, c), (c, a)):
-            users.setdefault((min(p, q), max(p, q)), []).append(t)
-    return {key: np.array(value) for key, value in users.items()}
+class _EdgeUsers:
+    """The triangles using each edge of `triangles`, looked up by the edge's
+    two vertices in either order: edge_users(a, b) -> (n,) int64, in
+    triangle order. One sorted array of edge keys (a dict of tuples cost
+    seconds per round on a mesh of 100,000 triangles)."""
+
+    def __init__(self, triangles):
+        first = triangles.reshape(-1)
+        second = np.roll(triangles, -1, axis=1).reshape(-1)  # edges (0, 1), (1, 2), (2, 0) of each triangle
+        self._stride = int(triangles.max(initial=0)) + 1
+        keys = np.minimum(first, second) * self._stride + np.maximum(first, second)
+        self._order = np.argsort(keys, kind="stable")
+        self._keys = keys[self._order]
+
+    def __call__(self, a, b):
+        key = min(a, b) * self._stride + max(a, b)
+        lo, hi = np.searchsorted(self._keys, [key, key + 1])
+        return self._order[lo:hi] // 3
 
 
 def budget_to_end(added, vertices):
