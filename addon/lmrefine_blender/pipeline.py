@@ -716,19 +716,19 @@ def _tessellate(lmrefine, target, lightmap, budget, journal, outcome, start, spa
     report["vertices_added"] = added
     outcome.tessellation[obj.name] = report
     if report["stopped"] == "the vertex budget is spent" and report["candidates_left"]:
-        from lmrefine.tessellation import DEFAULT_MIN_TEXELS
-        outcome.warnings.append(
-            f"'{obj.name}': Tessellate spent its Vertex Budget ({budget:g} of its {report['vertices_before']} "
-            f"vertices: {added} added) with {report['candidates_left']} triangle(s) still crossed by light "
-            f"changes and larger than {_texels(DEFAULT_MIN_TEXELS)}: raise Vertex Budget (Stages and "
-            "Tessellation; a mesh of few vertices needs many times its count)")
+        # Triangles the split would still halve down to a texel are no reason to warn; ones a warp cannot
+        # serve are (the coarse advice's rule; the split keeps the lightmap's mapping, so its map holds).
+        from lmrefine.tessellation import COARSE_MIN_TEXELS, coarse_transitions
+        coarse = coarse_transitions(lightmap, result.uvs, np.arange(len(result.uvs)).reshape(-1, 3))
+        report["coarse_left"] = coarse["triangles"]
+        if coarse["triangles"]:
+            outcome.warnings.append(
+                f"'{obj.name}': Tessellate spent its Vertex Budget ({budget:g} of its "
+                f"{report['vertices_before']} vertices: {added} added) with {coarse['triangles']} triangle(s) "
+                f"of more than {COARSE_MIN_TEXELS:g} texels still crossed by light changes: raise Vertex Budget "
+                "(Stages and Tessellation; a mesh of few vertices needs many times its count)")
     if added:
         target.layout = bridge.read_layout(obj.data, target.source, obj.matrix_world)
-
-
-def _texels(count):
-    """'1 texel', '8 texels'."""
-    return f"{count:g} texel" + ("" if count == 1 else "s")
 
 
 def _further_stages(context, lmrefine, groups, refined_uvs, options, journal, outcome, done, span):

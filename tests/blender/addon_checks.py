@@ -1987,14 +1987,15 @@ def coarse_floor_suggests_tessellation():
         return floor
 
     facts = {}
-    # strength 0: nothing to tessellate for; budget 64: enough for the split to end by itself.
+    # strength 0: nothing to tessellate for; budget 64: enough for the split to end by itself; budget 8:
+    # spent, with only triangles a warp serves left to split.
     for tessellate, strength, budget in ((False, 24.0, 0.25), (True, 24.0, 0.25), (False, 0.0, 0.25),
-                                         (True, 24.0, 64.0)):
+                                         (True, 24.0, 64.0), (True, 24.0, 8.0)):
         floor = coarse_floor(tessellate=tessellate, strength=strength, tessellate_budget=budget)
         vertices = len(floor.data.vertices)
         outcome, warnings, error = _run_pipeline([floor])
         facts[f"tessellate_{tessellate}" + ("_strength_0" if strength == 0 else "")
-              + ("_budget_64" if budget == 64.0 else "")] = {
+              + (f"_budget_{budget:g}" if budget != 0.25 else "")] = {
             "error": error, "warnings": warnings, "vertices_before": vertices,
             "tessellation": outcome and outcome.tessellation.get("Floor"),
             "widening": outcome and outcome.reports["Floor"]["transition_widening"]}
