@@ -379,12 +379,14 @@ def test_evaluate_puts_the_equal_error_figure_in_the_summary(level_dir, tmp_path
     assert again["counts"] == {"skipped": 1}
 
 
-def test_flags_the_addon_refuses_are_named_without_its_usage_lines(tmp_path):
-    # Blender's batch entry exits 2 after argparse's usage lines: the level's error is argparse's own
-    # sentence, not the last lines of the usage (a fake Blender stands in: no Blender needed).
-    from lmrefine.batch.level_task import run_level
+def _refusing_blender(tmp_path):
+    """A fake Blender whose batch entry refuses its flags as argparse does (usage lines, then the error,
+    exit 2), logging each start into tmp_path/starts, a second late on every level but a.blend; and an
+    empty batch script."""
     fake = tmp_path / "blender"
     fake.write_text("#!/bin/sh\n"
+                    f"echo started >> '{tmp_path / 'starts'}'\n"
+                    "case \"$*\" in *a.blend*) ;; *) sleep 1 ;; esac\n"  # level a refuses first
                     "echo 'usage: blender -b scene.blend --python batch.py -- [-h] --objects OBJECTS --out OUT'\n"
                     "echo '        [--preview | --no-preview] [--report REPORT]'\n"
                     "echo 'blender -b scene.blend --python batch.py --: error: the following arguments are "
@@ -393,9 +395,40 @@ def test_flags_the_addon_refuses_are_named_without_its_usage_lines(tmp_path):
     fake.chmod(0o755)
     script = tmp_path / "batch.py"
     script.write_text("")
+    return str(fake), str(script)
+
+
+def test_flags_the_addon_refuses_are_named_without_its_usage_lines(tmp_path):
+    # The level's error is argparse's own sentence, not the last lines of the usage (no Blender needed).
+    from lmrefine.batch.level_task import run_level
+    fake, script = _refusing_blender(tmp_path)
     level = tmp_path / "level.blend"
     level.write_bytes(b"BLENDER")
-    result = run_level("level", str(level), str(tmp_path / "out"), [], blender=str(fake), batch_script=str(script))
-    assert result["ok"] is False and result["retry"] is False
+    result = run_level("level", str(level), str(tmp_path / "out"), [], blender=fake, batch_script=script)
+    assert result["ok"] is False and result["retry"] is False and result["flags_refused"] is True
     assert result["error"] == ("the add-on's batch entry refused the flags: the following arguments are required: "
                                "--objects")
+
+
+def test_refused_flags_stop_the_batch_instead_of_failing_every_level(tmp_path):
+    # The flags are every level's: after the first refusal the levels left are not started (each would
+    # start Blender to fail the same way), and the summary says why (Dask, a fake Blender).
+    fake, script = _refusing_blender(tmp_path)
+    levels = tmp_path / "levels"
+    levels.mkdir()
+    for name in "abcdef":
+        (levels / f"{name}.blend").write_bytes(b"BLENDER")
+    stream = io.StringIO()
+    summary = run_batch([str(levels)], str(tmp_path / "out"),
+                        BatchOptions(flags=[], workers=1, blender=fake, batch_script=script), stream=stream)
+    starts = len((tmp_path / "starts").read_text().splitlines())
+    statuses = [row["status"] for row in summary["levels"]]
+    # Level a refuses first; the worker's two threads may have started one or two more by then.
+    assert summary["ok"] is False and statuses == ["failed"] + ["not run"] * 5 and starts <= 4, (statuses, starts)
+    refused = summary["levels"][0]
+    for row in summary["levels"]:
+        if row["status"] == "not run":
+            assert row["error"] == (f"the add-on's batch entry refused the flags: the following arguments are "
+                                    f"required: --objects (on level '{refused['level']}'; fix the flags and run "
+                                    "again)")
+    assert f"stopped: the flags were refused on '{refused['level']}'" in stream.getvalue()

@@ -124,7 +124,9 @@ def run_level(name, level_path, out_dir, flags, threads=None, blender=None, batc
         # batch.py ran and refused the level (its message): the same again would fail the same way.
         result.update(ok=False, retry=False, error=report.get("error", f"exit code {returncode}"))
     elif returncode == 2:
-        result.update(ok=False, retry=False, error=f"the add-on's batch entry refused the flags: {_refusal(log_path)}")
+        # The flags are every level's: the runner stops the batch (runner._stop_after_refusal).
+        result.update(ok=False, retry=False, flags_refused=True,
+                      error=f"the add-on's batch entry refused the flags: {_refusal(log_path)}")
     else:
         how = f"killed by signal {-returncode}" if returncode < 0 else f"exit code {returncode}"
         result.update(ok=False, retry=True, error=f"Blender failed ({how}) without a report: {_tail(log_path)}")

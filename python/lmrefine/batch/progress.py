@@ -42,7 +42,7 @@ class BatchProgress:
         """A level committed or given up: a permanent line above the bars."""
         with self.lock:
             self.running.pop(name, None)
-            if status in ("done", "failed"):
+            if status in ("done", "failed", "not run"):
                 self.finished += 1
             self._clear()
             extra = f" ({detail})" if detail else ""

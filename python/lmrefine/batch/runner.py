@@ -175,10 +175,14 @@ def _run_levels(levels, out_dir, flags, options, manifest, progress):
                     done = ()
                 ticker.tick()
                 for future in done:
+                    if future not in pending:  # cancelled by a refusal below
+                        continue
                     name = pending.pop(future)
-                    again = _finish(future, name, out_dir, options, manifest, progress)
+                    again, refused = _finish(future, name, out_dir, options, manifest, progress)
                     if again:
                         pending[submit(by_name[name], exclude=again)] = name
+                    if refused:
+                        _stop_after_refusal(pending, name, out_dir, manifest, progress)
                     manifest.save()
         except KeyboardInterrupt:
             for future in pending:
@@ -194,9 +198,27 @@ def _run_levels(levels, out_dir, flags, options, manifest, progress):
         cluster.close()
 
 
+def _stop_after_refusal(pending, refused, out_dir, manifest, progress):
+    """The add-on's batch entry refused the flags on level `refused`: they are
+    every level's, so the levels still `pending` (future -> name) would fail
+    the same way. Cancel them and record why they did not run; `pending` is
+    emptied."""
+    error = manifest.record(refused)["error"]
+    for future, name in pending.items():
+        future.cancel()  # a level already running finishes into its attempt folder, cleared by the next run
+        manifest.update(name, status="not run", attempts=_attempts_started(out_dir, name), seconds=None,
+                        error=f"{error} (on level '{refused}'; fix the flags and run again)",
+                        log=None, outputs=None)
+        progress.level_done(name, "not run", 0.0, "the flags were refused")
+    if pending:
+        progress.message(f"stopped: the flags were refused on '{refused}', so the {len(pending)} level(s) left "
+                         "were not run")
+    pending.clear()
+
+
 def _finish(future, name, out_dir, options, manifest, progress):
-    """Handle one finished task; returns the worker to avoid when the level
-    should run again, else None."""
+    """Handle one finished task; returns (the worker to avoid when the level
+    should run again, else None; whether the add-on refused the flags)."""
     attempts = _attempts_started(out_dir, name)
     try:
         result = future.result()
@@ -213,13 +235,13 @@ def _finish(future, name, out_dir, options, manifest, progress):
                         evaluation_error=result.get("evaluation_error"))
         progress.level_done(name, "done", result["seconds"],
                             f"attempt {attempts}" if attempts > 1 else "")
-        return None
+        return None, False
     if result["retry"] and attempts < 1 + options.retries:
         progress.message(f"{name}: attempt {attempts} failed ({result['error']}); retrying")
-        return result.get("worker") or "-"
+        return result.get("worker") or "-", False
     log = _gather_logs(out_dir, name)
     shutil.rmtree(work_dir(out_dir, name), ignore_errors=True)
     manifest.update(name, status="failed", attempts=attempts, seconds=result["seconds"], error=result["error"],
                     log=log, outputs=None)
     progress.level_done(name, "failed", result["seconds"] or 0.0, result["error"])
-    return None
+    return None, bool(result.get("flags_refused"))

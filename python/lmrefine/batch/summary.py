@@ -57,8 +57,8 @@ def summary_table(rows):
     lines = ["  ".join(text.ljust(width) for text, width in zip(line, widths)).rstrip() for line in table]
     lines.insert(1, "  ".join("-" * width for width in widths))
     for row in rows:
-        if row["status"] == "failed":
-            lines.append(f"{row['level']}: {row['error']} (log: {row['log']})")
+        if row["status"] in ("failed", "not run"):
+            lines.append(f"{row['level']}: {row['error']}" + (f" (log: {row['log']})" if row["log"] else ""))
         elif row.get("evaluation_error"):
             lines.append(f"{row['level']}: not measured: {row['evaluation_error']}")
         if row.get("skipped_objects"):
