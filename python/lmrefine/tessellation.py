@@ -56,9 +56,9 @@ COARSE_THRESHOLD = 0.5
 MAX_ROUNDS = 32
 # A budget is a fraction of the vertex count, so a floor of one quad (4
 # vertices) needs a large one: it took ~270x (1,074 new vertices) to split
-# every triangle a sun's shadows cross down to 8 texels at 512^2 (the first
-# min_texels). The count
-# of splits is also held to the lightmap's texel count.
+# every triangle a sun's shadows cross down to 8 texels (the first
+# min_texels) at 512^2. The count of splits is also held to the lightmap's
+# texel count.
 MAX_BUDGET = 1024.0
 # The largest budget a trial of the split tries to tell the budget a mesh
 # needs (the add-on's Tessellate advice, evaluate's coarse note): a split
