@@ -209,6 +209,33 @@ def test_equal_error_search_finds_a_known_crossing():
         metrics.equal_error_resolution([2, 1], [1, 2], 1.5)
 
 
+def test_equal_error_interval_is_wide_where_the_baseline_stops_falling():
+    from lmrefine.evaluation import _ill_determined_note
+    multipliers = [1, 1.5, 2, 3, 4]
+    # The room at 32 samples (its plain bakes' errors, seed 0): flat from 2R to 3R. Its refined map's
+    # error sits just below that stretch, so the ratio reads 3.0 while 2% more error reads 1.9.
+    room = [0.017644, 0.014647, 0.013159, 0.0131594, 0.011499]
+    assert metrics.equal_error_resolution(multipliers, room, 0.013156)[0] == pytest.approx(3.0, abs=0.01)
+    low, high = metrics.equal_error_interval(multipliers, room, 0.013156)
+    assert 1.8 < low < 2.0 and 3.0 < high < 3.2
+    # Error falling as a power of resolution (texels resolving the light): a narrow interval.
+    steep = [m ** -0.6 for m in multipliers]
+    low, high = metrics.equal_error_interval(multipliers, steep, 2.5 ** -0.6)
+    assert low < 2.5 < high < 1.1 * low
+    # The note: only for the wide one, naming the flattest stretch and the samples.
+    sweep = lambda errors: [{"resolution": int(256 * m), "rmse": e} for m, e in zip(multipliers, errors)]
+    result = {"equal_error_interval": list(metrics.equal_error_interval(multipliers, room, 0.013156)),
+              "resolution_sweep": sweep(room), "rmse_refined": 0.013156, "bake_samples": 32}
+    note = _ill_determined_note(result)
+    assert note.startswith("ill-determined ratio: the refined map's error 0.01316 +-2% matches the uniform baseline "
+                           "anywhere from 1.9") and "(0.01316 at 512, 0.01316 at 768)" in note
+    assert "more --samples (now 32)" in note
+    narrow = {**result, "equal_error_interval": [2.4, 2.6], "resolution_sweep": sweep(steep)}
+    assert _ill_determined_note(narrow) is None
+    # Flat over the whole range: no interval (equal_error_resolution says "flat").
+    assert np.isnan(metrics.equal_error_interval(multipliers, [0.22, 0.22, 0.215, 0.21, 0.205], 0.2)).all()
+
+
 def test_truth_noise_is_the_noise_of_the_mean_of_two_estimates(rng):
     truth = rng.random((200000, 3))
     first = truth + rng.normal(0, 0.1, truth.shape)

@@ -277,6 +277,24 @@ def _plain_refinement(unsplit, variant, baseline, to_unsplit, points, truth, tra
     return out
 
 
+def _ill_determined_note(result):
+    """A note when the equal-error ratio is ill-determined: within
+    metrics.INTERVAL_TOLERANCE of the refined map's error, the uniform
+    baseline's curve gives ratios more than ILL_DETERMINED_SPREAD apart
+    (its error hardly falls there: bake noise, most often); else None."""
+    low, high = result["equal_error_interval"]
+    if not (np.isfinite(low) and np.isfinite(high)) or high < metrics.ILL_DETERMINED_SPREAD * low:
+        return None
+    sweep = result["resolution_sweep"]
+    flattest = min(range(1, len(sweep)), key=lambda k: (sweep[k - 1]["rmse"] - sweep[k]["rmse"]) / sweep[k - 1]["rmse"])
+    a, b = sweep[flattest - 1], sweep[flattest]
+    return (f"ill-determined ratio: the refined map's error {result['rmse_refined']:.4g} +-"
+            f"{metrics.INTERVAL_TOLERANCE:.0%} matches the uniform baseline anywhere from {low:.2f}x to {high:.2f}x, "
+            f"as the baseline's error hardly falls there ({a['rmse']:.4g} at {a['resolution']}, {b['rmse']:.4g} at "
+            f"{b['resolution']}); bake with more --samples (now {result['bake_samples']}) to resolve it, and compare "
+            "runs by their errors rather than this ratio")
+
+
 # The stop rule of further stages is shared with the add-on (lmrefine.metrics).
 STAGE_MIN_CHANGE = metrics.STAGE_MIN_CHANGE
 
@@ -660,6 +678,7 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
         sweep_t = [metrics.error_stats(s["lookup"], truth, where & transitions)["rmse"] for s in sweep]
         ratio, status = metrics.equal_error_resolution(options.multipliers, sweep_rmse, ref["rmse"])
         ratio_t, status_t = metrics.equal_error_resolution(options.multipliers, sweep_t, ref_t["rmse"])
+        interval = metrics.equal_error_interval(options.multipliers, sweep_rmse, ref["rmse"])
         return {
             "points": int(where.sum()),
             "transition_points": int((where & transitions).sum()),
@@ -670,6 +689,7 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
             "transition_widening": metrics.transition_widening(density_base, density_refined, points.triangle,
                                                                where & transitions),
             "equal_error_resolution_ratio": ratio, "equal_error_status": status,
+            "equal_error_interval": list(interval),
             "transition_equal_error_resolution_ratio": ratio_t, "transition_equal_error_status": status_t,
             "resolution_sweep": [{"resolution": s["resolution"], "multiplier": s["multiplier"], "rmse": e,
                                   "transition_rmse": et} for s, e, et in zip(sweep, sweep_rmse, sweep_t)],
@@ -760,6 +780,9 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
             f"{resolution}, {sweep_rmse[-1]:.4g} at {result['resolution_sweep'][-1]['resolution']}), so there is no "
             f"equal-error resolution; bake with more --samples or --denoise (ground-truth noise: {truth_noise:.3g}, "
             "raise --truth-samples if that is close to the errors)")
+    note = _ill_determined_note(result)
+    if note:
+        result["notes"].append(note)
     if result["rmse_refined"] > result["rmse_baseline"]:
         result["notes"].append("the error over all points grew: the texels taken from flat areas cost more there "
                                "than the transitions gained")

@@ -336,6 +336,27 @@ def transition_widening(density_baseline, density_refined, point_triangle, trans
     return float(selected.mean()) if selected.size else float("nan")
 
 
+# equal_error_interval: the refined map's error +-this fraction, and the
+# spread of ratios over which the interval calls its ratio ill-determined.
+INTERVAL_TOLERANCE = 0.02
+ILL_DETERMINED_SPREAD = 1.25
+
+
+def equal_error_interval(multipliers, errors, target, tolerance=INTERVAL_TOLERANCE):
+    """The equal-error resolutions (equal_error_resolution) of the errors
+    `target` x (1 + tolerance) and `target` x (1 - tolerance): (low, high).
+    Where the baseline's error hardly falls between two multipliers (a bake
+    noise floor, a light the extra texels do not resolve), a 2% change of
+    the refined map's error moves its ratio across that whole stretch; a
+    wide interval says the ratio is ill-determined there. NaNs when the
+    ratio is undefined or the curve flat."""
+    low, low_status = equal_error_resolution(multipliers, errors, target * (1.0 + tolerance))
+    high, high_status = equal_error_resolution(multipliers, errors, target * (1.0 - tolerance))
+    if "flat" in (low_status, high_status) or "undefined" in (low_status, high_status):
+        return float("nan"), float("nan")
+    return low, high
+
+
 def equal_error_resolution(multipliers, errors, target, min_drop=0.1):
     """Where does the uniform baseline's error, measured at resolutions
     R x `multipliers` (ascending, the first one 1), reach `target` (the
