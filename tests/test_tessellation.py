@@ -74,27 +74,6 @@ def test_splits_only_triangles_the_transition_crosses():
     assert report["stopped"] == "every triangle a transition crosses is at most min_texels"
 
 
-def test_coarse_triangles_are_split_first():
-    # A hard edge at u = 0.4 and a soft light change at u = 0.8 (strength 0.3: only the finer rule
-    # splits for it). A budget that runs out goes to the coarse triangles (more than 8 texels at
-    # strength 0.5) first, exactly as a split with only that rule would; then the rest, to 1 texel.
-    positions, triangles, uvs = bent_grid()
-    strength = edge_strength(0.4)
-    strength[:, 51:53] = 0.3
-    coarse_only = tessellate(positions, triangles, uvs, strength, budget=1024.0, min_texels=8, threshold=0.5)
-    added = coarse_only.report["vertices_added"]
-    assert added > 0 and coarse_only.report["stopped"] == "every triangle a transition crosses is at most min_texels"
-    first = tessellate(positions, triangles, uvs, strength, budget=added / len(positions))
-    np.testing.assert_array_equal(first.triangles, coarse_only.triangles)
-    np.testing.assert_array_equal(first.uvs, coarse_only.uvs)
-    full = tessellate(positions, triangles, uvs, strength, budget=1024.0)
-    assert full.report["vertices_added"] > added and full.report["min_texels"] == 1.0
-    out_uv = full.uvs.reshape(-1, 3, 2)
-    soft = (out_uv[..., 0].min(axis=1) < 53 / R) & (out_uv[..., 0].max(axis=1) > 51 / R)
-    texels = 0.5 * np.abs(np.cross(out_uv[:, 1] - out_uv[:, 0], out_uv[:, 2] - out_uv[:, 0])) * R * R
-    assert texels[soft].max() <= 1 + 1e-9  # the soft change's triangles split down to 1 texel
-
-
 @pytest.mark.parametrize("seam", [False, True])
 def test_surface_and_every_uv_map_keep_their_mapping(seam):
     positions, triangles, uvs = bent_grid(seam=seam)

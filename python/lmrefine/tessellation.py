@@ -36,8 +36,7 @@ DEFAULT_BUDGET = 0.25       # at most +25% vertices
 # marks a triangle from this peak strength (0..1) on. Finer and softer
 # than the first choice (8, 0.5): on the tuning scenes every split to 1
 # texel from 0.25 gained more over the plain refinement (docs/refiner.md,
-# "Where the split ends"). The coarse triangles (COARSE_MIN_TEXELS,
-# COARSE_THRESHOLD) are split first.
+# "Where the split ends").
 DEFAULT_MIN_TEXELS = 1.0
 DEFAULT_THRESHOLD = 0.25
 # A refinement is coarse (tessellation is its fix) when its light changes'
@@ -266,12 +265,6 @@ def tessellate(positions, triangles, uvs, strength, *, budget=DEFAULT_BUDGET, mi
         report_progress()
         next_report = len(splits) + _PROGRESS_SPLITS
         rounds += 1
-        # Coarse ones first, round after round, while any is left: a budget that runs out should have
-        # gone to the triangles a warp cannot serve, not to halving small ones under soft light.
-        coarse = ((texels[candidates] > max(min_texels, COARSE_MIN_TEXELS))
-                  & (peak[candidates] >= max(threshold, COARSE_THRESHOLD)))
-        if coarse.any():
-            candidates = candidates[coarse]
         order = candidates[np.argsort(-(peak[candidates] * texels[candidates]), kind="stable")]
         # Each candidate's longest edge in texels: a triangle split this round is touched and
         # left alone after, so its corners are still the ones measured here.
