@@ -223,13 +223,20 @@ def test_equal_error_interval_is_wide_where_the_baseline_stops_falling():
     low, high = metrics.equal_error_interval(multipliers, steep, 2.5 ** -0.6)
     assert low < 2.5 < high < 1.1 * low
     # The note: only for the wide one, naming the flattest stretch and the samples.
-    sweep = lambda errors: [{"resolution": int(256 * m), "rmse": e} for m, e in zip(multipliers, errors)]
+    sweep = lambda errors: [{"resolution": int(256 * m), "multiplier": m, "rmse": e}
+                            for m, e in zip(multipliers, errors)]
     result = {"equal_error_interval": list(metrics.equal_error_interval(multipliers, room, 0.013156)),
               "resolution_sweep": sweep(room), "rmse_refined": 0.013156, "bake_samples": 32}
     note = _ill_determined_note(result)
     assert note.startswith("ill-determined ratio: the refined map's error 0.01316 +-2% matches the uniform baseline "
                            "anywhere from 1.9") and "(0.01316 at 512, 0.01316 at 768)" in note
     assert "more --samples (now 32)" in note
+    # The stretch named is the flattest one the interval spans, not a flatter one elsewhere.
+    elsewhere = [0.0150, 0.0152] + room[2:]  # rising from R to 1.5R, outside the interval 1.9-3.1x
+    low, high = metrics.equal_error_interval(multipliers, elsewhere, 0.013156)
+    assert 1.5 < low < 2.0 and 3.0 < high < 3.2
+    note = _ill_determined_note({**result, "equal_error_interval": [low, high], "resolution_sweep": sweep(elsewhere)})
+    assert "(0.01316 at 512, 0.01316 at 768)" in note
     narrow = {**result, "equal_error_interval": [2.4, 2.6], "resolution_sweep": sweep(steep)}
     assert _ill_determined_note(narrow) is None
     # Flat over the whole range: no interval (equal_error_resolution says "flat").

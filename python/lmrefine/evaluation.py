@@ -286,7 +286,10 @@ def _ill_determined_note(result):
     if not (np.isfinite(low) and np.isfinite(high)) or high < metrics.ILL_DETERMINED_SPREAD * low:
         return None
     sweep = result["resolution_sweep"]
-    flattest = min(range(1, len(sweep)), key=lambda k: (sweep[k - 1]["rmse"] - sweep[k]["rmse"]) / sweep[k - 1]["rmse"])
+    # The stretch to name: the flattest of those the interval spans.
+    spanned = [k for k in range(1, len(sweep)) if sweep[k - 1]["multiplier"] < high and sweep[k]["multiplier"] > low]
+    flattest = min(spanned or range(1, len(sweep)),
+                   key=lambda k: (sweep[k - 1]["rmse"] - sweep[k]["rmse"]) / sweep[k - 1]["rmse"])
     a, b = sweep[flattest - 1], sweep[flattest]
     return (f"ill-determined ratio: the refined map's error {result['rmse_refined']:.4g} +-"
             f"{metrics.INTERVAL_TOLERANCE:.0%} matches the uniform baseline anywhere from {low:.2f}x to {high:.2f}x, "
