@@ -684,7 +684,8 @@ def _split_needs(lmrefine, lightmap, group):
         positions, triangles, corner_uvs = tessellation.mesh_arrays(target.obj.data, target.layout)
         strength = lmrefine.transition_strength_of(lightmap, target.layout.uvs, target.layout.triangles)
         trial = lmrefine.tessellate(positions, triangles, corner_uvs, strength, budget=TRIAL_BUDGET)
-        needs.append((target.obj.name, int(trial.report["vertices_added"]), len(positions)))
+        needs.append((target.obj.name, int(trial.report["vertices_after"] - trial.report["vertices_before"]),
+                      len(positions)))
     return needs
 
 
@@ -714,15 +715,18 @@ def _tessellate(lmrefine, target, lightmap, budget, journal, outcome, start, spa
     report = _plain(result.report)
     report["vertices_added"] = added
     outcome.tessellation[obj.name] = report
-    # Triangles the split would still halve down to a texel are no reason to warn; ones a warp cannot
-    # serve (coarse_left: the coarse advice's rule) are.
-    if report["stopped"] == "the vertex budget is spent" and report["coarse_left"]:
-        from lmrefine.tessellation import COARSE_MIN_TEXELS
-        outcome.warnings.append(
-            f"'{obj.name}': Tessellate spent its Vertex Budget ({budget:g} of its "
-            f"{report['vertices_before']} vertices: {added} added) with {report['coarse_left']} triangle(s) "
-            f"of more than {COARSE_MIN_TEXELS:g} texels still crossed by light changes: raise Vertex Budget "
-            "(Stages and Tessellation; a mesh of few vertices needs many times its count)")
+    if report["stopped"] == "the vertex budget is spent" and report["candidates_left"]:
+        # Triangles the split would still halve down to a texel are no reason to warn; ones a warp cannot
+        # serve are (the coarse advice's rule; the split keeps the lightmap's mapping, so its map holds).
+        from lmrefine.tessellation import COARSE_MIN_TEXELS, coarse_transitions
+        coarse = coarse_transitions(lightmap, result.uvs, np.arange(len(result.uvs)).reshape(-1, 3))
+        report["coarse_left"] = coarse["triangles"]
+        if coarse["triangles"]:
+            outcome.warnings.append(
+                f"'{obj.name}': Tessellate spent its Vertex Budget ({budget:g} of its "
+                f"{report['vertices_before']} vertices: {added} added) with {coarse['triangles']} triangle(s) "
+                f"of more than {COARSE_MIN_TEXELS:g} texels still crossed by light changes: raise Vertex Budget "
+                "(Stages and Tessellation; a mesh of few vertices needs many times its count)")
     if added:
         target.layout = bridge.read_layout(obj.data, target.source, obj.matrix_world)
 

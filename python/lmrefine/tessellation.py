@@ -235,9 +235,7 @@ def tessellate(positions, triangles, uvs, strength, *, budget=DEFAULT_BUDGET, mi
     (lmrefine.CancelledError, nothing returned).
 
     Returns a TessellationResult; its report holds vertices before/after,
-    triangles before/after, splits, rounds, candidates left, the coarse ones
-    among the output's triangles (`coarse_left`: coarse_transitions' rule,
-    the triangles a warp cannot serve) and why it stopped.
+    triangles before/after, splits, rounds, candidates left and why it stopped.
     """
     positions, triangles, uvs, strength, attributes = _check_inputs(
         positions, triangles, uvs, strength, budget, min_texels, threshold, corner_attributes)
@@ -322,14 +320,12 @@ def tessellate(positions, triangles, uvs, strength, *, budget=DEFAULT_BUDGET, mi
         stopped = f"{MAX_ROUNDS} rounds"
     if rounds and stopped.startswith("no triangle"):
         stopped = "every triangle a transition crosses is at most min_texels"
-    coarse_left = int(_candidates(corner["uv"], strength, COARSE_MIN_TEXELS, COARSE_THRESHOLD)[0].size)
     positions_out = np.concatenate(new_positions)
     report = {
         "vertices_before": int(vertex_count), "vertices_after": int(len(positions_out)),
         "vertices_added": int(len(positions_out) - vertex_count), "vertex_budget": allowed,
         "triangles_before": int(len(uvs) // 3),
         "triangles_after": int(len(triangles)), "rounds": rounds, "candidates_left": candidates_left,
-        "coarse_left": coarse_left,
         "stopped": stopped, "min_texels": float(min_texels), "threshold": float(threshold),
     }
     return TessellationResult(
