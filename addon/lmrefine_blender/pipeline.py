@@ -684,8 +684,7 @@ def _split_needs(lmrefine, lightmap, group):
         positions, triangles, corner_uvs = tessellation.mesh_arrays(target.obj.data, target.layout)
         strength = lmrefine.transition_strength_of(lightmap, target.layout.uvs, target.layout.triangles)
         trial = lmrefine.tessellate(positions, triangles, corner_uvs, strength, budget=TRIAL_BUDGET)
-        needs.append((target.obj.name, int(trial.report["vertices_after"] - trial.report["vertices_before"]),
-                      len(positions)))
+        needs.append((target.obj.name, int(trial.report["vertices_added"]), len(positions)))
     return needs
 
 
