@@ -339,3 +339,35 @@ def test_random_atlases_keep_the_rules_whichever_candidate_is_kept(seed):
             "predicted_error_unstretched"]][0]
         assert stretch["largest_stretch"] == kept["largest_stretch"] == pytest.approx(stretch["chart_stretch"].max())
         assert kept["largest_stretch"] in (pytest.approx(first), pytest.approx(np.sqrt(first)))
+
+
+def test_texel_floor_keeps_two_by_two_texels_and_never_shrinks_a_smaller_chart():
+    texels = np.array([1600.0, 256.0, 6.25, 2.25, 0.0])
+    scales = np.array([2.0, 1.0, 0.5, 0.5, 0.5])  # the model's: the flat charts at the lower bound
+    for atlas in (1000.0, 4096.0):  # the charts cover more than FLOOR_PACKING of it, or less
+        floored = allocation.texel_floor(scales, texels, atlas)
+        covered = max(texels.sum(), allocation.FLOOR_PACKING * atlas)
+        level = np.sqrt(covered / (texels * floored ** 2).sum())  # the level the floor assumes
+        kept = texels * (floored * level) ** 2
+        assert kept[2] == pytest.approx(allocation.MIN_CHART_TEXELS) and kept[3] == pytest.approx(2.25)
+        np.testing.assert_array_equal(floored[[0, 1, 4]], scales[[0, 1, 4]])  # large enough, or of no area
+    # Nothing to raise: the scales come back as they are.
+    np.testing.assert_array_equal(allocation.texel_floor(scales[:2], texels[:2], 4096.0), scales[:2])
+
+
+def test_a_repack_leaves_a_small_flat_chart_its_bilinear_texels():
+    # A 40 x 40-texel chart with a hard shadow edge, and two flat charts of 2.2 x 2.2 texels: the model
+    # halves the flat charts' scale, which would leave them under 2 x 2 texels.
+    edge = grid_chart(8, (2 / 64, 2 / 64), (42 / 64, 42 / 64))
+    small = [grid_chart(1, (x / 64, 50 / 64), ((x + 2.2) / 64, 52.2 / 64)) for x in (50, 56)]
+    uvs, tris = merge(edge, *small)
+    v, u = np.mgrid[0:64, 0:64] + 0.5
+    lightmap = np.repeat(np.where(u + 0.4 * v > 30, 0.9, 0.1)[..., None], 3, axis=2).astype(np.float32)
+    lightmap[45:, 45:] = 0.5
+    result = lmrefine.refine_uvs(lightmap, uvs, tris, 64)
+    assert result.report["repack"]["used"]
+    texels = np.abs(allocation.signed_areas(result.uvs, tris)) * 64 * 64
+    charts = lmrefine.find_charts(result.uvs, tris)
+    per_chart = np.bincount(charts, weights=texels)
+    assert per_chart[charts[-1]] >= 0.9 * allocation.MIN_CHART_TEXELS, per_chart
+    assert per_chart[charts[0]] > 1700  # the edge's chart grew

@@ -114,68 +114,45 @@ def test_join_and_split_round_trip_with_offset_triangles():
     np.testing.assert_array_equal(parts["A"], targets[0].layout.uvs + 1.0)
 
 
-def merge_reference(maps, masks, margin):
-    """Plain reference: a covered texel from the first object covering it; a gutter texel from the
-    object of the nearest covered texel by chessboard distance (at most `margin`), ties to the lower
-    the lowest object index among those at the least distance."""
-    height, width = masks[0].shape
-    merged = np.zeros_like(maps[0])
-    for y in range(height):
-        for x in range(width):
-            best = None
-            for index, mask in enumerate(masks):
-                ys, xs = np.nonzero(mask)
-                if len(ys) == 0:
-                    continue
-                distance = int(np.max(np.stack([np.abs(ys - y), np.abs(xs - x)]), axis=0).min())
-                if distance <= margin and (best is None or distance < best[0]):
-                    best = (distance, index)
-            if best is not None:
-                merged[y, x] = maps[best[1]][y, x]
-    return merged
-
-
-def test_merge_takes_each_texel_from_the_object_that_covers_it_or_is_nearest():
+def test_merge_takes_each_covered_texel_from_its_object_and_fills_the_gutter_from_the_joined_charts():
     rng = np.random.default_rng(3)
     resolution = 24
     layouts = [square(0.1, 0.1, 0.45, 0.9), square(0.6, 0.1, 0.9, 0.4), square(0.6, 0.6, 0.9, 0.9)]
-    masks = [lmrefine.coverage_mask(uvs, triangles, resolution) for uvs, triangles in layouts]
+    uvs, triangles, _, rows = atlas.join_layouts(layouts)
+    masks = [lmrefine.coverage_mask(uvs, triangles[r], resolution) for r in rows]
     maps = [rng.random((resolution, resolution, 4), dtype=np.float32) for _ in layouts]
-    merged = atlas.merge_maps(maps, masks, margin=1)
-    np.testing.assert_array_equal(merged, merge_reference(maps, masks, margin=1))
-    np.testing.assert_array_equal(atlas.merge_maps(maps, masks, margin=16), merge_reference(maps, masks, margin=16))
-    for image, mask in zip(maps, masks):
-        np.testing.assert_array_equal(merged[mask], image[mask])
-    assert not merged[0, 0].any() and not merged[-1, -1].any()  # two texels from the nearest chart, beyond the margin
-
-
-def test_merge_leaves_its_inputs_alone_and_a_single_map_as_it_is():
-    maps = [np.ones((8, 8, 4), np.float32), np.full((8, 8, 4), 2.0, np.float32)]
-    masks = [np.zeros((8, 8), bool), np.zeros((8, 8), bool)]
-    masks[0][:, :4], masks[1][:, 4:] = True, True
     copies = [image.copy() for image in maps]
-    merged = atlas.merge_maps(maps, masks, margin=4)
-    assert (merged[:, :4] == 1.0).all() and (merged[:, 4:] == 2.0).all()
+    for margin in (1, 16):
+        merged = atlas.merge_maps(maps, masks, uvs, triangles, margin)
+        covered = np.zeros_like(masks[0])
+        composed = np.zeros_like(maps[0])
+        for image, mask in zip(maps, masks):
+            composed[mask & ~covered] = image[mask & ~covered]
+            covered |= mask
+        np.testing.assert_array_equal(merged, lmrefine.dilate(composed, uvs, triangles, margin))
+        for image, mask in zip(maps, masks):
+            np.testing.assert_array_equal(merged[mask], image[mask])
+        if margin == 1:
+            assert not merged[0, 0].any() and not merged[-1, -1].any()  # two rings out
     for image, copy in zip(maps, copies):
-        np.testing.assert_array_equal(image, copy)
-    assert atlas.merge_maps(maps[:1], masks[:1], margin=4) is maps[0]
+        np.testing.assert_array_equal(image, copy)  # the inputs are not modified
 
 
 @pytest.mark.parametrize("resolution", [16, 64])
-def test_merged_per_object_bakes_equal_the_bakers_own_atlas_bake_on_covered_texels(resolution):
-    """The Embree baker's atlas=True bakes every receiver into one map; merging its per-object maps by
-    coverage gives the same light where a chart covers a texel."""
+def test_merged_per_object_bakes_equal_the_bakers_own_atlas_bake(resolution):
+    """The Embree baker's atlas=True bakes every receiver into one map; merging its per-object maps
+    gives the same light on the charts and the same gutter, also where the two objects' charts are
+    two texels apart (a gutter texel between them from the chart nearest it)."""
     scene = lmrefine.Scene()
-    for index, (u0, u1) in enumerate(((0.05, 0.45), (0.55, 0.95))):
-        uvs, triangles = square(u0, 0.05, u1, 0.95)
+    squares = [square(0.05, 0.05, 0.47, 0.95), square(0.47 + 2.05 / resolution, 0.05, 0.95, 0.95)]
+    for index, (uvs, triangles) in enumerate(squares):
         x = float(index) * 1.2
         positions = np.array([(x, 0, 0), (x + 1, 0, 0), (x + 1, 1, 0), (x, 1, 0)], np.float32)
         scene.add_mesh(positions, triangles, uvs=uvs[triangles.ravel()], receiver=True)
     scene.add_light("sun", energy=2.0, matrix=np.eye(4).tolist())
     own = lmrefine.bake(scene, resolution, samples=4, seed=1)
     shared = lmrefine.bake(scene, resolution, samples=4, seed=1, atlas=True)["atlas"]
-    masks = [lmrefine.coverage_mask(*square(0.05, 0.05, 0.45, 0.95), resolution),
-             lmrefine.coverage_mask(*square(0.55, 0.05, 0.95, 0.95), resolution)]
-    merged = atlas.merge_maps([own[0], own[1]], masks, margin=16)
-    covered = masks[0] | masks[1]
-    np.testing.assert_allclose(merged[covered][:, :3], shared[covered][:, :3], rtol=1e-5, atol=1e-6)
+    uvs, triangles, _, rows = atlas.join_layouts(squares)
+    masks = [lmrefine.coverage_mask(uvs, triangles[r], resolution) for r in rows]
+    merged = atlas.merge_maps([own[0], own[1]], masks, uvs, triangles, 16)
+    np.testing.assert_allclose(merged[..., :3], shared[..., :3], rtol=1e-5, atol=1e-6)

@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 import lmrefine
+from lmrefine import metrics
 from baker_scenes import floor, quad, texel_centers
 
 
@@ -73,6 +74,32 @@ def test_dilation_never_mixes_two_charts_in_a_narrow_gutter():
     assert np.all(np.isclose(gutter, lit, rtol=1e-6) | (gutter == 0.0))
     np.testing.assert_allclose(gutter[:, :6], lit, rtol=1e-6)
     np.testing.assert_array_equal(gutter[:, 6:], 0.0)
+
+
+def test_a_gutter_texel_takes_the_chart_nearest_its_centre():
+    # Two charts two texels apart (at 32 texels), as the packer leaves them:
+    # the lit one (chart 0) ends at x = 9.05 texels, the dark one starts at
+    # 11.05, so column 10 is the only free one. Its centre (10.5) is 0.55
+    # from the dark chart and 1.45 from the lit one; by ring counts the two
+    # tie (three neighbours each) and the lower id, the lit chart, took it, so
+    # a bilinear lookup just inside the dark chart's border read lit light.
+    scene = lmrefine.Scene()
+    lit = floor(uv_rect=(0.0, 0.0, 9.05 / 32, 1.0))
+    dark = quad(([3, -1, 0], [3, 1, 0], [5, -1, 0]), (11.05 / 32, 0.0, 1.0, 1.0))  # faces -z
+    scene.add_mesh(lit[0], lit[1], uvs=lit[2])
+    scene.add_mesh(dark[0], dark[1], uvs=dark[2])
+    scene.add_light("sun", energy=2.0, angle=0.0, direction=(0, 0, -1))
+    image = lmrefine.bake(scene, 32, samples=4, dilation=16, atlas=True)["atlas"]
+    covered = image[..., 3] > 0
+    assert np.all(covered[:, :10]) and not covered[:, 10].any() and np.all(covered[:, 11:])
+    np.testing.assert_array_equal(image[:, 10, :3], 0.0)
+    lit_value = 2.0 / np.pi
+    np.testing.assert_allclose(image[:, :10, 0], lit_value, rtol=1e-6)
+    # Points on each chart a tenth of a texel inside its border read only its own light.
+    v = np.full(2, 0.5)
+    looked_up = metrics.bilinear_lookup(image[..., :3], np.stack([np.array([8.95, 11.15]) / 32, v], 1))
+    np.testing.assert_allclose(looked_up[0], lit_value, rtol=1e-6)
+    np.testing.assert_array_equal(looked_up[1], 0.0)
 
 
 def test_per_mesh_maps_and_atlas():

@@ -288,6 +288,7 @@ def test_operator_end_to_end(facts, name):
         assert stats is not None, f"no image for pass {name_}"
         assert stats["size"] == [64, 64] and stats["is_float"] and stats["packed"]
         assert stats["std"] > 0.01 and stats["max"] > 0.1, f"pass {name_} looks unbaked: {stats}"
+        assert stats["gutter_as_baker"], f"pass {name_}: the gutter is not lmrefine.dilate's"
     assert ("ShaderNodeUVMap", "Lightmap_refined") in [tuple(node) for node in value["preview_nodes"]]
     assert value["result_valid"] and value["transition_widening"] > 1.0
     assert 0.0 < value["density_range"][0] <= value["density_range"][1]

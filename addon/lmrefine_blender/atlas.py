@@ -68,6 +68,12 @@ class AtlasGroup:
         """Joined per-corner UVs -> {object name: its own rows}."""
         return {target.obj.name: uvs[rows] for target, rows in zip(self.targets, self.slices)}
 
+    def merge(self, maps, resolution, margin, uvs=None):
+        """The group's one map from its members' own bakes (`maps`, in target order) of the joined
+        layout, or of the joined `uvs` of the same triangles (a refined layout): merge_maps."""
+        uvs = self.uvs if uvs is None else uvs
+        return merge_maps(maps, self.masks(resolution, uvs), uvs, self.triangles, margin)
+
     def masks(self, resolution, uvs=None):
         """Each target's coverage mask (rasterized from its UVs, never from alpha) of the joined
         layout, or of the joined `uvs` of the same triangles (a refined layout)."""
@@ -121,32 +127,21 @@ def group_targets(targets, resolution, shared=True):
     return groups
 
 
-def merge_maps(maps, masks, margin):
-    """One atlas map from the members' own bakes: each covered texel from the map of the object whose
-    chart covers it (the first, where two touch), each gutter texel within `margin` texels (chessboard
-    distance) of a chart from the nearest chart's object (the first of equally near ones): the bakers
-    fill that margin from each chart's own texels. Texels further out are 0. Coverage comes from the
-    layouts, never from alpha. Inputs are not modified; a single map is returned as it is."""
-    if len(maps) == 1:
-        return maps[0]
-    owner = np.full(masks[0].shape, -1, dtype=np.int32)
-    for index, mask in enumerate(masks):
-        owner[mask & (owner < 0)] = index
-    height, width = owner.shape
-    none = len(maps)
-    for _ in range(margin):  # one texel of chessboard distance per step
-        free = owner < 0
-        if not free.any():
-            break
-        padded = np.pad(np.where(owner < 0, none, owner), 1, constant_values=none)
-        nearest = np.full(owner.shape, none, dtype=np.int32)
-        for dy in (0, 1, 2):
-            for dx in (0, 1, 2):
-                np.minimum(nearest, padded[dy:dy + height, dx:dx + width], out=nearest)
-        reached = free & (nearest < none)
-        owner[reached] = nearest[reached]
+def merge_maps(maps, masks, uvs, triangles, margin):
+    """One map from the bakes of the layout (`uvs`, `triangles`; the members' rows joined) and of
+    each member (`maps`, with `masks` its rasterized coverage): each covered texel from the map of the
+    object whose chart covers it (the first, where two touch), and the gutter filled anew from the
+    joined layout's charts by lmrefine.dilate, as the baker fills an atlas it bakes at once: within
+    `margin` texels, a gutter texel a bilinear lookup on a chart can read from the chart nearest it,
+    so two objects' charts two texels apart never lend each other light. Texels further out are 0.
+    A single map is dilated the same way: a Cycles bake's margin averages neighbouring charts.
+    Coverage comes from the layouts, never from alpha. Inputs are not modified."""
+    import lmrefine
+
     merged = np.zeros(np.shape(maps[0]), dtype=np.float32)
-    for index, image in enumerate(maps):
-        mine = owner == index
+    taken = np.zeros(np.shape(masks[0]), dtype=bool)
+    for image, mask in zip(maps, masks):
+        mine = mask & ~taken
         merged[mine] = np.asarray(image, dtype=np.float32)[mine]
-    return merged
+        taken |= mask
+    return lmrefine.dilate(merged, uvs, triangles, margin)

@@ -379,8 +379,8 @@ def run(context, targets, options, journal, image_dir=None):
             if len(images) == 1:  # the members' material shows one atlas image: it is the group's map
                 lightmaps[group.name] = bridge.image_to_array(next(iter(images.values())))
             else:
-                lightmaps[group.name] = atlas.merge_maps([bridge.image_to_array(t.image) for t in group.targets],
-                                                         group.masks(resolution), BAKE_MARGIN)
+                lightmaps[group.name] = group.merge([bridge.image_to_array(t.image) for t in group.targets],
+                                                    resolution, BAKE_MARGIN)
     else:
         source_of = {t.obj.name: t.source for t in targets}
         passes = (options["driving_pass"],)
@@ -587,15 +587,15 @@ def new_outcome(targets, options):
 
 
 def _group_maps(groups, per_object, resolution, joined_uvs=None):
-    """{group name: its one map} from each object's own bake: a group of one keeps its object's map,
-    a shared atlas merges its members' maps by their rasterized coverage (atlas.merge_maps) of the
-    layout they were baked with (`joined_uvs[group name]`, default the group's source layout)."""
+    """{group name: its one map} from each object's own bake: the members' maps merged by their
+    rasterized coverage of the layout they were baked with (`joined_uvs[group name]`, default the
+    group's source layout) and the gutter filled from the joined layout's charts (atlas.merge_maps;
+    for a group of one, what the Embree baker did already, and what Cycles' margin does otherwise)."""
     maps = {}
     for group in groups:
         members = [per_object[name] for name in group.objects]
         uvs = joined_uvs[group.name] if joined_uvs is not None else None
-        maps[group.name] = members[0] if not group.shared else atlas.merge_maps(
-            members, group.masks(resolution, uvs), BAKE_MARGIN)
+        maps[group.name] = group.merge(members, resolution, BAKE_MARGIN, uvs)
     return maps
 
 

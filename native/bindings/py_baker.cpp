@@ -8,7 +8,9 @@
 #include <vector>
 
 #include "lmrefine/bake/baker.h"
+#include "lmrefine/bake/dilation.h"
 #include "lmrefine/core/error.h"
+#include "lmrefine/core/memory.h"
 #include "numpy_util.h"
 #include "progress_binding.h"
 
@@ -86,6 +88,41 @@ py::tuple evaluate_native(const Scene& scene, const py::handle& points_in, const
     return py::make_tuple(values, stats_dict(result.stats));
 }
 
+// The baker's dilation for an image baked elsewhere: a new float32 array of the
+// image's shape, its colour channels refilled in the gutter, alpha as given.
+py::array_t<float> dilate_native(const py::handle& image_in, const py::handle& uvs_in, const py::handle& triangles_in,
+                                 const py::handle& texels) {
+    auto image = py_util::require_float32(image_in, "image", {3});
+    const int64_t height = image.shape(0), width = image.shape(1), channels = image.shape(2);
+    if (channels != 3 && channels != 4) {
+        throw py::value_error("image must have shape (H, W, 3) or (H, W, 4), got " + py_util::shape_string(image));
+    }
+    if (height > (1 << 15) || width > (1 << 15)) {
+        throw py::value_error("image is larger than 32768 texels a side: shape " + py_util::shape_string(image));
+    }
+    auto uvs = py_util::require_points(uvs_in, "uvs", 2);
+    auto triangles = py_util::require_indices(triangles_in, "triangles", 3, /*allow_empty=*/true);
+    const int iterations = int(py_util::int_param(texels, "texels", 0, 1 << 15));
+    const UvLayout layout{uvs.data(), uvs.shape(0), triangles.data(), triangles.shape(0)};
+    const int64_t pixels = height * width;
+    require_memory("dilating a " + std::to_string(height) + "x" + std::to_string(width) + " image",
+                   saturating_product({uint64_t(pixels), uint64_t(16 + 4 * channels + 20)}), "dilate a smaller image");
+    std::vector<float> out(image.data(), image.data() + pixels * channels);
+    {
+        py::gil_scoped_release release;
+        validate_layout(layout);
+        std::vector<float> rgba(size_t(pixels * 4), 0.0f);
+        for (int64_t i = 0; i < pixels; ++i) {
+            for (int ch = 0; ch < 3; ++ch) rgba[size_t(4 * i + ch)] = out[size_t(channels * i + ch)];
+        }
+        dilate(rgba.data(), int(width), int(height), layout, iterations);
+        for (int64_t i = 0; i < pixels; ++i) {
+            for (int ch = 0; ch < 3; ++ch) out[size_t(channels * i + ch)] = rgba[size_t(4 * i + ch)];
+        }
+    }
+    return py_util::to_numpy(std::move(out), {py::ssize_t(height), py::ssize_t(width), py::ssize_t(channels)});
+}
+
 }  // namespace
 
 void bind_baker(py::module_& m) {
@@ -96,6 +133,8 @@ void bind_baker(py::module_& m) {
     m.def("_evaluate", &evaluate_native, py::arg("scene"), py::arg("points"), py::arg("normals"), py::arg("passes"),
           py::arg("samples"), py::arg("seed"), py::arg("progress"), py::arg("bounces"), py::arg("ao_distance"),
           "Native evaluate: returns ([(P, 3) per pass], stats). Use lmrefine.evaluate.");
+    m.def("_dilate", &dilate_native, py::arg("image"), py::arg("uvs"), py::arg("triangles"), py::arg("texels"),
+          "Native dilation of an image baked elsewhere. Use lmrefine.dilate.");
     m.def(
         "_bench_occluded_loop",
         [](const Scene& scene, const py::handle& rays_in) {

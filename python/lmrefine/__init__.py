@@ -41,7 +41,7 @@ from ._native import (  # noqa: F401  (re-exports)
     warp_uvs,
     write_image,
 )
-from .baker import BakeResult, bake, evaluate, trace_rays  # noqa: F401  (re-exports)
+from .baker import BakeResult, bake, dilate, evaluate, trace_rays  # noqa: F401  (re-exports)
 from .charting import RechartResult, rechart  # noqa: F401
 from .packer import CHART_TOLERANCE, PackResult, pack_charts  # noqa: F401
 from .refine import RefineResult, identity_grid, refine_uvs  # noqa: F401
@@ -68,6 +68,7 @@ __all__ = [
     "bake",
     "check_layout",
     "coverage_mask",
+    "dilate",
     "dwt",
     "dwt2",
     "evaluate",

@@ -60,6 +60,15 @@ LUMA = np.array([0.2126, 0.7152, 0.0722], np.float32)
 # docs/refiner.md, "Chart scaling").
 REQUIRED_GAIN = 0.95
 MIN_UTILISATION_KEPT = 0.95
+# The fewest texels (area) a repack leaves a chart: 2 x 2, what a bilinear
+# lookup reads; a chart already smaller keeps its size. The scale bounds are
+# relative to the median chart, so without it a flat chart shrinks again at
+# every stage of a multi-stage refinement.
+MIN_CHART_TEXELS = 4.0
+# The share of the atlas texel_floor expects the repacked charts to cover
+# (the packer reaches 84-95% on the bundled scenes, docs/packer.md): lower
+# than reached, so a small chart ends at or above the floor.
+FLOOR_PACKING = 0.8
 
 
 def triangle_texels(uvs, triangles, shape):
@@ -307,11 +316,13 @@ def signal_scales(source_uvs, triangles, energy, min_scale, max_scale, lightmap=
     """repack's charts of `source_uvs` and their relative linear scales by
     their signal, with the model's terms: (charts (T,), scales (C,), edge,
     smooth). The repack packs the charts at these scales times one global
-    scale (or at their square roots: `repack`)."""
+    scale (or at their square roots: `repack`); a chart keeps at least
+    MIN_CHART_TEXELS texels of the map `energy` is (texel_floor)."""
     charts = find_charts(source_uvs, triangles, tolerance=CHART_TOLERANCE)
-    scales, edge, smooth, _ = chart_scales(source_uvs, triangles, charts, energy, min_scale, max_scale,
-                                           lightmap, mask, world_areas=world_areas)
-    return charts, scales, edge, smooth
+    scales, edge, smooth, area = chart_scales(source_uvs, triangles, charts, energy, min_scale, max_scale,
+                                              lightmap, mask, world_areas=world_areas)
+    height, width = np.shape(energy)[:2]
+    return charts, texel_floor(scales, np.asarray(area, np.float64) * height * width, height * width), edge, smooth
 
 
 def repack(source_uvs, refined_uvs, triangles, energy, resolution, padding, min_scale, max_scale, progress=None,
@@ -361,6 +372,28 @@ def repack(source_uvs, refined_uvs, triangles, energy, resolution, padding, min_
             return soft_packed, {**soft, "softened": softened}
         report["softened"] = softened
     return (packed if report["used"] else None), report
+
+
+def texel_floor(scales, texels, atlas_texels):
+    """`scales` (relative, the packer sets the level) raised where a chart
+    of `texels` texels at scale 1 would keep fewer than MIN_CHART_TEXELS (or
+    shrink, if it has fewer already). The level is estimated as the one at
+    which the charts cover FLOOR_PACKING of the atlas (`atlas_texels`), or as
+    many texels as they do now if that is more; charts of no area are left
+    as they are."""
+    texels = np.asarray(texels, np.float64)
+    scales = np.asarray(scales, np.float64)
+    live = texels > 0
+    if not live.any():
+        return scales
+    kept = np.ones_like(scales)  # the linear scale a chart may shrink to
+    kept[live] = np.sqrt(np.minimum(1.0, MIN_CHART_TEXELS / texels[live]))
+    covered = max(float(texels[live].sum()), FLOOR_PACKING * float(atlas_texels))
+    floored = scales.copy()
+    for _ in range(4):  # raising a small chart barely moves the level
+        level = np.sqrt(covered / (texels[live] * floored[live] ** 2).sum())
+        floored = np.where(live, np.maximum(floored, kept / level), floored)
+    return floored
 
 
 def _reports_done(progress):

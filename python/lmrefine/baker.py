@@ -64,7 +64,9 @@ def bake(scene, resolution, passes=("direct",), samples=16, seed=0, progress=Non
         progress (callable | None): ``progress(fraction, stage)``; returning
             False cancels (raises ``lmrefine.CancelledError``, nothing partial).
         dilation (int): texels to fill into the gutter around each chart, from
-            that chart's own texels (Blender's bake margin, default 16).
+            that chart's own texels (Blender's bake margin, default 16); a
+            gutter texel a bilinear lookup on a chart can read (centre within
+            1.5 texels) takes the nearest chart's light (``dilate``).
         denoise (bool): edge-aware a-trous filter guided by position, normal and
             the per-texel noise estimate.
         bounces (int): diffuse bounces of the indirect pass (Cycles' default 4).
@@ -94,6 +96,34 @@ def bake(scene, resolution, passes=("direct",), samples=16, seed=0, progress=Non
         for name, image in zip(names, images):
             by_pass[name][key] = image
     return BakeResult(by_pass[names[0]] if len(names) == 1 else by_pass, stats)
+
+
+def dilate(image, uvs, triangles, texels=16):
+    """The baker's gutter fill for a map baked elsewhere (a Cycles bake, or
+    maps merged into one shared atlas).
+
+    Texels the layout's charts cover (``coverage_mask``) keep their colour.
+    Every other texel within ``texels`` rings of a chart takes the mean colour
+    of its neighbours of one chart: the chart nearest its centre when one is
+    within 1.5 texels (so a bilinear lookup at a chart's border reads only its
+    own light when charts are two texels apart), else the chart with most
+    such neighbours. Colour never mixes across charts. Charts are
+    ``find_charts``' (bit-identical UVs joined).
+
+    Args:
+        image (numpy.ndarray): float32 (H, W, 3) or (H, W, 4), row 0 at the top.
+        uvs (numpy.ndarray): (N, 2) per-corner UVs of the layout it was baked with.
+        triangles (numpy.ndarray): (T, 3) integer indices into ``uvs``.
+        texels (int): rings of gutter to fill (Blender's bake margin, default 16).
+
+    Returns:
+        numpy.ndarray: a new float32 array of ``image``'s shape; alpha, if
+        any, as given. ``image`` is not modified.
+
+    Raises:
+        ValueError: bad shapes or dtype, indices out of range, NaN UVs.
+    """
+    return _native._dilate(image, uvs, triangles, texels)
 
 
 def evaluate(scene, points, normals, passes=("direct",), samples=64, seed=0, progress=None, bounces=4,

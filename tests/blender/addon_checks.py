@@ -630,8 +630,12 @@ def _image_stats(name, layout_uvs, triangles):
     pixels = bridge.image_to_array(image)
     covered = lmrefine.coverage_mask(layout_uvs, triangles, RESOLUTION)
     light = pixels[..., :3].mean(axis=2)[covered]
+    # The gutter as lmrefine's baker fills it (each texel from the chart nearest it), whichever baker
+    # baked the map: filling it again changes nothing. A Cycles margin averages neighbouring charts.
+    refilled = lmrefine.dilate(pixels, layout_uvs, triangles, 16)
     return {"size": list(image.size), "is_float": image.is_float, "packed": image.packed_file is not None,
-            "min": float(light.min()), "max": float(light.max()), "std": float(light.std())}
+            "min": float(light.min()), "max": float(light.max()), "std": float(light.std()),
+            "gutter_as_baker": bool(np.array_equal(refilled[..., :3], pixels[..., :3]))}
 
 
 def _end_to_end(first, backend, passes):

@@ -21,7 +21,7 @@ COVERED = ("check_layout", "coverage_mask", "dwt", "dwt2", "find_charts", "gradi
            "idwt", "idwt2", "read_image", "run_automaton", "warp_uvs", "write_image", "LayoutChecker", "Scene",
            "bake", "evaluate", "identity_grid", "refine_uvs", "CancelledError", "BakeResult", "RefineResult",
            "pack_charts", "PackResult", "CHART_TOLERANCE", "trace_rays", "tessellate", "TessellationResult",
-           "transition_strength_of", "tessellated_refine_options", "rechart", "RechartResult")
+           "transition_strength_of", "tessellated_refine_options", "rechart", "RechartResult", "dilate")
 
 VALID_FRACTION = 0.2  # cases left entirely valid: the ok path must hold its promises too
 WAVELETS = ("haar", "d4", "d12", "d20", "cdf53", "cdf97")
@@ -641,6 +641,15 @@ def case_transition_strength_of(lm, rng):
     return _case("transition_strength_of", lm.transition_strength_of, kwargs, rng, makers)
 
 
+def case_dilate(lm, rng):
+    r = int(rng.choice([8, 16, 32]))
+    uvs, triangles = random_layout(rng, r)
+    image = rng.uniform(0.0, 1.0, (r, r, int(rng.choice([3, 4])))).astype(np.float32)
+    kwargs = {"image": image, "uvs": uvs, "triangles": triangles, "texels": int(rng.choice([0, 1, 16]))}
+    makers = {"image": as_array, "uvs": as_array, "triangles": as_array, "texels": as_number}
+    return _case("dilate", lm.dilate, kwargs, rng, makers)
+
+
 def case_tessellated_refine_options(lm, rng):
     r = int(rng.choice([8, 16, 32]))
     uvs, triangles = random_layout(rng, r)
@@ -657,7 +666,7 @@ BUILDERS = (
     case_refine_uvs, case_refine_uvs,  # the whole pipeline gets twice the share
     case_pack_charts, case_rechart, case_refine_uvs_rechart, case_refine_uvs_folds,
     case_write_image, case_read_image, case_scene, case_bake, case_evaluate, case_trace_rays,
-    case_tessellate, case_transition_strength_of, case_tessellated_refine_options,
+    case_tessellate, case_transition_strength_of, case_tessellated_refine_options, case_dilate,
 )
 
 

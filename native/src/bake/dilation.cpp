@@ -1,10 +1,67 @@
 #include "lmrefine/bake/dilation.h"
 
+#include <algorithm>
+#include <cmath>
+#include <numeric>
 #include <vector>
+
+#include "lmrefine/core/nearest_point.h"
+#include "lmrefine/core/texel_space.h"
+#include "lmrefine/layout/chart.h"
 
 namespace lmrefine {
 
-void dilate(float* rgba, int width, int height, const int32_t* texel_chart, int iterations) {
+NearCharts::NearCharts(int width, int height)
+    : width_(width), height_(height), chart_(size_t(int64_t(width) * height), -1),
+      distance2_(chart_.size(), 0.0f) {}
+
+void NearCharts::add(const UvLayout& layout, const int32_t* triangle_chart, int32_t chart_base, const uint8_t* skip,
+                     const std::vector<int32_t>& texel_chart) {
+    const float reach2 = float(kNearChartReach * kNearChartReach);
+    // Texel centres (col + 0.5, row + 0.5) inside [low, high].
+    const auto first = [](double low) { return int(std::ceil(low - 0.5)); };
+    const auto end = [](double high) { return int(std::floor(high - 0.5)) + 1; };
+    for (int64_t t = 0; t < layout.triangle_count; ++t) {
+        if (skip != nullptr && skip[t]) continue;
+        glm::dvec2 c[3];
+        for (int j = 0; j < 3; ++j) {
+            const float* uv = layout.uvs + 2 * int64_t(layout.triangles[3 * t + j]);
+            c[j] = uv_to_pixel(glm::dvec2(uv[0], uv[1]), width_, height_);
+        }
+        const double area = (c[1].x - c[0].x) * (c[2].y - c[0].y) - (c[1].y - c[0].y) * (c[2].x - c[0].x);
+        if (!(std::abs(area) > 0.0)) continue;  // the raster skips these too
+        const int col_begin = std::max(0, first(std::min({c[0].x, c[1].x, c[2].x}) - kNearChartReach));
+        const int col_end = std::min(width_, end(std::max({c[0].x, c[1].x, c[2].x}) + kNearChartReach));
+        const int row_begin = std::max(0, first(std::min({c[0].y, c[1].y, c[2].y}) - kNearChartReach));
+        const int row_end = std::min(height_, end(std::max({c[0].y, c[1].y, c[2].y}) + kNearChartReach));
+        const int32_t chart = chart_base + triangle_chart[t];
+        for (int row = row_begin; row < row_end; ++row) {
+            for (int col = col_begin; col < col_end; ++col) {
+                const size_t texel = size_t(int64_t(row) * width_ + col);
+                if (texel_chart[texel] >= 0) continue;
+                const float d = float(squared_distance_to_triangle({col + 0.5, row + 0.5}, c));
+                if (d >= reach2) continue;
+                const int32_t held = chart_[texel];
+                if (held < 0 || d < distance2_[texel] || (d == distance2_[texel] && chart < held)) {
+                    distance2_[texel] = d;
+                    chart_[texel] = chart;
+                }
+            }
+        }
+    }
+}
+
+std::vector<int32_t> NearCharts::take(const std::vector<int32_t>& texel_chart) {
+    // A texel a later layout of the map covers is not in the gutter.
+    for (size_t i = 0; i < chart_.size(); ++i) {
+        if (texel_chart[i] >= 0) chart_[i] = -1;
+    }
+    distance2_.clear();
+    return std::move(chart_);
+}
+
+void dilate(float* rgba, int width, int height, const int32_t* texel_chart, const int32_t* near_chart,
+            int iterations) {
     std::vector<int32_t> chart(texel_chart, texel_chart + int64_t(width) * height);
     std::vector<int32_t> next = chart;
     struct Candidate {
@@ -39,6 +96,10 @@ void dilate(float* rgba, int width, int height, const int32_t* texel_chart, int 
                     const Candidate &a = candidates[k], &b = candidates[best];
                     if (a.count > b.count || (a.count == b.count && a.chart < b.chart)) best = k;
                 }
+                const int32_t near = near_chart != nullptr ? near_chart[index] : -1;
+                for (int k = 0; k < found && near >= 0; ++k) {
+                    if (candidates[k].chart == near) best = k;
+                }
                 for (int ch = 0; ch < 3; ++ch) rgba[4 * index + ch] = candidates[best].sum[ch] / float(candidates[best].count);
                 rgba[4 * index + 3] = 0.0f;
                 next[index] = candidates[best].chart;
@@ -48,6 +109,19 @@ void dilate(float* rgba, int width, int height, const int32_t* texel_chart, int 
         if (!changed) break;
         chart = next;
     }
+}
+
+void dilate(float* rgba, int width, int height, const UvLayout& layout, int iterations) {
+    const Charts charts = find_charts(layout);
+    std::vector<int32_t> texel_chart(size_t(int64_t(width) * height), -1);
+    for_each_covered_texel(layout, width, height, [&](int64_t t, int row, int col) {
+        int32_t& owner = texel_chart[size_t(int64_t(row) * width + col)];
+        if (owner < 0) owner = charts.triangle_chart[size_t(t)];
+    });
+    NearCharts near(width, height);
+    near.add(layout, charts.triangle_chart.data(), 0, nullptr, texel_chart);
+    const std::vector<int32_t> near_chart = near.take(texel_chart);
+    dilate(rgba, width, height, texel_chart.data(), near_chart.data(), iterations);
 }
 
 }  // namespace lmrefine

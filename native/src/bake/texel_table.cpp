@@ -8,29 +8,21 @@
 #include <glm/geometric.hpp>
 #include <glm/vec2.hpp>
 
+#include "lmrefine/bake/dilation.h"
 #include "lmrefine/layout/chart.h"
 #include "lmrefine/layout/coverage.h"
 #include "lmrefine/bake/scene.h"
+#include "lmrefine/core/nearest_point.h"
 #include "lmrefine/core/texel_space.h"
 
 namespace lmrefine {
-namespace {
-
-// The point of segment ab nearest to p.
-glm::dvec2 nearest_on_segment(const glm::dvec2& p, const glm::dvec2& a, const glm::dvec2& b) {
-    const glm::dvec2 ab = b - a;
-    const double length2 = glm::dot(ab, ab);
-    const double t = length2 > 0.0 ? std::clamp(glm::dot(p - a, ab) / length2, 0.0, 1.0) : 0.0;
-    return a + ab * t;
-}
-
-}  // namespace
 
 TexelTable build_texel_table(const Scene& scene, const std::vector<int>& meshes, int width, int height) {
     TexelTable table;
     table.width = width;
     table.height = height;
     table.texel_chart.assign(size_t(int64_t(width) * height), -1);
+    NearCharts near(width, height);
     struct Entry {
         int64_t texel;
         int32_t mesh;
@@ -51,8 +43,10 @@ TexelTable build_texel_table(const Scene& scene, const std::vector<int>& meshes,
             entries.push_back({texel, id, t});
             if (table.texel_chart[size_t(texel)] < 0) table.texel_chart[size_t(texel)] = chart_base + charts.triangle_chart[size_t(t)];
         });
+        near.add(layout, charts.triangle_chart.data(), chart_base, mesh.degenerate.data(), table.texel_chart);
         chart_base += charts.count;
     }
+    table.near_chart = near.take(table.texel_chart);
     // Stable: candidates keep mesh then triangle order, so the result is deterministic.
     std::stable_sort(entries.begin(), entries.end(), [](const Entry& a, const Entry& b) { return a.texel < b.texel; });
     table.candidate_mesh.reserve(entries.size());

@@ -21,6 +21,7 @@ struct TexelTable {
     std::vector<int32_t> candidate_mesh;
     std::vector<int64_t> candidate_triangle;
     std::vector<int32_t> texel_chart;    // (height * width) chart id or -1 (charts numbered across the map's meshes)
+    std::vector<int32_t> near_chart;     // (height * width) NearCharts' chart of a gutter texel, or -1
 };
 
 // Conservative rasterization (for_each_covered_texel) of the UV layouts of
