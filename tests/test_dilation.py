@@ -141,3 +141,14 @@ def test_dilate_refuses_bad_input_with_the_fix():
         lmrefine.dilate(image, uvs, triangles, -1)
     with pytest.raises(ValueError, match="refers to UV 100"):
         lmrefine.dilate(image, uvs, triangles + 100)
+
+
+def test_dilate_does_not_depend_on_the_thread_count(monkeypatch):
+    rng = np.random.default_rng(7)
+    uvs, triangles = random_charts(rng, 8)
+    image = rng.random((70, 90, 3), dtype=np.float32)  # more rows than one task takes
+    every = lmrefine.dilate(image, uvs, triangles)
+    monkeypatch.setenv("LMREFINE_THREADS", "1")
+    np.testing.assert_array_equal(lmrefine.dilate(image, uvs, triangles), every)
+    monkeypatch.setenv("LMREFINE_THREADS", "3")
+    np.testing.assert_array_equal(lmrefine.dilate(image, uvs, triangles), every)

@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "lmrefine/core/nearest_point.h"
+#include "lmrefine/core/parallel.h"
 #include "lmrefine/core/texel_space.h"
 #include "lmrefine/layout/chart.h"
 
@@ -69,9 +70,11 @@ void dilate(float* rgba, int width, int height, const int32_t* texel_chart, cons
         int count;
         float sum[3];
     };
-    for (int ring = 0; ring < iterations; ++ring) {
-        bool changed = false;
-        for (int row = 0; row < height; ++row) {
+    // A ring reads only texels filled before it (`chart`) and writes only
+    // texels still empty there, so its rows are independent: the result is
+    // the same for any thread count.
+    const auto fill_rows = [&](int64_t begin, int64_t end, bool& changed) {
+        for (int row = int(begin); row < int(end); ++row) {
             for (int col = 0; col < width; ++col) {
                 const int64_t index = int64_t(row) * width + col;
                 if (chart[index] >= 0) continue;
@@ -106,7 +109,20 @@ void dilate(float* rgba, int width, int height, const int32_t* texel_chart, cons
                 changed = true;
             }
         }
-        if (!changed) break;
+    };
+    constexpr int64_t kRowsPerTask = 16;
+    const int64_t tasks = (int64_t(height) + kRowsPerTask - 1) / kRowsPerTask;
+    std::vector<uint8_t> task_changed(static_cast<size_t>(tasks), 0);
+    for (int ring = 0; ring < iterations; ++ring) {
+        std::fill(task_changed.begin(), task_changed.end(), uint8_t(0));
+        parallel_for(tasks, 1, [&](int64_t first, int64_t last) {
+            for (int64_t task = first; task < last; ++task) {
+                bool changed = false;
+                fill_rows(task * kRowsPerTask, std::min<int64_t>(height, (task + 1) * kRowsPerTask), changed);
+                task_changed[size_t(task)] = changed;
+            }
+        });
+        if (std::find(task_changed.begin(), task_changed.end(), uint8_t(1)) == task_changed.end()) break;
         chart = next;
     }
 }
