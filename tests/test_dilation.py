@@ -152,3 +152,17 @@ def test_dilate_does_not_depend_on_the_thread_count(monkeypatch):
     np.testing.assert_array_equal(lmrefine.dilate(image, uvs, triangles), every)
     monkeypatch.setenv("LMREFINE_THREADS", "3")
     np.testing.assert_array_equal(lmrefine.dilate(image, uvs, triangles), every)
+
+
+def test_dilate_takes_uvs_far_outside_the_map():
+    # Corners 1e30 away: no crash and no overflow; covered texels keep their colour, every filled one is finite.
+    rng = np.random.default_rng(1)
+    image = rng.random((16, 16, 3), dtype=np.float32)
+    uvs = np.array([[-1e30, -1e30], [1e30, 0.5], [0.5, 1e30], [0.1, 0.1], [0.3, 0.1], [0.1, 0.3]], np.float32)
+    triangles = np.array([[0, 1, 2], [3, 4, 5]], np.int32)
+    for layout in (uvs, uvs * np.float32(1e-30) + np.float32(40.0)):  # the second: both far off the map
+        dilated = lmrefine.dilate(image, layout, triangles)
+        covered = lmrefine.coverage_mask(layout, triangles, 16)
+        np.testing.assert_array_equal(dilated[covered], image[covered])
+        assert np.isfinite(dilated).all()
+        np.testing.assert_array_equal(lmrefine.dilate(image, layout, triangles), dilated)

@@ -204,8 +204,9 @@ uint64_t bake_memory_estimate(const Scene& scene, const BakeOptions& options) {
                                 needed(options.passes, kIndirect);
     // Returned images: 16 bytes per texel per pass per map. While one map is
     // baked: its texel table (~40 bytes per texel counting ~1.5 candidates),
-    // chart ids (4), the gutter's nearest charts and their distances (8), 20 bytes per transport, 28 of guides, and finishing
-    // scratch (variance, dilation copies, denoise buffers: ~60).
+    // chart ids (4), the gutter's nearest charts and their distances (8), 20
+    // bytes per transport, 28 of guides, and finishing scratch (variance,
+    // dilation copies, denoise buffers: ~60).
     const uint64_t returned = maps * uint64_t(options.passes.size()) * pixels * 16;
     const uint64_t working = pixels * (40 + 4 + 8 + 20 * transports + 28 + 60);
     return returned + working;

@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <numeric>
 #include <vector>
 
 #include "lmrefine/core/nearest_point.h"
@@ -19,9 +18,12 @@ NearCharts::NearCharts(int width, int height)
 void NearCharts::add(const UvLayout& layout, const int32_t* triangle_chart, int32_t chart_base, const uint8_t* skip,
                      const std::vector<int32_t>& texel_chart) {
     const float reach2 = float(kNearChartReach * kNearChartReach);
-    // Texel centres (col + 0.5, row + 0.5) inside [low, high].
-    const auto first = [](double low) { return int(std::ceil(low - 0.5)); };
-    const auto end = [](double high) { return int(std::floor(high - 0.5)) + 1; };
+    // Texel centres (col + 0.5, row + 0.5) inside [low, high], clamped to the
+    // image in double first (UVs far outside [0, 1] would overflow an int).
+    const auto first = [](double low, int size) { return int(std::clamp(std::ceil(low - 0.5), 0.0, double(size))); };
+    const auto end = [](double high, int size) {
+        return int(std::clamp(std::floor(high - 0.5) + 1.0, 0.0, double(size)));
+    };
     for (int64_t t = 0; t < layout.triangle_count; ++t) {
         if (skip != nullptr && skip[t]) continue;
         glm::dvec2 c[3];
@@ -31,17 +33,17 @@ void NearCharts::add(const UvLayout& layout, const int32_t* triangle_chart, int3
         }
         const double area = (c[1].x - c[0].x) * (c[2].y - c[0].y) - (c[1].y - c[0].y) * (c[2].x - c[0].x);
         if (!(std::abs(area) > 0.0)) continue;  // the raster skips these too
-        const int col_begin = std::max(0, first(std::min({c[0].x, c[1].x, c[2].x}) - kNearChartReach));
-        const int col_end = std::min(width_, end(std::max({c[0].x, c[1].x, c[2].x}) + kNearChartReach));
-        const int row_begin = std::max(0, first(std::min({c[0].y, c[1].y, c[2].y}) - kNearChartReach));
-        const int row_end = std::min(height_, end(std::max({c[0].y, c[1].y, c[2].y}) + kNearChartReach));
+        const int col_begin = first(std::min({c[0].x, c[1].x, c[2].x}) - kNearChartReach, width_);
+        const int col_end = end(std::max({c[0].x, c[1].x, c[2].x}) + kNearChartReach, width_);
+        const int row_begin = first(std::min({c[0].y, c[1].y, c[2].y}) - kNearChartReach, height_);
+        const int row_end = end(std::max({c[0].y, c[1].y, c[2].y}) + kNearChartReach, height_);
         const int32_t chart = chart_base + triangle_chart[t];
         for (int row = row_begin; row < row_end; ++row) {
             for (int col = col_begin; col < col_end; ++col) {
                 const size_t texel = size_t(int64_t(row) * width_ + col);
                 if (texel_chart[texel] >= 0) continue;
                 const float d = float(squared_distance_to_triangle({col + 0.5, row + 0.5}, c));
-                if (d >= reach2) continue;
+                if (!(d < reach2)) continue;  // NaN too (a triangle of huge UVs)
                 const int32_t held = chart_[texel];
                 if (held < 0 || d < distance2_[texel] || (d == distance2_[texel] && chart < held)) {
                     distance2_[texel] = d;
