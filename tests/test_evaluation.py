@@ -114,6 +114,9 @@ def test_the_pipeline_reports_every_figure_with_sensible_values(tmp_path):
     assert sum(o["points"] for o in report["objects"]) == 3000
     for o in report["objects"]:
         assert o["rmse_baseline"] > 0 and "transition_widening" in o and "equal_error_resolution_ratio" in o
+    # Each half's share of the map's texels, refined against plain: together they keep the map's texels.
+    assert all(o["texels"] > 0 for o in report["objects"])
+    assert "texels, refined / plain" in (out / "tiny_smart" / "report.md").read_text()
     if not report["gain"]:
         assert report["notes"]
     for name in ("report.md", "lightmaps.png", "layout.png", "density.png", "error.png", "error_vs_resolution.png",
@@ -434,3 +437,20 @@ def test_the_report_says_when_the_repack_or_the_stretch_was_taken_at_square_root
     refused = dict(stretch, used=False, reason="the stretched charts do not fit")
     (line,) = repack_lines({"stretch": refused})
     assert "not kept (the stretched charts do not fit)" in line and "square root" not in line
+
+
+def test_a_note_names_the_objects_the_refined_map_serves_worse():
+    from lmrefine.evaluation import _objects_served_worse
+
+    def row(name, before, after, points=1000, texels=1.0):
+        return {"object": name, "points": points, "rmse_baseline": before, "rmse_refined": after, "texels": texels}
+
+    objects = [row("Shell", 0.0132, 0.0049, texels=1.1), row("Cabinet", 0.0011, 0.0031, texels=0.31),
+               row("Lamp", 0.0100, 0.0120),                 # 20% worse: within OBJECT_WORSE
+               row("Vase", 0.0010, 0.0016),                  # 60% worse, but by the truth's noise alone
+               row("Cup", 0.001, 0.005, points=50)]          # too few points to say
+    note = _objects_served_worse(objects, truth_noise=0.0004)
+    assert note.startswith("objects the refined map serves worse than the plain bake: Cabinet (RMSE 0.0011 -> "
+                           "0.0031, 0.31x its texels);")
+    assert "Shell" not in note and "Lamp" not in note and "Vase" not in note and "Cup" not in note
+    assert _objects_served_worse(objects[:1], truth_noise=0.0004) is None

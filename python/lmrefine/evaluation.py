@@ -26,6 +26,11 @@ from .tessellation import (COARSE_CONTRAST, COARSE_TRIANGLE_TEXELS, MAX_BUDGET, 
 DEFAULT_MULTIPLIERS = (1.0, 1.5, 2.0, 3.0, 4.0)
 # A transition-point RMSE at least this much lower counts as a gain.
 GAIN_THRESHOLD = 0.05
+# An object whose RMSE the refined map raises by this factor (and by more than
+# twice the truth's noise), measured at this many points or more, is named in
+# a note: the figure over all points can hide it.
+OBJECT_WORSE = 1.25
+OBJECT_MIN_POINTS = 200
 
 
 @dataclass
@@ -499,6 +504,22 @@ def _split_trial(sample, variant, baseline):
     return "', '".join(worst["objects"]), int(worst["vertices_added"]), int(worst["vertices_before"])
 
 
+def _objects_served_worse(objects, truth_noise):
+    """A note naming the objects whose error the refined map raised by more
+    than OBJECT_WORSE and by more than twice the truth's noise (so not by the
+    truth's noise alone), with the share of texels each kept; None if none."""
+    worse = [o for o in objects if o["points"] >= OBJECT_MIN_POINTS
+             and o["rmse_refined"] > OBJECT_WORSE * o["rmse_baseline"]
+             and o["rmse_refined"] - o["rmse_baseline"] > 2.0 * truth_noise]
+    if not worse:
+        return None
+    named = ", ".join(f"{o['object']} (RMSE {o['rmse_baseline']:.4g} -> {o['rmse_refined']:.4g}, "
+                      f"{o['texels']:.2f}x its texels)" for o in worse)
+    return (f"objects the refined map serves worse than the plain bake: {named}; an object that lost texels "
+            "gave them to light changes elsewhere (the figure over all points is what the texels buy), "
+            "one that kept them may read a neighbour's light at its borders")
+
+
 def _diagnose(result, context):
     """Why a scene shows no gain (or only a small one), from what we know."""
     notes = []
@@ -739,8 +760,11 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
     for index, name in enumerate(sample.objects):
         where = object_ids == index
         if where.any():
+            mine = sample.object_id == index  # the object's share of the map, refined against plain
+            texel_share = float((areas[mine] * density_refined[mine]).sum()
+                                / max((areas[mine] * density_base[mine]).sum(), 1e-300))
             result["objects"].append({"object": name, **{k: v for k, v in figures(where).items()
-                                                         if k != "resolution_sweep"}})
+                                                         if k != "resolution_sweep"}, "texels": texel_share})
     on_transitions = points.triangle[transitions]
     context = {
         "refine_report": refined.report,
@@ -789,6 +813,9 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
     if result["rmse_refined"] > result["rmse_baseline"]:
         result["notes"].append("the error over all points grew: the texels taken from flat areas cost more there "
                                "than the transitions gained")
+    worse = _objects_served_worse(result["objects"], truth_noise)
+    if worse:
+        result["notes"].append(worse)
     stages.seconds["metrics"] = time.perf_counter() - start
 
     if out_dir is not None:

@@ -462,13 +462,15 @@ def scene_markdown(result):
         lines.append(f"| {s['resolution']} | {_number(s['rmse'])} | {_number(s['transition_rmse'])} |")
     lines += ["", "## Per object", "",
               "| object | points | transition points | RMSE base | RMSE refined | transition RMSE base | "
-              "transition RMSE refined | widening | equal-error ratio |", "|---|---|---|---|---|---|---|---|---|"]
+              "transition RMSE refined | widening | texels, refined / plain | equal-error ratio |",
+              "|---|---|---|---|---|---|---|---|---|---|"]
     for o in r["objects"]:
         ratio = o["equal_error_resolution_ratio"]
         lines.append(
             f"| {o['object']} | {o['points']} | {o['transition_points']} | {_number(o['rmse_baseline'])} | "
             f"{_number(o['rmse_refined'])} | {_number(o['transition_rmse_baseline'])} | "
             f"{_number(o['transition_rmse_refined'])} | {_number(o['transition_widening'], 3)} | "
+            f"{_number(o.get('texels'), 3)} | "
             f"{'n/a' if ratio is None else ('>=' if o['equal_error_status'] == 'above' else '') + f'{ratio:.2f}'} |")
     lines += ["", "## Time per stage (seconds)", "", "| stage | seconds |", "|---|---|"]
     lines += [f"| {stage} | {seconds:.2f} |" for stage, seconds in r["timings"].items()]
