@@ -28,6 +28,7 @@ sys.path.insert(0, os.path.join(HERE, "..", "tests"))
 
 import lmrefine  # noqa: E402
 from baker_scenes import floor, mesh_spec, scene_from_spec  # noqa: E402
+from timing import best_of  # noqa: E402
 
 RESOLUTION = 128
 AO_DISTANCE = 2.0
@@ -231,17 +232,8 @@ def dilation_against_a_bake(resolution=1024):
     uvs, triangles = sample.layout("lightmap")
     scene = sample.to_scene(uvs)
 
-    def best_wall(call):
-        times = []
-        for _ in range(REPEATS):
-            start = time.perf_counter()
-            call()
-            times.append(time.perf_counter() - start)
-        return min(times)
-
-    image = lmrefine.bake(scene, resolution, samples=1, seed=0)[0]
-    bake = best_wall(lambda: lmrefine.bake(scene, resolution, samples=1, seed=0))
-    dilate = best_wall(lambda: lmrefine.dilate(image, uvs, triangles, 16))
+    bake, maps = best_of(REPEATS, lambda: lmrefine.bake(scene, resolution, samples=1, seed=0))
+    dilate, _ = best_of(REPEATS, lambda: lmrefine.dilate(maps[0], uvs, triangles, 16))
     print(f"\nlmrefine.dilate at {resolution}^2 (courtyard, Lightmap Pack, {len(triangles)} triangles): "
           f"{dilate:.3f} s against {bake:.3f} s for a 1-sample bake of the same layout ({dilate / bake:.2f}x)")
 

@@ -13,7 +13,6 @@ Run with Python, it starts headless Blender on itself.
 import os
 import subprocess
 import sys
-import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 REPO = os.path.dirname(HERE)
@@ -23,8 +22,9 @@ def in_blender(subdivisions):
     import bpy
     import numpy as np
 
-    sys.path[:0] = [os.path.join(REPO, "python"), os.path.join(REPO, "addon")]
+    sys.path[:0] = [os.path.join(REPO, "python"), os.path.join(REPO, "addon"), HERE]
     from lmrefine_blender import bridge
+    from timing import best_of
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     bpy.ops.mesh.primitive_grid_add(x_subdivisions=subdivisions, y_subdivisions=subdivisions, size=4.0)
@@ -35,13 +35,8 @@ def in_blender(subdivisions):
     mesh.calc_normals_split()
     bpy.context.evaluated_depsgraph_get()  # evaluate once, outside the timings
 
-    def best_of(function, repeats=3):
-        times = []
-        for _ in range(repeats):
-            start = time.perf_counter()
-            function()
-            times.append(time.perf_counter() - start)
-        return min(times)
+    def least(function):
+        return best_of(3, function)[0]
 
     def raw_copies():
         for collection, attribute, width, dtype in (
@@ -51,12 +46,12 @@ def in_blender(subdivisions):
             values = np.empty(len(collection) * width, dtype=dtype)
             collection.foreach_get(attribute, values)
 
-    baseline = best_of(raw_copies)
+    baseline = least(raw_copies)
     rows = [
         ("foreach_get copies (baseline)", baseline),
-        ("read_layout (+ weld)", best_of(lambda: bridge.read_layout(mesh, "Lightmap"))),
+        ("read_layout (+ weld)", least(lambda: bridge.read_layout(mesh, "Lightmap"))),
         ("export_scene (evaluated, world space)",
-         best_of(lambda: bridge.export_scene(bpy.context, [obj], {obj.name: "Lightmap"}))),
+         least(lambda: bridge.export_scene(bpy.context, [obj], {obj.name: "Lightmap"}))),
     ]
     print(f"{len(mesh.loop_triangles)} triangles, {len(mesh.loops)} face corners")
     print(f"{'step':40s} {'seconds':>8s} {'ratio':>6s}")

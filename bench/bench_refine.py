@@ -23,22 +23,13 @@
 
 import os
 import sys
-import time
 
 import numpy as np
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tests"))
 import lmrefine  # noqa: E402
 from layouts import plane, shadow_edge_lightmap  # noqa: E402
-
-
-def best_of(runs, work):
-    times, result = [], None
-    for _ in range(runs):
-        start = time.perf_counter()
-        result = work()
-        times.append(time.perf_counter() - start)
-    return min(times), result
+from timing import best_of  # noqa: E402
 
 
 def scene(resolution, position=0.5, angle=0.3, quads=128):
