@@ -21,6 +21,7 @@ void bind_rechart(py::module_& m);
 void bind_packer(py::module_& m);
 void bind_automaton(py::module_& m);
 void bind_warp(py::module_& m);
+void bind_shape_fit(py::module_& m);
 void bind_layout_check(py::module_& m);
 void bind_wavelet(py::module_& m);
 void bind_gradient_map(py::module_& m);
@@ -65,6 +66,7 @@ PYBIND11_MODULE(_native, m) {
     lmrefine::bindings::bind_packer(m);
     lmrefine::bindings::bind_automaton(m);
     lmrefine::bindings::bind_warp(m);
+    lmrefine::bindings::bind_shape_fit(m);
     lmrefine::bindings::bind_layout_check(m);
     lmrefine::bindings::bind_wavelet(m);
     lmrefine::bindings::bind_gradient_map(m);

@@ -70,6 +70,8 @@ def evaluation_options(args):
         refine_options["repack"] = False
     if getattr(args, "no_stretch", False):
         refine_options["max_stretch"] = 1.0
+    if getattr(args, "triangle_stretch", None) is not None:
+        refine_options["triangle_stretch"] = args.triangle_stretch
     rechart = getattr(args, "rechart", None)
     compare = ()
     if rechart is not None and getattr(args, "compare", False):
@@ -192,6 +194,9 @@ def add_evaluation_arguments(parser, resolution, points):
                         help="refine inside charts only (refine_uvs repack=False): no chart scaling or packing")
     parser.add_argument("--no-stretch", action="store_true",
                         help="never stretch a chart across its light changes (refine_uvs max_stretch=1)")
+    parser.add_argument("--triangle-stretch", type=float, nargs="?", const=2.0, metavar="STRETCH",
+                        help="stretch each triangle across the light changes that run one way inside it, by up to "
+                             "STRETCH (default 2), and pack again (refine_uvs triangle_stretch; opt-in)")
     from .charting import DEFAULT_ANGLE
 
     parser.add_argument("--rechart", type=float, nargs="?", const=DEFAULT_ANGLE, metavar="ANGLE",

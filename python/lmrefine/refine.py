@@ -11,8 +11,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import _native, alignment, allocation, backoff, rechart_route
+from . import _native, alignment, allocation, backoff, metrics, rechart_route
 from .folds import find_folds
+from .packer import CHART_TOLERANCE, pack_charts
 
 BORDER_MODES = ("same", "border_rule", "extra_ring")
 
@@ -183,7 +184,7 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
                max_magnification=8.0, min_shrink=0.25, edge_shrink=0.8, delta=0.02, passes=1, border="same",
                directional=False, wavelet="d4", diffusion=0.05, max_steps=8, progress=None, repack=True,
                min_chart_scale=0.5, max_chart_scale=2.0, positions=None, rechart=True, world_areas=None,
-               normals=None, max_stretch=2.0, polygons=None):
+               normals=None, max_stretch=2.0, polygons=None, triangle_stretch=1.0):
     """Refine a lightmap UV layout: more texels where light changes fast.
 
     Args:
@@ -234,6 +235,15 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
             (lmrefine.stretch; docs/refiner.md, "Chart stretch"); kept only
             when the error model predicts less error than the unstretched
             packing. 1 = off. report["repack"]["stretch"] says what happened.
+        triangle_stretch: >= 1 (opt-in; 1 = off): after the repack, each
+            triangle whose light changes run one way is stretched across
+            them by up to this and squeezed along them, its area kept, the
+            chart's triangles fitted to those shapes together, and the
+            charts packed again at their sizes (lmrefine.stretch
+            .triangle_stretch; docs/refiner.md, "Triangle stretch"). Kept
+            when that layout passes the checks and keeps 90% of the texel
+            area; report["triangle_stretch"] says what happened (None when
+            off).
         positions: (N, 3) the 3-D position of each UV (the uvs' indexing),
             or None. With positions and rechart, a source layout that gives
             the refiner no room (rechart_route.layout_room: one chart per
@@ -327,7 +337,7 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
                "edge_shrink": edge_shrink, "delta": delta, "passes": passes, "border": border,
                "directional": directional, "wavelet": wavelet, "diffusion": diffusion, "max_steps": max_steps,
                "repack": repack, "min_chart_scale": min_chart_scale, "max_chart_scale": max_chart_scale,
-               "world_areas": world_areas, "max_stretch": max_stretch}
+               "world_areas": world_areas, "max_stretch": max_stretch, "triangle_stretch": triangle_stretch}
     if not (isinstance(rechart, (bool, np.bool_)) or (isinstance(rechart, str) and rechart == "always")):
         raise TypeError(f"rechart must be True, False or 'always', got {rechart!r}")
     for name, value in (("normals", normals), ("polygons", polygons)):
@@ -574,6 +584,59 @@ def _in_charts(lightmap, uvs, triangles, resolution, padding, mask, gradient, pr
                      world_areas=world_areas)
 
 
+# A triangle-stretched layout packed again must keep at least this share of
+# the unstretched layout's texel area (its stretch is paid for by packing
+# density, which the chart model does not see).
+TRIANGLE_STRETCH_MIN_AREA = 0.9
+
+
+def _triangle_stretched(stage, new_uvs, check):
+    """The triangle stretch (stretch.triangle_stretch) of the refined layout
+    `new_uvs` (its check_layout report `check`), packed again at its charts'
+    sizes: (uvs, check, report), the input's own when the stretch is not
+    kept (it moved nothing, its packing fails the checks or covers less
+    than TRIANGLE_STRETCH_MIN_AREA of the texels)."""
+    from . import stretch
+
+    factor = stage.options["triangle_stretch"]
+    if isinstance(factor, (bool, np.bool_)) or not isinstance(factor, (int, float, np.number)) \
+            or not 1.0 <= float(factor) < np.inf:
+        raise ValueError(f"triangle_stretch must be a finite number >= 1 (1 = none), got {factor!r}")
+    report = {"used": False, "max_stretch": float(factor)}
+    if stage.gradient_given is not None or stage.hold:
+        report["reason"] = ("a gradient map was given instead of a lightmap" if stage.gradient_given is not None
+                            else "the layout is held (its light steps lie on texel boundaries)")
+        return new_uvs, check, report
+    triangles, shape, padding = stage.triangles, stage.shape, _pack_padding(stage.padding, stage.original)
+    charts = _native.find_charts(new_uvs, triangles, tolerance=CHART_TOLERANCE)
+    stretched, figures = stretch.triangle_stretch(stage.lightmap, stage.mask, stage.uvs, new_uvs, triangles, charts,
+                                                  shape, float(factor))
+    report.update(figures)
+    if np.array_equal(stretched, new_uvs):
+        report["reason"] = "no triangle holds light changes that run one way"
+        return new_uvs, check, report
+    try:
+        packed, pack_report = pack_charts(stretched, triangles, charts, None, shape, padding,
+                                          progress=allocation._reports_done(stage.progress))
+    except ValueError as error:
+        report["reason"] = f"the stretched charts do not pack ({error})"
+        return new_uvs, check, report
+    area = float(np.abs(metrics.uv_areas(packed, triangles)).sum())
+    area_before = float(np.abs(metrics.uv_areas(new_uvs, triangles)).sum())
+    report["texel_area"] = area / max(area_before, 1e-300)
+    packed_check = _native.check_layout(packed, triangles, shape, stage.padding)
+    worse = backoff.failures(packed_check, stage.original, stage.padding)
+    if worse:
+        report["reason"] = f"the stretched layout failed {', '.join(worse)}"
+    elif report["texel_area"] < TRIANGLE_STRETCH_MIN_AREA:
+        report["reason"] = (f"packed again the stretched charts keep {report['texel_area']:.0%} of the texels "
+                            f"(needed: {TRIANGLE_STRETCH_MIN_AREA:.0%})")
+    else:
+        report["used"] = True
+        return packed, packed_check, report
+    return new_uvs, check, report
+
+
 def _pack_padding(padding, original):
     """The gutter the repack packs at: the padding, or the input's gutter
     (`original`, its check_layout report) where that is narrower
@@ -639,6 +702,13 @@ def _repacked(stage):
                          f"{repack_report['padded_utilisation_after']:.0%} full with its gutters "
                          f"(the input: {repack_report['padded_utilisation_before']:.0%})")
         timings["repack"] = time.perf_counter() - clock
+    triangle_report = None
+    if options["triangle_stretch"] != 1.0:
+        clock = time.perf_counter()
+        new_uvs, check, triangle_report = _triangle_stretched(stage, new_uvs, check)
+        if not triangle_report["used"]:
+            notes.append(f"triangle stretch not used: {triangle_report['reason']}")
+        timings["triangle_stretch"] = time.perf_counter() - clock
     areas = _native.grid_cell_areas(grid)
     covered_areas = areas[mask] if mask.any() else np.ones(1, np.float32)
     if covered_areas.max() >= max_magnification * 0.999:
@@ -682,6 +752,7 @@ def _repacked(stage):
         "original_check": original,
         "check": check,
         "repack": repack_report,
+        "triangle_stretch": triangle_report,
     }
     return RefineResult(uvs=new_uvs, grid=grid, report=report), scalar_energy, mask
 

@@ -74,11 +74,22 @@ def chart_tensors(lightmap, mask, source_uvs, uvs, triangles, charts):
     its source triangle: a gradient g maps to A^-T g). Triangles without
     area in either layout add nothing."""
     count = int(charts.max()) + 1 if len(charts) else 0
+    mapped = triangle_tensors(lightmap, mask, source_uvs, uvs, triangles)
+    out = np.zeros((count, 2, 2))
+    for i in range(2):
+        for j in range(2):
+            out[:, i, j] = np.bincount(charts, weights=mapped[:, i, j], minlength=count)
+    return out
+
+
+def triangle_tensors(lightmap, mask, source_uvs, uvs, triangles):
+    """(T, 2, 2) float64: chart_tensors' structure tensor per triangle (the
+    sum over its texels), in the frame of layout `uvs`."""
     gradient = luminance_gradient(lightmap, mask)
     # Only directions and ratios matter: scaled to at most 1, huge light cannot overflow the squares.
     peak = float(np.abs(gradient).max(initial=0.0))
     if not (np.isfinite(peak) and peak > 0):
-        return np.zeros((count, 2, 2))
+        return np.zeros((len(triangles), 2, 2))
     # Per triangle, in the source frame: sums over its texels (allocation's
     # four points per triangle, as triangle_energy), read at those points only.
     samples, texels = triangle_samples(source_uvs, triangles, gradient)
@@ -99,11 +110,7 @@ def chart_tensors(lightmap, mask, source_uvs, uvs, triangles, charts):
     inverse[good] = before[good] @ np.linalg.inv(after[good])
     mapped = np.transpose(inverse, (0, 2, 1)) @ tensor @ inverse
     mapped[~good] = 0.0
-    out = np.zeros((count, 2, 2))
-    for i in range(2):
-        for j in range(2):
-            out[:, i, j] = np.bincount(charts, weights=mapped[:, i, j], minlength=count)
-    return out
+    return mapped
 
 
 def stretch_factors(tensors, uvs, triangles, charts, resolution, max_stretch):
@@ -219,3 +226,119 @@ def turn_to_smallest_boxes(uvs, triangles, charts, which):
     keep = turned[chart]
     out[index[keep]] = candidate[index[keep]]
     return out.astype(np.asarray(uvs).dtype), turned
+
+
+# The triangle stretch (docs/refiner.md, "Triangle stretch"): the chart
+# stretch made local. Rounds of averaging each triangle's structure tensor
+# with its neighbours' (triangles a few texels large read few texels):
+TRIANGLE_SMOOTHING = 2
+# A triangle's stretch grows with its light changes up to this quantile of
+# the triangles' (per texel), so flat triangles, whose tensor is noise, keep
+# their shape.
+TRIANGLE_STRENGTH_QUANTILE = 90
+# The share of the stretch a chart keeps when it flips a triangle, in turn;
+# a chart that flips one at the last keeps its shape.
+TRIANGLE_BACKOFF = (1.0, 0.5, 0.25)
+# UV corners of one chart this close (in UV units, rounded) are one vertex of the fit.
+WELD_STEP = 2.0 ** -20
+
+
+def _welded(uvs, triangles, charts):
+    """(vertex per corner index (N,), vertex count): the corners of one
+    chart at the same UV (to WELD_STEP) are one vertex."""
+    corner_chart = np.full(len(uvs), -1, np.int64)
+    corner_chart[triangles.ravel()] = np.repeat(charts, 3)
+    key = np.column_stack([corner_chart, np.round(np.asarray(uvs, np.float64) / WELD_STEP).astype(np.int64)])
+    _, vertex = np.unique(key, axis=0, return_inverse=True)
+    vertex = vertex.ravel()
+    return vertex, int(vertex.max()) + 1 if len(vertex) else 0
+
+
+def _smoothed(values, vertex_triangles, vertices, rounds):
+    """Per-triangle `values` (T, ...) averaged `rounds` times over the
+    triangles that share a vertex with each."""
+    flat = values.reshape(len(values), -1)
+    for _ in range(rounds):
+        total = np.zeros((vertices, flat.shape[1]))
+        count = np.zeros(vertices)
+        for k in range(3):
+            np.add.at(total, vertex_triangles[:, k], flat)
+            np.add.at(count, vertex_triangles[:, k], 1.0)
+        mean = total / np.maximum(count, 1.0)[:, None]
+        flat = sum(mean[vertex_triangles[:, k]] for k in range(3)) / 3.0
+    return flat.reshape(values.shape)
+
+
+def _signed_areas(uvs, triangles):
+    p = np.asarray(uvs, np.float64)[triangles]
+    e1, e2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
+    return 0.5 * (e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+
+
+def triangle_targets(tensors, uvs, triangles, resolution, max_stretch):
+    """(T,) stretch a >= 1 and (T, 2, 2) target maps a e1 e1^T + e2 e2^T / a
+    (area kept: wider across the light changes, narrower along them) from
+    per-triangle structure tensors in the frame of `uvs`: the model's best
+    stretch (l1 / l2)^(1/4) (stretch_factors), bounded by `max_stretch` and
+    ramped down with the light changes per texel below the
+    TRIANGLE_STRENGTH_QUANTILE-th percentile."""
+    height, width = resolution
+    values, vectors = np.linalg.eigh(tensors)
+    low, high = np.maximum(values[:, 0], 0.0), np.maximum(values[:, 1], 0.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        best = np.where(low > 0, (high / np.maximum(low, 1e-300)) ** 0.25, np.inf)
+    texels = np.abs(_signed_areas(uvs, triangles)) * width * height
+    strength = np.sqrt((high + low) / np.maximum(texels, 1e-12))
+    live = strength[(high > 0) & (texels > 0)]
+    reference = float(np.percentile(live, TRIANGLE_STRENGTH_QUANTILE)) if live.size else 0.0
+    ramp = np.clip(strength / reference, 0.0, 1.0) if reference > 0 else np.zeros_like(strength)
+    factor = 1.0 + (np.minimum(best, max_stretch) - 1.0) * ramp
+    factor = np.where((high > 0) & np.isfinite(factor), factor, 1.0)
+    across, along = vectors[:, :, 1], vectors[:, :, 0]
+    targets = (factor[:, None, None] * across[:, :, None] * across[:, None, :]
+               + (1.0 / factor)[:, None, None] * along[:, :, None] * along[:, None, :])
+    return factor, targets
+
+
+def triangle_stretch(lightmap, mask, source_uvs, uvs, triangles, charts, resolution, max_stretch):
+    """`uvs` with each triangle stretched across the light changes of
+    `lightmap` (baked on `source_uvs`) and squeezed along them, the chart's
+    triangles fitted to those shapes together (lmrefine._native._fit_shapes);
+    a chart that would flip a triangle keeps less of the stretch
+    (TRIANGLE_BACKOFF), none at the last. The charts stay where they were
+    and need packing again. Returns (uvs, report)."""
+    triangles = np.asarray(triangles)
+    charts = np.asarray(charts)
+    count = int(charts.max()) + 1 if len(charts) else 0
+    vertex, vertices = _welded(uvs, triangles, charts)
+    vertex_triangles = vertex[triangles]
+    tensors = _smoothed(triangle_tensors(lightmap, mask, source_uvs, uvs, triangles), vertex_triangles, vertices,
+                        TRIANGLE_SMOOTHING)
+    factor, targets = triangle_targets(tensors, uvs, triangles, resolution, max_stretch)
+    start = np.zeros((vertices, 2))
+    start[vertex] = np.asarray(uvs, np.float64)
+    before = _signed_areas(uvs, triangles)
+    kept = np.ones(count)  # the share of its stretch each chart keeps
+    identity = np.eye(2)
+    out = np.asarray(uvs, np.float64).copy()
+    for share in TRIANGLE_BACKOFF:
+        trying = kept == share
+        if not trying.any():
+            break
+        scale = kept[charts][:, None, None]
+        fitted = _native._fit_shapes(start, vertex_triangles, identity + scale * (targets - identity))[vertex]
+        after = _signed_areas(fitted, triangles)
+        flipped = np.zeros(count, bool)
+        # A triangle without area in the input has no orientation to keep.
+        np.logical_or.at(flipped, charts, (before != 0) & ((before > 0) != (after > 0)))
+        good = trying & ~flipped
+        corner_good = np.zeros(len(uvs), bool)
+        corner_good[triangles.ravel()] = np.repeat(good[charts], 3)
+        out[corner_good] = fitted[corner_good]
+        following = TRIANGLE_BACKOFF.index(share) + 1
+        kept[trying & flipped] = TRIANGLE_BACKOFF[following] if following < len(TRIANGLE_BACKOFF) else 0.0
+    stretched = factor > 1.0
+    report = {"triangles_stretched": int(stretched.sum()), "largest_stretch": float(factor.max(initial=1.0)),
+              "mean_stretch": float(factor[stretched].mean()) if stretched.any() else 1.0,
+              "charts_backed_off": int(((kept > 0) & (kept < 1)).sum()), "charts_kept_shape": int((kept == 0).sum())}
+    return out.astype(np.asarray(uvs).dtype), report

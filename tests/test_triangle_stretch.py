@@ -1,0 +1,154 @@
+"""The triangle stretch (lmrefine.stretch.triangle_stretch, refine_uvs
+triangle_stretch=): the shape fit against a plain reference, its guards, and
+the stretch across a stripe of shadow."""
+
+import numpy as np
+import pytest
+
+import lmrefine
+from lmrefine import _native, stretch
+from layouts import floor_grid, grid_chart, plane
+
+
+def fit_shapes_reference(uvs, triangles, targets, anchor=1e-6):
+    """The shape fit's rule, dense: every edge (i, j) of triangle t wants
+    u_j - u_i = D_t (r_j - r_i), weighted by area_t / |r_j - r_i|^2; each
+    vertex is pulled to its place by anchor x its summed edge weights (1
+    without edges); the normal equations solved directly."""
+    n = len(uvs)
+    system = np.zeros((n, n))
+    rhs = np.zeros((n, 2))
+    for t, tri in enumerate(triangles):
+        a, b, c = uvs[tri]
+        area = 0.5 * abs((b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]))
+        if area == 0:
+            continue
+        for k in range(3):
+            i, j = tri[k], tri[(k + 1) % 3]
+            edge = uvs[j] - uvs[i]
+            w = area / (edge @ edge)
+            target = targets[t] @ edge
+            system[i, i] += w
+            system[j, j] += w
+            system[i, j] -= w
+            system[j, i] -= w
+            rhs[i] -= w * target
+            rhs[j] += w * target
+    diagonal = np.diag(system).copy()
+    for i in range(n):
+        pull = anchor * diagonal[i] if diagonal[i] > 0 else 1.0
+        system[i, i] += pull
+        rhs[i] += pull * uvs[i]
+    return np.linalg.solve(system, rhs)
+
+
+def shared_grid(n):
+    """An n x n grid of quads over [0, 1]^2 whose triangles share vertices."""
+    positions, triangles = floor_grid(n, 0.5)
+    return positions[:, :2].astype(np.float64) + 0.5, triangles
+
+
+def test_fit_shapes_matches_the_reference():
+    rng = np.random.default_rng(3)
+    uvs, tris = shared_grid(5)
+    uvs = uvs + rng.normal(0, 0.02, uvs.shape)
+    targets = rng.normal(0, 0.3, (len(tris), 2, 2)) + np.eye(2)
+    expected = fit_shapes_reference(uvs, tris, targets)
+    np.testing.assert_allclose(_native._fit_shapes(uvs, tris, targets), expected, rtol=0, atol=1e-9)
+
+
+def test_fit_shapes_identity_keeps_the_layout_and_a_stretch_is_met():
+    uvs, tris = shared_grid(4)
+    same = _native._fit_shapes(uvs, tris, np.tile(np.eye(2), (len(tris), 1, 1)))
+    np.testing.assert_allclose(same, uvs, atol=1e-10)
+    # One consistent target for all triangles is met exactly, about the centre.
+    fitted = _native._fit_shapes(uvs, tris, np.tile(np.diag([2.0, 0.5]), (len(tris), 1, 1)))
+    np.testing.assert_allclose(np.ptp(fitted, axis=0), [2.0, 0.5], rtol=1e-5)
+    np.testing.assert_allclose(fitted.mean(axis=0), uvs.mean(axis=0), atol=1e-5)
+
+
+def test_fit_shapes_rejects_bad_input():
+    uvs, tris = shared_grid(2)
+    targets = np.tile(np.eye(2), (len(tris), 1, 1))
+    with pytest.raises(ValueError, match="outside"):
+        _native._fit_shapes(uvs, tris + 100, targets)
+    bad = uvs.copy()
+    bad[1, 0] = np.nan
+    with pytest.raises(ValueError, match="NaN"):
+        _native._fit_shapes(bad, tris, targets)
+    with pytest.raises(ValueError, match="one per triangle"):
+        _native._fit_shapes(uvs, tris, targets[:-1])
+    nan_targets = targets.copy()
+    nan_targets[0, 0, 0] = np.inf
+    with pytest.raises(ValueError, match="targets"):
+        _native._fit_shapes(uvs, tris, nan_targets)
+    # A vertex no triangle uses stays where it is; degenerate triangles add nothing.
+    extra = np.vstack([uvs, [[0.3, 0.7]]])
+    degenerate = np.vstack([tris, [[0, 0, 1]]])
+    out = _native._fit_shapes(extra, degenerate, np.tile(np.eye(2), (len(degenerate), 1, 1)))
+    np.testing.assert_allclose(out, extra, atol=1e-10)
+
+
+def stripe_lightmap(resolution, centre=0.5, width=0.03):
+    """A vertical stripe of shadow (a picket's) across a lit plane."""
+    x = (np.arange(resolution) + 0.5) / resolution
+    lit = np.where(np.abs(x - centre) < width / 2, 0.1, 1.0).astype(np.float32)
+    return np.ascontiguousarray(np.broadcast_to(lit, (resolution, resolution)))
+
+
+def test_a_stripe_gets_wider_across_and_narrower_along():
+    resolution = 128
+    uvs, tris = plane(32, margin=0.05)
+    lightmap = stripe_lightmap(resolution)
+    mask = lmrefine.coverage_mask(uvs, tris, resolution)
+    charts = np.zeros(len(tris), np.int64)
+    out, report = stretch.triangle_stretch(lightmap, mask, uvs, uvs, tris, charts, (resolution, resolution), 2.0)
+    assert report["triangles_stretched"] > 0 and report["charts_kept_shape"] == 0
+    corners = uvs[tris]
+    near = np.abs(corners[:, :, 0].mean(axis=1) - 0.5) < 0.02
+    width_before = np.ptp(corners[:, :, 0], axis=1)
+    height_before = np.ptp(corners[:, :, 1], axis=1)
+    after = out[tris]
+    across = np.ptp(after[:, :, 0], axis=1) / width_before
+    along = np.ptp(after[:, :, 1], axis=1) / height_before
+    # Across the stripe (u) the triangles widen, along it (v) they shorten, their area about kept.
+    assert np.median(across[near]) > 1.3
+    assert np.median(along[near]) < 0.9
+    far = np.abs(corners[:, :, 0].mean(axis=1) - 0.5) > 0.3
+    assert abs(np.median(across[far]) - 1.0) < 0.15
+    areas_before, areas_after = stretch._signed_areas(uvs, tris), stretch._signed_areas(out, tris)
+    assert (np.sign(areas_after) == np.sign(areas_before)).all()
+
+
+def test_refine_uvs_triangle_stretch_report_and_validity():
+    resolution = 128
+    uvs, tris = plane(32, margin=0.05)
+    lightmap = stripe_lightmap(resolution)
+    result = lmrefine.refine_uvs(lightmap, uvs, tris, resolution, triangle_stretch=2.0)
+    report = result.report["triangle_stretch"]
+    assert report["max_stretch"] == 2.0 and report["triangles_stretched"] > 0
+    check = lmrefine.check_layout(result.uvs, tris, resolution, 2.0)
+    assert check["valid"], check
+    if report["used"]:
+        assert report["texel_area"] >= 0.9
+    else:
+        assert report["reason"]
+    assert lmrefine.refine_uvs(lightmap, uvs, tris, resolution).report["triangle_stretch"] is None
+    with pytest.raises(ValueError, match="triangle_stretch"):
+        lmrefine.refine_uvs(lightmap, uvs, tris, resolution, triangle_stretch=0.5)
+
+
+def test_triangle_stretch_on_random_light_never_flips():
+    rng = np.random.default_rng(7)
+    resolution = 64
+    for seed in range(4):
+        uvs, tris = grid_chart(12, (0.1, 0.1), (0.9, 0.9))
+        lightmap = rng.random((resolution, resolution)).astype(np.float32)
+        lightmap[:, : resolution // 2] *= 0.1
+        mask = lmrefine.coverage_mask(uvs, tris, resolution)
+        charts = np.zeros(len(tris), np.int64)
+        out, _ = stretch.triangle_stretch(lightmap, mask, uvs, uvs, tris, charts, (resolution, resolution),
+                                          1.0 + seed)
+        before, after = stretch._signed_areas(uvs, tris), stretch._signed_areas(out, tris)
+        assert (np.sign(after) == np.sign(before)).all()
+        assert np.isfinite(out).all()
