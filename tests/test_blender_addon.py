@@ -696,6 +696,14 @@ def test_charts_stretched_across_stripes_are_reported_and_in_the_map(facts):
     assert off["outcome"] == "FINISHED" and off["valid"] and off["panel_stretched"] == 0
     assert "stretched across" not in off["result_message"]
     assert off["gains"]["x"] < 1.3 * off["gains"]["y"], off["gains"]
+    assert off["panel_stretched_triangles"] == 0
+    # Triangle Stretch (the chart stretch off): triangles stretched, said so, and the map shows it.
+    local = fact(facts, "stretch_across_stripes")["triangle"]
+    assert local["outcome"] == "FINISHED" and local["valid"] and local["panel_stretched"] == 0
+    assert local["panel_stretched_triangles"] > 0
+    assert f"{local['panel_stretched_triangles']} triangle(s) stretched across their light changes" in \
+        local["result_message"]
+    assert local["gains"]["x"] > 1.2 * local["gains"]["y"], local["gains"]
 
 
 def test_stages_refine_again_and_report_the_stages_kept(facts):

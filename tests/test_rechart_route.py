@@ -696,3 +696,21 @@ def test_texel_points_refuse_bad_input():
         lmrefine._native.texel_points(np.array([[0, 0], [np.nan, 0], [1, 1]]), triangles, 8)
     with pytest.raises(ValueError, match="shape"):
         lmrefine._native.texel_points(np.zeros((3, 3)), triangles, 8)
+
+
+def test_route_decides_on_the_layouts_before_the_triangle_stretch(lightmap_pack_case, monkeypatch):
+    """The route's model sees texel areas, not shapes: it compares its candidates before the triangle
+    stretch (RefineResult.unstretched_uvs), so the stretch never changes which route is taken. Here
+    every stretch is kept (the judgement's bar raised), which costs each candidate packing scale."""
+    from lmrefine import refine as refine_module
+
+    corners, uvs, triangles, lightmap = lightmap_pack_case
+    off = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, positions=corners,
+                              triangle_stretch=1.0)
+    monkeypatch.setattr(refine_module, "TRIANGLE_STRETCH_REQUIRED_GAIN", 10.0)
+    on = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, positions=corners)
+    assert off.unstretched_uvs is None and on.report["triangle_stretch"]["used"]
+    for key in ("used", "predicted_error", "predicted_error_source_route", "charts"):
+        assert on.report["rechart"].get(key) == off.report["rechart"].get(key), key
+    assert np.array_equal(on.unstretched_uvs, off.uvs) and not np.array_equal(on.uvs, off.uvs)
+    assert lmrefine.check_layout(on.uvs, triangles, RESOLUTION, padding=2)["valid"]

@@ -102,7 +102,9 @@ def test_a_stripe_gets_wider_across_and_narrower_along():
     lightmap = stripe_lightmap(resolution)
     mask = lmrefine.coverage_mask(uvs, tris, resolution)
     charts = np.zeros(len(tris), np.int64)
-    out, report = stretch.triangle_stretch(lightmap, mask, uvs, uvs, tris, charts, (resolution, resolution), 2.0)
+    out, kept, report, _ = stretch.triangle_stretch(lightmap, mask, uvs, uvs, tris, charts,
+                                                     (resolution, resolution), 2.0)
+    assert kept.tolist() == [1.0]
     assert report["triangles_stretched"] > 0 and report["charts_kept_shape"] == 0
     corners = uvs[tris]
     near = np.abs(corners[:, :, 0].mean(axis=1) - 0.5) < 0.02
@@ -130,12 +132,16 @@ def test_refine_uvs_triangle_stretch_report_and_validity():
     check = lmrefine.check_layout(result.uvs, tris, resolution, 2.0)
     assert check["valid"], check
     if report["used"]:
-        assert report["texel_area"] >= 0.9
+        assert report["predicted_edge_error"] < 1.0
     else:
         assert report["reason"]
-    assert lmrefine.refine_uvs(lightmap, uvs, tris, resolution).report["triangle_stretch"] is None
-    with pytest.raises(ValueError, match="triangle_stretch"):
-        lmrefine.refine_uvs(lightmap, uvs, tris, resolution, triangle_stretch=0.5)
+    # The default is 2; 1 turns it off, and so does refining inside the charts only (no packing).
+    assert lmrefine.refine_uvs(lightmap, uvs, tris, resolution).report["triangle_stretch"]["max_stretch"] == 2.0
+    assert lmrefine.refine_uvs(lightmap, uvs, tris, resolution, triangle_stretch=1).report["triangle_stretch"] is None
+    assert lmrefine.refine_uvs(lightmap, uvs, tris, resolution, repack=False).report["triangle_stretch"] is None
+    for bad in (0.5, 17.0, float("nan"), float("inf"), True, "2"):
+        with pytest.raises(ValueError, match="triangle_stretch"):
+            lmrefine.refine_uvs(lightmap, uvs, tris, resolution, triangle_stretch=bad)
 
 
 def test_triangle_stretch_on_random_light_never_flips():
@@ -147,8 +153,26 @@ def test_triangle_stretch_on_random_light_never_flips():
         lightmap[:, : resolution // 2] *= 0.1
         mask = lmrefine.coverage_mask(uvs, tris, resolution)
         charts = np.zeros(len(tris), np.int64)
-        out, _ = stretch.triangle_stretch(lightmap, mask, uvs, uvs, tris, charts, (resolution, resolution),
-                                          1.0 + seed)
+        out, kept, _, _ = stretch.triangle_stretch(lightmap, mask, uvs, uvs, tris, charts,
+                                                   (resolution, resolution), 1.0 + seed)
+        assert kept[0] in (1.0, 0.5, 0.25, 0.0)
         before, after = stretch._signed_areas(uvs, tris), stretch._signed_areas(out, tris)
         assert (np.sign(after) == np.sign(before)).all()
         assert np.isfinite(out).all()
+
+
+def test_triangle_edge_error_of_simple_maps():
+    uvs, tris = shared_grid(3)
+    count = len(tris)
+    across = np.tile([1.0, 0.0], (count, 1))
+    model = {"direction": across, "share": np.full(count, 1.0), "weight": np.ones(count)}
+    # The same layout: 1. Scaled by g everywhere: 1 / g. Stretched by a across e1, all the light across: 1 / a.
+    assert stretch.triangle_edge_error(model, uvs, uvs, tris) == pytest.approx(1.0)
+    assert stretch.triangle_edge_error(model, uvs, 0.5 * uvs, tris) == pytest.approx(2.0)
+    stretched = uvs * np.array([2.0, 0.5])
+    assert stretch.triangle_edge_error(model, uvs, stretched, tris) == pytest.approx(0.5)
+    # Light changes split evenly: the model's f(a) = (1 / a + a) / 2 for a stretch a that keeps the area.
+    even = {**model, "share": np.full(count, 0.5)}
+    assert stretch.triangle_edge_error(even, uvs, stretched, tris) == pytest.approx((0.5 + 2.0) / 2)
+    # Without light changes nothing counts: 1.
+    assert stretch.triangle_edge_error({**model, "weight": np.zeros(count)}, uvs, stretched, tris) == 1.0

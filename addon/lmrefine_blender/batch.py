@@ -73,6 +73,8 @@ def build_parser():
     parser.add_argument("--min-shrink", type=float, help="smallest a texel's area may become (fraction)")
     parser.add_argument("--max-stretch", type=float, help="largest stretch of a chart across its light changes "
                         "(its texel area kept; 1 = none)")
+    parser.add_argument("--triangle-stretch", type=float, help="largest stretch of a triangle across the light "
+                        "changes that run one way inside it, after the charts are packed (1 = none; default 2)")
     parser.add_argument("--delta", type=float, help="automaton stop threshold")
     parser.add_argument("--passes", type=int, help="refinement passes")
     parser.add_argument("--border", choices=("same", "border_rule", "extra_ring"), help="grid border treatment")
@@ -115,7 +117,7 @@ def apply_flags(settings, args):
     mapping = {
         "source_layer": args.source_layer, "resolution": args.resolution, "padding": args.padding,
         "strength": args.strength, "max_magnification": args.max_magnification, "min_shrink": args.min_shrink,
-        "max_stretch": args.max_stretch,
+        "max_stretch": args.max_stretch, "triangle_stretch": args.triangle_stretch,
         "delta": args.delta, "passes": args.passes, "directional": args.directional, "samples": args.samples,
         "preview": args.preview, "exr_float32": args.float32, "stages": args.stages,
         "shared_atlas": args.shared_atlas,

@@ -41,6 +41,7 @@ def _report_outcome(operator, context, outcome, seconds):
     recharted = [obj for name in recharted_maps for obj in outcome.atlases.get(name, [name])]
     result.recharted = len(recharted)
     result.stretched = summary["stretched_charts"]
+    result.stretched_triangles = summary["stretched_triangles"]
     result.stages_stopped = "; ".join(_stage_stop(name, entry) for name, entry in outcome.stages.items()
                                       if not entry["stages"][-1]["kept"])
     if summary["moved"] == 0:
@@ -61,6 +62,8 @@ def _report_outcome(operator, context, outcome, seconds):
     if summary["stretched_charts"]:
         result.message += (f"; {summary['stretched_charts']} chart(s) stretched across their light changes "
                            f"(up to {summary['largest_stretch']:.2f}x, their texel area kept)")
+    if summary["stretched_triangles"]:
+        result.message += f"; {summary['stretched_triangles']} triangle(s) stretched across their light changes"
     if outcome.tessellation:
         result.message += f"; tessellation added {summary['vertices_added']} vertices"
     if outcome.stages:

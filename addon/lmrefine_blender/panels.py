@@ -84,7 +84,8 @@ class LMREFINE_PT_refine_options(_LightmapTab, bpy.types.Panel):
     def draw(self, context):
         settings = context.scene.lmrefine
         column = self.split_layout().column()
-        for name in ("strength", "max_magnification", "min_shrink", "max_stretch", "delta", "passes", "border",
+        for name in ("strength", "max_magnification", "min_shrink", "max_stretch", "triangle_stretch", "delta",
+                     "passes", "border",
                      "wavelet", "directional"):
             column.prop(settings, name)
         column.prop(settings, "rechart", text="Re-chart if Better")
@@ -184,6 +185,8 @@ class LMREFINE_PT_refine_result(_LightmapTab, bpy.types.Panel):
         stretched = result.valid and result.stretched > 0
         rows.append((f"Stretched: {result.stretched} charts" if stretched else "Stretched: none", 'FULLSCREEN_ENTER',
                      stretched))
+        if result.valid and result.stretched_triangles > 0:
+            rows.append((f"Stretched: {result.stretched_triangles} triangles", 'FULLSCREEN_ENTER', True))
         tessellated = result.valid and result.tessellated
         rows.append((f"New vertices: {result.vertices_added}" if tessellated else "Tessellation: off",
                      'MOD_TRIANGULATE', tessellated))

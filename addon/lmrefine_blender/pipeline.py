@@ -130,6 +130,9 @@ class Outcome:
         # Charts the output layouts stretched across their light changes (refine_uvs' chart stretch).
         stretches = [(report.get("repack") or {}).get("stretch") or {} for report in reports]
         stretches = [s for s in stretches if s.get("used")]
+        # Triangles the output layouts stretched (refine_uvs' triangle stretch, opt-in).
+        triangles = [report.get("triangle_stretch") or {} for report in reports]
+        triangles = [t for t in triangles if t.get("used")]
         return {
             "moved": moved,
             "transition_widening": widening,
@@ -140,6 +143,7 @@ class Outcome:
             "stages_kept": max(kept, default=1),
             "stretched_charts": sum(int(s["charts_stretched"]) for s in stretches),
             "largest_stretch": max((float(s["largest_stretch"]) for s in stretches), default=1.0),
+            "stretched_triangles": sum(int(t["triangles_stretched"]) for t in triangles),
             "objects": len(self.objects),
             "images_per_pass": len(self.images),
             "shared_images": {name: objects for name, objects in self.atlases.items() if len(objects) > 1},
@@ -179,6 +183,7 @@ def settings_snapshot(settings):
             "max_magnification": settings.max_magnification,
             "min_shrink": settings.min_shrink,
             "max_stretch": settings.max_stretch,
+            "triangle_stretch": settings.triangle_stretch,
             "delta": settings.delta,
             "passes": settings.passes,
             "border": settings.border.lower(),

@@ -98,6 +98,9 @@ class LMREFINE_PG_result(bpy.types.PropertyGroup):
     stretched: IntProperty(name="Stretched", description="Charts of the refined maps stretched across their light "
                            "changes (more texels across the shadows' edges, fewer along them), summed over the maps",
                            default=0)
+    stretched_triangles: IntProperty(name="Stretched Triangles",
+                                     description="Triangles of the refined maps stretched across the light changes "
+                                     "inside them (Triangle Stretch), summed over the maps", default=0)
 
 
 class LMREFINE_PG_settings(bpy.types.PropertyGroup):
@@ -149,6 +152,13 @@ class LMREFINE_PG_settings(bpy.types.PropertyGroup):
         description="A chart whose light changes run mostly one way (stripes of beams, railings) may be "
                     "stretched across them by up to this and squeezed along them as much, its texel area kept; "
                     "only where it predicts less error and the atlas stays as full. 1 turns it off",
+        default=2.0, min=1.0, max=4.0,
+    )
+    triangle_stretch: FloatProperty(
+        name="Tri Stretch",
+        description="After the charts are scaled and packed, stretch each triangle across the light changes that "
+                    "run one way inside it (a picket's shadow) by up to this, squeezed along them, and pack again; "
+                    "kept only where the error model predicts less error, packing included. 1 turns it off",
         default=2.0, min=1.0, max=4.0,
     )
     delta: FloatProperty(

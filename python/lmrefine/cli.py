@@ -72,6 +72,8 @@ def evaluation_options(args):
         refine_options["max_stretch"] = 1.0
     if getattr(args, "triangle_stretch", None) is not None:
         refine_options["triangle_stretch"] = args.triangle_stretch
+    if getattr(args, "no_triangle_stretch", False):
+        refine_options["triangle_stretch"] = 1.0
     rechart = getattr(args, "rechart", None)
     compare = ()
     if rechart is not None and getattr(args, "compare", False):
@@ -194,9 +196,11 @@ def add_evaluation_arguments(parser, resolution, points):
                         help="refine inside charts only (refine_uvs repack=False): no chart scaling or packing")
     parser.add_argument("--no-stretch", action="store_true",
                         help="never stretch a chart across its light changes (refine_uvs max_stretch=1)")
-    parser.add_argument("--triangle-stretch", type=float, nargs="?", const=2.0, metavar="STRETCH",
-                        help="stretch each triangle across the light changes that run one way inside it, by up to "
-                             "STRETCH (default 2), and pack again (refine_uvs triangle_stretch; opt-in)")
+    parser.add_argument("--triangle-stretch", type=float, metavar="STRETCH",
+                        help="largest stretch of a triangle across the light changes that run one way inside it "
+                             "(refine_uvs triangle_stretch; default: refine_uvs' own, 2)")
+    parser.add_argument("--no-triangle-stretch", action="store_true",
+                        help="never stretch a triangle across its light changes (refine_uvs triangle_stretch=1)")
     from .charting import DEFAULT_ANGLE
 
     parser.add_argument("--rechart", type=float, nargs="?", const=DEFAULT_ANGLE, metavar="ANGLE",

@@ -361,6 +361,13 @@ def fit_reset(result):
     return bool(levels) and bool(levels[-1].get("fit_reset"))
 
 
+def _compared(result):
+    """The layout of a refinement the route's model compares: the one before
+    the triangle stretch (refine.RefineResult.unstretched_uvs), whose gain
+    is in the texels' shapes the model does not see."""
+    return result.uvs if result.unstretched_uvs is None else result.unstretched_uvs
+
+
 def refine_recharted(refine, lightmap, uvs, triangles, shape, padding, positions, room, energy, source_route,
                      original, progress, folds=None, normals=None, polygons=None, source_lowest=None):
     """The re-chart route: `refine(lightmap, uvs, mask, padding)` (refine_uvs without
@@ -391,7 +398,7 @@ def refine_recharted(refine, lightmap, uvs, triangles, shape, padding, positions
         return None, info
     # One model of the source layout for every prediction (its texel sizes, slope and error).
     model = ErrorModel(uvs, triangles, energy, positions, lightmap, folds=folds)
-    predicted = model.relative(result.uvs)
+    predicted = model.relative(_compared(result))
     if fit_reset(result) and result.report["edge_shrink"] == 1.0:
         # Charts exactly the padding apart keep every edge texel rigid, and
         # the automaton's fit undid a region's deformation: charts packed
@@ -403,7 +410,7 @@ def refine_recharted(refine, lightmap, uvs, triangles, shape, padding, positions
             pack_padding + backoff.EDGE_SHRINK_GUTTER_MARGIN, progress)
         info["edge_room"] = False
         if roomier is not None:
-            retried_predicted = model.relative(retried.uvs)
+            retried_predicted = model.relative(_compared(retried))
             retried_check = backoff.worse_than_source(retried.uvs, uvs, triangles, shape, padding, source=original,
                                                       recharted=True)
             if retried_predicted < predicted and not retried_check[0]:
@@ -426,7 +433,7 @@ def refine_recharted(refine, lightmap, uvs, triangles, shape, padding, positions
         info.update(used=True, predicted_error_source_route=None)
         result.report["check"] = check
         return result, info
-    info["predicted_error_source_route"] = model.relative(source_route().uvs)
+    info["predicted_error_source_route"] = model.relative(_compared(source_route()))
     # Both against the source layout; the lower prediction wins (the source
     # layout's own refinement is never worse than the source by its checks).
     if not (info["predicted_error"] < REQUIRED_GAIN

@@ -32,11 +32,16 @@ class RefineResult:
     grid: (H + 1, W + 1, 2) float32, the deformed grid's nodes in UV space
         (identity: node (i, j) at u = j / W, v = 1 - i / H).
     report: dict, see refine_uvs.
+    unstretched_uvs: the layout before the triangle stretch when it was
+        kept, else None: the re-chart route compares its candidates on
+        these, so the stretch never changes which route is taken (the
+        route's model sees texel areas, not their shapes).
     """
 
     uvs: np.ndarray
     grid: np.ndarray
     report: dict = field(default_factory=dict)
+    unstretched_uvs: np.ndarray = field(default=None, repr=False)
 
 
 @dataclass
@@ -184,7 +189,7 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
                max_magnification=8.0, min_shrink=0.25, edge_shrink=0.8, delta=0.02, passes=1, border="same",
                directional=False, wavelet="d4", diffusion=0.05, max_steps=8, progress=None, repack=True,
                min_chart_scale=0.5, max_chart_scale=2.0, positions=None, rechart=True, world_areas=None,
-               normals=None, max_stretch=2.0, polygons=None, triangle_stretch=1.0):
+               normals=None, max_stretch=2.0, polygons=None, triangle_stretch=2.0):
     """Refine a lightmap UV layout: more texels where light changes fast.
 
     Args:
@@ -235,15 +240,16 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
             (lmrefine.stretch; docs/refiner.md, "Chart stretch"); kept only
             when the error model predicts less error than the unstretched
             packing. 1 = off. report["repack"]["stretch"] says what happened.
-        triangle_stretch: >= 1 (opt-in; 1 = off): after the repack, each
-            triangle whose light changes run one way is stretched across
-            them by up to this and squeezed along them, its area kept, the
-            chart's triangles fitted to those shapes together, and the
-            charts packed again at their sizes (lmrefine.stretch
-            .triangle_stretch; docs/refiner.md, "Triangle stretch"). Kept
-            when that layout passes the checks and keeps 90% of the texel
-            area; report["triangle_stretch"] says what happened (None when
-            off).
+        triangle_stretch: in [1, 16]; with repack and a lightmap, after the
+            repack each triangle whose light changes run one way is
+            stretched across them by up to this and squeezed along them, its
+            area kept, the chart's triangles fitted to those shapes
+            together, and the charts packed again at their sizes
+            (lmrefine.stretch.triangle_stretch; docs/refiner.md, "Triangle
+            stretch"). Kept when that layout passes the checks and the
+            chart model predicts less edge error for it, the packing's loss
+            of scale counted. 1 = off. report["triangle_stretch"] says what
+            happened (None when off, or when the repack is).
         positions: (N, 3) the 3-D position of each UV (the uvs' indexing),
             or None. With positions and rechart, a source layout that gives
             the refiner no room (rechart_route.layout_room: one chart per
@@ -340,6 +346,10 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
                "world_areas": world_areas, "max_stretch": max_stretch, "triangle_stretch": triangle_stretch}
     if not (isinstance(rechart, (bool, np.bool_)) or (isinstance(rechart, str) and rechart == "always")):
         raise TypeError(f"rechart must be True, False or 'always', got {rechart!r}")
+    if isinstance(triangle_stretch, (bool, np.bool_)) or not isinstance(triangle_stretch, (int, float, np.number)) \
+            or not 1.0 <= float(triangle_stretch) <= MAX_TRIANGLE_STRETCH:
+        raise ValueError(f"triangle_stretch must be a number in [1, {MAX_TRIANGLE_STRETCH:g}] (1 = none), got "
+                         f"{triangle_stretch!r}")
     for name, value in (("normals", normals), ("polygons", polygons)):
         if value is not None and positions is None:
             raise ValueError(f"{name}= is read only with positions= (the re-chart route): pass the UVs' 3-D "
@@ -584,57 +594,74 @@ def _in_charts(lightmap, uvs, triangles, resolution, padding, mask, gradient, pr
                      world_areas=world_areas)
 
 
-# A triangle-stretched layout packed again must keep at least this share of
-# the unstretched layout's texel area (its stretch is paid for by packing
-# density, which the chart model does not see).
-TRIANGLE_STRETCH_MIN_AREA = 0.9
+# The largest triangle_stretch refine_uvs takes: a triangle 16 times wider
+# across its light changes is 1/16 as long along them.
+MAX_TRIANGLE_STRETCH = 16.0
+# The triangle stretch is kept when the chart model's edge term of its
+# packed layout is below this share of the refined layout's.
+TRIANGLE_STRETCH_REQUIRED_GAIN = 1.0
 
 
 def _triangle_stretched(stage, new_uvs, check):
     """The triangle stretch (stretch.triangle_stretch) of the refined layout
     `new_uvs` (its check_layout report `check`), packed again at its charts'
     sizes: (uvs, check, report), the input's own when the stretch is not
-    kept (it moved nothing, its packing fails the checks or covers less
-    than TRIANGLE_STRETCH_MIN_AREA of the texels)."""
+    kept. A chart of the packed layout that fails the checks (where it did
+    not in `new_uvs`) keeps less of its stretch, and the charts are fitted
+    and packed again; the layout is kept when it passes and the chart
+    model's edge term (stretch.triangle_edge_error: the stretch against the
+    packing's loss of scale) is below TRIANGLE_STRETCH_REQUIRED_GAIN."""
     from . import stretch
 
-    factor = stage.options["triangle_stretch"]
-    if isinstance(factor, (bool, np.bool_)) or not isinstance(factor, (int, float, np.number)) \
-            or not 1.0 <= float(factor) < np.inf:
-        raise ValueError(f"triangle_stretch must be a finite number >= 1 (1 = none), got {factor!r}")
+    factor = stage.options["triangle_stretch"]  # checked by refine_uvs
     report = {"used": False, "max_stretch": float(factor)}
-    if stage.gradient_given is not None or stage.hold:
-        report["reason"] = ("a gradient map was given instead of a lightmap" if stage.gradient_given is not None
-                            else "the layout is held (its light steps lie on texel boundaries)")
+    if stage.gradient_given is not None:
+        report["reason"] = "a gradient map was given instead of a lightmap"
         return new_uvs, check, report
     triangles, shape, padding = stage.triangles, stage.shape, _pack_padding(stage.padding, stage.original)
-    charts = _native.find_charts(new_uvs, triangles, tolerance=CHART_TOLERANCE)
-    stretched, figures = stretch.triangle_stretch(stage.lightmap, stage.mask, stage.uvs, new_uvs, triangles, charts,
-                                                  shape, float(factor))
-    report.update(figures)
-    if np.array_equal(stretched, new_uvs):
-        report["reason"] = "no triangle holds light changes that run one way"
-        return new_uvs, check, report
-    try:
-        packed, pack_report = pack_charts(stretched, triangles, charts, None, shape, padding,
-                                          progress=allocation._reports_done(stage.progress))
-    except ValueError as error:
-        report["reason"] = f"the stretched charts do not pack ({error})"
-        return new_uvs, check, report
-    area = float(np.abs(metrics.uv_areas(packed, triangles)).sum())
-    area_before = float(np.abs(metrics.uv_areas(new_uvs, triangles)).sum())
-    report["texel_area"] = area / max(area_before, 1e-300)
-    packed_check = _native.check_layout(packed, triangles, shape, stage.padding)
-    worse = backoff.failures(packed_check, stage.original, stage.padding)
-    if worse:
+    checker = _native.LayoutChecker(new_uvs, triangles, shape, stage.padding)
+    charts = checker.charts
+    failing_before = set(checker.check(failing_charts=True)["failing_charts"].tolist())
+    kept = None
+    for _ in range(len(stretch.TRIANGLE_BACKOFF) + 1):
+        stretched, kept, figures, model = stretch.triangle_stretch(
+            stage.lightmap, stage.mask, stage.uvs, new_uvs, triangles, charts, shape, float(factor), kept)
+        report.update(figures)
+        if np.array_equal(stretched, new_uvs):
+            report["reason"] = "no triangle holds light changes that run one way"
+            return new_uvs, check, report
+        try:
+            packed, _ = pack_charts(stretched, triangles, charts, None, shape, padding,
+                                    progress=allocation._reports_done(stage.progress))
+        except ValueError as error:
+            report["reason"] = f"the stretched charts do not pack ({error})"
+            return new_uvs, check, report
+        packed_check = checker.check(packed, failing_charts=True)
+        failing = set(packed_check.pop("failing_charts").tolist()) - failing_before
+        worse = backoff.failures(packed_check, stage.original, stage.padding)
+        if worse == ["overlapping"] and not failing:
+            worse = []  # counted in texels: a chart that overlapped itself before may count a few more
+        if not worse:
+            break
         report["reason"] = f"the stretched layout failed {', '.join(worse)}"
-    elif report["texel_area"] < TRIANGLE_STRETCH_MIN_AREA:
-        report["reason"] = (f"packed again the stretched charts keep {report['texel_area']:.0%} of the texels "
-                            f"(needed: {TRIANGLE_STRETCH_MIN_AREA:.0%})")
+        backing = np.array(sorted(failing), np.int64)
+        if not len(backing) or not (kept[backing] > 0).any():
+            return new_uvs, check, report
+        kept[backing] = stretch.smaller_share(kept[backing])
     else:
-        report["used"] = True
-        return packed, packed_check, report
-    return new_uvs, check, report
+        return new_uvs, check, report
+    report.pop("reason", None)
+    report.update(figures)
+    report["texel_area"] = float(metrics.uv_areas(packed, triangles).sum() /
+                                 max(metrics.uv_areas(new_uvs, triangles).sum(), 1e-300))
+    report["predicted_edge_error"] = stretch.triangle_edge_error(model, new_uvs, packed, triangles)
+    if report["predicted_edge_error"] >= TRIANGLE_STRETCH_REQUIRED_GAIN:
+        report["reason"] = (f"the error model predicts {report['predicted_edge_error']:.3f} of the refined layout's "
+                            f"edge error once packed again (needed: below {TRIANGLE_STRETCH_REQUIRED_GAIN:g})")
+        return new_uvs, check, report
+    report["used"] = True
+    check = _native.check_layout(packed, triangles, shape, stage.padding)
+    return packed, check, report
 
 
 def _pack_padding(padding, original):
@@ -702,9 +729,10 @@ def _repacked(stage):
                          f"{repack_report['padded_utilisation_after']:.0%} full with its gutters "
                          f"(the input: {repack_report['padded_utilisation_before']:.0%})")
         timings["repack"] = time.perf_counter() - clock
-    triangle_report = None
-    if options["triangle_stretch"] != 1.0:
+    triangle_report, unstretched = None, None
+    if options["triangle_stretch"] != 1.0 and repack and strength > 0 and not stage.hold:
         clock = time.perf_counter()
+        unstretched = new_uvs
         new_uvs, check, triangle_report = _triangle_stretched(stage, new_uvs, check)
         if not triangle_report["used"]:
             notes.append(f"triangle stretch not used: {triangle_report['reason']}")
@@ -754,7 +782,9 @@ def _repacked(stage):
         "repack": repack_report,
         "triangle_stretch": triangle_report,
     }
-    return RefineResult(uvs=new_uvs, grid=grid, report=report), scalar_energy, mask
+    kept_stretch = triangle_report is not None and triangle_report["used"]
+    return (RefineResult(uvs=new_uvs, grid=grid, report=report, unstretched_uvs=unstretched if kept_stretch else None),
+            scalar_energy, mask)
 
 
 def layout_figures(lightmap, old_uvs, new_uvs, triangles, wavelet="d4"):

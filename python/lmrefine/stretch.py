@@ -25,6 +25,14 @@ packing's and it packs about as densely as the input. When it does not
 pack densely enough, the stretched charts that a stretch along a diagonal
 sheared are turned to their smallest boxes (`turn_to_smallest_boxes`) and
 packed once more, judged by the same rules.
+
+The triangle stretch (`triangle_stretch`, called by refine_uvs after the
+repack) does the same per triangle: each triangle's tensor, averaged with
+its neighbours', gives its own stretch and direction; the chart's
+triangles are fitted to those shapes together (lmrefine._native._fit_shapes,
+least squares), the charts packed again, and `triangle_edge_error` (the
+same edge term, per triangle, the packing's scale included) judges it
+(docs/refiner.md, "Triangle stretch").
 """
 
 import numpy as np
@@ -276,12 +284,15 @@ def _signed_areas(uvs, triangles):
 
 
 def triangle_targets(tensors, uvs, triangles, resolution, max_stretch):
-    """(T,) stretch a >= 1 and (T, 2, 2) target maps a e1 e1^T + e2 e2^T / a
-    (area kept: wider across the light changes, narrower along them) from
-    per-triangle structure tensors in the frame of `uvs`: the model's best
-    stretch (l1 / l2)^(1/4) (stretch_factors), bounded by `max_stretch` and
-    ramped down with the light changes per texel below the
-    TRIANGLE_STRENGTH_QUANTILE-th percentile."""
+    """Per triangle, from its structure tensor in the frame of `uvs`: the
+    stretch a >= 1 (T,), the target map a e1 e1^T + e2 e2^T / a (T, 2, 2)
+    (area kept: wider across the light changes, narrower along them), the
+    direction e1 (T, 2), the share of its light changes across e1 and its
+    light changes sqrt(l1) + sqrt(l2) (the chart stretch's weights, per
+    triangle). The stretch is the model's best, (l1 / l2)^(1/4)
+    (stretch_factors), bounded by `max_stretch` and ramped down with the
+    light changes per texel below the TRIANGLE_STRENGTH_QUANTILE-th
+    percentile."""
     height, width = resolution
     values, vectors = np.linalg.eigh(tensors)
     low, high = np.maximum(values[:, 0], 0.0), np.maximum(values[:, 1], 0.0)
@@ -297,32 +308,37 @@ def triangle_targets(tensors, uvs, triangles, resolution, max_stretch):
     across, along = vectors[:, :, 1], vectors[:, :, 0]
     targets = (factor[:, None, None] * across[:, :, None] * across[:, None, :]
                + (1.0 / factor)[:, None, None] * along[:, :, None] * along[:, None, :])
-    return factor, targets
+    roots = np.sqrt(high) + np.sqrt(low)
+    share = np.where(roots > 0, np.sqrt(high) / np.maximum(roots, 1e-300), 0.5)
+    return factor, targets, across, share, roots
 
 
-def triangle_stretch(lightmap, mask, source_uvs, uvs, triangles, charts, resolution, max_stretch):
+def triangle_stretch(lightmap, mask, source_uvs, uvs, triangles, charts, resolution, max_stretch, kept=None):
     """`uvs` with each triangle stretched across the light changes of
     `lightmap` (baked on `source_uvs`) and squeezed along them, the chart's
-    triangles fitted to those shapes together (lmrefine._native._fit_shapes);
-    a chart that would flip a triangle keeps less of the stretch
-    (TRIANGLE_BACKOFF), none at the last. The charts stay where they were
-    and need packing again. Returns (uvs, report)."""
+    triangles fitted to those shapes together (lmrefine._native._fit_shapes).
+    `kept`: the share of its stretch each chart may keep (C,), 1 for all by
+    default; a chart that would flip a triangle keeps the next smaller share
+    of TRIANGLE_BACKOFF, none after the last. The charts stay where they were
+    and need packing again. Returns (uvs, kept shares (C,), report, model:
+    the per-triangle `direction`, `share` and `weight` triangle_edge_error
+    reads)."""
     triangles = np.asarray(triangles)
     charts = np.asarray(charts)
     count = int(charts.max()) + 1 if len(charts) else 0
+    kept = np.ones(count) if kept is None else np.asarray(kept, np.float64).copy()
     vertex, vertices = _welded(uvs, triangles, charts)
     vertex_triangles = vertex[triangles]
     tensors = _smoothed(triangle_tensors(lightmap, mask, source_uvs, uvs, triangles), vertex_triangles, vertices,
                         TRIANGLE_SMOOTHING)
-    factor, targets = triangle_targets(tensors, uvs, triangles, resolution, max_stretch)
+    factor, targets, direction, share, weight = triangle_targets(tensors, uvs, triangles, resolution, max_stretch)
     start = np.zeros((vertices, 2))
     start[vertex] = np.asarray(uvs, np.float64)
     before = _signed_areas(uvs, triangles)
-    kept = np.ones(count)  # the share of its stretch each chart keeps
     identity = np.eye(2)
     out = np.asarray(uvs, np.float64).copy()
-    for share in TRIANGLE_BACKOFF:
-        trying = kept == share
+    while True:
+        trying = kept > 0
         if not trying.any():
             break
         scale = kept[charts][:, None, None]
@@ -335,10 +351,46 @@ def triangle_stretch(lightmap, mask, source_uvs, uvs, triangles, charts, resolut
         corner_good = np.zeros(len(uvs), bool)
         corner_good[triangles.ravel()] = np.repeat(good[charts], 3)
         out[corner_good] = fitted[corner_good]
-        following = TRIANGLE_BACKOFF.index(share) + 1
-        kept[trying & flipped] = TRIANGLE_BACKOFF[following] if following < len(TRIANGLE_BACKOFF) else 0.0
+        if not (trying & flipped).any():
+            break
+        kept[trying & flipped] = smaller_share(kept[trying & flipped])
     stretched = factor > 1.0
     report = {"triangles_stretched": int(stretched.sum()), "largest_stretch": float(factor.max(initial=1.0)),
               "mean_stretch": float(factor[stretched].mean()) if stretched.any() else 1.0,
               "charts_backed_off": int(((kept > 0) & (kept < 1)).sum()), "charts_kept_shape": int((kept == 0).sum())}
-    return out.astype(np.asarray(uvs).dtype), report
+    return out.astype(np.asarray(uvs).dtype), kept, report, {"direction": direction, "share": share,
+                                                            "weight": weight}
+
+
+def smaller_share(shares):
+    """The next share of TRIANGLE_BACKOFF below each of `shares` (0 after the last)."""
+    steps = np.array(TRIANGLE_BACKOFF + (0.0,))
+    return np.array([steps[steps < share].max(initial=0.0) for share in np.atleast_1d(shares)])
+
+
+def triangle_edge_error(model, before_uvs, after_uvs, triangles):
+    """The chart model's edge term of a layout `after_uvs` made from
+    `before_uvs` (the same triangles, each an affine image), relative to
+    `before_uvs`'s: each triangle's light changes split into `share` across
+    its `direction` e1 and the rest along e2, each falling with the texel
+    size across it, weighted by the triangle's light changes: sum w (s / |A
+    e1| + (1 - s) / |A e2|) / sum w, A the triangle's map before -> after.
+    1.0 = the same; the packing's global scale is in A."""
+    before = np.asarray(before_uvs, np.float64)[triangles]
+    after = np.asarray(after_uvs, np.float64)[triangles]
+    edges_before = np.stack([before[:, 1] - before[:, 0], before[:, 2] - before[:, 0]], -1)
+    edges_after = np.stack([after[:, 1] - after[:, 0], after[:, 2] - after[:, 0]], -1)
+    det = edges_before[:, 0, 0] * edges_before[:, 1, 1] - edges_before[:, 0, 1] * edges_before[:, 1, 0]
+    scale = np.abs(edges_before).max(axis=(1, 2))
+    weight = np.asarray(model["weight"], np.float64)
+    good = (np.abs(det) > 1e-12 * scale ** 2) & (weight > 0)
+    if not good.any():
+        return 1.0
+    maps = edges_after[good] @ np.linalg.inv(edges_before[good])
+    e1 = np.asarray(model["direction"], np.float64)[good]
+    e2 = np.stack([-e1[:, 1], e1[:, 0]], -1)
+    across = np.linalg.norm(np.einsum("tij,tj->ti", maps, e1), axis=1)
+    along = np.linalg.norm(np.einsum("tij,tj->ti", maps, e2), axis=1)
+    share = np.asarray(model["share"], np.float64)[good]
+    terms = share / np.maximum(across, 1e-12) + (1.0 - share) / np.maximum(along, 1e-12)
+    return float((weight[good] * terms).sum() / weight[good].sum())

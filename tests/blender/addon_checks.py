@@ -1399,13 +1399,14 @@ def tessellation_refused_where_it_would_change_more():
 def stretch_across_stripes():
     """The beams' shadows are stripes across x on two tiles: the panel and the message say how many charts
     were stretched, and the refined map shows it: on the striped tiles a texel step along x covers less
-    of the floor than one along y, where the source map treated both alike."""
+    of the floor than one along y, where the source map treated both alike. The same with the chart
+    stretch off and Triangle Stretch on (key "triangle")."""
     scenes.striped_scene()
     register()
     facts = {}
-    for max_stretch in (2.0, 1.0):
+    for key, max_stretch, triangle_stretch in (("2.0", 2.0, 1.0), ("1.0", 1.0, 1.0), ("triangle", 1.0, 2.0)):
         settings(resolution=128, padding=2, samples=4, first_lightmap='EMBREE', backend='EMBREE',
-                 bake_passes={'DIRECT'}, max_stretch=max_stretch)
+                 bake_passes={'DIRECT'}, max_stretch=max_stretch, triangle_stretch=triangle_stretch)
         outcome, message = refine()
         result = bpy.context.scene.lmrefine.result
         obj = bpy.data.objects["Tiles"]
@@ -1421,8 +1422,9 @@ def stretch_across_stripes():
                                            128)
             after = metrics.texels_across(corners[striped], refined[layout.triangles[striped]], triangle, d, 128)
             gains[axis] = float(np.median(after / before))
-        facts[str(max_stretch)] = {
+        facts[key] = {
             "outcome": outcome, "message": message, "panel_stretched": result.stretched,
+            "panel_stretched_triangles": result.stretched_triangles,
             "result_message": result.message, "gains": gains,
             "valid": bool(lmrefine.check_layout(refined, layout.triangles, 128, padding=2)["valid"])}
     return facts

@@ -277,7 +277,8 @@ def case_refine_uvs(lm, rng):
               "max_magnification": as_number, "min_shrink": as_number, "edge_shrink": as_number,
               "delta": as_number, "passes": as_number, "border": as_string, "directional": as_number,
               "wavelet": as_string, "diffusion": as_number, "max_steps": as_number, "progress": as_progress,
-              "repack": as_number, "min_chart_scale": as_number, "max_chart_scale": as_number}
+              "repack": as_number, "min_chart_scale": as_number, "max_chart_scale": as_number,
+              "max_stretch": as_number, "triangle_stretch": as_number}
     kwargs, chosen = mutate(kwargs, rng, makers)
     layout = (kwargs["uvs"], kwargs["triangles"], kwargs["resolution"], kwargs["padding"])
     return Case("refine_uvs", _call(lm.refine_uvs, dict(kwargs)), list(kwargs.values()), layout=layout,

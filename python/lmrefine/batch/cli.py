@@ -10,7 +10,8 @@ from .runner import BatchOptions, run_batch
 # the add-on stays the one judge of its own flags; anything after `--` is
 # passed too.
 VALUE_FLAGS = ("--objects", "--source-layer", "--resolution", "--padding", "--first-lightmap", "--lightmap-image",
-               "--driving-pass", "--strength", "--max-magnification", "--min-shrink", "--max-stretch", "--delta",
+               "--driving-pass", "--strength", "--max-magnification", "--min-shrink", "--max-stretch",
+               "--triangle-stretch", "--delta",
                "--passes",
                "--border", "--wavelet", "--backend", "--bake-passes", "--samples", "--stages")
 SWITCH_FLAGS = ("--directional", "--no-directional", "--preview", "--no-preview", "--no-tessellate", "--rechart",
