@@ -704,6 +704,7 @@ def test_charts_stretched_across_stripes_are_reported_and_in_the_map(facts):
     assert f"{local['panel_stretched_triangles']} triangle(s) stretched across their light changes" in \
         local["result_message"]
     assert local["gains"]["x"] > 1.2 * local["gains"]["y"], local["gains"]
+    assert re.search(r"texels at light changes [0-9.]+x their area \([0-9.]+x across them\)", local["result_message"])
 
 
 def test_stages_refine_again_and_report_the_stages_kept(facts):

@@ -176,3 +176,28 @@ def test_triangle_edge_error_of_simple_maps():
     assert stretch.triangle_edge_error(even, uvs, stretched, tris) == pytest.approx((0.5 + 2.0) / 2)
     # Without light changes nothing counts: 1.
     assert stretch.triangle_edge_error({**model, "weight": np.zeros(count)}, uvs, stretched, tris) == 1.0
+
+
+def test_widening_across_the_light_changes_is_measured_on_the_output():
+    """report["transition_widening_across"]: the texels across the light changes at the triangles there,
+    new over old; a stretch that keeps the area raises it, not the area widening."""
+    from lmrefine import refine
+
+    resolution = 128
+    uvs, tris = plane(32, margin=0.05)
+    lightmap = stripe_lightmap(resolution)
+    centre = np.array([0.5, 0.5], np.float32)
+    stretched = (uvs - centre) * np.array([1.6, 1 / 1.6], np.float32) * 0.6 + centre  # across the stripe (u)
+    figures = refine.layout_figures(lightmap, uvs, stretched, tris)
+    assert figures["transition_widening"] == pytest.approx(0.36, rel=1e-3)
+    assert figures["transition_widening_across"] == pytest.approx(1.6 * 0.6, rel=1e-3)
+    turned = (uvs - centre) * np.array([1 / 1.6, 1.6], np.float32) * 0.6 + centre  # along it
+    assert refine.layout_figures(lightmap, uvs, turned, tris)["transition_widening_across"] == \
+        pytest.approx(0.6 / 1.6, rel=1e-3)
+    on = lmrefine.refine_uvs(lightmap, uvs, tris, resolution).report
+    off = lmrefine.refine_uvs(lightmap, uvs, tris, resolution, triangle_stretch=1.0).report
+    assert on["triangle_stretch"]["used"]
+    assert on["transition_widening_across"] > off["transition_widening_across"]
+    assert on["transition_widening"] < off["transition_widening"]  # the stretch trades area for shape
+    assert lmrefine.refine_uvs(None, uvs, tris, resolution, gradient=np.ones((resolution, resolution, 4),
+                               np.float32)).report["transition_widening_across"] is None

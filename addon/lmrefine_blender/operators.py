@@ -49,8 +49,11 @@ def _report_outcome(operator, context, outcome, seconds):
                           f"source maps ({seconds:.1f}s; the warnings say why)")
     else:
         still = len(outcome.objects) - summary["moved"]
+        across = summary["transition_widening_across"]
         result.message = (f"Refined {len(outcome.objects)} object(s) in {seconds:.1f}s: texels at light changes "
-                          f"{summary['transition_widening']:.2f}x their area, a triangle's texels "
+                          f"{summary['transition_widening']:.2f}x their area"
+                          + (f" ({across:.2f}x across them)" if across is not None else "")
+                          + ", a triangle's texels "
                           f"{summary['density_min']:.2f}x to {summary['density_max']:.2f}x (chart repack included)"
                           + (f"; {still} did not move (see warnings)" if still else ""))
     result.message += "; " + images_sentence(summary)

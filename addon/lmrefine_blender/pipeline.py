@@ -118,6 +118,8 @@ class Outcome:
         reports = list(self.reports.values())
         # Measured on the refined layouts (refine_uvs's report); objects that did not move count as 1x.
         widening = float(np.mean([r["transition_widening"] for r in reports]))
+        # Texels across the light changes there (a stretch raises it while it keeps the area).
+        across = [r["transition_widening_across"] for r in reports if r.get("transition_widening_across") is not None]
         low = min(r["density_min"] for r in reports)
         high = max(r["density_max"] for r in reports)
         moved = sum(len(self.atlases.get(name, [name])) for name, report in self.reports.items()
@@ -136,6 +138,7 @@ class Outcome:
         return {
             "moved": moved,
             "transition_widening": widening,
+            "transition_widening_across": float(np.mean(across)) if across else None,
             "density_min": float(low),
             "density_max": float(high),
             "limited_by": ", ".join(sorted(limits)),

@@ -13,7 +13,7 @@ import numpy as np
 
 from . import _native, alignment, allocation, backoff, metrics, rechart_route
 from .folds import find_folds
-from .packer import CHART_TOLERANCE, pack_charts
+from .packer import pack_charts
 
 BORDER_MODES = ("same", "border_rule", "extra_ring")
 
@@ -404,7 +404,8 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
         if rechart == "always":
             info["always"] = True
         if recharted is not None:
-            result = _recharted_result(recharted, stage.original, uvs, triangles, energy, source_mask, info)
+            result = _recharted_result(recharted, stage.original, uvs, triangles, energy, source_mask, info,
+                                       lightmap if gradient is None else None)
     if not info["used"]:
         result = source_route()
     if not info["used"] and (opened or folded) and rechart:
@@ -443,12 +444,12 @@ def _source_lowest(stage):
     return lowest
 
 
-def _recharted_result(recharted, original, uvs, triangles, energy, mask, info):
+def _recharted_result(recharted, original, uvs, triangles, energy, mask, info, lightmap):
     """The re-charted refinement's result, its figures measured against the
-    source layout (the user's, `original` its check), its notes saying why
-    it was re-charted."""
+    source layout (the user's, `original` its check; `lightmap` its first
+    bake, or None), its notes saying why it was re-charted."""
     report = recharted.report
-    report.update(_layout_figures(uvs, recharted.uvs, triangles, energy, mask))
+    report.update(_layout_figures(uvs, recharted.uvs, triangles, energy, mask, lightmap))
     room = info["room"]
     notes = [note.replace("nothing moved:", "the re-charted layout's own refinement moved nothing:")
              for note in report["notes"]]
@@ -744,7 +745,8 @@ def _repacked(stage):
     if covered_areas.min() <= min_shrink * 1.001:
         limited_by.append("min_shrink")
     # Every figure is measured on the layout returned (triangle UV areas), not on the grid.
-    figures = _layout_figures(uvs, new_uvs, triangles, scalar_energy, mask)
+    figures = _layout_figures(uvs, new_uvs, triangles, scalar_energy, mask,
+                              stage.lightmap if stage.gradient_given is None else None)
     moved = not np.array_equal(new_uvs, uvs)
     if not moved:
         broke = [kind for kind in limited_by if kind in ("flipped", "overlapping", "gutter", "degenerate", "grid")]
@@ -802,15 +804,16 @@ def layout_figures(lightmap, old_uvs, new_uvs, triangles, wavelet="d4"):
         raise ValueError(f"the lightmap must be an (H, W) or (H, W, C) array, got shape {lightmap.shape}")
     mask = _native.coverage_mask(old_uvs, triangles, shape)
     gradient = _gradient(lightmap, None, mask, shape, wavelet, None)
-    return _layout_figures(old_uvs, new_uvs, triangles, gradient.sum(axis=2), mask)
+    return _layout_figures(old_uvs, new_uvs, triangles, gradient.sum(axis=2), mask, lightmap)
 
 
-def _layout_figures(old, new, triangles, energy, mask):
+def _layout_figures(old, new, triangles, energy, mask, lightmap=None):
     density = _triangle_density(old, new, triangles)
     measured = density[np.isfinite(density) & (density > 0)]
     widening, triangle_texels = _transition_figures(old, new, triangles, energy, mask)
     return {
         "transition_widening": widening,
+        "transition_widening_across": _transition_across(old, new, triangles, energy, mask, lightmap),
         "transition_triangle_texels": triangle_texels,
         "density_min": float(measured.min()) if measured.size else 1.0,
         "density_max": float(measured.max()) if measured.size else 1.0,
@@ -830,12 +833,9 @@ def _transition_figures(old, new, triangles, energy, mask):
     median of their texel areas in the input layout (0.0 then): a triangle's
     texels stay evenly spread, so one of many texels keeps a light change
     at the input's texel density whatever the warp does."""
-    covered = energy[mask]
-    if covered.size == 0 or covered.max() <= 0 or len(triangles) == 0:
+    at_change = _at_light_changes(old, triangles, energy, mask)
+    if at_change is None:
         return 1.0, 0.0
-    threshold = max(float(np.percentile(covered, 90.0)), np.finfo(np.float32).tiny)
-    rows, cols = allocation.triangle_texels(old, triangles, energy.shape)
-    at_change = (mask[rows, cols] & (energy[rows, cols] >= threshold)).any(axis=1)
     # Unsigned: a layout may wind a chart either way (the re-chart route's
     # charts need not keep the source's), and texels count the same.
     before = np.abs(allocation.signed_areas(old, triangles)[at_change])
@@ -845,6 +845,48 @@ def _transition_figures(old, new, triangles, energy, mask):
         return 1.0, 0.0
     texels = float(np.median(before[keep])) * energy.shape[0] * energy.shape[1]
     return float(after[keep].sum() / before[keep].sum()), texels
+
+
+def _at_light_changes(old, triangles, energy, mask):
+    """(T,) bool: the triangles at a light change, as _transition_figures
+    defines them; None when no covered texel has gradient energy."""
+    covered = energy[mask]
+    if covered.size == 0 or covered.max() <= 0 or len(triangles) == 0:
+        return None
+    threshold = max(float(np.percentile(covered, 90.0)), np.finfo(np.float32).tiny)
+    rows, cols = allocation.triangle_texels(old, triangles, energy.shape)
+    return (mask[rows, cols] & (energy[rows, cols] >= threshold)).any(axis=1)
+
+
+def _transition_across(old, new, triangles, energy, mask, lightmap):
+    """The texels across the light changes at the triangles at a light
+    change (_transition_figures' triangles), new over old: each triangle's
+    linear scale |A e1| along the main direction e1 of its first bake's
+    luminance gradient (stretch.triangle_tensors in the input layout; A
+    its map input -> output), averaged with the input areas as weights.
+    The figure a stretch raises while it keeps the area (1.0 when nothing
+    is at a light change; None without a lightmap)."""
+    from . import stretch
+
+    if lightmap is None:
+        return None
+    at_change = _at_light_changes(old, triangles, energy, mask)
+    if at_change is None or not at_change.any():
+        return 1.0
+    tensors = stretch.triangle_tensors(lightmap, mask, old, old, triangles[at_change])
+    values, vectors = np.linalg.eigh(tensors)
+    before = np.asarray(old, np.float64)[triangles[at_change]]
+    after = np.asarray(new, np.float64)[triangles[at_change]]
+    edges_before = np.stack([before[:, 1] - before[:, 0], before[:, 2] - before[:, 0]], -1)
+    edges_after = np.stack([after[:, 1] - after[:, 0], after[:, 2] - after[:, 0]], -1)
+    area = 0.5 * np.abs(np.linalg.det(edges_before))
+    scale = np.abs(edges_before).max(axis=(1, 2))
+    good = (values[:, 1] > 0) & (area > 1e-12 * scale ** 2)
+    if not good.any():
+        return 1.0
+    maps = edges_after[good] @ np.linalg.inv(edges_before[good])
+    across = np.linalg.norm(np.einsum("tij,tj->ti", maps, vectors[good, :, 1]), axis=1)
+    return float((across * area[good]).sum() / area[good].sum())
 
 
 def _triangle_density(old, new, triangles):
