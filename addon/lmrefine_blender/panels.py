@@ -85,8 +85,7 @@ class LMREFINE_PT_refine_options(_LightmapTab, bpy.types.Panel):
         settings = context.scene.lmrefine
         column = self.split_layout().column()
         for name in ("strength", "max_magnification", "min_shrink", "max_stretch", "triangle_stretch", "delta",
-                     "passes", "border",
-                     "wavelet", "directional"):
+                     "passes", "border", "wavelet", "directional"):
             column.prop(settings, name)
         column.prop(settings, "rechart", text="Re-chart if Better")
 
@@ -183,9 +182,11 @@ class LMREFINE_PT_refine_result(_LightmapTab, bpy.types.Panel):
         rows.append((f"Re-charted: {result.recharted}" if recharted else "Re-charted: none", 'UV_DATA',
                      recharted))
         stretched = result.valid and result.stretched > 0
-        rows.append((f"Stretched: {result.stretched} charts" if stretched else "Stretched: none", 'FULLSCREEN_ENTER',
-                     stretched))
-        if result.valid and result.stretched_triangles > 0:
+        triangles = result.valid and result.stretched_triangles > 0
+        if stretched or not triangles:  # "none" only when neither stretch was kept
+            rows.append((f"Stretched: {result.stretched} charts" if stretched else "Stretched: none",
+                         'FULLSCREEN_ENTER', stretched))
+        if triangles:
             rows.append((f"Stretched: {result.stretched_triangles} triangles", 'FULLSCREEN_ENTER', True))
         tessellated = result.valid and result.tessellated
         rows.append((f"New vertices: {result.vertices_added}" if tessellated else "Tessellation: off",

@@ -132,7 +132,7 @@ class Outcome:
         # Charts the output layouts stretched across their light changes (refine_uvs' chart stretch).
         stretches = [(report.get("repack") or {}).get("stretch") or {} for report in reports]
         stretches = [s for s in stretches if s.get("used")]
-        # Triangles the output layouts stretched (refine_uvs' triangle stretch, opt-in).
+        # Triangles the output layouts stretched (refine_uvs' triangle stretch).
         triangles = [report.get("triangle_stretch") or {} for report in reports]
         triangles = [t for t in triangles if t.get("used")]
         return {

@@ -100,7 +100,7 @@ class LMREFINE_PG_result(bpy.types.PropertyGroup):
                            default=0)
     stretched_triangles: IntProperty(name="Stretched Triangles",
                                      description="Triangles of the refined maps stretched across the light changes "
-                                     "inside them (Triangle Stretch), summed over the maps", default=0)
+                                     "inside them (Tri Stretch), summed over the maps", default=0)
 
 
 class LMREFINE_PG_settings(bpy.types.PropertyGroup):
