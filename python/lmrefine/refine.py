@@ -652,7 +652,6 @@ def _triangle_stretched(stage, new_uvs, check):
     else:
         return new_uvs, check, report
     report.pop("reason", None)
-    report.update(figures)
     report["texel_area"] = float(metrics.uv_areas(packed, triangles).sum() /
                                  max(metrics.uv_areas(new_uvs, triangles).sum(), 1e-300))
     report["predicted_edge_error"] = stretch.triangle_edge_error(model, new_uvs, packed, triangles)
@@ -810,10 +809,11 @@ def layout_figures(lightmap, old_uvs, new_uvs, triangles, wavelet="d4"):
 def _layout_figures(old, new, triangles, energy, mask, lightmap=None):
     density = _triangle_density(old, new, triangles)
     measured = density[np.isfinite(density) & (density > 0)]
-    widening, triangle_texels = _transition_figures(old, new, triangles, energy, mask)
+    at_change = _at_light_changes(old, triangles, energy, mask)
+    widening, triangle_texels = _transition_figures(old, new, triangles, energy, at_change)
     return {
         "transition_widening": widening,
-        "transition_widening_across": _transition_across(old, new, triangles, energy, mask, lightmap),
+        "transition_widening_across": _transition_across(old, new, triangles, mask, at_change, lightmap),
         "transition_triangle_texels": triangle_texels,
         "density_min": float(measured.min()) if measured.size else 1.0,
         "density_max": float(measured.max()) if measured.size else 1.0,
@@ -821,7 +821,7 @@ def _layout_figures(old, new, triangles, energy, mask, lightmap=None):
     }
 
 
-def _transition_figures(old, new, triangles, energy, mask):
+def _transition_figures(old, new, triangles, energy, at_change):
     """(transition widening, median texels of a triangle at light changes).
 
     A triangle is at a light change when one of four points inside it (its
@@ -832,8 +832,8 @@ def _transition_figures(old, new, triangles, energy, mask):
     gradient energy or no triangle lies on one); the second figure is the
     median of their texel areas in the input layout (0.0 then): a triangle's
     texels stay evenly spread, so one of many texels keeps a light change
-    at the input's texel density whatever the warp does."""
-    at_change = _at_light_changes(old, triangles, energy, mask)
+    at the input's texel density whatever the warp does. `at_change`:
+    _at_light_changes' triangles."""
     if at_change is None:
         return 1.0, 0.0
     # Unsigned: a layout may wind a chart either way (the re-chart route's
@@ -858,35 +858,31 @@ def _at_light_changes(old, triangles, energy, mask):
     return (mask[rows, cols] & (energy[rows, cols] >= threshold)).any(axis=1)
 
 
-def _transition_across(old, new, triangles, energy, mask, lightmap):
+def _transition_across(old, new, triangles, mask, at_change, lightmap):
     """The texels across the light changes at the triangles at a light
     change (_transition_figures' triangles), new over old: each triangle's
     linear scale |A e1| along the main direction e1 of its first bake's
     luminance gradient (stretch.triangle_tensors in the input layout; A
     its map input -> output), averaged with the input areas as weights.
     The figure a stretch raises while it keeps the area (1.0 when nothing
-    is at a light change; None without a lightmap)."""
+    is at a light change; None without a lightmap). `at_change`:
+    _at_light_changes' triangles."""
     from . import stretch
 
     if lightmap is None:
         return None
-    at_change = _at_light_changes(old, triangles, energy, mask)
     if at_change is None or not at_change.any():
         return 1.0
-    tensors = stretch.triangle_tensors(lightmap, mask, old, old, triangles[at_change])
-    values, vectors = np.linalg.eigh(tensors)
-    before = np.asarray(old, np.float64)[triangles[at_change]]
-    after = np.asarray(new, np.float64)[triangles[at_change]]
-    edges_before = np.stack([before[:, 1] - before[:, 0], before[:, 2] - before[:, 0]], -1)
-    edges_after = np.stack([after[:, 1] - after[:, 0], after[:, 2] - after[:, 0]], -1)
-    area = 0.5 * np.abs(np.linalg.det(edges_before))
-    scale = np.abs(edges_before).max(axis=(1, 2))
-    good = (values[:, 1] > 0) & (area > 1e-12 * scale ** 2)
+    changing = triangles[at_change]
+    values, vectors = np.linalg.eigh(stretch.triangle_tensors(lightmap, mask, old, old, changing))
+    maps, has_area = stretch.triangle_maps(old, new, changing)
+    lit = values[:, 1] > 0
+    maps, good = maps[lit[has_area]], has_area & lit
     if not good.any():
         return 1.0
-    maps = edges_after[good] @ np.linalg.inv(edges_before[good])
+    area = np.abs(allocation.signed_areas(np.asarray(old), changing))[good]
     across = np.linalg.norm(np.einsum("tij,tj->ti", maps, vectors[good, :, 1]), axis=1)
-    return float((across * area[good]).sum() / area[good].sum())
+    return float((across * area).sum() / area.sum())
 
 
 def _triangle_density(old, new, triangles):

@@ -38,7 +38,7 @@ same edge term, per triangle, the packing's scale included) judges it
 import numpy as np
 
 from . import _native
-from .allocation import texel_luminance, triangle_samples
+from .allocation import signed_areas, texel_luminance, triangle_samples
 
 # A chart is never squeezed to fewer texels across than this (its extent
 # along the squeezed direction in the layout being stretched): bilinear
@@ -277,12 +277,6 @@ def _smoothed(values, vertex_triangles, vertices, rounds):
     return flat.reshape(values.shape)
 
 
-def _signed_areas(uvs, triangles):
-    p = np.asarray(uvs, np.float64)[triangles]
-    e1, e2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
-    return 0.5 * (e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
-
-
 def triangle_targets(tensors, uvs, triangles, resolution, max_stretch):
     """Per triangle, from its structure tensor in the frame of `uvs`: the
     stretch a >= 1 (T,), the target map a e1 e1^T + e2 e2^T / a (T, 2, 2)
@@ -298,7 +292,7 @@ def triangle_targets(tensors, uvs, triangles, resolution, max_stretch):
     low, high = np.maximum(values[:, 0], 0.0), np.maximum(values[:, 1], 0.0)
     with np.errstate(divide="ignore", invalid="ignore"):
         best = np.where(low > 0, (high / np.maximum(low, 1e-300)) ** 0.25, np.inf)
-    texels = np.abs(_signed_areas(uvs, triangles)) * width * height
+    texels = np.abs(signed_areas(uvs, triangles)) * width * height
     strength = np.sqrt((high + low) / np.maximum(texels, 1e-12))
     live = strength[(high > 0) & (texels > 0)]
     reference = float(np.percentile(live, TRIANGLE_STRENGTH_QUANTILE)) if live.size else 0.0
@@ -334,7 +328,7 @@ def triangle_stretch(lightmap, mask, source_uvs, uvs, triangles, charts, resolut
     factor, targets, direction, share, weight = triangle_targets(tensors, uvs, triangles, resolution, max_stretch)
     start = np.zeros((vertices, 2))
     start[vertex] = np.asarray(uvs, np.float64)
-    before = _signed_areas(uvs, triangles)
+    before = signed_areas(uvs, triangles)
     identity = np.eye(2)
     out = np.asarray(uvs, np.float64).copy()
     while True:
@@ -343,7 +337,7 @@ def triangle_stretch(lightmap, mask, source_uvs, uvs, triangles, charts, resolut
             break
         scale = kept[charts][:, None, None]
         fitted = _native._fit_shapes(start, vertex_triangles, identity + scale * (targets - identity))[vertex]
-        after = _signed_areas(fitted, triangles)
+        after = signed_areas(fitted, triangles)
         flipped = np.zeros(count, bool)
         # A triangle without area in the input has no orientation to keep.
         np.logical_or.at(flipped, charts, (before != 0) & ((before > 0) != (after > 0)))
@@ -368,6 +362,19 @@ def smaller_share(shares):
     return np.array([steps[steps < share].max(initial=0.0) for share in np.atleast_1d(shares)])
 
 
+def triangle_maps(before_uvs, after_uvs, triangles):
+    """Each triangle's affine map from layout `before_uvs` to `after_uvs`
+    (the same triangles): (maps (K, 2, 2) of the K triangles with area in
+    `before_uvs`, that mask (T,))."""
+    before = np.asarray(before_uvs, np.float64)[triangles]
+    after = np.asarray(after_uvs, np.float64)[triangles]
+    edges_before = np.stack([before[:, 1] - before[:, 0], before[:, 2] - before[:, 0]], -1)
+    edges_after = np.stack([after[:, 1] - after[:, 0], after[:, 2] - after[:, 0]], -1)
+    det = edges_before[:, 0, 0] * edges_before[:, 1, 1] - edges_before[:, 0, 1] * edges_before[:, 1, 0]
+    good = np.abs(det) > 1e-12 * np.abs(edges_before).max(axis=(1, 2)) ** 2
+    return edges_after[good] @ np.linalg.inv(edges_before[good]), good
+
+
 def triangle_edge_error(model, before_uvs, after_uvs, triangles):
     """The chart model's edge term of a layout `after_uvs` made from
     `before_uvs` (the same triangles, each an affine image), relative to
@@ -376,17 +383,13 @@ def triangle_edge_error(model, before_uvs, after_uvs, triangles):
     size across it, weighted by the triangle's light changes: sum w (s / |A
     e1| + (1 - s) / |A e2|) / sum w, A the triangle's map before -> after.
     1.0 = the same; the packing's global scale is in A."""
-    before = np.asarray(before_uvs, np.float64)[triangles]
-    after = np.asarray(after_uvs, np.float64)[triangles]
-    edges_before = np.stack([before[:, 1] - before[:, 0], before[:, 2] - before[:, 0]], -1)
-    edges_after = np.stack([after[:, 1] - after[:, 0], after[:, 2] - after[:, 0]], -1)
-    det = edges_before[:, 0, 0] * edges_before[:, 1, 1] - edges_before[:, 0, 1] * edges_before[:, 1, 0]
-    scale = np.abs(edges_before).max(axis=(1, 2))
     weight = np.asarray(model["weight"], np.float64)
-    good = (np.abs(det) > 1e-12 * scale ** 2) & (weight > 0)
+    live = weight > 0
+    maps, has_area = triangle_maps(before_uvs, after_uvs, triangles)
+    maps = maps[live[has_area]]
+    good = has_area & live
     if not good.any():
         return 1.0
-    maps = edges_after[good] @ np.linalg.inv(edges_before[good])
     e1 = np.asarray(model["direction"], np.float64)[good]
     e2 = np.stack([-e1[:, 1], e1[:, 0]], -1)
     across = np.linalg.norm(np.einsum("tij,tj->ti", maps, e1), axis=1)
