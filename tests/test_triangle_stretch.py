@@ -7,7 +7,7 @@ import pytest
 
 import lmrefine
 from lmrefine import _native, allocation, stretch
-from layouts import floor_grid, grid_chart, plane
+from layouts import floor_grid, grid_chart, lightmap_pack, plane
 
 
 def fit_shapes_reference(uvs, triangles, targets, anchor=1e-6):
@@ -201,3 +201,66 @@ def test_widening_across_the_light_changes_is_measured_on_the_output():
     assert on["transition_widening"] < off["transition_widening"]  # the stretch trades area for shape
     assert lmrefine.refine_uvs(None, uvs, tris, resolution, gradient=np.ones((resolution, resolution, 4),
                                np.float32)).report["transition_widening_across"] is None
+
+
+def test_chart_gains_sum_the_edge_term_per_chart():
+    uvs, tris = grid_chart(1, (0.0, 0.0), (1.0, 1.0))
+    uvs = np.vstack([uvs, uvs + 2.0]).astype(np.float64)
+    tris = np.vstack([tris, tris + len(tris) * 3])
+    charts = np.array([0, 0, 1, 1])
+    # Every triangle's light changes all across u (share 1), weight 1.
+    model = {"direction": np.tile([1.0, 0.0], (4, 1)), "share": np.ones(4), "weight": np.ones(4)}
+    after = uvs.copy()
+    after[:6, 0] *= 2.0   # chart 0 twice as wide across: its term halves
+    after[6:, 0] = 2.0 + (after[6:, 0] - 2.0) * 0.5  # chart 1 half as wide: its term doubles
+    np.testing.assert_allclose(stretch.chart_gains(model, uvs, after, tris, charts), [2 * 0.5, 2 * -1.0])
+    weights, terms = stretch.triangle_edge_terms(model, uvs, after, tris)
+    assert terms.sum() / weights.sum() == pytest.approx(stretch.triangle_edge_error(model, uvs, after, tris))
+
+
+def test_best_served_subsets_take_the_largest_gains_first():
+    from lmrefine.refine import _best_served
+    gains = np.array([3.0, -1.0, 1.0, 0.5, 0.0])
+    subsets = [np.flatnonzero(s).tolist() for s in _best_served(gains, np.ones(5, bool))]
+    # 100% of the gain: three charts; 75%: two; 50% and 25%: the first alone (listed once).
+    assert subsets == [[0, 2, 3], [0, 2], [0]]
+    assert [np.flatnonzero(s).tolist() for s in _best_served(gains, np.array([0, 1, 1, 1, 1], bool))] == \
+        [[2, 3], [2]]
+    assert _best_served(np.array([-1.0, 0.0]), np.ones(2, bool)) == []
+
+
+def striped_patches(resolution, seed):
+    """Patches of stripes at random angles and periods on a lit map."""
+    rng = np.random.default_rng(seed)
+    y, x = np.mgrid[0:resolution, 0:resolution] + 0.5
+    lightmap = np.ones((resolution, resolution), np.float32)
+    for _ in range(6):
+        angle, period = rng.uniform(0, np.pi), rng.uniform(4, 12)
+        cx, cy, radius = rng.uniform(0, resolution, 2).tolist() + [rng.uniform(15, 50)]
+        inside = (x - cx) ** 2 + (y - cy) ** 2 < radius * radius
+        stripe = np.sin((x * np.cos(angle) + y * np.sin(angle)) * 2 * np.pi / period) > 0.6
+        lightmap[inside & stripe] = 0.1
+    return lightmap
+
+
+def test_the_stretch_of_the_best_served_charts_is_kept_when_every_chart_s_is_not():
+    resolution = 128
+    uvs, tris = lightmap_pack(6, 2, resolution, 4)
+    result = lmrefine.refine_uvs(striped_patches(resolution, 3), uvs, tris, resolution)
+    report = result.report["triangle_stretch"]
+    # Every chart stretched packs too loosely for the model; a few of them do not.
+    assert report["every_chart_edge_error"] >= 1.0
+    assert report["used"] and report["predicted_edge_error"] < 1.0
+    assert lmrefine.check_layout(result.uvs, tris, resolution, 2.0)["valid"]
+    # The charts left out keep their shape: each triangle's map from the
+    # layout before the stretch is one rotation and scale for all of them.
+    maps, good = stretch.triangle_maps(result.unstretched_uvs, result.uvs, tris)
+    charts = _native.LayoutChecker(result.unstretched_uvs, tris, resolution, 2.0).charts[good]
+    singular = np.linalg.svd(maps, compute_uv=False)
+    anisotropy = np.zeros(charts.max() + 1)
+    np.maximum.at(anisotropy, charts, singular[:, 0] / singular[:, 1])
+    stretched = int((anisotropy > 1.01).sum())
+    assert 0 < stretched <= report["charts_stretched"] < len(anisotropy)
+    kept_shape = anisotropy <= 1.01
+    scales = singular[kept_shape[charts], 0]
+    assert np.ptp(scales) < 1e-3 * scales.mean()

@@ -611,7 +611,9 @@ def _triangle_stretched(stage, new_uvs, check):
     not in `new_uvs`) keeps less of its stretch, and the charts are fitted
     and packed again; the layout is kept when it passes and the chart
     model's edge term (stretch.triangle_edge_error: the stretch against the
-    packing's loss of scale) is below TRIANGLE_STRETCH_REQUIRED_GAIN."""
+    packing's loss of scale) is below TRIANGLE_STRETCH_REQUIRED_GAIN. When
+    the stretch of every chart is not, the stretch of the charts it serves
+    best (_best_served) is packed and judged the same way, the best kept."""
     from . import stretch
 
     factor = stage.options["triangle_stretch"]  # checked by refine_uvs
@@ -632,16 +634,10 @@ def _triangle_stretched(stage, new_uvs, check):
             report["reason"] = "no triangle holds light changes that run one way"
             return new_uvs, check, report
         try:
-            packed, _ = pack_charts(stretched, triangles, charts, None, shape, padding,
-                                    progress=allocation._reports_done(stage.progress))
+            packed, worse, failing = _packed_again(stage, checker, failing_before, stretched, padding)
         except ValueError as error:
             report["reason"] = f"the stretched charts do not pack ({error})"
             return new_uvs, check, report
-        packed_check = checker.check(packed, failing_charts=True)
-        failing = set(packed_check.pop("failing_charts").tolist()) - failing_before
-        worse = backoff.failures(packed_check, stage.original, stage.padding)
-        if worse == ["overlapping"] and not failing:
-            worse = []  # counted in texels: a chart that overlapped itself before may count a few more
         if not worse:
             break
         report["reason"] = f"the stretched layout failed {', '.join(worse)}"
@@ -652,16 +648,86 @@ def _triangle_stretched(stage, new_uvs, check):
     else:
         return new_uvs, check, report
     report.pop("reason", None)
+    predicted = stretch.triangle_edge_error(model, new_uvs, packed, triangles)
+    report["every_chart_edge_error"] = predicted
+    if predicted >= TRIANGLE_STRETCH_REQUIRED_GAIN:
+        # The charts that gain least may cost the packing more than they give:
+        # the stretch of fewer charts, those it serves best, is judged too.
+        gains = stretch.chart_gains(model, new_uvs, stretched, triangles, charts)
+        for selected in _best_served(gains, kept > 0):
+            if np.array_equal(selected, kept > 0):
+                continue  # the stretch of every chart, judged above
+            layout = _with_charts(new_uvs, stretched, triangles, charts, selected)
+            try:
+                candidate, worse, _ = _packed_again(stage, checker, failing_before, layout, padding)
+            except ValueError:
+                continue
+            if worse:
+                continue
+            error = stretch.triangle_edge_error(model, new_uvs, candidate, triangles)
+            if error < predicted:
+                packed, predicted, kept = candidate, error, np.where(selected, kept, 0.0)
     report["texel_area"] = float(metrics.uv_areas(packed, triangles).sum() /
                                  max(metrics.uv_areas(new_uvs, triangles).sum(), 1e-300))
-    report["predicted_edge_error"] = stretch.triangle_edge_error(model, new_uvs, packed, triangles)
-    if report["predicted_edge_error"] >= TRIANGLE_STRETCH_REQUIRED_GAIN:
-        report["reason"] = (f"the error model predicts {report['predicted_edge_error']:.3f} of the refined layout's "
+    report["predicted_edge_error"] = predicted
+    if predicted >= TRIANGLE_STRETCH_REQUIRED_GAIN:
+        report["reason"] = (f"the error model predicts {predicted:.3f} of the refined layout's "
                             f"edge error once packed again (needed: below {TRIANGLE_STRETCH_REQUIRED_GAIN:g})")
         return new_uvs, check, report
     report["used"] = True
+    report["charts_stretched"] = int((kept > 0).sum())
+    report.update(stretch.stretch_figures(model["factor"], kept, charts))
     check = _native.check_layout(packed, triangles, shape, stage.padding)
     return packed, check, report
+
+
+def _packed_again(stage, checker, failing_before, layout, padding):
+    """`layout`'s charts (checker.charts) packed again at their sizes: (the
+    packed layout, the checks it fails that the refined layout passed, the
+    charts failing that did not before); ValueError when they do not pack."""
+    packed, _ = pack_charts(layout, stage.triangles, checker.charts, None, stage.shape, padding,
+                            progress=allocation._reports_done(stage.progress))
+    packed_check = checker.check(packed, failing_charts=True)
+    failing = set(packed_check.pop("failing_charts").tolist()) - failing_before
+    worse = backoff.failures(packed_check, stage.original, stage.padding)
+    if worse == ["overlapping"] and not failing:
+        worse = []  # counted in texels: a chart that overlapped itself before may count a few more
+    return packed, worse, failing
+
+
+# When the stretch of every chart is refused, the stretch of the charts it
+# serves best is tried: those holding these shares of its summed gain.
+TRIANGLE_SUBSET_SHARES = (1.0, 0.75, 0.5, 0.25)
+
+
+def _best_served(gains, candidates):
+    """Chart subsets (C,) bool to try the triangle stretch on: of the
+    `candidates` charts whose stretch lowers their edge term (`gains` > 0),
+    the fewest, largest gains first, holding each of TRIANGLE_SUBSET_SHARES
+    of the summed gain; each subset once."""
+    order = np.flatnonzero(candidates & (gains > 0))
+    order = order[np.argsort(-gains[order], kind="stable")]
+    if not len(order):
+        return []
+    cumulative = np.cumsum(gains[order])
+    subsets, seen = [], set()
+    for share in TRIANGLE_SUBSET_SHARES:
+        count = int(np.searchsorted(cumulative, share * cumulative[-1] * (1 - 1e-12))) + 1
+        count = min(count, len(order))
+        if count in seen:
+            continue
+        seen.add(count)
+        selected = np.zeros(len(gains), bool)
+        selected[order[:count]] = True
+        subsets.append(selected)
+    return subsets
+
+
+def _with_charts(base_uvs, chart_uvs, triangles, charts, selected):
+    """`base_uvs` with the corners of the `selected` charts (C,) bool taken from `chart_uvs`."""
+    corners = np.zeros(len(base_uvs), bool)
+    corners[np.asarray(triangles).ravel()] = np.repeat(selected[charts], 3)
+    return np.where(corners[:, None], chart_uvs, base_uvs)
 
 
 def _pack_padding(padding, original):

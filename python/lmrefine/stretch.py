@@ -348,12 +348,20 @@ def triangle_stretch(lightmap, mask, source_uvs, uvs, triangles, charts, resolut
         if not (trying & flipped).any():
             break
         kept[trying & flipped] = smaller_share(kept[trying & flipped])
-    stretched = factor > 1.0
-    report = {"triangles_stretched": int(stretched.sum()), "largest_stretch": float(factor.max(initial=1.0)),
-              "mean_stretch": float(factor[stretched].mean()) if stretched.any() else 1.0,
-              "charts_backed_off": int(((kept > 0) & (kept < 1)).sum()), "charts_kept_shape": int((kept == 0).sum())}
+    report = {**stretch_figures(factor, kept, charts), "charts_backed_off": int(((kept > 0) & (kept < 1)).sum()),
+              "charts_kept_shape": int((kept == 0).sum())}
     return out.astype(np.asarray(uvs).dtype), kept, report, {"direction": direction, "share": share,
-                                                            "weight": weight}
+                                                            "weight": weight, "factor": factor}
+
+
+def stretch_figures(factor, kept, charts):
+    """The report's figures of triangles stretched by `factor` (T,), each
+    keeping its chart's share `kept` (C,) of its stretch: how many, the
+    largest and the mean stretch of those stretched."""
+    kept_factor = 1.0 + (np.asarray(factor) - 1.0) * np.asarray(kept)[charts]
+    stretched = kept_factor > 1.0
+    return {"triangles_stretched": int(stretched.sum()), "largest_stretch": float(kept_factor.max(initial=1.0)),
+            "mean_stretch": float(kept_factor[stretched].mean()) if stretched.any() else 1.0}
 
 
 def smaller_share(shares):
@@ -375,6 +383,28 @@ def triangle_maps(before_uvs, after_uvs, triangles):
     return edges_after[good] @ np.linalg.inv(edges_before[good]), good
 
 
+def triangle_edge_terms(model, before_uvs, after_uvs, triangles):
+    """Per triangle, the chart model's edge term of `after_uvs` made from
+    `before_uvs` (triangle_edge_error's sum, before the sum): (weights w
+    (T,), terms w (s / |A e1| + (1 - s) / |A e2|) (T,)); a triangle without
+    light changes or without area in `before_uvs` has weight 0 and term 0."""
+    weight = np.asarray(model["weight"], np.float64)
+    maps, has_area = triangle_maps(before_uvs, after_uvs, triangles)
+    good = has_area & (weight > 0)
+    weights, terms = np.zeros(len(weight)), np.zeros(len(weight))
+    if not good.any():
+        return weights, terms
+    maps = maps[good[has_area]]
+    e1 = np.asarray(model["direction"], np.float64)[good]
+    e2 = np.stack([-e1[:, 1], e1[:, 0]], -1)
+    across = np.linalg.norm(np.einsum("tij,tj->ti", maps, e1), axis=1)
+    along = np.linalg.norm(np.einsum("tij,tj->ti", maps, e2), axis=1)
+    share = np.asarray(model["share"], np.float64)[good]
+    weights[good] = weight[good]
+    terms[good] = weight[good] * (share / np.maximum(across, 1e-12) + (1.0 - share) / np.maximum(along, 1e-12))
+    return weights, terms
+
+
 def triangle_edge_error(model, before_uvs, after_uvs, triangles):
     """The chart model's edge term of a layout `after_uvs` made from
     `before_uvs` (the same triangles, each an affine image), relative to
@@ -383,17 +413,16 @@ def triangle_edge_error(model, before_uvs, after_uvs, triangles):
     size across it, weighted by the triangle's light changes: sum w (s / |A
     e1| + (1 - s) / |A e2|) / sum w, A the triangle's map before -> after.
     1.0 = the same; the packing's global scale is in A."""
-    weight = np.asarray(model["weight"], np.float64)
-    live = weight > 0
-    maps, has_area = triangle_maps(before_uvs, after_uvs, triangles)
-    maps = maps[live[has_area]]
-    good = has_area & live
-    if not good.any():
-        return 1.0
-    e1 = np.asarray(model["direction"], np.float64)[good]
-    e2 = np.stack([-e1[:, 1], e1[:, 0]], -1)
-    across = np.linalg.norm(np.einsum("tij,tj->ti", maps, e1), axis=1)
-    along = np.linalg.norm(np.einsum("tij,tj->ti", maps, e2), axis=1)
-    share = np.asarray(model["share"], np.float64)[good]
-    terms = share / np.maximum(across, 1e-12) + (1.0 - share) / np.maximum(along, 1e-12)
-    return float((weight[good] * terms).sum() / weight[good].sum())
+    weights, terms = triangle_edge_terms(model, before_uvs, after_uvs, triangles)
+    total = weights.sum()
+    return float(terms.sum() / total) if total > 0 else 1.0
+
+
+def chart_gains(model, before_uvs, after_uvs, triangles, charts):
+    """What each chart's stretch `before_uvs` -> `after_uvs` (before any
+    packing) takes off the model's summed edge term: sum over the chart's
+    triangles of w - w (s / |A e1| + (1 - s) / |A e2|) (C,); negative for a
+    chart the stretch serves worse."""
+    weights, terms = triangle_edge_terms(model, before_uvs, after_uvs, triangles)
+    count = int(np.max(charts)) + 1 if len(charts) else 0
+    return np.bincount(charts, weights - terms, minlength=count)
