@@ -264,3 +264,20 @@ def test_the_stretch_of_the_best_served_charts_is_kept_when_every_chart_s_is_not
     kept_shape = anisotropy <= 1.01
     scales = singular[kept_shape[charts], 0]
     assert np.ptp(scales) < 1e-3 * scales.mean()
+
+
+def test_source_tensors_read_once_map_as_read_each_time():
+    resolution = 64
+    uvs, tris = lightmap_pack(3, 2, resolution, 2)
+    lightmap = striped_patches(resolution, 1)
+    mask = lmrefine.coverage_mask(uvs, tris, resolution)
+    moved = uvs * np.float32(0.8) + np.float32(0.05)
+    source = stretch.source_tensors(lightmap, mask, uvs, tris)
+    np.testing.assert_array_equal(stretch.triangle_tensors(lightmap, mask, uvs, moved, tris, source),
+                                  stretch.triangle_tensors(lightmap, mask, uvs, moved, tris))
+    # In the source's own frame the mapping is the identity.
+    np.testing.assert_allclose(stretch.triangle_tensors(lightmap, mask, uvs, uvs, tris), source, rtol=1e-12,
+                               atol=1e-15)
+    # A layout scaled by 0.8 sees gradients 1 / 0.8 as steep: tensors / 0.64.
+    np.testing.assert_allclose(stretch.triangle_tensors(lightmap, mask, uvs, moved, tris, source), source / 0.64,
+                               rtol=1e-5, atol=1e-6 * np.abs(source).max())

@@ -326,7 +326,7 @@ def signal_scales(source_uvs, triangles, energy, min_scale, max_scale, lightmap=
 
 
 def repack(source_uvs, refined_uvs, triangles, energy, resolution, padding, min_scale, max_scale, progress=None,
-           lightmap=None, mask=None, world_areas=None, max_stretch=1.0, signal=None):
+           lightmap=None, mask=None, world_areas=None, max_stretch=1.0, signal=None, source_tensors=None):
     """Scale the charts of `refined_uvs` by their signal (measured on the
     source layout `source_uvs`, where `energy` and `lightmap` were baked;
     `mask` its coverage; `world_areas` the triangles' surface areas, or
@@ -338,10 +338,11 @@ def repack(source_uvs, refined_uvs, triangles, energy, resolution, padding, min_
     to their smallest boxes, and a fourth stretches each chart by the square
     root of its factor. A packing the model takes but the density rule
     refuses is packed again at the square roots of the scales (and judged
-    the same way). `signal`: signal_scales' result for these arguments, when
-    the caller has it. Returns (uvs, report); uvs is None when the packed
-    layout is not better than `refined_uvs` by the error model (the report
-    says so)."""
+    the same way). `signal`: signal_scales' result for these arguments, and
+    `source_tensors`: stretch.source_tensors' for lightmap, mask and
+    source_uvs, when the caller has them. Returns (uvs, report); uvs is None
+    when the packed layout is not better than `refined_uvs` by the error
+    model (the report says so)."""
     charts, scales, edge, smooth = signal if signal is not None else signal_scales(
         source_uvs, triangles, energy, min_scale, max_scale, lightmap, mask, world_areas)
     # No packing can scale the charts beyond filling the whole atlas, gutters
@@ -357,7 +358,7 @@ def repack(source_uvs, refined_uvs, triangles, energy, resolution, padding, min_
     stretched = None
     if max_stretch > 1.0 and lightmap is not None:
         stretched = _stretch_candidate(source_uvs, refined_uvs, triangles, charts, lightmap, mask, resolution,
-                                       max_stretch)
+                                       max_stretch, source_tensors)
     packed, report = _packing_at(scales, refined_uvs, triangles, charts, edge, smooth, stretched, resolution,
                                  padding, progress)
     if not report["used"] and report.get("predicted_error", 1.0) < REQUIRED_GAIN:
@@ -474,7 +475,8 @@ def _packing_at(scales, refined_uvs, triangles, charts, edge, smooth, stretched,
     return packed, report
 
 
-def _stretch_candidate(source_uvs, refined_uvs, triangles, charts, lightmap, mask, resolution, max_stretch):
+def _stretch_candidate(source_uvs, refined_uvs, triangles, charts, lightmap, mask, resolution, max_stretch,
+                       source_tensors=None):
     """`refined_uvs` with its charts stretched across their light changes
     (lmrefine.stretch), with each chart's factor, edge-term factor and
     light-change weight; None when no chart stretches."""
@@ -482,7 +484,7 @@ def _stretch_candidate(source_uvs, refined_uvs, triangles, charts, lightmap, mas
 
     if mask is None:
         mask = coverage_mask(source_uvs, triangles, resolution)
-    tensors = stretch.chart_tensors(lightmap, mask, source_uvs, refined_uvs, triangles, charts)
+    tensors = stretch.chart_tensors(lightmap, mask, source_uvs, refined_uvs, triangles, charts, source_tensors)
     factor, direction, share, weight = stretch.stretch_factors(tensors, refined_uvs, triangles, charts, resolution,
                                                                max_stretch)
     if not (factor > 1.0).any():

@@ -77,9 +77,23 @@ class _InCharts:
     kept: np.ndarray          # the back-off's share kept per cell
     world_areas: object       # validated world_areas, or None
     signal: tuple = None      # allocation.signal_scales, once _source_lowest has made it
+    tensors: np.ndarray = None  # stretch.source_tensors of the lightmap, once _source_tensors has made it
 
 
 _MAX_RESOLUTION = 1 << 24  # as the native side (numpy_util.cpp parse_resolution)
+
+
+def _source_tensors(stage):
+    """stretch.source_tensors of the stage's lightmap on its source layout,
+    made once for the chart stretch, the triangle stretch and the report;
+    None when a gradient map was given instead of a lightmap."""
+    from . import stretch
+
+    if stage.gradient_given is not None:
+        return None
+    if stage.tensors is None:
+        stage.tensors = stretch.source_tensors(stage.lightmap, stage.mask, stage.uvs, stage.triangles)
+    return stage.tensors
 
 
 def _resolution_side(value, name):
@@ -628,7 +642,8 @@ def _triangle_stretched(stage, new_uvs, check):
     kept = None
     for _ in range(len(stretch.TRIANGLE_BACKOFF) + 1):
         stretched, kept, figures, model = stretch.triangle_stretch(
-            stage.lightmap, stage.mask, stage.uvs, new_uvs, triangles, charts, shape, float(factor), kept)
+            stage.lightmap, stage.mask, stage.uvs, new_uvs, triangles, charts, shape, float(factor), kept,
+            _source_tensors(stage))
         report.update(figures)
         if np.array_equal(stretched, new_uvs):
             report["reason"] = "no triangle holds light changes that run one way"
@@ -766,7 +781,7 @@ def _repacked(stage):
                                                   lightmap=stage.lightmap if stage.gradient_given is None else None,
                                                   mask=mask,
                                                   world_areas=stage.world_areas, max_stretch=float(max_stretch),
-                                                  signal=stage.signal)
+                                                  signal=stage.signal, source_tensors=_source_tensors(stage))
         if packed is not None:
             packed_check = _native.check_layout(packed, triangles, shape, padding, failing_charts=True)
             failing = set(packed_check.pop("failing_charts").tolist())
@@ -811,7 +826,7 @@ def _repacked(stage):
         limited_by.append("min_shrink")
     # Every figure is measured on the layout returned (triangle UV areas), not on the grid.
     figures = _layout_figures(uvs, new_uvs, triangles, scalar_energy, mask,
-                              stage.lightmap if stage.gradient_given is None else None)
+                              stage.lightmap if stage.gradient_given is None else None, _source_tensors(stage))
     moved = not np.array_equal(new_uvs, uvs)
     if not moved:
         broke = [kind for kind in limited_by if kind in ("flipped", "overlapping", "gutter", "degenerate", "grid")]
@@ -872,14 +887,17 @@ def layout_figures(lightmap, old_uvs, new_uvs, triangles, wavelet="d4"):
     return _layout_figures(old_uvs, new_uvs, triangles, gradient.sum(axis=2), mask, lightmap)
 
 
-def _layout_figures(old, new, triangles, energy, mask, lightmap=None):
+def _layout_figures(old, new, triangles, energy, mask, lightmap=None, tensors=None):
+    """The report's figures of the layout `new` made from `old` (lightmap
+    its first bake, or None; `tensors`: stretch.source_tensors' of it, when
+    the caller has them)."""
     density = _triangle_density(old, new, triangles)
     measured = density[np.isfinite(density) & (density > 0)]
     at_change = _at_light_changes(old, triangles, energy, mask)
     widening, triangle_texels = _transition_figures(old, new, triangles, energy, at_change)
     return {
         "transition_widening": widening,
-        "transition_widening_across": _transition_across(old, new, triangles, mask, at_change, lightmap),
+        "transition_widening_across": _transition_across(old, new, triangles, mask, at_change, lightmap, tensors),
         "transition_triangle_texels": triangle_texels,
         "density_min": float(measured.min()) if measured.size else 1.0,
         "density_max": float(measured.max()) if measured.size else 1.0,
@@ -924,7 +942,7 @@ def _at_light_changes(old, triangles, energy, mask):
     return (mask[rows, cols] & (energy[rows, cols] >= threshold)).any(axis=1)
 
 
-def _transition_across(old, new, triangles, mask, at_change, lightmap):
+def _transition_across(old, new, triangles, mask, at_change, lightmap, tensors=None):
     """The texels across the light changes at the triangles at a light
     change (_transition_figures' triangles), new over old: each triangle's
     linear scale |A e1| along the main direction e1 of its first bake's
@@ -932,7 +950,8 @@ def _transition_across(old, new, triangles, mask, at_change, lightmap):
     its map input -> output), averaged with the input areas as weights.
     The figure a stretch raises while it keeps the area (1.0 when nothing
     is at a light change; None without a lightmap). `at_change`:
-    _at_light_changes' triangles."""
+    _at_light_changes' triangles; `tensors`: stretch.source_tensors' for
+    lightmap, mask and old, when the caller has them."""
     from . import stretch
 
     if lightmap is None:
@@ -940,7 +959,9 @@ def _transition_across(old, new, triangles, mask, at_change, lightmap):
     if at_change is None or not at_change.any():
         return 1.0
     changing = triangles[at_change]
-    values, vectors = np.linalg.eigh(stretch.triangle_tensors(lightmap, mask, old, old, changing))
+    # In the input layout's own frame the tensors need no mapping.
+    values, vectors = np.linalg.eigh(stretch.source_tensors(lightmap, mask, old, changing) if tensors is None
+                                     else tensors[at_change])
     maps, has_area = stretch.triangle_maps(old, new, changing)
     lit = values[:, 1] > 0
     maps, good = maps[lit[has_area]], has_area & lit

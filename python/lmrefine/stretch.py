@@ -74,15 +74,16 @@ def luminance_gradient(lightmap, mask):
     return np.where(mask[..., None], out, np.float32(0))
 
 
-def chart_tensors(lightmap, mask, source_uvs, uvs, triangles, charts):
+def chart_tensors(lightmap, mask, source_uvs, uvs, triangles, charts, source=None):
     """(C, 2, 2) float64: each chart's structure tensor of the luminance
     gradient of `lightmap` (baked on `source_uvs`, `mask` its coverage;
     the gradient scaled by its largest component, all zero without one), in
     the frame of layout `uvs` (the same triangles, each an affine image of
     its source triangle: a gradient g maps to A^-T g). Triangles without
-    area in either layout add nothing."""
+    area in either layout add nothing. `source`: source_tensors' result for
+    these arguments, when the caller has it."""
     count = int(charts.max()) + 1 if len(charts) else 0
-    mapped = triangle_tensors(lightmap, mask, source_uvs, uvs, triangles)
+    mapped = triangle_tensors(lightmap, mask, source_uvs, uvs, triangles, source)
     out = np.zeros((count, 2, 2))
     for i in range(2):
         for j in range(2):
@@ -90,9 +91,12 @@ def chart_tensors(lightmap, mask, source_uvs, uvs, triangles, charts):
     return out
 
 
-def triangle_tensors(lightmap, mask, source_uvs, uvs, triangles):
-    """(T, 2, 2) float64: chart_tensors' structure tensor per triangle (the
-    sum over its texels), in the frame of layout `uvs`."""
+def source_tensors(lightmap, mask, source_uvs, triangles):
+    """(T, 2, 2) float64: each triangle's structure tensor of the luminance
+    gradient of `lightmap` (the sum over its texels), in the frame of the
+    layout `source_uvs` it was baked on (chart_tensors' gradient, scaled
+    the same way). Several layouts made from one source read it through
+    triangle_tensors' `source`: the gradient is read once."""
     gradient = luminance_gradient(lightmap, mask)
     # Only directions and ratios matter: scaled to at most 1, huge light cannot overflow the squares.
     peak = float(np.abs(gradient).max(initial=0.0))
@@ -104,10 +108,19 @@ def triangle_tensors(lightmap, mask, source_uvs, uvs, triangles):
     sampled = samples.astype(np.float64) / peak  # (T, 4, 2)
     gu, gv = sampled[..., 0], sampled[..., 1]
     parts = [field.mean(axis=1) * texels for field in (gu * gu, gu * gv, gv * gv)]
-    tensor = np.stack([np.stack([parts[0], parts[1]], -1), np.stack([parts[1], parts[2]], -1)], -2)
-    source = np.asarray(source_uvs, np.float64)[triangles]
+    return np.stack([np.stack([parts[0], parts[1]], -1), np.stack([parts[1], parts[2]], -1)], -2)
+
+
+def triangle_tensors(lightmap, mask, source_uvs, uvs, triangles, source=None):
+    """(T, 2, 2) float64: chart_tensors' structure tensor per triangle (the
+    sum over its texels), in the frame of layout `uvs`. `source`:
+    source_tensors' result for these arguments, when the caller has it."""
+    tensor = source_tensors(lightmap, mask, source_uvs, triangles) if source is None else source
+    if not tensor.any():
+        return np.zeros((len(triangles), 2, 2))
+    corners = np.asarray(source_uvs, np.float64)[triangles]
     target = np.asarray(uvs, np.float64)[triangles]
-    before = np.stack([source[:, 1] - source[:, 0], source[:, 2] - source[:, 0]], -1)  # columns: edge vectors
+    before = np.stack([corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]], -1)  # columns: edge vectors
     after = np.stack([target[:, 1] - target[:, 0], target[:, 2] - target[:, 0]], -1)
     det_before = before[:, 0, 0] * before[:, 1, 1] - before[:, 0, 1] * before[:, 1, 0]
     det_after = after[:, 0, 0] * after[:, 1, 1] - after[:, 0, 1] * after[:, 1, 0]
@@ -307,7 +320,8 @@ def triangle_targets(tensors, uvs, triangles, resolution, max_stretch):
     return factor, targets, across, share, roots
 
 
-def triangle_stretch(lightmap, mask, source_uvs, uvs, triangles, charts, resolution, max_stretch, kept=None):
+def triangle_stretch(lightmap, mask, source_uvs, uvs, triangles, charts, resolution, max_stretch, kept=None,
+                     source=None):
     """`uvs` with each triangle stretched across the light changes of
     `lightmap` (baked on `source_uvs`) and squeezed along them, the chart's
     triangles fitted to those shapes together (lmrefine._native._fit_shapes).
@@ -316,15 +330,16 @@ def triangle_stretch(lightmap, mask, source_uvs, uvs, triangles, charts, resolut
     of TRIANGLE_BACKOFF, none after the last. The charts stay where they were
     and need packing again. Returns (uvs, kept shares (C,), report, model:
     the per-triangle `direction`, `share` and `weight` triangle_edge_error
-    reads)."""
+    reads). `source`: source_tensors' result for lightmap, mask, source_uvs
+    and triangles, when the caller has it."""
     triangles = np.asarray(triangles)
     charts = np.asarray(charts)
     count = int(charts.max()) + 1 if len(charts) else 0
     kept = np.ones(count) if kept is None else np.asarray(kept, np.float64).copy()
     vertex, vertices = _welded(uvs, triangles, charts)
     vertex_triangles = vertex[triangles]
-    tensors = _smoothed(triangle_tensors(lightmap, mask, source_uvs, uvs, triangles), vertex_triangles, vertices,
-                        TRIANGLE_SMOOTHING)
+    tensors = _smoothed(triangle_tensors(lightmap, mask, source_uvs, uvs, triangles, source), vertex_triangles,
+                        vertices, TRIANGLE_SMOOTHING)
     factor, targets, direction, share, weight = triangle_targets(tensors, uvs, triangles, resolution, max_stretch)
     start = np.zeros((vertices, 2))
     start[vertex] = np.asarray(uvs, np.float64)
