@@ -131,6 +131,7 @@ def test_refine_uvs_triangle_stretch_report_and_validity():
     assert report["max_stretch"] == 2.0 and report["triangles_stretched"] > 0
     check = lmrefine.check_layout(result.uvs, tris, resolution, 2.0)
     assert check["valid"], check
+    assert all(np.array_equal(result.report["check"][k], check[k]) for k in check)
     if report["used"]:
         assert report["predicted_edge_error"] < 1.0
     else:
@@ -251,7 +252,11 @@ def test_the_stretch_of_the_best_served_charts_is_kept_when_every_chart_s_is_not
     # Every chart stretched packs too loosely for the model; a few of them do not.
     assert report["every_chart_edge_error"] >= 1.0
     assert report["used"] and report["predicted_edge_error"] < 1.0
-    assert lmrefine.check_layout(result.uvs, tris, resolution, 2.0)["valid"]
+    check = lmrefine.check_layout(result.uvs, tris, resolution, 2.0)
+    assert check["valid"]
+    # The report's check is check_layout's of the layout returned.
+    assert result.report["check"].keys() == check.keys()
+    assert all(np.array_equal(result.report["check"][k], check[k]) for k in check)
     # The charts left out keep their shape: each triangle's map from the
     # layout before the stretch is one rotation and scale for all of them.
     maps, good = stretch.triangle_maps(result.unstretched_uvs, result.uvs, tris)

@@ -649,7 +649,7 @@ def _triangle_stretched(stage, new_uvs, check):
             report["reason"] = "no triangle holds light changes that run one way"
             return new_uvs, check, report
         try:
-            packed, worse, failing = _packed_again(stage, checker, failing_before, stretched, padding)
+            packed, packed_check, worse, failing = _packed_again(stage, checker, failing_before, stretched, padding)
         except ValueError as error:
             report["reason"] = f"the stretched charts do not pack ({error})"
             return new_uvs, check, report
@@ -674,14 +674,15 @@ def _triangle_stretched(stage, new_uvs, check):
                 continue  # the stretch of every chart, judged above
             layout = _with_charts(new_uvs, stretched, triangles, charts, selected)
             try:
-                candidate, worse, _ = _packed_again(stage, checker, failing_before, layout, padding)
+                candidate, candidate_check, worse, _ = _packed_again(stage, checker, failing_before, layout, padding)
             except ValueError:
                 continue
             if worse:
                 continue
             error = stretch.triangle_edge_error(model, new_uvs, candidate, triangles)
             if error < predicted:
-                packed, predicted, kept = candidate, error, np.where(selected, kept, 0.0)
+                packed, packed_check, predicted = candidate, candidate_check, error
+                kept = np.where(selected, kept, 0.0)
     report["texel_area"] = float(metrics.uv_areas(packed, triangles).sum() /
                                  max(metrics.uv_areas(new_uvs, triangles).sum(), 1e-300))
     report["predicted_edge_error"] = predicted
@@ -695,14 +696,16 @@ def _triangle_stretched(stage, new_uvs, check):
     report["used"] = True
     report["charts_stretched"] = int((kept > 0).sum())
     report.update(stretch.stretch_figures(model["factor"], kept, charts))
-    check = _native.check_layout(packed, triangles, shape, stage.padding)
-    return packed, check, report
+    return packed, packed_check, report
 
 
 def _packed_again(stage, checker, failing_before, layout, padding):
     """`layout`'s charts (checker.charts) packed again at their sizes: (the
-    packed layout, the checks it fails that the refined layout passed, the
-    charts failing that did not before); ValueError when they do not pack."""
+    packed layout, its check_layout report, the checks it fails that the
+    refined layout passed, the charts failing that did not before);
+    ValueError when they do not pack. The packing moves whole charts, so
+    the refined layout's charts are the packed layout's: the checker's
+    report is check_layout's."""
     packed, _ = pack_charts(layout, stage.triangles, checker.charts, None, stage.shape, padding,
                             progress=allocation._reports_done(stage.progress))
     packed_check = checker.check(packed, failing_charts=True)
@@ -710,7 +713,7 @@ def _packed_again(stage, checker, failing_before, layout, padding):
     worse = backoff.failures(packed_check, stage.original, stage.padding)
     if worse == ["overlapping"] and not failing:
         worse = []  # counted in texels: a chart that overlapped itself before may count a few more
-    return packed, worse, failing
+    return packed, packed_check, worse, failing
 
 
 # When the stretch of every chart is refused, the stretch of the charts it
