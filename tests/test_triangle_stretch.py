@@ -244,7 +244,7 @@ def striped_patches(resolution, seed):
     return lightmap
 
 
-def test_the_stretch_of_the_best_served_charts_is_kept_when_every_chart_s_is_not():
+def test_the_best_served_charts_keep_their_stretch_when_all_are_refused():
     resolution = 128
     uvs, tris = lightmap_pack(6, 2, resolution, 4)
     result = lmrefine.refine_uvs(striped_patches(resolution, 3), uvs, tris, resolution)
