@@ -953,7 +953,7 @@ def _transition_across(old, new, triangles, mask, at_change, lightmap, tensors=N
     """The texels across the light changes at the triangles at a light
     change (_transition_figures' triangles), new over old: each triangle's
     linear scale |A e1| along the main direction e1 of its first bake's
-    luminance gradient (stretch.triangle_tensors in the input layout; A
+    luminance gradient (stretch.source_tensors, in the input layout; A
     its map input -> output), averaged with the input areas as weights.
     The figure a stretch raises while it keeps the area (1.0 when nothing
     is at a light change; None without a lightmap). `at_change`:
