@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 import lmrefine
+from lmrefine import backoff
 
 BORDERS = ("same", "border_rule", "extra_ring")
 
@@ -189,6 +190,29 @@ def test_coarse_to_fine_gets_further_than_one_level_in_fewer_steps():
     assert pyramid["cell_area"][:, 4:8].mean() > 1.3 * one["cell_area"][:, 4:8].mean()
 
 
+@pytest.mark.parametrize("border", BORDERS)
+def test_a_coarser_finest_level_steps_no_further_and_its_grid_holds_every_bound(border):
+    # A band of light changes: the pyramid stepping down to 2-texel cells
+    # only still widens it; the one-texel level is made from that grid and
+    # fitted to its bounds, taking no step, so every cell holds them.
+    energy = np.full((64, 48), 0.1, np.float32)
+    energy[:, 20:26] = 1.0
+    mask = np.ones(energy.shape, bool)
+    mask[:, :2] = False
+    fine = lmrefine.run_automaton(energy, mask, border=border)
+    coarse = lmrefine.run_automaton(energy, mask, border=border, finest_block=2, check_invariants=True)
+    assert [level["block"] for level in coarse["levels"]] == [level["block"] for level in fine["levels"]]
+    assert coarse["levels"][-1]["steps"] == 0 < coarse["levels"][-2]["steps"]
+    assert coarse["steps"] == fine["steps"] - fine["levels"][-1]["steps"]
+    area = coarse["cell_area"]
+    assert area[:, 20:26].mean() > 1.5 > 1 > area[:, 30:].mean()
+    assert area[mask].min() >= 0.25 - 1e-5 and area[mask].max() <= 8 + 1e-5 and area[~mask].min() >= 1 - 1e-5
+    assert not backoff.invalid_cells(coarse["grid"]).any()
+    np.testing.assert_allclose(coarse["energy"], np.where(mask, energy, 0))  # the one-texel level's, unstepped
+    # Coarser than the coarsest level: the coarsest level, then the fit.
+    assert [level["block"] for level in lmrefine.run_automaton(energy, finest_block=1024)["levels"]] == [8, 1]
+
+
 def test_progress_can_cancel():
     energy = np.random.default_rng(0).random((64, 64)).astype(np.float32)
     with pytest.raises(lmrefine.CancelledError):
@@ -211,6 +235,9 @@ def test_bad_arguments_raise_value_errors():
         lmrefine.run_automaton(energy, diffusion=0.5)
     with pytest.raises(ValueError, match="channel"):
         lmrefine.run_automaton(np.ones((4, 4, 3), np.float32))
+    for block in (0, 3, 2048):
+        with pytest.raises(ValueError, match="finest_block"):
+            lmrefine.run_automaton(energy, finest_block=block)
 
 
 def test_result_does_not_depend_on_the_thread_count(rng, monkeypatch):

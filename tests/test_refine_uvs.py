@@ -318,6 +318,61 @@ def test_a_layout_that_did_not_move_is_reported_as_such():
     assert any("no light change" in note for note in flat.report["notes"])
 
 
+def test_the_automaton_s_finest_cells_follow_the_layout_s_small_triangles():
+    # Two triangles of 2048 texels each (side 64): cells of 16 texels. Small
+    # triangles decide once they hold SMALL_TRIANGLE_SHARE of the texels (of
+    # the triangles at light changes; here every triangle): 3.8% of them do
+    # not, 20% (8 texels each, side 4) bring it to 1.
+    from lmrefine.refine import SMALL_TRIANGLE_SHARE, automaton_block
+
+    large = grid_chart(1, (0.0, 0.0), (0.5, 0.5))
+    assert automaton_block(*large, R) == 16
+    assert automaton_block(*large, (R, 2 * R)) == 16  # sqrt(2 x 4096) x 0.25 = 22.6
+    assert automaton_block(*merge(large, grid_chart(8, (0.5, 0.5), (0.6, 0.6))), R) == 16
+    assert 0.038 < SMALL_TRIANGLE_SHARE < 0.2
+    assert automaton_block(*merge(large, grid_chart(8, (0.5, 0.5), (0.75, 0.75))), R) == 1
+    # Where the light changes decides: a tessellation's small triangles there, however few.
+    few = merge(large, grid_chart(8, (0.5, 0.5), (0.6, 0.6)))
+    assert automaton_block(*few, R, at_change=np.arange(len(few[1])) >= 2) == 1
+    assert automaton_block(*few, R, at_change=np.arange(len(few[1])) < 2) == 16
+    assert automaton_block(*few, R, at_change=np.zeros(len(few[1]), bool)) == 16  # none: every triangle
+    assert automaton_block(*plane(8), R) == 2  # 14.4-texel quads: triangles of side 14.4
+    assert automaton_block(*plane(16), R) == 1  # 7.2-texel quads
+    assert automaton_block(np.zeros((3, 2), np.float32), np.array([[0, 1, 2]]), R) == 1  # no area
+
+
+def test_small_triangles_along_a_shadow_edge_keep_one_texel_cells():
+    # Large flat charts either side of a finely split strip that the shadow
+    # edge runs along (as a tessellation leaves it): the strip holds under
+    # a tenth of the texels, yet it is where the light changes.
+    from lmrefine.refine import automaton_block
+
+    uvs, tris = merge(grid_chart(2, (0.05, 0.05), (0.44, 0.95)), grid_chart(16, (0.46, 0.05), (0.54, 0.95)),
+                      grid_chart(2, (0.56, 0.05), (0.95, 0.95)))
+    mask = lmrefine.coverage_mask(uvs, tris, R)
+    gradient = finite_difference_gradient(shadow_edge_lightmap(R, angle=0.0), mask)
+    assert automaton_block(uvs, tris, R) == 8  # every triangle: the large ones decide
+    result = lmrefine.refine_uvs(None, uvs, tris, R, gradient=gradient, repack=False)
+    assert result.report["finest_block"] == 1
+
+
+def test_coarse_triangles_run_a_coarser_finest_level_and_stay_valid():
+    uvs, tris, gradient = edge_scene(quads=8)  # 14.4-texel quads: cells of 2 texels
+    result = lmrefine.refine_uvs(None, uvs, tris, R, gradient=gradient, repack=False)
+    assert result.report["finest_block"] == 2
+    assert [level["block"] for level in result.report["levels"][-3:]] == [4, 2, 1]
+    assert result.report["levels"][-1]["steps"] == 0
+    assert result.report["moved"] and result.report["transition_widening"] > 2.0
+    assert_valid(result, uvs, tris, R, 2)
+    # One-texel cells, asked for, move the same vertices about as far.
+    fine = lmrefine.refine_uvs(None, uvs, tris, R, gradient=gradient, repack=False, finest_block=1)
+    assert fine.report["finest_block"] == 1
+    assert fine.report["transition_widening"] == pytest.approx(result.report["transition_widening"], rel=0.15)
+    for bad in (0, 3, True, 2.0, 4096):
+        with pytest.raises(ValueError, match="finest_block"):
+            lmrefine.refine_uvs(None, uvs, tris, R, gradient=gradient, finest_block=bad)
+
+
 def test_a_layout_whose_every_uv_is_on_a_chart_border_skips_the_automaton():
     # One quad per chart, gutters wide enough for edge_shrink: a warp could only reshape each chart's
     # affine map, so the automaton is not run and, without the repack, nothing moves.

@@ -45,7 +45,7 @@ py::dict run(const py::handle& energy_in, const py::handle& mask_in, const py::h
              const py::handle& diffusion, const py::handle& rate, const py::handle& delta, const py::handle& max_steps,
              const py::handle& min_shrink, const py::handle& max_magnification, const py::handle& edge_shrink,
              const py::handle& border, const py::handle& coarse_to_fine, const py::handle& passes,
-             const py::handle& check_invariants,
+             const py::handle& finest_block, const py::handle& check_invariants,
              py::object progress_callback) {
     py_util::FloatArray energy;
     AutomatonInput input = energy_input(energy_in, energy);
@@ -63,6 +63,7 @@ py::dict run(const py::handle& energy_in, const py::handle& mask_in, const py::h
     options.border = parse_border_mode(py_util::string_param(border, "border"));
     options.coarse_to_fine = py_util::bool_param(coarse_to_fine, "coarse_to_fine");
     options.passes = int(py_util::int_param(passes, "passes", 1, 64));
+    options.finest_block = int(py_util::int_param(finest_block, "finest_block", 1, 1024));
     options.check_invariants = py_util::bool_param(check_invariants, "check_invariants");
 
     py_util::PythonProgress progress(std::move(progress_callback));
@@ -146,6 +147,7 @@ void bind_automaton(py::module_& m) {
           py::arg("min_shrink") = py::float_(d.min_area), py::arg("max_magnification") = py::float_(d.max_area),
           py::arg("edge_shrink") = py::float_(d.edge_shrink), py::arg("border") = py::str("same"),
           py::arg("coarse_to_fine") = py::bool_(d.coarse_to_fine), py::arg("passes") = py::int_(d.passes),
+          py::arg("finest_block") = py::int_(d.finest_block),
           py::arg("check_invariants") = py::bool_(false), py::arg("progress") = py::none(),
           R"doc(Run the cellular automaton on an energy map (see docs/refiner.md).
 
@@ -171,6 +173,9 @@ Args:
     border (str): 'same', 'border_rule' or 'extra_ring'.
     coarse_to_fine (bool): run on a pyramid (False: one level, for comparison).
     passes (int): extra passes rerun the finest level with fresh energies.
+    finest_block (int): texels per cell side of the finest level that
+        steps, a power of two; above 1 the one-texel level is only made
+        from its grid and fitted to the bounds (no step).
     check_invariants (bool): verify every invariant after every step and
         raise RuntimeError naming the first that fails (for tests).
     progress (callable | None): progress(fraction, stage); False cancels.

@@ -189,6 +189,39 @@ def _energy(gradient, mask, strength, directional):
     return ((1 + strength * normalized) / (1 + strength)).astype(np.float32), total
 
 
+# The automaton's finest cells are at most this fraction of the side of the
+# small triangles at light changes (those holding the smallest
+# SMALL_TRIANGLE_SHARE of their texels): measured on the tuning scenes,
+# finer cells paid where those triangles spanned 2.5-5 texels and not where
+# they spanned 10 (docs/refiner.md, "The finest level").
+FINEST_BLOCK_TRIANGLE_SHARE = 0.25
+SMALL_TRIANGLE_SHARE = 0.1
+
+
+def automaton_block(uvs, triangles, resolution, at_change=None):
+    """The automaton's finest cell side in texels: the largest power of two
+    at most FINEST_BLOCK_TRIANGLE_SHARE of the side sqrt(2 x texel area) of
+    the triangle below which lie SMALL_TRIANGLE_SHARE of the texels of the
+    triangles at light changes (`at_change`, (T,) bool; None: every
+    triangle). Where the light changes is where the deformation has to be
+    fine: a tessellation's small triangles there decide, not the large flat
+    ones around them. 1 for triangles with no area."""
+    height, width = _resolution(resolution)
+    areas = metrics.uv_areas(uvs, triangles)
+    if at_change is not None and np.any(at_change):
+        areas = areas[np.asarray(at_change, bool)]
+    areas = np.sort(areas) * (float(height) * width)
+    cumulative = np.cumsum(areas)
+    if not len(areas) or not cumulative[-1] > 0:
+        return 1
+    small = areas[min(int(np.searchsorted(cumulative, SMALL_TRIANGLE_SHARE * cumulative[-1])), len(areas) - 1)]
+    size = FINEST_BLOCK_TRIANGLE_SHARE * np.sqrt(2.0 * small)
+    block = 1
+    while 2 * block <= min(size, 1024):
+        block *= 2
+    return block
+
+
 def identity_grid(resolution):
     """The undeformed (H + 1, W + 1, 2) grid: node (i, j) at u = j / W, v = 1 - i / H."""
     height, width = _resolution(resolution)
@@ -203,7 +236,7 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
                max_magnification=8.0, min_shrink=0.25, edge_shrink=0.8, delta=0.02, passes=1, border="same",
                directional=False, wavelet="d4", diffusion=0.05, max_steps=8, progress=None, repack=True,
                min_chart_scale=0.5, max_chart_scale=2.0, positions=None, rechart=True, world_areas=None,
-               normals=None, max_stretch=2.0, polygons=None, triangle_stretch=2.0):
+               normals=None, max_stretch=2.0, polygons=None, triangle_stretch=2.0, finest_block=None):
     """Refine a lightmap UV layout: more texels where light changes fast.
 
     Args:
@@ -232,6 +265,11 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
         directional: use the four-spring variant (one energy per channel).
         wavelet: passed to gradient_map.
         diffusion, max_steps: automaton details (see run_automaton).
+        finest_block: texels per cell side of the automaton's finest level,
+            a power of two in [1, 1024]; None (default): from the layout's
+            small triangles (automaton_block), 1 unless they span many
+            texels. A warp moves only vertices, so cells much smaller than
+            the triangles buy nothing (docs/refiner.md, "The finest level").
         progress: callable progress(fraction, stage); returning False cancels.
         repack: after the in-chart refinement, scale each chart by its
             signal (the error model in docs/refiner.md, "Chart scaling":
@@ -344,7 +382,8 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
         run along, lmrefine.alignment; at its ALIGNED_STEP_SHARE or more the
         layout is returned as it is; None with gradient= or strength 0),
         notes (list of sentences, e.g. on the original's gutter),
-        passes, edge_shrink (the value used: 1.0 on a tight pack),
+        passes, finest_block (the value used), edge_shrink (the value
+        used: 1.0 on a tight pack),
         border, seconds (timings: setup (the original's coverage, gutter
         texels and check), gradient_map, automaton, warp_and_check),
         original_check and check (check_layout reports).
@@ -357,7 +396,8 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
                "edge_shrink": edge_shrink, "delta": delta, "passes": passes, "border": border,
                "directional": directional, "wavelet": wavelet, "diffusion": diffusion, "max_steps": max_steps,
                "repack": repack, "min_chart_scale": min_chart_scale, "max_chart_scale": max_chart_scale,
-               "world_areas": world_areas, "max_stretch": max_stretch, "triangle_stretch": triangle_stretch}
+               "world_areas": world_areas, "max_stretch": max_stretch, "triangle_stretch": triangle_stretch,
+               "finest_block": finest_block}
     if not (isinstance(rechart, (bool, np.bool_)) or (isinstance(rechart, str) and rechart == "always")):
         raise TypeError(f"rechart must be True, False or 'always', got {rechart!r}")
     if isinstance(triangle_stretch, (bool, np.bool_)) or not isinstance(triangle_stretch, (int, float, np.number)) \
@@ -529,6 +569,10 @@ def _in_charts(lightmap, uvs, triangles, resolution, padding, mask, gradient, pr
         raise ValueError(f"passes must be in [1, 64], got {passes!r}")
     if not 0 < edge_shrink <= 1:
         raise ValueError(f"edge_shrink must be in (0, 1] (1: chart edges keep their size), got {edge_shrink}")
+    finest_block = options["finest_block"]
+    if finest_block is not None and (isinstance(finest_block, bool) or not isinstance(finest_block, (int, np.integer))
+                                     or not 1 <= finest_block <= 1024 or finest_block & (finest_block - 1)):
+        raise ValueError(f"finest_block must be None or a power of two in [1, 1024], got {finest_block!r}")
     if world_areas is not None:
         world_areas = np.asarray(world_areas)
         if world_areas.shape != (len(triangles),) or not (np.issubdtype(world_areas.dtype, np.integer)
@@ -571,12 +615,15 @@ def _in_charts(lightmap, uvs, triangles, resolution, padding, mask, gradient, pr
     # (docs/refiner.md, "Layouts without room").
     no_room = not hold and (room or rechart_route.layout_room(uvs, triangles))["room_fraction"] == 0.0
     if hold or no_room:
-        run = {"grid": identity, "steps": 0, "levels": [], "converged": True}
+        run = {"grid": identity, "steps": 0, "levels": [], "converged": True, "finest_block": None}
     else:
+        block = (automaton_block(uvs, triangles, shape, _at_light_changes(uvs, triangles, scalar_energy, mask))
+                 if finest_block is None else int(finest_block))
         run = _native.run_automaton(energy, mask, rigid=rigid, diffusion=diffusion, delta=delta,
                                     max_steps=max_steps, min_shrink=min_shrink, max_magnification=max_magnification,
                                     edge_shrink=edge_shrink_used, border=border, passes=int(passes),
-                                    progress=progress)
+                                    finest_block=block, progress=progress)
+        run["finest_block"] = min(block, run["levels"][0]["block"])  # the coarsest level at most
     full = run["grid"]
     timings["automaton"] = time.perf_counter() - clock
     clock = time.perf_counter()
@@ -855,6 +902,7 @@ def _repacked(stage):
         **figures,
         "steps": int(stage.run["steps"]),
         "levels": stage.run["levels"],
+        "finest_block": stage.run["finest_block"],
         "converged": bool(stage.run["converged"]),
         "strength_used": float(strength) * float(kept.min()),
         "backoff": float(kept.min()),

@@ -223,8 +223,9 @@ int level_step_budget(int block, const AutomatonOptions& options) {
     return block >= kManyStepsBlock ? options.max_steps * kCoarseStepFactor : options.max_steps;
 }
 
-void run_level(Level& level, const AutomatonOptions& options, bool ring, LevelStats& stats, int& total_steps,
-               Progress* progress) {
+// Runs `level` for at most `budget` steps.
+void run_level(Level& level, const AutomatonOptions& options, bool ring, int budget, LevelStats& stats,
+               int& total_steps, Progress* progress) {
     automaton_detail::prepare_level(level, options, ring);
     // The finest level's grid: every bound holds from its start.
     if (level.block == 1) {
@@ -239,7 +240,6 @@ void run_level(Level& level, const AutomatonOptions& options, bool ring, LevelSt
     }
     stats.steps = 0;
     stats.converged = false;
-    const int budget = level_step_budget(level.block, options);
     for (int s = 0; s < budget; ++s) {
         if (progress) progress->check();
         const automaton_detail::StepStats step = automaton_detail::step(level, options);
@@ -282,6 +282,9 @@ AutomatonResult run_automaton(const AutomatonInput& input, const AutomatonOption
                      "edge_shrink must be in (0, 1]: the smallest area of a chart's edge texel relative to its "
                      "original area (1 = rigid)");
     LMREFINE_REQUIRE(options.passes >= 1 && options.passes <= 64, "passes must be in [1, 64]");
+    LMREFINE_REQUIRE(options.finest_block >= 1 && options.finest_block <= 1024 &&
+                         (options.finest_block & (options.finest_block - 1)) == 0,
+                     "finest_block must be a power of two in [1, 1024]");
     const int64_t values = int64_t(input.width) * input.height * input.channels;
     for (int64_t k = 0; k < values; ++k) {
         if (!(input.energy[k] >= 0) || !std::isfinite(input.energy[k])) {
@@ -293,8 +296,12 @@ AutomatonResult run_automaton(const AutomatonInput& input, const AutomatonOption
 
     const bool ring = options.border == BorderMode::ExtraRing;
     const int levels = level_count(input.width, input.height, options.coarse_to_fine);
-    uint64_t budget = uint64_t(options.max_steps) * (options.passes - 1);
-    for (int l = 0; l < levels; ++l) budget += uint64_t(level_step_budget(1 << l, options));
+    // The finest level run: finest_block's, or the coarsest if that is coarser.
+    int finest = 0;
+    while ((1 << finest) < options.finest_block && finest < levels - 1) ++finest;
+    const int finest_block = 1 << finest;
+    uint64_t budget = uint64_t(level_step_budget(finest_block, options)) * uint64_t(options.passes - 1);
+    for (int l = finest; l < levels; ++l) budget += uint64_t(level_step_budget(1 << l, options));
     if (progress) progress->begin("automaton", budget);
 
     const LargeVector<uint8_t> rigid = rigid_texels(input);
@@ -303,33 +310,30 @@ AutomatonResult run_automaton(const AutomatonInput& input, const AutomatonOption
     Level level;
     reserve_levels(level, carried, input.width, input.height, input.channels, ring);
     using Clock = std::chrono::steady_clock;
-    for (int l = levels - 1; l >= 0; --l) {
+    // Levels run coarsest first, down to the finest block; then extra passes
+    // of it. Above one-texel cells, the one-texel level is made from that
+    // grid and fitted to its bounds, with no step, so the returned grid
+    // holds every bound as a run down to one texel does.
+    auto run = [&](int block, int steps) {
         const Clock::time_point start = Clock::now();
-        const int block = 1 << l;
-        make_level(level, input, rigid, options.edge_shrink, block, l == levels - 1 ? nullptr : &carried, ring);
+        const bool first = result.levels.empty();
+        make_level(level, input, rigid, options.edge_shrink, block, first ? nullptr : &carried, ring);
         LevelStats stats;
         stats.block = block;
         stats.rows = level.rows() - (ring ? 2 : 0);
         stats.cols = level.cols() - (ring ? 2 : 0);
-        run_level(level, options, ring, stats, result.steps, progress);
+        run_level(level, options, ring, steps, stats, result.steps, progress);
         hand_down(level, ring, input.width, input.height, carried);
         stats.seconds = std::chrono::duration<double>(Clock::now() - start).count();
         result.levels.push_back(stats);
-    }
-    for (int pass = 1; pass < options.passes; ++pass) {
-        const Clock::time_point start = Clock::now();
-        make_level(level, input, rigid, options.edge_shrink, 1, &carried, ring);
-        LevelStats stats;
-        stats.rows = input.height;
-        stats.cols = input.width;
-        run_level(level, options, ring, stats, result.steps, progress);
-        hand_down(level, ring, input.width, input.height, carried);
-        stats.seconds = std::chrono::duration<double>(Clock::now() - start).count();
-        result.levels.push_back(stats);
-    }
+    };
+    for (int l = levels - 1; l >= finest; --l) run(1 << l, level_step_budget(1 << l, options));
+    for (int pass = 1; pass < options.passes; ++pass) run(finest_block, level_step_budget(finest_block, options));
+    if (finest_block > 1) run(1, 0);
     if (progress) progress->finish();
 
-    result.converged = result.levels.back().converged;
+    // The finest level run decides (a fitted one-texel level takes no step).
+    result.converged = result.levels[result.levels.size() - (finest_block > 1 ? 2 : 1)].converged;
     result.grid = std::move(carried);
     const int pad = ring ? 1 : 0;
     result.energy.resize(size_t(values));

@@ -48,6 +48,12 @@ struct AutomatonOptions {
     BorderMode border = BorderMode::Same;
     bool coarse_to_fine = true;  // false: a single level (needs O(L^2) steps; for comparison)
     int passes = 1;              // extra passes rerun the finest level with energies reset
+    // Texels per cell side of the finest level that steps (a power of two):
+    // above 1 the pyramid stops stepping there, and the one-texel level is
+    // only made from its grid and fitted to its bounds. A warp moves only
+    // vertices, so a deformation much finer than the triangles is lost
+    // anyway (docs/refiner.md, "The finest level").
+    int finest_block = 1;
     bool check_invariants = false;  // verify every guard after every step (tests; slower)
 };
 
@@ -87,8 +93,10 @@ struct LevelStats {
 };
 
 struct AutomatonResult {
-    NodeGrid grid;                 // finest grid, pixel space
-    LargeVector<float> energy;     // final energies, height * width * channels
+    NodeGrid grid;                 // finest grid (one texel per cell), pixel space
+    // Final energies of the one-texel level, height * width * channels (with
+    // finest_block > 1 it takes no step: the input's, uncovered texels 0).
+    LargeVector<float> energy;
     std::vector<LevelStats> levels;  // coarsest first
     int steps = 0;
     bool converged = false;        // the finest level reached delta
