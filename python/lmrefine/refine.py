@@ -265,11 +265,12 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
         directional: use the four-spring variant (one energy per channel).
         wavelet: passed to gradient_map.
         diffusion, max_steps: automaton details (see run_automaton).
-        finest_block: texels per cell side of the automaton's finest level,
-            a power of two in [1, 1024]; None (default): from the layout's
-            small triangles (automaton_block), 1 unless they span many
-            texels. A warp moves only vertices, so cells much smaller than
-            the triangles buy nothing (docs/refiner.md, "The finest level").
+        finest_block: texels per cell side of the automaton's finest level
+            that steps, a power of two in [1, 1024]; None (default): from
+            the small triangles at light changes (automaton_block), 1
+            unless they span many texels. A warp moves only vertices, so
+            cells much smaller than the triangles buy nothing
+            (docs/refiner.md, "The finest level").
         progress: callable progress(fraction, stage); returning False cancels.
         repack: after the in-chart refinement, scale each chart by its
             signal (the error model in docs/refiner.md, "Chart scaling":

@@ -99,7 +99,7 @@ struct AutomatonResult {
     LargeVector<float> energy;
     std::vector<LevelStats> levels;  // coarsest first
     int steps = 0;
-    bool converged = false;        // the finest level reached delta
+    bool converged = false;        // the finest level that stepped reached delta
 };
 
 AutomatonResult run_automaton(const AutomatonInput& input, const AutomatonOptions& options,
