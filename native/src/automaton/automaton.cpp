@@ -226,13 +226,16 @@ int level_step_budget(int block, const AutomatonOptions& options) {
 // Runs `level` for at most `budget` steps.
 void run_level(Level& level, const AutomatonOptions& options, bool ring, int budget, LevelStats& stats,
                int& total_steps, Progress* progress) {
-    automaton_detail::prepare_level(level, options, ring);
+    // A level only fitted (0 steps) needs no step buffers nor measured cells.
+    const bool stepping = budget > 0 || options.check_invariants;
+    automaton_detail::prepare_level(level, options, ring, stepping);
     // The finest level's grid: every bound holds from its start.
     if (level.block == 1) {
         const automaton_detail::Fit fit = automaton_detail::fit_to_bounds(level);
         stats.fit_rounds = fit.rounds;
         stats.fit_reset = fit.reset;
     }
+    if (!stepping) return;
     automaton_detail::measure_cells(level);
     if (options.check_invariants) {
         level.start_nodes = level.grid.nodes;

@@ -70,8 +70,10 @@ struct Level {
 };
 
 // Fills kind, areas, bounds, node modes and the reference density from the
-// energies and uncovered areas already in `level` (grid and energy set).
-void prepare_level(Level& level, const AutomatonOptions& options, bool ring);
+// energies and uncovered areas already in `level` (grid and energy set);
+// with `stepping`, also the buffers step() needs (a level only fitted to its
+// bounds does without them).
+void prepare_level(Level& level, const AutomatonOptions& options, bool ring, bool stepping = true);
 
 // The finest level starts from a grid interpolated from the level above,
 // where cells of one coarse cell differ in size: some may start outside

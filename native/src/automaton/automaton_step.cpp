@@ -38,7 +38,7 @@ double push(double a, double b) { return a + b > 0 ? (a - b) / (a + b) : 0.0; }
 
 }  // namespace
 
-void prepare_level(Level& level, const AutomatonOptions& options, bool ring) {
+void prepare_level(Level& level, const AutomatonOptions& options, bool ring, bool stepping) {
     const int rows = level.rows(), cols = level.cols(), channels = level.channels;
     const size_t cells = size_t(rows) * cols;
     level.kind.assign(cells, CellKind::Material);
@@ -98,6 +98,9 @@ void prepare_level(Level& level, const AutomatonOptions& options, bool ring) {
         }
     }
 
+    level.suspect_round.assign(cells, 0);
+    level.revert_round = 0;
+    if (!stepping) return;
     level.next_nodes = level.grid.nodes;
     level.next_energy = level.energy;
     for (auto* v : {&level.area, &level.safe_radius, &level.quality, &level.next_area, &level.next_safe_radius,
@@ -106,8 +109,6 @@ void prepare_level(Level& level, const AutomatonOptions& options, bool ring) {
     }
     level.row_difference.assign(size_t(rows + 1), 0.0);
     level.row_moved.assign(size_t(rows + 1), 0.0);
-    level.suspect_round.assign(cells, 0);
-    level.revert_round = 0;
     level.breaking_cell.assign(cells, 0);
     level.reverted_node.assign(size_t(rows + 1) * (cols + 1), 0);
 }
