@@ -78,6 +78,7 @@ class _InCharts:
     world_areas: object       # validated world_areas, or None
     signal: tuple = None      # allocation.signal_scales, once _source_lowest has made it
     tensors: np.ndarray = None  # stretch.source_tensors of the lightmap, once _source_tensors has made it
+    at_change: object = None  # _at_light_changes of the source layout, when the automaton's block was chosen
 
 
 _MAX_RESOLUTION = 1 << 24  # as the native side (numpy_util.cpp parse_resolution)
@@ -615,11 +616,13 @@ def _in_charts(lightmap, uvs, triangles, resolution, padding, mask, gradient, pr
     # charts is the repack's job), so the automaton is not run
     # (docs/refiner.md, "Layouts without room").
     no_room = not hold and (room or rechart_route.layout_room(uvs, triangles))["room_fraction"] == 0.0
+    at_change = None
     if hold or no_room:
         run = {"grid": identity, "steps": 0, "levels": [], "converged": True, "finest_block": None}
     else:
-        block = (automaton_block(uvs, triangles, shape, _at_light_changes(uvs, triangles, scalar_energy, mask))
-                 if finest_block is None else int(finest_block))
+        if finest_block is None:
+            at_change = _at_light_changes(uvs, triangles, scalar_energy, mask)
+        block = automaton_block(uvs, triangles, shape, at_change) if finest_block is None else int(finest_block)
         run = _native.run_automaton(energy, mask, rigid=rigid, diffusion=diffusion, delta=delta,
                                     max_steps=max_steps, min_shrink=min_shrink, max_magnification=max_magnification,
                                     edge_shrink=edge_shrink_used, border=border, passes=int(passes),
@@ -654,7 +657,7 @@ def _in_charts(lightmap, uvs, triangles, resolution, padding, mask, gradient, pr
                      edge_shrink_used=edge_shrink_used, timings=timings, gradient_given=gradient_given,
                      energy=scalar_energy, aligned=aligned, hold=hold, no_room=no_room, run=run,
                      limited_by=limited_by, notes=notes, grid=grid, new_uvs=new_uvs, check=check, kept=kept,
-                     world_areas=world_areas)
+                     world_areas=world_areas, at_change=at_change)
 
 
 # The largest triangle_stretch refine_uvs takes: a triangle 16 times wider
@@ -881,7 +884,8 @@ def _repacked(stage):
         limited_by.append("min_shrink")
     # Every figure is measured on the layout returned (triangle UV areas), not on the grid.
     figures = _layout_figures(uvs, new_uvs, triangles, scalar_energy, mask,
-                              stage.lightmap if stage.gradient_given is None else None, _source_tensors(stage))
+                              stage.lightmap if stage.gradient_given is None else None, _source_tensors(stage),
+                              stage.at_change)
     moved = not np.array_equal(new_uvs, uvs)
     if not moved:
         broke = [kind for kind in limited_by if kind in ("flipped", "overlapping", "gutter", "degenerate", "grid")]
@@ -943,13 +947,14 @@ def layout_figures(lightmap, old_uvs, new_uvs, triangles, wavelet="d4"):
     return _layout_figures(old_uvs, new_uvs, triangles, gradient.sum(axis=2), mask, lightmap)
 
 
-def _layout_figures(old, new, triangles, energy, mask, lightmap=None, tensors=None):
+def _layout_figures(old, new, triangles, energy, mask, lightmap=None, tensors=None, at_change=None):
     """The report's figures of the layout `new` made from `old` (lightmap
-    its first bake, or None; `tensors`: stretch.source_tensors' of it, when
-    the caller has them)."""
+    its first bake, or None; `tensors`: stretch.source_tensors' of it, and
+    `at_change`: _at_light_changes', when the caller has them)."""
     density = _triangle_density(old, new, triangles)
     measured = density[np.isfinite(density) & (density > 0)]
-    at_change = _at_light_changes(old, triangles, energy, mask)
+    if at_change is None:
+        at_change = _at_light_changes(old, triangles, energy, mask)
     widening, triangle_texels = _transition_figures(old, new, triangles, energy, at_change)
     return {
         "transition_widening": widening,
