@@ -668,11 +668,12 @@ MAX_TRIANGLE_STRETCH = 16.0
 TRIANGLE_STRETCH_REQUIRED_GAIN = 1.0
 
 
-def _triangle_stretched(stage, new_uvs, check):
+def _triangle_stretched(stage, new_uvs, check, analysed=None):
     """The triangle stretch (stretch.triangle_stretch) of the refined layout
-    `new_uvs` (its check_layout report `check`), packed again at its charts'
-    sizes: (uvs, check, report), the input's own when the stretch is not
-    kept. A chart of the packed layout that fails the checks (where it did
+    `new_uvs` (its check_layout report `check`; `analysed`: its
+    LayoutChecker and the set of charts failing that check, when the caller
+    has them), packed again at its charts' sizes: (uvs, check, report), the
+    input's own when the stretch is not kept. A chart of the packed layout that fails the checks (where it did
     not in `new_uvs`) keeps less of its stretch, and the charts are fitted
     and packed again; the layout is kept when it passes and the chart
     model's edge term (stretch.triangle_edge_error: the stretch against the
@@ -687,9 +688,11 @@ def _triangle_stretched(stage, new_uvs, check):
         report["reason"] = "a gradient map was given instead of a lightmap"
         return new_uvs, check, report
     triangles, shape, padding = stage.triangles, stage.shape, _pack_padding(stage.padding, stage.original)
-    checker = _native.LayoutChecker(new_uvs, triangles, shape, stage.padding)
+    if analysed is None:
+        checker = _native.LayoutChecker(new_uvs, triangles, shape, stage.padding)
+        analysed = checker, set(checker.check(failing_charts=True)["failing_charts"].tolist())
+    checker, failing_before = analysed
     charts = checker.charts
-    failing_before = set(checker.check(failing_charts=True)["failing_charts"].tolist())
     kept = None
     for _ in range(len(stretch.TRIANGLE_BACKOFF) + 1):
         stretched, kept, figures, model = stretch.triangle_stretch(
@@ -824,7 +827,7 @@ def _repacked(stage):
     repack, min_chart_scale, max_chart_scale = options["repack"], options["min_chart_scale"], \
         options["max_chart_scale"]
     max_stretch, passes, border = options["max_stretch"], options["passes"], options["border"]
-    repack_report = None
+    repack_report = analysed = None
     if repack and strength > 0 and not stage.hold:
         clock = time.perf_counter()
         if not 0 < min_chart_scale <= 1 <= max_chart_scale < np.inf:
@@ -841,7 +844,9 @@ def _repacked(stage):
                                                   world_areas=stage.world_areas, max_stretch=float(max_stretch),
                                                   signal=stage.signal, source_tensors=_source_tensors(stage))
         if packed is not None:
-            packed_check = _native.check_layout(packed, triangles, shape, padding, failing_charts=True)
+            # Analysed once: the triangle stretch packs this layout's charts again.
+            packed_checker = _native.LayoutChecker(packed, triangles, shape, padding)
+            packed_check = packed_checker.check(failing_charts=True)
             failing = set(packed_check.pop("failing_charts").tolist())
             worse = backoff.failures(packed_check, original, padding)
             if worse == ["overlapping"]:
@@ -853,7 +858,7 @@ def _repacked(stage):
                 repack_report["used"] = False
                 notes.append(f"repack not used: the packed layout failed {', '.join(worse)}")
             else:
-                new_uvs, check = packed, packed_check
+                new_uvs, check, analysed = packed, packed_check, (packed_checker, failing)
                 softened = repack_report.get("softened")
                 if softened:
                     refused = softened["refused"]
@@ -872,7 +877,7 @@ def _repacked(stage):
     if options["triangle_stretch"] != 1.0 and repack and strength > 0 and not stage.hold:
         clock = time.perf_counter()
         unstretched = new_uvs
-        new_uvs, check, triangle_report = _triangle_stretched(stage, new_uvs, check)
+        new_uvs, check, triangle_report = _triangle_stretched(stage, new_uvs, check, analysed)
         if not triangle_report["used"]:
             notes.append(f"triangle stretch not used: {triangle_report['reason']}")
         timings["triangle_stretch"] = time.perf_counter() - clock
