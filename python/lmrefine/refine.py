@@ -676,8 +676,9 @@ def _triangle_stretched(stage, new_uvs, check, analysed=None):
     input's own when the stretch is not kept. A chart of the packed layout
     that fails the checks (where it did not in `new_uvs`) keeps less of its
     stretch, and the charts are fitted and packed again; the layout is
-    kept when it passes and the chart model's edge term (stretch.triangle_edge_error: the stretch against the
-    packing's loss of scale) is below TRIANGLE_STRETCH_REQUIRED_GAIN. When
+    kept when it passes and the chart model's edge term
+    (stretch.triangle_edge_error: the stretch against the packing's loss of
+    scale) is below TRIANGLE_STRETCH_REQUIRED_GAIN. When
     the stretch of every chart is not, the stretch of the charts it serves
     best (_best_served) is packed and judged the same way, the best kept."""
     from . import stretch

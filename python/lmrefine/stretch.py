@@ -330,8 +330,9 @@ def triangle_stretch(lightmap, mask, source_uvs, uvs, triangles, charts, resolut
     of TRIANGLE_BACKOFF, none after the last. The charts stay where they were
     and need packing again. Returns (uvs, kept shares (C,), report, model:
     the per-triangle `direction`, `share` and `weight` triangle_edge_error
-    reads, and the `factor` of each triangle's stretch). `source`: source_tensors' result for lightmap, mask, source_uvs
-    and triangles, when the caller has it."""
+    reads, and the `factor` of each triangle's stretch). `source`:
+    source_tensors' result for lightmap, mask, source_uvs and triangles,
+    when the caller has it."""
     triangles = np.asarray(triangles)
     charts = np.asarray(charts)
     count = int(charts.max()) + 1 if len(charts) else 0
