@@ -6,6 +6,7 @@ import pytest
 
 import lmrefine
 from lmrefine import allocation
+from lmrefine import refine as refine_module
 from layouts import (finite_difference_gradient, grid_chart, lightmap_pack, merge, plane, shadow_edge_lightmap,
                      smart_uv)
 
@@ -778,3 +779,34 @@ def test_the_back_off_of_random_strong_warps_passes_the_checks(seed):
         rise = np.diff(kept, axis=axis)
         assert (rise <= np.delete(slope, 0, axis=axis) + 1e-5).all()
         assert (-rise <= np.delete(slope, -1, axis=axis) + 1e-5).all()
+
+
+def test_chart_separated_parts_the_charts_whose_texels_touch():
+    # Owners of a 4 x 6 map: chart 0 left, chart 1 right (touching), a texel of both, an uncovered one.
+    owners = np.array([[0, 0, 0, 1, 1, 1],
+                       [0, 0, 0, 1, 1, -1],
+                       [0, 0, -2, 1, 1, 1],
+                       [0, 0, 0, 0, 0, 0]], np.int32)
+    separated = refine_module.chart_separated(owners != -1, owners)
+    expected = np.array([[1, 1, 1, 0, 1, 1],
+                         [1, 1, 1, 0, 1, 0],
+                         [1, 1, 0, 1, 1, 1],
+                         [1, 1, 1, 0, 0, 0]], bool)  # the right / lower texel of each pair goes, and the shared one
+    assert np.array_equal(separated, expected)
+    # Charts with a gutter of uncovered texels between them lose nothing.
+    apart = np.array([[0, 0, -1, 1], [0, 0, -1, 1]], np.int32)
+    assert np.array_equal(refine_module.chart_separated(apart != -1, apart), apart != -1)
+
+
+def test_no_light_change_between_charts_whose_texels_touch():
+    # Two charts 1.1 texels apart (Lightmap Pack's gutter): their covered texels touch. Each is lit
+    # evenly, the two differently: read across the border, the gradient map would see an edge there
+    # and the automaton would widen it (it did: transition widening 1.38).
+    uvs, triangles = merge(grid_chart(3, (2 / 32, 2 / 32), (14.5 / 32, 30 / 32)),
+                           grid_chart(3, (15.6 / 32, 2 / 32), (30 / 32, 30 / 32)))
+    owners = lmrefine._native.LayoutChecker(uvs, triangles, (32, 32), 0.0).texel_owners()
+    assert (owners[2:30, 14] == 0).all() and (owners[2:30, 15] == 1).all()
+    lightmap = np.repeat(np.where(owners == 1, 1.0, 0.2)[..., None], 3, axis=2).astype(np.float32)
+    result = lmrefine.refine_uvs(lightmap, uvs, triangles, 32, padding=1.0)
+    assert not result.report["moved"]
+    assert "no light change inside the charts" in result.report["notes"][-1]

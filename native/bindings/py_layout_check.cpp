@@ -84,6 +84,15 @@ public:
         return bytes.attr("view")(py::dtype::of<bool>()).cast<py::array_t<bool>>();
     }
 
+    py::array_t<int32_t> owners() {
+        std::vector<int32_t> owner;
+        {
+            py::gil_scoped_release release;
+            owner = checker_->owners();
+        }
+        return py_util::to_numpy(std::move(owner), {height_, width_});
+    }
+
     py::array_t<int32_t> charts() const {
         std::vector<int32_t> ids = checker_->charts().triangle_chart;
         const py::ssize_t n = py::ssize_t(ids.size());
@@ -228,6 +237,9 @@ failing_charts=...)``.
              "coverage_mask(original, triangles, resolution): (H, W) bool.")
         .def("gutter_texels", [](PyLayoutChecker& self) { return self.mask(checker_gutter); },
              "gutter_texels(original, triangles, resolution): (H, W) bool.")
+        .def("texel_owners", &PyLayoutChecker::owners,
+             R"doc((H, W) int32: per texel the chart (``charts``' id) of every triangle
+covering it, -1 where none does, -2 where triangles of two charts do.)doc")
         .def_property_readonly("charts", &PyLayoutChecker::charts,
                                "find_charts(original, triangles): (T,) int32 chart id per triangle.");
 }

@@ -4,6 +4,8 @@
 #include <string>
 #include <vector>
 
+#include "lmrefine/layout/chart.h"
+#include "lmrefine/layout/layout_raster.h"
 #include "lmrefine/layout/texel_points.h"
 #include "numpy_util.h"
 
@@ -106,15 +108,23 @@ Raises:
                 throw py::value_error("mask must have the lightmap's shape (" + std::to_string(height) + ", " +
                                       std::to_string(width) + "), got " + py_util::shape_string(mask));
             }
-            // The texel points (40 bytes a texel) and the output.
+            // The texel points (40 bytes a texel), the source's texel owners and the output.
             py_util::parse_resolution(py::make_tuple(height, width), "the carried lightmap",
-                                      40 + 4 * uint64_t(channels));
+                                      44 + 4 * uint64_t(channels));
             std::vector<float> out;
             {
                 py::gil_scoped_release release;
+                // The source map's texels per chart, as the baker charts the layout it baked on.
+                const std::vector<float> source_float(source_uvs.data(), source_uvs.data() + source_uvs.size());
+                const UvLayout source{source_float.data(), source_uvs.shape(0), source_triangles.data(),
+                                      source_triangles.shape(0)};
+                const Charts charts = find_charts(source);
+                const std::vector<int32_t> owner = texel_owners(LayoutRaster(source, width, height),
+                                                                charts.triangle_chart);
                 const TexelPoints points = texel_points(uvs.data(), triangles.data(), triangles.shape(0), width, height);
                 out = carry_lightmap(points, reinterpret_cast<const uint8_t*>(mask.data()), source_uvs.data(),
-                                     source_triangles.data(), lightmap.data(), width, height, channels);
+                                     source_triangles.data(), charts.triangle_chart.data(), owner.data(),
+                                     lightmap.data(), width, height, channels);
             }
             std::vector<py::ssize_t> shape(lightmap.shape(), lightmap.shape() + lightmap.ndim());
             return py_util::to_numpy(std::move(out), shape);
@@ -133,10 +143,14 @@ Args:
 
 Returns:
     numpy.ndarray: float32 of the lightmap's shape: each texel of ``mask``
-    holds the bilinear value of ``lightmap`` at the same surface point (the
-    texel's centre in the triangle texel_points gives it, barycentrics
-    clamped into that triangle); 0 elsewhere. Bit-identical to
-    rechart_route.resample_lightmap's numpy reference in tests/test_rechart_route.py.
+    holds the value of ``lightmap`` at the same surface point (the texel's
+    centre in the triangle texel_points gives it, barycentrics clamped into
+    that triangle), read from the texels of that triangle's source chart
+    (texel_owners of the source layout, charts as the baker finds them): the
+    bilinear value where the chart owns all four texels, else the weights
+    of those it owns renormalized, else its nearest texel within two, else
+    the bilinear value; 0 elsewhere. Bit-identical to the numpy reference in
+    tests/test_rechart_route.py.
 
 Raises:
     ValueError: bad shapes, indices out of range, NaN UVs, a mask of another shape.

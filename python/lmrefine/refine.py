@@ -170,6 +170,23 @@ def _gradient(lightmap, gradient, mask, shape, wavelet, progress):
     return _native.gradient_map(lightmap, mask, wavelet=wavelet, progress=progress)
 
 
+def chart_separated(mask, owners):
+    """`mask` (H, W) without the texels that would join two charts in the
+    gradient map: texels two charts cover, and of two neighbouring texels
+    (along a row or a column) of different charts the right or lower one.
+    `owners`: texel_owners of the layout (-1 uncovered, -2 two charts). The
+    wavelet takes an uncovered texel for a chart border, so one is enough.
+    Lightmap Pack packs unrelated faces about a texel apart, their covered
+    texels touch, and a map read across them shows a light change at every
+    face whose neighbour is lit differently."""
+    owners = np.asarray(owners)
+    separated = np.asarray(mask, bool) & (owners != -2)
+    for before, after, target in ((owners[:, :-1], owners[:, 1:], separated[:, 1:]),
+                                  (owners[:-1], owners[1:], separated[1:])):
+        target &= ~((before >= 0) & (after >= 0) & (before != after))
+    return separated
+
+
 def transition_strength(raw, mask):
     """Gradient energy `raw` (H, W) or (H, W, C) scaled to [0, 1]: 1 at the
     strongest light changes of the covered texels (the 99th percentile, or a
@@ -602,7 +619,9 @@ def _in_charts(lightmap, uvs, triangles, resolution, padding, mask, gradient, pr
     timings = {"setup": time.perf_counter() - start}
     clock = time.perf_counter()
     gradient_given = gradient  # with a gradient map the lightmap is not read (nor checked)
-    gradient = _gradient(lightmap, gradient, mask, shape, wavelet, progress)
+    # A given gradient map is the caller's; one read from the lightmap stops at chart borders.
+    gradient = _gradient(lightmap, gradient, mask if gradient is not None else
+                         chart_separated(mask, checker.texel_owners()), shape, wavelet, progress)
     energy, scalar_energy = _energy(gradient, mask, float(strength), directional)
     timings["gradient_map"] = time.perf_counter() - clock
     clock = time.perf_counter()
@@ -948,8 +967,9 @@ def layout_figures(lightmap, old_uvs, new_uvs, triangles, wavelet="d4"):
     shape = tuple(lightmap.shape[:2]) if lightmap.ndim in (2, 3) else None
     if shape is None:
         raise ValueError(f"the lightmap must be an (H, W) or (H, W, C) array, got shape {lightmap.shape}")
-    mask = _native.coverage_mask(old_uvs, triangles, shape)
-    gradient = _gradient(lightmap, None, mask, shape, wavelet, None)
+    checker = _native.LayoutChecker(old_uvs, triangles, shape, 0.0)
+    mask = checker.coverage_mask()
+    gradient = _gradient(lightmap, None, chart_separated(mask, checker.texel_owners()), shape, wavelet, None)
     return _layout_figures(old_uvs, new_uvs, triangles, gradient.sum(axis=2), mask, lightmap)
 
 

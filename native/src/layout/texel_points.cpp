@@ -10,6 +10,68 @@
 #include "lmrefine/layout/bilinear_lookup.h"
 
 namespace lmrefine {
+namespace {
+
+// How far (in texels) a point with none of its 2 x 2 texels in its own chart
+// looks for the nearest one: a sliver chart, or a point on its border.
+constexpr int kOwnedSearch = 2;
+
+// The source map's value at (u, v) read from the texels `owner` gives to
+// `chart` only: the bilinear weights of those of the 2 x 2 texels (exactly
+// bilinear_sample when it owns all four), renormalized; where it owns none
+// of them, its nearest texel within kOwnedSearch; where none is that close,
+// the plain bilinear value. A texel of another chart beside it holds other
+// light (Lightmap Pack packs unrelated faces a texel apart).
+void owned_sample(const float* image, int width, int height, int channels, const int32_t* owner, int32_t chart,
+                  double u, double v, double* out) {
+    const double w = double(width), h = double(height);
+    // bilinear_sample's texels and weights.
+    const double x = std::clamp(u * w - 0.5, 0.0, w - 1.0);
+    const double y = std::clamp((1.0 - v) * h - 0.5, 0.0, h - 1.0);
+    const int64_t j0 = width > 1 ? std::min(int64_t(std::floor(x)), int64_t(width) - 2) : 0;
+    const int64_t i0 = height > 1 ? std::min(int64_t(std::floor(y)), int64_t(height) - 2) : 0;
+    const double fx = width > 1 ? x - double(j0) : 0.0;
+    const double fy = height > 1 ? y - double(i0) : 0.0;
+    const int64_t j1 = std::min(j0 + 1, int64_t(width) - 1), i1 = std::min(i0 + 1, int64_t(height) - 1);
+    const int64_t texel[4] = {i0 * width + j0, i0 * width + j1, i1 * width + j0, i1 * width + j1};
+    const double weight[4] = {(1.0 - fx) * (1.0 - fy), fx * (1.0 - fy), (1.0 - fx) * fy, fx * fy};
+    if (owner[texel[0]] == chart && owner[texel[1]] == chart && owner[texel[2]] == chart &&
+        owner[texel[3]] == chart) {
+        bilinear_sample(image, width, height, channels, u, v, out);
+        return;
+    }
+    double total = 0.0;
+    for (int c = 0; c < channels; ++c) out[c] = 0.0;
+    for (int k = 0; k < 4; ++k) {
+        if (owner[texel[k]] != chart || !(weight[k] > 0.0)) continue;
+        total += weight[k];
+        for (int c = 0; c < channels; ++c) out[c] += weight[k] * double(image[texel[k] * channels + c]);
+    }
+    if (total > 0.0) {
+        for (int c = 0; c < channels; ++c) out[c] /= total;
+        return;
+    }
+    // The nearest texel of the chart (the first in row order on a tie).
+    const int64_t ci = int64_t(std::floor(y + 0.5)), cj = int64_t(std::floor(x + 0.5));
+    int64_t best = -1;
+    double best_distance = std::numeric_limits<double>::infinity();
+    for (int64_t i = std::max<int64_t>(ci - kOwnedSearch, 0); i <= std::min<int64_t>(ci + kOwnedSearch, height - 1);
+         ++i) {
+        for (int64_t j = std::max<int64_t>(cj - kOwnedSearch, 0);
+             j <= std::min<int64_t>(cj + kOwnedSearch, width - 1); ++j) {
+            if (owner[i * width + j] != chart) continue;
+            const double distance = (double(j) - x) * (double(j) - x) + (double(i) - y) * (double(i) - y);
+            if (distance < best_distance) best_distance = distance, best = i * width + j;
+        }
+    }
+    if (best < 0) {
+        bilinear_sample(image, width, height, channels, u, v, out);
+        return;
+    }
+    for (int c = 0; c < channels; ++c) out[c] = double(image[best * channels + c]);
+}
+
+}  // namespace
 
 TexelPoints texel_points(const double* uvs, const int32_t* triangles, int64_t triangle_count, int width,
                          int height) {
@@ -56,7 +118,8 @@ TexelPoints texel_points(const double* uvs, const int32_t* triangles, int64_t tr
 }
 
 std::vector<float> carry_lightmap(const TexelPoints& points, const uint8_t* mask, const double* source_uvs,
-                                  const int32_t* source_triangles, const float* image, int width, int height,
+                                  const int32_t* source_triangles, const int32_t* source_chart,
+                                  const int32_t* source_owner, const float* image, int width, int height,
                                   int channels) {
     const int64_t texels = int64_t(width) * int64_t(height);
     std::vector<float> out(size_t(texels) * size_t(channels), 0.0f);
@@ -79,7 +142,8 @@ std::vector<float> carry_lightmap(const TexelPoints& points, const uint8_t* mask
                 u += w[k] * source_uvs[2 * corner[k]];
                 v += w[k] * source_uvs[2 * corner[k] + 1];
             }
-            bilinear_sample(image, width, height, channels, u, v, value.data());
+            owned_sample(image, width, height, channels, source_owner, source_chart[points.triangle[size_t(i)]], u,
+                         v, value.data());
             for (int c = 0; c < channels; ++c) out[size_t(i * channels + c)] = float(value[size_t(c)]);
         }
     });

@@ -30,15 +30,20 @@ TexelPoints texel_points(const double* uvs, const int32_t* triangles, int64_t tr
 // A lightmap `image` (height, width, channels) baked on the source layout
 // (source_uvs, source_triangles) carried over to the layout whose texel
 // points are `points` (texel_points of the same triangles, same size): each
-// texel of `mask` (H * W bytes, nonzero = covered) takes the bilinear value
-// (bilinear_lookup.h) of the source map at the same surface point, its
-// barycentrics clamped to >= 0 and normalized (a third each where no
-// triangle with area reaches); other texels are 0. Returns H * W * channels
-// floats. The order of operations is resample_lightmap's numpy one
-// (python/lmrefine/rechart_route.py before this kernel): the same bits.
-// Indices must be in range (the caller validates them).
+// texel of `mask` (H * W bytes, nonzero = covered) takes the value of the
+// source map at the same surface point, its barycentrics clamped to >= 0
+// and normalized (a third each where no triangle with area reaches), read
+// from the texels of that triangle's source chart only: `source_chart`
+// (per triangle) and `source_owner` (per texel of the source map,
+// texel_owners). The bilinear value (bilinear_lookup.h) where the chart owns
+// all four texels; else the bilinear weights of those it owns,
+// renormalized; else its nearest texel within two; else the bilinear value.
+// Other texels are 0. Returns H * W * channels floats, in the same order of
+// operations as the numpy reference in tests/test_rechart_route.py: the same
+// bits. Indices must be in range (the caller validates them).
 std::vector<float> carry_lightmap(const TexelPoints& points, const uint8_t* mask, const double* source_uvs,
-                                  const int32_t* source_triangles, const float* image, int width, int height,
+                                  const int32_t* source_triangles, const int32_t* source_chart,
+                                  const int32_t* source_owner, const float* image, int width, int height,
                                   int channels);
 
 }  // namespace lmrefine
