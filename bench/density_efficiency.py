@@ -26,9 +26,8 @@ sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."
 
 import lmrefine  # noqa: E402
 from lmrefine import metrics, sample_scenes  # noqa: E402
-from lmrefine.baker import evaluate as evaluate_light  # noqa: E402
-from lmrefine.evaluation import (EvaluationOptions, _bake_map, _route_mesh, _single_pass,  # noqa: E402
-                                 _Stages, _uniform_sweep, surface_points)
+from lmrefine.evaluation import EvaluationOptions, _bake_map, _route_mesh  # noqa: E402
+from option_sweep import plain_parts  # noqa: E402
 
 
 def texel_axes(corner_positions, corner_uvs, resolution):
@@ -60,23 +59,10 @@ def measure(sample, options):
     change at the point, plus the refinement's report."""
     resolution = options.resolution
     uvs, triangles = sample.layout(options.variant)
-    passes = _single_pass(sample, options)
-    baseline = _bake_map(sample, uvs, resolution, options, None)
+    parts = plain_parts(sample, options)
+    baseline, density, points, stencil = parts["baseline"], parts["density"], parts["points"], parts["stencil"]
+    truth, neighbours, transitions, sweep = parts["truth"], parts["neighbours"], parts["transitions"], parts["sweep"]
     areas = sample.triangle_areas()
-    density = metrics.texel_density(uvs, triangles, areas, resolution)
-    points, stencil, stencil_normals, distances, _ = surface_points(sample, density, options)
-    scene = sample.to_scene(uvs)
-    first = evaluate_light(scene, np.concatenate([points.points, stencil]),
-                           np.concatenate([points.normals, stencil_normals]), passes=passes,
-                           samples=options.truth_samples, seed=options.seed + 1).astype(np.float64)
-    second = evaluate_light(scene, points.points, points.normals, passes=passes, samples=options.truth_samples,
-                            seed=options.seed + 2).astype(np.float64)
-    truth = (first[:len(points)] + second) / 2
-    neighbours = first[len(points):]
-    transitions = metrics.transition_mask(metrics.surface_gradient(truth, neighbours, distances))
-    uv_points = metrics.interpolate_corners(uvs, points.triangle, points.bary)
-    sweep = _uniform_sweep(sample, uvs, uv_points, resolution, options, _Stages("sweep", None), "sweep",
-                           first=metrics.bilinear_lookup(baseline, uv_points))
     padding = min(float(options.padding),
                   float(lmrefine.check_layout(uvs, triangles, resolution, options.padding)["min_gutter_texels"]))
     refined = lmrefine.refine_uvs(baseline, uvs, triangles, resolution, padding=padding,

@@ -37,9 +37,11 @@ from lmrefine.evaluation import (EvaluationOptions, _bake_map, _route_mesh, _sin
                                  _Stages, _uniform_sweep, surface_points)
 
 
-def _fixed_parts(sample, options):
-    """What every option set shares: the plain bake, the points, the truth,
-    the transition mask and the uniform sweep's RMSEs (as evaluate_sample)."""
+def plain_parts(sample, options):
+    """What evaluate_sample measures every map against: the plain bake, the
+    points and their stencil, the truth there (the mean of two estimates)
+    and at the stencil, the transition mask and the uniform sweep (a
+    lookup per multiplier)."""
     resolution = options.resolution
     uvs, triangles = sample.layout(options.variant)
     passes = _single_pass(sample, options)
@@ -53,15 +55,26 @@ def _fixed_parts(sample, options):
     second = evaluate_light(scene, points.points, points.normals, passes=passes, samples=options.truth_samples,
                             seed=options.seed + 2).astype(np.float64)
     truth = (first[:len(points)] + second) / 2
-    transitions = metrics.transition_mask(metrics.surface_gradient(truth, first[len(points):], distances))
+    neighbours = first[len(points):]
+    transitions = metrics.transition_mask(metrics.surface_gradient(truth, neighbours, distances))
     uv_points = metrics.interpolate_corners(uvs, points.triangle, points.bary)
     sweep = _uniform_sweep(sample, uvs, uv_points, resolution, options, _Stages("sweep", None), "sweep",
                            first=metrics.bilinear_lookup(baseline, uv_points))
+    return {"baseline": baseline, "density": density, "points": points, "stencil": stencil, "truth": truth,
+            "neighbours": neighbours, "transitions": transitions, "sweep": sweep}
+
+
+def _fixed_parts(sample, options):
+    """What every option set shares: the plain bake, the points, the truth,
+    the transition mask and the uniform sweep's RMSEs (as evaluate_sample)."""
+    parts = plain_parts(sample, options)
+    truth, transitions, points = parts["truth"], parts["transitions"], parts["points"]
     everywhere = np.ones(len(truth), bool)
-    return {"baseline": baseline, "triangle": points.triangle, "bary": points.bary, "truth": truth,
+    return {"baseline": parts["baseline"], "triangle": points.triangle, "bary": points.bary, "truth": truth,
             "transitions": transitions,
-            "sweep": [metrics.error_stats(s["lookup"], truth, everywhere)["rmse"] for s in sweep],
-            "sweep_transitions": [metrics.error_stats(s["lookup"], truth, transitions)["rmse"] for s in sweep]}
+            "sweep": [metrics.error_stats(s["lookup"], truth, everywhere)["rmse"] for s in parts["sweep"]],
+            "sweep_transitions": [metrics.error_stats(s["lookup"], truth, transitions)["rmse"]
+                                  for s in parts["sweep"]]}
 
 
 def fixed_parts(scene, variant, resolution, cache):
