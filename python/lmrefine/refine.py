@@ -42,6 +42,9 @@ class RefineResult:
     grid: np.ndarray
     report: dict = field(default_factory=dict)
     unstretched_uvs: np.ndarray = field(default=None, repr=False)
+    # Where the report found the light changes: (the layout refined, its
+    # triangles at light changes, its first bake's structure tensors or None).
+    light_changes: tuple = field(default=None, repr=False)
 
 
 @dataclass
@@ -521,8 +524,16 @@ def _recharted_result(recharted, original, uvs, triangles, energy, mask, info, l
     """The re-charted refinement's result, its figures measured against the
     source layout (the user's, `original` its check; `lightmap` its first
     bake, or None), its notes saying why it was re-charted."""
+    from . import stretch
+
     report = recharted.report
-    report.update(_layout_figures(uvs, recharted.uvs, triangles, energy, mask, lightmap))
+    # The light changes as the re-charted refinement found them, in the map
+    # carried to its layout: read within its charts, where the source's own
+    # charts may be too small to show them (Lightmap Pack's few texels).
+    recharted_uvs, at_change, tensors = recharted.light_changes
+    if tensors is not None:
+        tensors = stretch.triangle_tensors(None, None, recharted_uvs, uvs, triangles, source=tensors)
+    report.update(_layout_figures(uvs, recharted.uvs, triangles, energy, mask, lightmap, tensors, at_change))
     room = info["room"]
     notes = [note.replace("nothing moved:", "the re-charted layout's own refinement moved nothing:")
              for note in report["notes"]]
@@ -908,9 +919,11 @@ def _repacked(stage):
     if covered_areas.min() <= min_shrink * 1.001:
         limited_by.append("min_shrink")
     # Every figure is measured on the layout returned (triangle UV areas), not on the grid.
+    at_change = stage.at_change if stage.at_change is not None else \
+        _at_light_changes(uvs, triangles, scalar_energy, mask)
     figures = _layout_figures(uvs, new_uvs, triangles, scalar_energy, mask,
                               stage.lightmap if stage.gradient_given is None else None, _source_tensors(stage),
-                              stage.at_change)
+                              at_change)
     moved = not np.array_equal(new_uvs, uvs)
     if not moved:
         broke = [kind for kind in limited_by if kind in ("flipped", "overlapping", "gutter", "degenerate", "grid")]
@@ -950,7 +963,8 @@ def _repacked(stage):
         "triangle_stretch": triangle_report,
     }
     kept_stretch = triangle_report is not None and triangle_report["used"]
-    return (RefineResult(uvs=new_uvs, grid=grid, report=report, unstretched_uvs=unstretched if kept_stretch else None),
+    return (RefineResult(uvs=new_uvs, grid=grid, report=report, unstretched_uvs=unstretched if kept_stretch else None,
+                         light_changes=(uvs, at_change, _source_tensors(stage))),
             scalar_energy, mask)
 
 
