@@ -809,3 +809,15 @@ def test_route_report_reads_the_light_changes_where_the_refinement_found_them():
     assert result.report["rechart"]["used"]
     assert result.report["transition_widening"] > 3  # measured 6.9
     assert result.report["transition_widening_across"] > 2  # measured 3.7
+
+
+def test_layout_figures_count_the_light_changes_where_the_first_refinement_found_them(lightmap_pack_case):
+    # The add-on's figures over several stages start from the first refinement's light changes: given
+    # those of a re-charted result, layout_figures of its layout is its report.
+    corners, uvs, triangles, lightmap = lightmap_pack_case
+    result = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, positions=corners)
+    assert result.report["rechart"]["used"]
+    figures = lmrefine.refine.layout_figures(lightmap, uvs, result.uvs, triangles,
+                                             light_changes=result.light_changes)
+    for key in ("transition_widening", "transition_widening_across", "transition_triangle_texels"):
+        assert figures[key] == pytest.approx(result.report[key], rel=1e-9), key

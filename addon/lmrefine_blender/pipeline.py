@@ -423,6 +423,7 @@ def run(context, targets, options, journal, image_dir=None):
     # 2. Refine every map's layout (native, off the main thread), check it, write it.
     clock = time.perf_counter()
     refined_uvs = {}  # group name -> the joined refined UVs
+    light_changes = {}  # group name -> where its first refinement found the light changes
     for group in list(groups):
         name, label = group.name, group.label()
         try:
@@ -463,6 +464,7 @@ def run(context, targets, options, journal, image_dir=None):
         report["source_check_layout"] = dict(source_check)
         outcome.reports[name] = _plain(report)
         refined_uvs[name] = result.uvs
+        light_changes[name] = result.light_changes
     if not groups:
         raise UserError(" ".join(w for w in outcome.warnings if w.startswith("Skipped: ")))
     outcome.atlases = {group.name: group.objects for group in groups}
@@ -481,7 +483,8 @@ def run(context, targets, options, journal, image_dir=None):
                 # The figures of the layout the user gets, against the source map, at the first bake's edges.
                 figures = lmrefine.refine.layout_figures(lightmaps[name], group.uvs, refined_uvs[name],
                                                          group.triangles,
-                                                         wavelet=options["refine_options"]["wavelet"])
+                                                         wavelet=options["refine_options"]["wavelet"],
+                                                         light_changes=light_changes[name])
                 figures.pop("triangle_density")
                 outcome.reports[name].update(_plain(figures))
             outcome.reports[name]["stages"] = _plain(outcome.stages[name])

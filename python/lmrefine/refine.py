@@ -524,16 +524,12 @@ def _recharted_result(recharted, original, uvs, triangles, energy, mask, info, l
     """The re-charted refinement's result, its figures measured against the
     source layout (the user's, `original` its check; `lightmap` its first
     bake, or None), its notes saying why it was re-charted."""
-    from . import stretch
-
     report = recharted.report
     # The light changes as the re-charted refinement found them, in the map
     # carried to its layout: read within its charts, where the source's own
     # charts may be too small to show them (Lightmap Pack's few texels).
-    recharted_uvs, at_change, tensors = recharted.light_changes
-    if tensors is not None:
-        tensors = stretch.triangle_tensors(None, None, recharted_uvs, uvs, triangles, source=tensors)
-    report.update(_layout_figures(uvs, recharted.uvs, triangles, energy, mask, lightmap, tensors, at_change))
+    report.update(_layout_figures(uvs, recharted.uvs, triangles, energy, mask, lightmap,
+                                  *_found_light_changes(recharted.light_changes, uvs, triangles)))
     room = info["room"]
     notes = [note.replace("nothing moved:", "the re-charted layout's own refinement moved nothing:")
              for note in report["notes"]]
@@ -968,11 +964,26 @@ def _repacked(stage):
             scalar_energy, mask)
 
 
-def layout_figures(lightmap, old_uvs, new_uvs, triangles, wavelet="d4"):
+def _found_light_changes(light_changes, uvs, triangles):
+    """(tensors, at_change) for _layout_figures from a RefineResult's
+    `light_changes`, its structure tensors mapped into the frame of `uvs`
+    (the same triangles)."""
+    from . import stretch
+
+    refined_from, at_change, tensors = light_changes
+    if tensors is not None:
+        tensors = stretch.triangle_tensors(None, None, refined_from, uvs, triangles, source=tensors)
+    return tensors, at_change
+
+
+def layout_figures(lightmap, old_uvs, new_uvs, triangles, wavelet="d4", light_changes=None):
     """The report's figures of a layout `new_uvs` made from `old_uvs` (one
     refinement or several in a row) at the light changes of `lightmap`,
     baked on `old_uvs`: transition_widening, density_min, density_max and
-    triangle_density, as refine_uvs defines them."""
+    triangle_density, as refine_uvs defines them. `light_changes`: the
+    first refinement's RefineResult.light_changes, to count the light
+    changes where it found them (a re-charted refinement: in the map carried
+    to its layout) rather than in `lightmap`."""
     old_uvs, triangles = _layout(old_uvs, triangles)
     new_uvs = np.asarray(new_uvs, np.float32)
     if new_uvs.shape != old_uvs.shape:
@@ -984,7 +995,8 @@ def layout_figures(lightmap, old_uvs, new_uvs, triangles, wavelet="d4"):
     checker = _native.LayoutChecker(old_uvs, triangles, shape, 0.0)
     mask = checker.coverage_mask()
     gradient = _gradient(lightmap, None, chart_separated(mask, checker.texel_owners()), shape, wavelet, None)
-    return _layout_figures(old_uvs, new_uvs, triangles, gradient.sum(axis=2), mask, lightmap)
+    found = (None, None) if light_changes is None else _found_light_changes(light_changes, old_uvs, triangles)
+    return _layout_figures(old_uvs, new_uvs, triangles, gradient.sum(axis=2), mask, lightmap, *found)
 
 
 def _layout_figures(old, new, triangles, energy, mask, lightmap=None, tensors=None, at_change=None):
