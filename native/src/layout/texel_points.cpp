@@ -24,35 +24,26 @@ constexpr int kOwnedSearch = 2;
 // light (Lightmap Pack packs unrelated faces a texel apart).
 void owned_sample(const float* image, int width, int height, int channels, const int32_t* owner, int32_t chart,
                   double u, double v, double* out) {
-    const double w = double(width), h = double(height);
-    // bilinear_sample's texels and weights.
-    const double x = std::clamp(u * w - 0.5, 0.0, w - 1.0);
-    const double y = std::clamp((1.0 - v) * h - 0.5, 0.0, h - 1.0);
-    const int64_t j0 = width > 1 ? std::min(int64_t(std::floor(x)), int64_t(width) - 2) : 0;
-    const int64_t i0 = height > 1 ? std::min(int64_t(std::floor(y)), int64_t(height) - 2) : 0;
-    const double fx = width > 1 ? x - double(j0) : 0.0;
-    const double fy = height > 1 ? y - double(i0) : 0.0;
-    const int64_t j1 = std::min(j0 + 1, int64_t(width) - 1), i1 = std::min(i0 + 1, int64_t(height) - 1);
-    const int64_t texel[4] = {i0 * width + j0, i0 * width + j1, i1 * width + j0, i1 * width + j1};
-    const double weight[4] = {(1.0 - fx) * (1.0 - fy), fx * (1.0 - fy), (1.0 - fx) * fy, fx * fy};
-    if (owner[texel[0]] == chart && owner[texel[1]] == chart && owner[texel[2]] == chart &&
-        owner[texel[3]] == chart) {
-        bilinear_sample(image, width, height, channels, u, v, out);
+    const BilinearFootprint f = bilinear_footprint(width, height, u, v);
+    if (owner[f.texel[0]] == chart && owner[f.texel[1]] == chart && owner[f.texel[2]] == chart &&
+        owner[f.texel[3]] == chart) {
+        bilinear_blend(image, channels, f, out);
         return;
     }
+    const double weight[4] = {(1.0 - f.fx) * (1.0 - f.fy), f.fx * (1.0 - f.fy), (1.0 - f.fx) * f.fy, f.fx * f.fy};
     double total = 0.0;
     for (int c = 0; c < channels; ++c) out[c] = 0.0;
     for (int k = 0; k < 4; ++k) {
-        if (owner[texel[k]] != chart || !(weight[k] > 0.0)) continue;
+        if (owner[f.texel[k]] != chart || !(weight[k] > 0.0)) continue;
         total += weight[k];
-        for (int c = 0; c < channels; ++c) out[c] += weight[k] * double(image[texel[k] * channels + c]);
+        for (int c = 0; c < channels; ++c) out[c] += weight[k] * double(image[f.texel[k] * channels + c]);
     }
     if (total > 0.0) {
         for (int c = 0; c < channels; ++c) out[c] /= total;
         return;
     }
     // The nearest texel of the chart (the first in row order on a tie).
-    const int64_t ci = int64_t(std::floor(y + 0.5)), cj = int64_t(std::floor(x + 0.5));
+    const int64_t ci = int64_t(std::floor(f.y + 0.5)), cj = int64_t(std::floor(f.x + 0.5));
     int64_t best = -1;
     double best_distance = std::numeric_limits<double>::infinity();
     for (int64_t i = std::max<int64_t>(ci - kOwnedSearch, 0); i <= std::min<int64_t>(ci + kOwnedSearch, height - 1);
@@ -60,12 +51,12 @@ void owned_sample(const float* image, int width, int height, int channels, const
         for (int64_t j = std::max<int64_t>(cj - kOwnedSearch, 0);
              j <= std::min<int64_t>(cj + kOwnedSearch, width - 1); ++j) {
             if (owner[i * width + j] != chart) continue;
-            const double distance = (double(j) - x) * (double(j) - x) + (double(i) - y) * (double(i) - y);
+            const double distance = (double(j) - f.x) * (double(j) - f.x) + (double(i) - f.y) * (double(i) - f.y);
             if (distance < best_distance) best_distance = distance, best = i * width + j;
         }
     }
     if (best < 0) {
-        bilinear_sample(image, width, height, channels, u, v, out);
+        bilinear_blend(image, channels, f, out);
         return;
     }
     for (int c = 0; c < channels; ++c) out[c] = double(image[best * channels + c]);
