@@ -994,9 +994,12 @@ def layout_figures(lightmap, old_uvs, new_uvs, triangles, wavelet="d4", light_ch
         raise ValueError(f"the lightmap must be an (H, W) or (H, W, C) array, got shape {lightmap.shape}")
     checker = _native.LayoutChecker(old_uvs, triangles, shape, 0.0)
     mask = checker.coverage_mask()
+    if light_changes is not None:
+        # The light changes are known: the energy that would find them is not needed (only its shape is read).
+        return _layout_figures(old_uvs, new_uvs, triangles, np.zeros(shape, np.float32), mask, lightmap,
+                               *_found_light_changes(light_changes, old_uvs, triangles))
     gradient = _gradient(lightmap, None, chart_separated(mask, checker.texel_owners()), shape, wavelet, None)
-    found = (None, None) if light_changes is None else _found_light_changes(light_changes, old_uvs, triangles)
-    return _layout_figures(old_uvs, new_uvs, triangles, gradient.sum(axis=2), mask, lightmap, *found)
+    return _layout_figures(old_uvs, new_uvs, triangles, gradient.sum(axis=2), mask, lightmap)
 
 
 def _layout_figures(old, new, triangles, energy, mask, lightmap=None, tensors=None, at_change=None):
