@@ -283,6 +283,40 @@ def test_a_repack_too_loose_at_the_signal_scales_is_kept_at_their_square_roots()
 
 
 
+def test_a_layout_of_the_libraries_own_packing_is_repacked_on_the_models_word_alone():
+    """The re-chart route's charts were packed by the library at one scale (own_packing): no caller's
+    packing to hold the repack to. The checkered corner at the model's scales, which the density rule
+    refuses for a caller's layout (and packs at the square roots), is then kept at those scales; and a
+    repack the model predicts no gain for is still refused."""
+    uvs, tris, lightmap = _checkered_corner()
+    energy = lmrefine.gradient_map(lightmap).sum(axis=2)
+    args = (uvs, uvs, tris, energy, (64, 64), 2.0, 0.5, 2.0)
+    callers, callers_report = allocation.repack(*args, lightmap=lightmap)
+    own, own_report = allocation.repack(*args, lightmap=lightmap, own_packing=True)
+    assert callers_report["softened"]["used"] and not callers_report["own_packing"]
+    assert own_report["used"] and own_report["own_packing"] and "softened" not in own_report
+    refused = callers_report["softened"]["refused"]
+    assert own_report["predicted_error"] == pytest.approx(refused["predicted_error"])
+    assert own_report["predicted_error"] < callers_report["predicted_error"]
+    assert own_report["padded_utilisation_after"] < (allocation.MIN_UTILISATION_KEPT
+                                                     * own_report["padded_utilisation_before"])
+    charts = lmrefine.find_charts(uvs, tris, lmrefine.CHART_TOLERANCE)
+    area = lambda u: np.bincount(charts, weights=np.abs(allocation.signed_areas(u, tris)))  # noqa: E731
+    checkered = int(np.argmax(own_report["signal_scales"]))
+
+    def lead(packed):
+        """The checkered chart's texel gain over the median flat chart's, measured on the layout."""
+        gain = area(packed) / area(uvs)
+        return gain[checkered] / np.median(np.delete(gain, checkered))
+    assert lead(own) > lead(callers) > 1.5
+    assert lmrefine.check_layout(own, tris, 64, 2)["valid"]
+    # Flat light: the model predicts no gain, and the route's own packing is not repacked either.
+    flat = np.full_like(lightmap, 0.6)
+    none, report = allocation.repack(uvs, uvs, tris, lmrefine.gradient_map(flat).sum(axis=2), (64, 64), 2.0, 0.5,
+                                     2.0, lightmap=flat, own_packing=True)
+    assert none is None and not report["used"] and report["predicted_error"] >= allocation.OWN_PACKING_RULE[0]
+
+
 def test_cancelling_during_the_softened_repack_cancels_the_refinement():
     """The second packing honours the caller's progress: asked to stop there, refine_uvs stops."""
     uvs, tris, lightmap = _checkered_corner()

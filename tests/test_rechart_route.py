@@ -811,6 +811,34 @@ def test_route_report_reads_the_light_changes_where_the_refinement_found_them():
     assert result.report["transition_widening_across"] > 2  # measured 3.7
 
 
+def test_route_repacks_its_own_charts_on_the_models_word():
+    """The bundled fence_and_tree's Lightmap Pack source at 256^2 re-charts into 7 charts, which the
+    route packs at one scale to 94% of the atlas. Scaled by their light, the flat back of the wall
+    shrinks and the square floor cannot fill what it leaves: 87% with its gutters, which the density
+    rule refused for a caller's layout, and the model's 0.97 missed its margin. The route's own packing
+    is repacked on the model's word (the triangle stretch then fits into the room: measured 1.46x ->
+    1.63x); the back of the wall gets a third of the texels of its lit front."""
+    from lmrefine.sample_scenes import load_sample
+    scene = load_sample("fence_and_tree")
+    uvs, triangles = scene.layout("lightmap")
+    positions = scene.positions[scene.triangles].reshape(-1, 3)
+    lightmap = lmrefine.bake(scene.to_scene(uvs), 256, passes="direct", samples=8, seed=0)[0][..., :3]
+    result = lmrefine.refine_uvs(lightmap, uvs, triangles, 256, padding=1, positions=positions)
+    repack = result.report["repack"]
+    assert result.report["rechart"]["used"] and repack["used"] and repack["own_packing"]
+    assert repack["padded_utilisation_after"] < (lmrefine.allocation.MIN_UTILISATION_KEPT
+                                                 * repack["padded_utilisation_before"])
+    assert result.report["triangle_stretch"]["used"]
+    # Measured on the output: the wall's two 25 m^2 sides, lit front (y < 4.6) and flat back.
+    centre_y = scene.positions[scene.triangles][:, :, 1].mean(axis=1)
+    wall = scene.object_id == scene.objects.index("BackWall")
+    texels = lmrefine.metrics.uv_areas(result.uvs, triangles)
+    front = texels[wall & (centre_y < 4.5)].sum()
+    back = texels[wall & (centre_y > 4.7)].sum()
+    assert back < 0.5 * front  # measured 0.30; 1.0 before
+    assert lmrefine.check_layout(result.uvs, triangles, 256, 2)["valid"]
+
+
 def test_layout_figures_count_the_light_changes_where_the_first_refinement_found_them(lightmap_pack_case):
     # The add-on's figures over several stages start from the first refinement's light changes: given
     # those of a re-charted result, layout_figures of its layout is its report.

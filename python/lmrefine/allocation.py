@@ -60,6 +60,11 @@ LUMA = np.array([0.2126, 0.7152, 0.0722], np.float32)
 # docs/refiner.md, "Chart scaling").
 REQUIRED_GAIN = 0.95
 MIN_UTILISATION_KEPT = 0.95
+# The same two for a layout this library packed itself at one scale (the
+# re-chart route's charts): no caller's packing to hold it to, so the
+# model's word alone, any predicted gain (docs/refiner.md, "The route's own
+# packing").
+OWN_PACKING_RULE = (1.0, 0.0)
 # The fewest texels (area) a repack leaves a chart: 2 x 2, what a bilinear
 # lookup reads; a chart already smaller keeps its size. The scale bounds are
 # relative to the median chart, so without it a flat chart shrinks again at
@@ -326,7 +331,8 @@ def signal_scales(source_uvs, triangles, energy, min_scale, max_scale, lightmap=
 
 
 def repack(source_uvs, refined_uvs, triangles, energy, resolution, padding, min_scale, max_scale, progress=None,
-           lightmap=None, mask=None, world_areas=None, max_stretch=1.0, signal=None, source_tensors=None):
+           lightmap=None, mask=None, world_areas=None, max_stretch=1.0, signal=None, source_tensors=None,
+           own_packing=False):
     """Scale the charts of `refined_uvs` by their signal (measured on the
     source layout `source_uvs`, where `energy` and `lightmap` were baked;
     `mask` its coverage; `world_areas` the triangles' surface areas, or
@@ -340,9 +346,11 @@ def repack(source_uvs, refined_uvs, triangles, energy, resolution, padding, min_
     refuses is packed again at the square roots of the scales (and judged
     the same way). `signal`: signal_scales' result for these arguments, and
     `source_tensors`: stretch.source_tensors' for lightmap, mask and
-    source_uvs, when the caller has them. Returns (uvs, report); uvs is None
-    when the packed layout is not better than `refined_uvs` by the error
-    model (the report says so)."""
+    source_uvs, when the caller has them. `own_packing`: refined_uvs's
+    charts were packed at one scale by this library (the re-chart route),
+    so OWN_PACKING_RULE replaces REQUIRED_GAIN and MIN_UTILISATION_KEPT.
+    Returns (uvs, report); uvs is None when the packed layout is not better
+    than `refined_uvs` by the error model (the report says so)."""
     charts, scales, edge, smooth = signal if signal is not None else signal_scales(
         source_uvs, triangles, energy, min_scale, max_scale, lightmap, mask, world_areas)
     # No packing can scale the charts beyond filling the whole atlas, gutters
@@ -351,26 +359,29 @@ def repack(source_uvs, refined_uvs, triangles, energy, resolution, padding, min_
     area_refined = np.bincount(charts, weights=np.abs(signed_areas(refined_uvs, triangles)), minlength=len(scales))
     largest = 1.0 / np.sqrt(max(float((area_refined * scales ** 2).sum()), 1e-300))
     best = predicted_error(edge, smooth, largest * scales)
-    if best >= REQUIRED_GAIN:
+    rule = OWN_PACKING_RULE if own_packing else (REQUIRED_GAIN, MIN_UTILISATION_KEPT)
+    if best >= rule[0]:
         return None, {"charts": int(len(scales)), "used": False, "predicted_error": best,
+                      "own_packing": bool(own_packing),
                       "reason": f"even filling the whole atlas the error model predicts {best:.3f} of the unpacked "
-                                f"error at best (a repack needs below {REQUIRED_GAIN})"}
+                                f"error at best (a repack needs below {rule[0]:g})"}
     stretched = None
     if max_stretch > 1.0 and lightmap is not None:
         stretched = _stretch_candidate(source_uvs, refined_uvs, triangles, charts, lightmap, mask, resolution,
                                        max_stretch, source_tensors)
     packed, report = _packing_at(scales, refined_uvs, triangles, charts, edge, smooth, stretched, resolution,
-                                 padding, progress)
-    if not report["used"] and report.get("predicted_error", 1.0) < REQUIRED_GAIN:
+                                 padding, progress, rule)
+    report["own_packing"] = bool(own_packing)
+    if not report["used"] and report.get("predicted_error", 1.0) < rule[0]:
         # Refused for its density alone: the signal's spread of chart sizes
         # costs more gutter than the input's. The scales half way to uniform
         # (in log scale) cost less, so the choice is not all or nothing.
         soft_packed, soft = _packing_at(np.sqrt(scales), refined_uvs, triangles, charts, edge, smooth, stretched,
-                                        resolution, padding, _reports_done(progress))
+                                        resolution, padding, _reports_done(progress), rule)
         softened = {"used": soft["used"], "refused": {
             key: report[key] for key in ("predicted_error", "padded_utilisation_before", "padded_utilisation_after")}}
         if soft["used"]:
-            return soft_packed, {**soft, "softened": softened}
+            return soft_packed, {**soft, "own_packing": bool(own_packing), "softened": softened}
         report["softened"] = softened
     return (packed if report["used"] else None), report
 
@@ -404,9 +415,12 @@ def _reports_done(progress):
     return None if progress is None else (lambda fraction, stage: progress(1.0, stage))
 
 
-def _packing_at(scales, refined_uvs, triangles, charts, edge, smooth, stretched, resolution, padding, progress):
+def _packing_at(scales, refined_uvs, triangles, charts, edge, smooth, stretched, resolution, padding, progress,
+                rule):
     """repack's packing of `refined_uvs`'s charts at relative `scales` (and of
-    the `stretched` candidate, when given) and its judgement: (packed uvs, report)."""
+    the `stretched` candidate, when given) and its judgement by `rule` (the
+    predicted error below rule[0], the padded utilisation at least rule[1]
+    of the input's): (packed uvs, report)."""
     try:
         (packed, pack_report), stretched_pack = _pack_both(
             refined_uvs, None if stretched is None else stretched["uvs"],
@@ -470,8 +484,8 @@ def _packing_at(scales, refined_uvs, triangles, charts, edge, smooth, stretched,
     # Density of the charts grown by half the padding, not texels touched: a
     # chart off the texel grid touches more texels than the same chart on it,
     # and shrunk charts need the same gutters (docs/refiner.md).
-    report["used"] = bool(predicted < REQUIRED_GAIN and report["padded_utilisation_after"]
-                          >= MIN_UTILISATION_KEPT * report["padded_utilisation_before"])
+    report["used"] = bool(predicted < rule[0] and report["padded_utilisation_after"]
+                          >= rule[1] * report["padded_utilisation_before"])
     return packed, report
 
 

@@ -474,7 +474,8 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
         shape = _resolution(resolution)
         recharted, info = rechart_route.refine_recharted(
             lambda carried, new_uvs, new_mask, new_padding: _refine(carried, new_uvs, triangles, shape, new_padding,
-                                                                    new_mask, None, progress, options)[0],
+                                                                    new_mask, None, progress, options,
+                                                                    own_packing=True)[0],
             lightmap, uvs, triangles, shape, padding, positions, room, energy, source_route, stage.original,
             progress, folds, normals, polygons, source_lowest=_source_lowest(stage))
         if rechart == "always":
@@ -559,12 +560,14 @@ def _recharted_result(recharted, original, uvs, triangles, energy, mask, info, l
     return recharted
 
 
-def _refine(lightmap, uvs, triangles, resolution, padding, mask, gradient, progress, options, room=None):
+def _refine(lightmap, uvs, triangles, resolution, padding, mask, gradient, progress, options, room=None,
+            own_packing=False):
     """refine_uvs without the re-chart route: (RefineResult, the first bake's
     gradient energy per texel (H, W), the source layout's coverage). `room`:
-    rechart_route.layout_room of the layout, when the caller has it."""
+    rechart_route.layout_room of the layout, when the caller has it;
+    `own_packing`: the layout is the re-chart route's (allocation.repack)."""
     return _repacked(_in_charts(lightmap, uvs, triangles, resolution, padding, mask, gradient, progress, options,
-                                room))
+                                room), own_packing)
 
 
 def _in_charts(lightmap, uvs, triangles, resolution, padding, mask, gradient, progress, options, room=None):
@@ -841,9 +844,9 @@ def _pack_padding(padding, original):
     return min(float(padding), max(float(original["min_gutter_texels"]), min(float(padding), 1.0)))
 
 
-def _repacked(stage):
-    """_refine from the in-chart `stage` (_in_charts) on: the chart repack,
-    the figures and the report."""
+def _repacked(stage, own_packing=False):
+    """_refine from the in-chart `stage` (_in_charts) on: the chart repack
+    (`own_packing`: allocation.repack's), the figures and the report."""
     options, uvs, triangles, shape, mask, original = \
         stage.options, stage.uvs, stage.triangles, stage.shape, stage.mask, stage.original
     scalar_energy, limited_by, notes, timings = stage.energy, stage.limited_by, stage.notes, stage.timings
@@ -869,7 +872,8 @@ def _repacked(stage):
                                                   lightmap=stage.lightmap if stage.gradient_given is None else None,
                                                   mask=mask,
                                                   world_areas=stage.world_areas, max_stretch=float(max_stretch),
-                                                  signal=stage.signal, source_tensors=_source_tensors(stage))
+                                                  signal=stage.signal, source_tensors=_source_tensors(stage),
+                                                  own_packing=own_packing)
         if packed is not None:
             # Analysed once: the triangle stretch packs this layout's charts again.
             packed_checker = _native.LayoutChecker(packed, triangles, shape, padding)
@@ -894,6 +898,9 @@ def _repacked(stage):
                                  f"(the input: {refused['padded_utilisation_before']:.0%})")
         elif "reason" in repack_report:
             notes.append(f"repack not used: {repack_report['reason']}")
+        elif own_packing:
+            notes.append(f"repack not used: the error model predicts {repack_report['predicted_error']:.3f} of the "
+                         f"unpacked error (needed: below {allocation.OWN_PACKING_RULE[0]:g})")
         else:
             notes.append(f"repack not used: the error model predicts {repack_report['predicted_error']:.3f} of the "
                          f"unpacked error and the packed atlas would be "
