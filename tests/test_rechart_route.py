@@ -377,7 +377,7 @@ def test_route_does_not_make_the_source_repack_the_bound_rules_out(lightmap_pack
     from lmrefine import refine
     made = []
     repacked = refine._repacked
-    monkeypatch.setattr(refine, "_repacked", lambda stage: made.append(stage) or repacked(stage))
+    monkeypatch.setattr(refine, "_repacked", lambda stage, *own: made.append(stage) or repacked(stage, *own))
     skipped = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, positions=corners)
     info = skipped.report["rechart"]
     assert info["used"] and info["predicted_error_source_route"] is None
