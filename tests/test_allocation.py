@@ -317,6 +317,41 @@ def test_a_layout_of_the_libraries_own_packing_is_repacked_on_the_models_word_al
     assert none is None and not report["used"] and report["predicted_error"] >= allocation.OWN_PACKING_RULE[0]
 
 
+def test_stretched_packings_of_the_libraries_own_packing_are_judged_by_the_model_alone():
+    """The chart stretch's candidates come in order, each a fallback for the ones before (stretched,
+    turned, half the factors). For a caller's packing the first that packs densely enough and
+    predicts less error is kept; for the library's own (the re-chart route) every candidate is judged
+    by the model alone, and the lowest prediction wins."""
+    uvs, tris = merge(grid_chart(2, (0.05, 0.05), (0.45, 0.45)), grid_chart(2, (0.55, 0.55), (0.95, 0.95)))
+    charts = lmrefine.find_charts(uvs, tris)
+    shape, padding, ones = (64, 64), 2.0, np.ones(2)
+    looser = ((uvs - 0.5) * 0.8 + 0.5).astype(uvs.dtype)  # the same charts, smaller: less dense
+    stretched = {"weight": ones, "report": {"charts_stretched": 2, "chart_stretch": 1.5 * ones,
+                                            "largest_stretch": 1.5}}
+    area, perimeter = allocation.chart_outlines(uvs, tris, charts, shape)
+    dense = allocation.padded_utilisation(area, perimeter, padding, shape)
+    made = []
+
+    def packings():
+        """A dense candidate that gains a little (0.9), then a looser one that gains more (0.7)."""
+        for layout, edge in ((uvs, 0.9), (looser, 0.7)):
+            made.append(edge)
+            yield np.zeros(2, bool), 1.5 * ones, edge * ones, (layout, {"chart_scales": ones})
+
+    for rule, expected, read in (((allocation.REQUIRED_GAIN, allocation.MIN_UTILISATION_KEPT), 0.9, [0.9]),
+                                 (allocation.OWN_PACKING_RULE, 0.7, [0.9, 0.7])):
+        made.clear()
+        report, kept = allocation._judge_stretch(stretched, packings(), tris, charts, shape, padding, ones, 1.0,
+                                                 dense, rule)
+        assert report["used"] and kept[-1] == pytest.approx(expected) and report["predicted_error"] == kept[-1]
+        assert made == read  # a caller's packing reads no candidate past the one kept
+        assert kept[0] is (uvs if expected == 0.9 else looser)
+    # The looser candidate fails the density rule for a caller's packing.
+    assert not allocation._judge_stretch(stretched, iter(list(packings())[1:]), tris, charts, shape, padding, ones,
+                                         1.0, dense, (allocation.REQUIRED_GAIN,
+                                                      allocation.MIN_UTILISATION_KEPT))[0]["used"]
+
+
 def test_cancelling_during_the_softened_repack_cancels_the_refinement():
     """The second packing honours the caller's progress: asked to stop there, refine_uvs stops."""
     uvs, tris, lightmap = _checkered_corner()

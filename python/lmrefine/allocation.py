@@ -458,7 +458,7 @@ def _packing_at(scales, refined_uvs, triangles, charts, edge, smooth, stretched,
                    pack(stretch.stretch_charts(refined_uvs, triangles, charts, half, stretched["direction"])))
 
         stretch_report, kept = _judge_stretch(stretched, packings(), triangles, charts, resolution, padding,
-                                              final, predicted, padded_before)
+                                              final, predicted, padded_before, rule)
         if kept is not None:
             packed, pack_report, final, area_after, perimeter_out, predicted = kept
     report = {
@@ -510,7 +510,8 @@ def _stretch_candidate(source_uvs, refined_uvs, triangles, charts, lightmap, mas
                        "largest_stretch": float(factor.max())}}
 
 
-def _judge_stretch(stretched, packings, triangles, charts, resolution, padding, final, predicted, padded_before):
+def _judge_stretch(stretched, packings, triangles, charts, resolution, padding, final, predicted, padded_before,
+                   rule):
     """The stretch's report and, when a stretched packing is kept, its (uvs,
     pack report, chart scales, chart areas, perimeters, predicted error):
     the first candidate that packs as densely as the input and predicts
@@ -534,16 +535,17 @@ def _judge_stretch(stretched, packings, triangles, charts, resolution, padding, 
         area, perimeter = chart_outlines(uvs, triangles, charts, resolution)
         # The same density rule as the unstretched packing (the model does not see the gutters).
         entry["padded_utilisation"] = padded_utilisation(area, perimeter, padding, resolution)
-        entry["dense"] = bool(entry["padded_utilisation"] >= MIN_UTILISATION_KEPT * padded_before)
+        entry["dense"] = bool(entry["padded_utilisation"] >= rule[1] * padded_before)
         # The stretch's edge error over the unstretched packing's, each chart weighted by its light
         # changes as the structure tensor measures them.
         after = (weight * edge_factor / np.maximum(scales, 1e-12)).sum()
         entry["predicted_error"] = predicted * (float(after / before) if before > 0 else 1.0)
-        if entry["dense"] and entry["predicted_error"] < predicted:
+        if entry["dense"] and entry["predicted_error"] < (predicted if kept is None else kept[-1]):
             kept = (uvs, pack_report, scales, area, perimeter, entry["predicted_error"])
             report.update(used=True, charts_turned=entry["charts_turned"], chart_stretch=factor,
                           largest_stretch=entry["largest_stretch"])
-            break
+            if rule[1] > 0:
+                break
     report["candidates"] = judged
     report["predicted_error"] = min((e["predicted_error"] for e in judged if "predicted_error" in e), default=None)
     if kept is not None:
