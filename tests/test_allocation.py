@@ -314,7 +314,7 @@ def test_a_layout_of_the_libraries_own_packing_is_repacked_on_the_models_word_al
     flat = np.full_like(lightmap, 0.6)
     none, report = allocation.repack(uvs, uvs, tris, lmrefine.gradient_map(flat).sum(axis=2), (64, 64), 2.0, 0.5,
                                      2.0, lightmap=flat, own_packing=True)
-    assert none is None and not report["used"] and report["predicted_error"] >= allocation.OWN_PACKING_RULE[0]
+    assert none is None and not report["used"] and report["predicted_error"] >= allocation.OWN_PACKING_RULE.required_gain
 
 
 def test_stretched_packings_of_the_libraries_own_packing_are_judged_by_the_model_alone():
@@ -338,8 +338,7 @@ def test_stretched_packings_of_the_libraries_own_packing_are_judged_by_the_model
             made.append(edge)
             yield np.zeros(2, bool), 1.5 * ones, edge * ones, (layout, {"chart_scales": ones})
 
-    for rule, expected, read in (((allocation.REQUIRED_GAIN, allocation.MIN_UTILISATION_KEPT), 0.9, [0.9]),
-                                 (allocation.OWN_PACKING_RULE, 0.7, [0.9, 0.7])):
+    for rule, expected, read in ((allocation.callers_rule(), 0.9, [0.9]), (allocation.OWN_PACKING_RULE, 0.7, [0.9, 0.7])):
         made.clear()
         report, kept = allocation._judge_stretch(stretched, packings(), tris, charts, shape, padding, ones, 1.0,
                                                  dense, rule)
@@ -348,8 +347,7 @@ def test_stretched_packings_of_the_libraries_own_packing_are_judged_by_the_model
         assert kept[0] is (uvs if expected == 0.9 else looser)
     # The looser candidate fails the density rule for a caller's packing.
     assert not allocation._judge_stretch(stretched, iter(list(packings())[1:]), tris, charts, shape, padding, ones,
-                                         1.0, dense, (allocation.REQUIRED_GAIN,
-                                                      allocation.MIN_UTILISATION_KEPT))[0]["used"]
+                                         1.0, dense, allocation.callers_rule())[0]["used"]
 
 
 def test_cancelling_during_the_softened_repack_cancels_the_refinement():

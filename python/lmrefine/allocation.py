@@ -21,6 +21,8 @@ alone, on the whole gradient energy, gives s_c proportional to
 (E_c / A_c)^(1/3).
 """
 
+from typing import NamedTuple
+
 import numpy as np
 
 from .packer import CHART_TOLERANCE, pack_charts
@@ -60,11 +62,28 @@ LUMA = np.array([0.2126, 0.7152, 0.0722], np.float32)
 # docs/refiner.md, "Chart scaling").
 REQUIRED_GAIN = 0.95
 MIN_UTILISATION_KEPT = 0.95
-# The same two for a layout this library packed itself at one scale (the
-# re-chart route's charts): no caller's packing to hold it to, so the
-# model's word alone, any predicted gain (docs/refiner.md, "The route's own
-# packing").
-OWN_PACKING_RULE = (1.0, 0.0)
+
+
+class KeepRule(NamedTuple):
+    """When a packing is kept: its predicted error below `required_gain`,
+    its padded utilisation at least `min_utilisation` of the input's; of
+    the stretch's candidates, the first that passes, or with `lowest` the
+    one the model predicts least error for."""
+    required_gain: float
+    min_utilisation: float
+    lowest: bool
+
+
+def callers_rule():
+    """The rule for a caller's packing (REQUIRED_GAIN, MIN_UTILISATION_KEPT)."""
+    return KeepRule(REQUIRED_GAIN, MIN_UTILISATION_KEPT, False)
+
+
+# For a layout this library packed itself at one scale (the re-chart
+# route's charts) there is no caller's packing to hold a repack to: the
+# model's word alone, any predicted gain, the lowest prediction of the
+# stretch's candidates (docs/refiner.md, "The route's own packing").
+OWN_PACKING_RULE = KeepRule(1.0, 0.0, True)
 # The fewest texels (area) a repack leaves a chart: 2 x 2, what a bilinear
 # lookup reads; a chart already smaller keeps its size. The scale bounds are
 # relative to the median chart, so without it a flat chart shrinks again at
@@ -359,12 +378,12 @@ def repack(source_uvs, refined_uvs, triangles, energy, resolution, padding, min_
     area_refined = np.bincount(charts, weights=np.abs(signed_areas(refined_uvs, triangles)), minlength=len(scales))
     largest = 1.0 / np.sqrt(max(float((area_refined * scales ** 2).sum()), 1e-300))
     best = predicted_error(edge, smooth, largest * scales)
-    rule = OWN_PACKING_RULE if own_packing else (REQUIRED_GAIN, MIN_UTILISATION_KEPT)
-    if best >= rule[0]:
+    rule = OWN_PACKING_RULE if own_packing else callers_rule()
+    if best >= rule.required_gain:
         return None, {"charts": int(len(scales)), "used": False, "predicted_error": best,
                       "own_packing": bool(own_packing),
                       "reason": f"even filling the whole atlas the error model predicts {best:.3f} of the unpacked "
-                                f"error at best (a repack needs below {rule[0]:g})"}
+                                f"error at best (a repack needs below {rule.required_gain:g})"}
     stretched = None
     if max_stretch > 1.0 and lightmap is not None:
         stretched = _stretch_candidate(source_uvs, refined_uvs, triangles, charts, lightmap, mask, resolution,
@@ -372,7 +391,7 @@ def repack(source_uvs, refined_uvs, triangles, energy, resolution, padding, min_
     packed, report = _packing_at(scales, refined_uvs, triangles, charts, edge, smooth, stretched, resolution,
                                  padding, progress, rule)
     report["own_packing"] = bool(own_packing)
-    if not report["used"] and report.get("predicted_error", 1.0) < rule[0]:
+    if not report["used"] and report.get("predicted_error", 1.0) < rule.required_gain:
         # Refused for its density alone: the signal's spread of chart sizes
         # costs more gutter than the input's. The scales half way to uniform
         # (in log scale) cost less, so the choice is not all or nothing.
@@ -418,9 +437,8 @@ def _reports_done(progress):
 def _packing_at(scales, refined_uvs, triangles, charts, edge, smooth, stretched, resolution, padding, progress,
                 rule):
     """repack's packing of `refined_uvs`'s charts at relative `scales` (and of
-    the `stretched` candidate, when given) and its judgement by `rule` (the
-    predicted error below rule[0], the padded utilisation at least rule[1]
-    of the input's): (packed uvs, report)."""
+    the `stretched` candidate, when given) and its judgement by `rule` (a
+    KeepRule): (packed uvs, report)."""
     try:
         (packed, pack_report), stretched_pack = _pack_both(
             refined_uvs, None if stretched is None else stretched["uvs"],
@@ -484,8 +502,8 @@ def _packing_at(scales, refined_uvs, triangles, charts, edge, smooth, stretched,
     # Density of the charts grown by half the padding, not texels touched: a
     # chart off the texel grid touches more texels than the same chart on it,
     # and shrunk charts need the same gutters (docs/refiner.md).
-    report["used"] = bool(predicted < rule[0] and report["padded_utilisation_after"]
-                          >= rule[1] * report["padded_utilisation_before"])
+    report["used"] = bool(predicted < rule.required_gain and report["padded_utilisation_after"]
+                          >= rule.min_utilisation * report["padded_utilisation_before"])
     return packed, report
 
 
@@ -515,9 +533,11 @@ def _judge_stretch(stretched, packings, triangles, charts, resolution, padding, 
     """The stretch's report and, when a stretched packing is kept, its (uvs,
     pack report, chart scales, chart areas, perimeters, predicted error):
     the first candidate that packs as densely as the input and predicts
-    less error than the unstretched packing. `packings` yields each
-    candidate's (charts turned (C,) bool, packing or None when it does not
-    fit) and is read no further than the one kept. `final`,
+    less error than the unstretched packing, by `rule` (a KeepRule; with
+    rule.lowest every candidate is judged and the lowest prediction kept).
+    `packings` yields each candidate's (charts turned (C,) bool, packing or
+    None when it does not fit) and is read no further than the one kept
+    unless rule.lowest. `final`,
     `predicted` and `padded_before` are the unstretched packing's scales
     and predicted error and the input's padded density."""
     report = {"used": False, "predicted_error_unstretched": predicted, "charts_turned": 0, **stretched["report"]}
@@ -535,7 +555,7 @@ def _judge_stretch(stretched, packings, triangles, charts, resolution, padding, 
         area, perimeter = chart_outlines(uvs, triangles, charts, resolution)
         # The same density rule as the unstretched packing (the model does not see the gutters).
         entry["padded_utilisation"] = padded_utilisation(area, perimeter, padding, resolution)
-        entry["dense"] = bool(entry["padded_utilisation"] >= rule[1] * padded_before)
+        entry["dense"] = bool(entry["padded_utilisation"] >= rule.min_utilisation * padded_before)
         # The stretch's edge error over the unstretched packing's, each chart weighted by its light
         # changes as the structure tensor measures them.
         after = (weight * edge_factor / np.maximum(scales, 1e-12)).sum()
@@ -544,7 +564,7 @@ def _judge_stretch(stretched, packings, triangles, charts, resolution, padding, 
             kept = (uvs, pack_report, scales, area, perimeter, entry["predicted_error"])
             report.update(used=True, charts_turned=entry["charts_turned"], chart_stretch=factor,
                           largest_stretch=entry["largest_stretch"])
-            if rule[1] > 0:
+            if not rule.lowest:
                 break
     report["candidates"] = judged
     report["predicted_error"] = min((e["predicted_error"] for e in judged if "predicted_error" in e), default=None)

@@ -900,7 +900,7 @@ def _repacked(stage, own_packing=False):
             notes.append(f"repack not used: {repack_report['reason']}")
         elif own_packing:
             notes.append(f"repack not used: the error model predicts {repack_report['predicted_error']:.3f} of the "
-                         f"unpacked error (needed: below {allocation.OWN_PACKING_RULE[0]:g})")
+                         f"unpacked error (needed: below {allocation.OWN_PACKING_RULE.required_gain:g})")
         else:
             notes.append(f"repack not used: the error model predicts {repack_report['predicted_error']:.3f} of the "
                          f"unpacked error and the packed atlas would be "
