@@ -314,7 +314,8 @@ def test_a_layout_of_the_libraries_own_packing_is_repacked_on_the_models_word_al
     flat = np.full_like(lightmap, 0.6)
     none, report = allocation.repack(uvs, uvs, tris, lmrefine.gradient_map(flat).sum(axis=2), (64, 64), 2.0, 0.5,
                                      2.0, lightmap=flat, own_packing=True)
-    assert none is None and not report["used"] and report["predicted_error"] >= allocation.OWN_PACKING_RULE.required_gain
+    assert none is None and not report["used"]
+    assert report["predicted_error"] >= allocation.OWN_PACKING_RULE.required_gain
 
 
 def test_stretched_packings_of_the_libraries_own_packing_are_judged_by_the_model_alone():
@@ -338,7 +339,8 @@ def test_stretched_packings_of_the_libraries_own_packing_are_judged_by_the_model
             made.append(edge)
             yield np.zeros(2, bool), 1.5 * ones, edge * ones, (layout, {"chart_scales": ones})
 
-    for rule, expected, read in ((allocation.callers_rule(), 0.9, [0.9]), (allocation.OWN_PACKING_RULE, 0.7, [0.9, 0.7])):
+    for rule, expected, read in ((allocation.callers_rule(), 0.9, [0.9]),
+                                 (allocation.OWN_PACKING_RULE, 0.7, [0.9, 0.7])):
         made.clear()
         report, kept = allocation._judge_stretch(stretched, packings(), tris, charts, shape, padding, ones, 1.0,
                                                  dense, rule)
