@@ -282,8 +282,7 @@ def test_a_repack_too_loose_at_the_signal_scales_is_kept_at_their_square_roots()
                                               max_stretch=1.0).uvs, result.uvs)
 
 
-
-def test_a_layout_of_the_libraries_own_packing_is_repacked_on_the_models_word_alone():
+def test_a_layout_the_library_packed_itself_is_repacked_on_the_models_word_alone():
     """The re-chart route's charts were packed by the library at one scale (own_packing): no caller's
     packing to hold the repack to. The checkered corner at the model's scales, which the density rule
     refuses for a caller's layout (and packs at the square roots), is then kept at those scales; and a
@@ -318,7 +317,7 @@ def test_a_layout_of_the_libraries_own_packing_is_repacked_on_the_models_word_al
     assert report["predicted_error"] >= allocation.OWN_PACKING_RULE.required_gain
 
 
-def test_stretched_packings_of_the_libraries_own_packing_are_judged_by_the_model_alone():
+def test_the_stretch_candidates_of_a_layout_the_library_packed_are_judged_by_the_model_alone():
     """The chart stretch's candidates come in order, each a fallback for the ones before (stretched,
     turned, half the factors). For a caller's packing the first that packs densely enough and
     predicts less error is kept; for the library's own (the re-chart route) every candidate is judged

@@ -829,7 +829,7 @@ def test_route_repacks_its_own_charts_on_the_models_word():
     assert repack["padded_utilisation_after"] < (lmrefine.allocation.MIN_UTILISATION_KEPT
                                                  * repack["padded_utilisation_before"])
     assert result.report["triangle_stretch"]["used"]
-    # Measured on the output: the wall's two 25 m^2 sides, lit front (y < 4.6) and flat back.
+    # Measured on the output: the wall's two 25 m^2 sides, the lit front (centres at y 4.45) and the flat back (4.75).
     centre_y = scene.positions[scene.triangles][:, :, 1].mean(axis=1)
     wall = scene.object_id == scene.objects.index("BackWall")
     texels = lmrefine.metrics.uv_areas(result.uvs, triangles)
