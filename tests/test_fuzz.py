@@ -74,3 +74,22 @@ def test_a_crash_and_a_hang_are_caught_and_counted(monkeypatch):
     assert counts == {"crash": 1, "hang": 1, "other exception KeyError": 1, "ok": 1}
     assert runner.failures(counts) == {"crash": 1, "hang": 1, "other exception KeyError": 1}
     assert "signal 9" in examples["crash"][0][1]
+
+
+def test_cases_leave_no_temporary_folders(monkeypatch, tmp_path):
+    """Children exit without cleanup, so a case's temporary folders must land where the runner removes them."""
+    import signal
+    import tempfile
+
+    def fake_run_case(lm, seed, index):
+        folder = tempfile.mkdtemp(prefix="lmrefine_fuzz_")
+        open(os.path.join(folder, "out.png"), "wb").close()
+        if index == 1:
+            os.kill(os.getpid(), signal.SIGKILL)
+        return "ok", ""
+
+    monkeypatch.setattr(runner, "run_case", fake_run_case)
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    counts, _ = runner.run(0, 3, jobs=2, timeout=10.0, fresh=False)
+    assert counts == {"ok": 2, "crash": 1}
+    assert list(tmp_path.iterdir()) == []

@@ -26,6 +26,7 @@ import json
 import os
 import re
 import select
+import shutil
 import signal
 import sys
 import tempfile
@@ -131,8 +132,14 @@ def run_case(lm, seed, index):
 
 
 def _child(lm, seed, index, write_fd, stderr_path):
-    """In the forked child: run one case, write its outcome, exit without cleanup."""
+    """In the forked child: run one case, write its outcome, exit without cleanup.
+
+    The case's own temporary folders go under the run's scratch folder (the
+    folder of stderr_path), which the parent removes: the child exits
+    without running any cleanup.
+    """
     try:
+        tempfile.tempdir = os.path.dirname(stderr_path)
         fd = os.open(stderr_path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
         os.dup2(fd, 2)
         os.dup2(fd, 1)
@@ -223,10 +230,7 @@ def run(seed, count, jobs=2, timeout=30.0, start=0, on_result=None, fresh=True):
                 del running[fd]
                 _remove(stderr_path)
                 record(index, "hang", f"still running after {timeout:.0f} s")
-    try:
-        os.rmdir(scratch)
-    except OSError:
-        pass
+    shutil.rmtree(scratch, ignore_errors=True)
     return counts, examples
 
 
