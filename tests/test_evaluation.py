@@ -159,6 +159,30 @@ def test_demo_runs_the_pipeline_on_the_bundled_courtyard(tmp_path, capsys):
     assert summary["width"] == 64 and summary["channels"]["r"]["max"] > 0
 
 
+def test_the_first_bake_can_have_samples_of_its_own():
+    """--first-samples changes only the map the refinement reads: at the
+    other bakes' count it is the same run, at another count the plain map and
+    the uniform sweep stay what they were and the refined layout follows the
+    first map."""
+    from lmrefine.evaluation import EvaluationOptions, evaluate_sample
+
+    common = dict(resolution=48, points=1000, samples=4, truth_samples=16, multipliers=(1.0, 2.0), view_width=0)
+    plain = evaluate_sample(tiny_scene(6), EvaluationOptions(**common))
+    same = evaluate_sample(tiny_scene(6), EvaluationOptions(**common, first_samples=4))
+    other = evaluate_sample(tiny_scene(6), EvaluationOptions(**common, first_samples=1))
+    assert same["rmse_refined"] == plain["rmse_refined"] and same["first_samples"] == 4
+    assert "bake first map" not in same["timings"] and "bake first map" in other["timings"]
+    assert other["rmse_baseline"] == plain["rmse_baseline"]
+    assert [s["rmse"] for s in other["resolution_sweep"]] == [s["rmse"] for s in plain["resolution_sweep"]]
+    assert other["rmse_refined"] != plain["rmse_refined"] and other["first_samples"] == 1
+    with pytest.raises(ValueError, match="first_samples"):
+        EvaluationOptions(**common, first_samples=0).check()
+    with pytest.raises(ValueError, match="first_samples"):
+        EvaluationOptions(**common, per_effect="sqrt", first_samples=2).check()
+    args = cli.build_parser().parse_args(["evaluate", "courtyard", "--first-samples", "8"])
+    assert cli.evaluation_options(args).first_samples == 8
+
+
 def test_evaluate_rejects_bad_arguments(tmp_path, capsys):
     assert cli.main(["evaluate", "no_such_scene", "--out", str(tmp_path)]) == 2
     assert "no sample scene" in capsys.readouterr().err

@@ -78,7 +78,8 @@ def evaluation_options(args):
     compare = ()
     if rechart is not None and getattr(args, "compare", False):
         compare = ("smart", "lightmap") if args.variant == "both" else (args.variant,)
-    return EvaluationOptions(resolution=args.resolution, samples=args.samples, truth_samples=args.truth_samples,
+    return EvaluationOptions(resolution=args.resolution, samples=args.samples,
+                             first_samples=getattr(args, "first_samples", None), truth_samples=args.truth_samples,
                              points=args.points, seed=args.seed, multipliers=args.multipliers,
                              padding=args.padding, denoise=args.denoise, bake_pass=args.bake_pass,
                              refine_options=refine_options, view_width=args.view_width,
@@ -180,6 +181,9 @@ def add_evaluation_arguments(parser, resolution, points):
     parser.add_argument("--resolution", type=int, default=resolution,
                         help=f"lightmap resolution R (default: {resolution})")
     parser.add_argument("--samples", type=int, default=32, help="bake samples per texel (default: 32)")
+    parser.add_argument("--first-samples", type=int, metavar="SAMPLES",
+                        help="bake samples per texel of the first bake, the map the refinement reads (default: "
+                             "--samples); every other map is baked with --samples")
     parser.add_argument("--truth-samples", type=int, default=256,
                         help="samples per point of the ground truth (default: 256)")
     parser.add_argument("--points", type=int, default=points,

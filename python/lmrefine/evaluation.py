@@ -38,6 +38,10 @@ class EvaluationOptions:
     resolution: int = 256
     variant: str = "smart"            # UV variant of the sample scene
     samples: int = 32                 # bake samples per texel
+    # Samples per texel of the first bake, the map the refinement reads;
+    # None: `samples`. Every other bake (the plain map the refined one is
+    # compared with, the refined map, the uniform sweep) uses `samples`.
+    first_samples: int = None
     truth_samples: int = 256          # lmrefine.evaluate samples per point (ground truth)
     points: int = 20000               # surface points
     seed: int = 0
@@ -72,6 +76,8 @@ class EvaluationOptions:
             raise ValueError(f"view width must be 0 (no surface pictures) or 16 to 2048 pixels, got {self.view_width}")
         if self.samples < 1 or self.truth_samples < 1:
             raise ValueError("samples and truth_samples must be at least 1")
+        if self.first_samples is not None and self.first_samples < 1:
+            raise ValueError(f"first_samples must be at least 1, or None for samples, got {self.first_samples}")
         m = tuple(float(x) for x in self.multipliers)
         if len(m) < 2 or m[0] != 1.0 or any(b <= a for a, b in zip(m, m[1:])):
             raise ValueError(f"multipliers must start at 1 and increase, e.g. 1,1.5,2,3,4; got {self.multipliers}")
@@ -92,6 +98,9 @@ class EvaluationOptions:
             if self.stages != 1:
                 raise ValueError(f"per_effect (--per-effect) refines each effect's layout once: use it with "
                                  f"stages=1 (--stages 1), not {self.stages}")
+            if self.first_samples is not None:
+                raise ValueError("per_effect (--per-effect) bakes each effect's first map with the combined one: "
+                                 "leave first_samples (--first-samples) unset")
 
     @property
     def layout_name(self):
@@ -599,6 +608,12 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
         first_bakes = {name: (first, second) for name, first, second in zip(EFFECTS, maps[1:], again)}
     else:
         baseline = stages.run("bake baseline", lambda p: _bake_map(sample, uvs, resolution, options, p))
+    # The map the refinement reads: the plain map itself, or with first_samples
+    # a bake of its own (the same seed, so at equal samples the same map).
+    first_map = baseline
+    if options.first_samples not in (None, options.samples):
+        first_map = stages.run("bake first map", lambda p: _bake_map(
+            sample, uvs, resolution, replace(options, samples=options.first_samples), p))
     tessellation = unsplit = None
     refine_options = options.refine_options
     if options.tessellate is not None:
@@ -607,12 +622,12 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
         unsplit = sample
         refine_options = tessellated_refine_options(refine_options, uvs, triangles)
         sample, tessellation, to_unsplit = stages.run("tessellate", lambda p: _tessellated(
-            sample, variant, baseline, options.tessellate))
+            sample, variant, first_map, options.tessellate))
         uvs, triangles = sample.layout(variant)
     original_check = check_layout(uvs, triangles, resolution, options.padding)
     padding = min(float(options.padding), float(original_check["min_gutter_texels"]))
     route = _route_mesh(sample, options)
-    refined = stages.run("refine", lambda p: refine_uvs(baseline, uvs, triangles, resolution, padding=padding,
+    refined = stages.run("refine", lambda p: refine_uvs(first_map, uvs, triangles, resolution, padding=padding,
                                                         progress=p, **route, **refine_options))
     refined_map = stages.run("bake refined", lambda p: _bake_map(sample, refined.uvs, resolution, options, p))
 
@@ -742,6 +757,7 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
         uniform.update(rmse=rmse, equal_error_resolution_ratio=ratio, equal_error_status=status)
     result = {"scene": sample.name, "variant": options.layout_name, "resolution": resolution, "pass": passes,
               "description": sample.description, "bake_samples": options.samples,
+              "first_samples": options.first_samples or options.samples,
               "truth_samples": options.truth_samples, "gradient_step_m": step, "texel_size_m": median_texel}
     result.update(figures(everywhere))
     result["layout"] = layout
@@ -769,7 +785,7 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
     context = {
         "refine_report": refined.report,
         # The split a coarse note would advise, tried only when a note is written.
-        "split_trial": functools.lru_cache(maxsize=None)(lambda: _split_trial(sample, variant, baseline)),
+        "split_trial": functools.lru_cache(maxsize=None)(lambda: _split_trial(sample, variant, first_map)),
         "texels_per_transition_triangle": float(np.median(texels[on_transitions])) if on_transitions.size else 0.0,
         "chart_texels_at_transitions": (float(np.median(chart_texels[charts[on_transitions]]))
                                         if on_transitions.size else 0.0),
@@ -783,7 +799,7 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
         result["uniform_repack"] = uniform
     if tessellation is not None:
         result["tessellation"] = {**tessellation, **_plain_refinement(
-            unsplit, variant, baseline, to_unsplit, points, truth, transitions, sweep, resolution, padding,
+            unsplit, variant, first_map, to_unsplit, points, truth, transitions, sweep, resolution, padding,
             options, stages, result)}
     if stage_history is not None:
         result["stages"] = stage_history

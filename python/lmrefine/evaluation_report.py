@@ -218,6 +218,12 @@ def write_surface_pictures(out_dir, result, views, density):
     plt.close(figure)
 
 
+def _first_samples(r):
+    """The first bake's samples, where they differ from the other bakes'."""
+    first = r.get("first_samples", r["bake_samples"])
+    return "" if first == r["bake_samples"] else f" ({first} for the first bake, the map the refinement reads)"
+
+
 def _number(value, digits=4):
     if value is None or (isinstance(value, float) and not math.isfinite(value)):
         return "n/a"
@@ -393,7 +399,7 @@ def scene_markdown(result):
         "",
         r.get("description", ""),
         "",
-        f"Pass `{r['pass']}`, {r['bake_samples']} bake samples per texel, ground truth from "
+        f"Pass `{r['pass']}`, {r['bake_samples']} bake samples per texel{_first_samples(r)}, ground truth from "
         f"{r['truth_samples']} samples (twice) at {r['points']} surface points ({r['transition_points']} transition "
         f"points: top decile of the surface gradient, step {r['gradient_step_m'] * 1000:.1f} mm); the ground truth's "
         f"own noise is {_number(r['truth_noise_rmse'], 3)} RMS.",
