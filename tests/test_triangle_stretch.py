@@ -286,3 +286,50 @@ def test_source_tensors_read_once_map_as_read_each_time():
     # A layout scaled by 0.8 sees gradients 1 / 0.8 as steep: tensors / 0.64.
     np.testing.assert_allclose(stretch.triangle_tensors(lightmap, mask, uvs, moved, tris, source), source / 0.64,
                                rtol=1e-5, atol=1e-6 * np.abs(source).max())
+
+
+def test_a_flip_costs_the_stretch_around_it_not_the_whole_chart(monkeypatch):
+    """A fit that flips one triangle under the stretch (a stand-in for the
+    squeezed triangles of a refined layout, which the real fit can flip)
+    halves the stretch of the triangles near it; the rest of the chart keeps
+    all of it. With no local back-off the whole chart steps down to half."""
+    resolution = 128
+    uvs, tris = plane(32, margin=0.05)
+    lightmap = stripe_lightmap(resolution)
+    mask = lmrefine.coverage_mask(uvs, tris, resolution)
+    charts = np.zeros(len(tris), np.int64)
+    shape = (resolution, resolution)
+    free, _, _, _ = stretch.triangle_stretch(lightmap, mask, uvs, uvs, tris, charts, shape, 2.0)
+    centres = uvs[tris].mean(axis=1)
+    victim = int(np.argmin(np.abs(centres[:, 0] - 0.49) + np.abs(centres[:, 1] - 0.5)))
+    fit = _native._fit_shapes
+    first = {}
+
+    def flipping_fit(start, vertex_triangles, targets):
+        fitted = fit(start, vertex_triangles, targets)
+        deviation = np.abs(targets[victim] - np.eye(2)).max()
+        first.setdefault("deviation", deviation)
+        if deviation >= 0.4 * first["deviation"]:  # the victim flips until its stretch is a quarter
+            a, b, c = fitted[vertex_triangles[victim]]
+            edge = (b - a) / np.linalg.norm(b - a)
+            foot = a + edge * np.dot(c - a, edge)
+            fitted[vertex_triangles[victim][2]] = 2 * foot - c
+        return fitted
+
+    monkeypatch.setattr(stretch._native, "_fit_shapes", flipping_fit)
+    assert first == {} and np.abs(free - uvs).max() > 0
+    out, kept, report, model = stretch.triangle_stretch(lightmap, mask, uvs, uvs, tris, charts, shape, 2.0)
+    assert kept.tolist() == [1.0] and report["charts_backed_off"] == 0
+    backed = model["local"] < 1
+    assert backed[victim] and 0 < report["triangles_backed_off"] == backed.sum() < 0.05 * len(tris)
+    assert (np.sign(allocation.signed_areas(out, tris)) == np.sign(allocation.signed_areas(uvs, tris))).all()
+    # Far from the victim the triangles keep the free fit's shapes (the fit is global: they move a little).
+    far = np.linalg.norm(centres - centres[victim], axis=1) > 0.3
+    for axis in (0, 1):
+        np.testing.assert_allclose(np.ptp(out[tris[far]][:, :, axis], axis=1),
+                                   np.ptp(free[tris[far]][:, :, axis], axis=1), rtol=0.05)
+
+    monkeypatch.setattr(stretch, "LOCAL_BACKOFF_ROUNDS", 0)
+    first.clear()
+    _, whole, whole_report, _ = stretch.triangle_stretch(lightmap, mask, uvs, uvs, tris, charts, shape, 2.0)
+    assert whole.tolist() == [0.25] and whole_report["triangles_backed_off"] == 0

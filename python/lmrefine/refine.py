@@ -779,7 +779,7 @@ def _triangle_stretched(stage, new_uvs, check, analysed=None):
         return new_uvs, check, report
     report["used"] = True
     report["charts_stretched"] = int((kept > 0).sum())
-    report.update(stretch.stretch_figures(model["factor"], kept, charts))
+    report.update(stretch.stretch_figures(model["factor"], kept[charts] * model["local"]))
     return packed, packed_check, report
 
 

@@ -260,6 +260,14 @@ TRIANGLE_STRENGTH_QUANTILE = 90
 # The share of the stretch a chart keeps when it flips a triangle, in turn;
 # a chart that flips one at the last keeps its shape.
 TRIANGLE_BACKOFF = (1.0, 0.5, 0.25)
+# Before its whole chart steps down TRIANGLE_BACKOFF, a flip halves the
+# stretch of the triangles within this many rings of it, up to this many
+# times: a chart of thousands of triangles need not give up its stretch for
+# two flipped ones (the room's floor did, on one seed in two). 2 rings,
+# chosen on the tuning scenes; 5 lost courtyard's Smart UV row at 512^2
+# (docs/refiner.md, "Local back-off").
+LOCAL_BACKOFF_RINGS = 2
+LOCAL_BACKOFF_ROUNDS = 4
 # UV corners of one chart this close (in UV units, rounded) are one vertex of the fit.
 WELD_STEP = 2.0 ** -20
 
@@ -326,11 +334,14 @@ def triangle_stretch(lightmap, mask, source_uvs, uvs, triangles, charts, resolut
     `lightmap` (baked on `source_uvs`) and squeezed along them, the chart's
     triangles fitted to those shapes together (lmrefine._native._fit_shapes).
     `kept`: the share of its stretch each chart may keep (C,), 1 for all by
-    default; a chart that would flip a triangle keeps the next smaller share
-    of TRIANGLE_BACKOFF, none after the last. The charts stay where they were
+    default. A chart that would flip a triangle first halves the stretch
+    around the flipped triangles (LOCAL_BACKOFF_RINGS, up to
+    LOCAL_BACKOFF_ROUNDS times), then keeps the next smaller share of
+    TRIANGLE_BACKOFF, none after the last. The charts stay where they were
     and need packing again. Returns (uvs, kept shares (C,), report, model:
     the per-triangle `direction`, `share` and `weight` triangle_edge_error
-    reads, and the `factor` of each triangle's stretch). `source`:
+    reads, the `factor` of each triangle's stretch and the `local` share
+    (T,) of its chart's it keeps). `source`:
     source_tensors' result for lightmap, mask, source_uvs and triangles,
     when the caller has it."""
     triangles = np.asarray(triangles)
@@ -347,34 +358,55 @@ def triangle_stretch(lightmap, mask, source_uvs, uvs, triangles, charts, resolut
     before = signed_areas(uvs, triangles)
     identity = np.eye(2)
     out = np.asarray(uvs, np.float64).copy()
+    local = np.ones(len(triangles))
+    local_rounds = np.zeros(count, np.int64)  # local back-offs of each chart at its present share
     while True:
         trying = kept > 0
         if not trying.any():
             break
-        scale = kept[charts][:, None, None]
+        scale = (kept[charts] * local)[:, None, None]
         fitted = _native._fit_shapes(start, vertex_triangles, identity + scale * (targets - identity))[vertex]
         after = signed_areas(fitted, triangles)
-        flipped = np.zeros(count, bool)
         # A triangle without area in the input has no orientation to keep.
-        np.logical_or.at(flipped, charts, (before != 0) & ((before > 0) != (after > 0)))
+        flips = (before != 0) & ((before > 0) != (after > 0))
+        flipped = np.zeros(count, bool)
+        np.logical_or.at(flipped, charts, flips)
         good = trying & ~flipped
         corner_good = np.zeros(len(uvs), bool)
         corner_good[triangles.ravel()] = np.repeat(good[charts], 3)
         out[corner_good] = fitted[corner_good]
-        if not (trying & flipped).any():
+        failing = trying & flipped
+        if not failing.any():
             break
-        kept[trying & flipped] = smaller_share(kept[trying & flipped])
-    report = {**stretch_figures(factor, kept, charts), "charts_backed_off": int(((kept > 0) & (kept < 1)).sum()),
-              "charts_kept_shape": int((kept == 0).sum())}
+        around = failing & (local_rounds < LOCAL_BACKOFF_ROUNDS)
+        local[_rings(flips & around[charts], vertex_triangles, vertices, LOCAL_BACKOFF_RINGS)] *= 0.5
+        local_rounds[around] += 1
+        whole = failing & ~around
+        kept[whole] = smaller_share(kept[whole])
+        local[whole[charts]] = 1.0
+        local_rounds[whole] = 0
+    local[kept[charts] == 0] = 1.0
+    report = {**stretch_figures(factor, kept[charts] * local),
+              "charts_backed_off": int(((kept > 0) & (kept < 1)).sum()), "charts_kept_shape": int((kept == 0).sum()),
+              "triangles_backed_off": int((local < 1).sum())}
     return out.astype(np.asarray(uvs).dtype), kept, report, {"direction": direction, "share": share,
-                                                            "weight": weight, "factor": factor}
+                                                            "weight": weight, "factor": factor, "local": local}
 
 
-def stretch_figures(factor, kept, charts):
+def _rings(selected, vertex_triangles, vertices, rings):
+    """`selected` (T,) bool grown by `rings` rings of the triangles sharing a vertex."""
+    for _ in range(rings):
+        marked = np.zeros(vertices, bool)
+        marked[vertex_triangles[selected].ravel()] = True
+        selected = marked[vertex_triangles].any(axis=1)
+    return selected
+
+
+def stretch_figures(factor, kept):
     """The report's figures of triangles stretched by `factor` (T,), each
-    keeping its chart's share `kept` (C,) of its stretch: how many, the
-    largest and the mean stretch of those stretched."""
-    kept_factor = 1.0 + (np.asarray(factor) - 1.0) * np.asarray(kept)[charts]
+    keeping the share `kept` (T,) of its stretch: how many, the largest and
+    the mean stretch of those stretched."""
+    kept_factor = 1.0 + (np.asarray(factor) - 1.0) * np.asarray(kept)
     stretched = kept_factor > 1.0
     return {"triangles_stretched": int(stretched.sum()), "largest_stretch": float(kept_factor.max(initial=1.0)),
             "mean_stretch": float(kept_factor[stretched].mean()) if stretched.any() else 1.0}
