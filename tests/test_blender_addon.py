@@ -293,6 +293,8 @@ def test_operator_end_to_end(facts, name):
     assert ("ShaderNodeUVMap", "Lightmap_refined") in [tuple(node) for node in value["preview_nodes"]]
     assert value["result_valid"] and value["transition_widening"] > 1.0
     assert 0.0 < value["density_range"][0] <= value["density_range"][1]
+    low, high = value["density_range"]
+    assert f"a triangle's texels {low:.2g}x to {high:.3g}x" in value["message"], value["message"]
     # The panel's timings ("first bake 0.12s  refine 0.30s  ..."): every stage
     # that ran, in order; an existing image needs no first bake.
     stages = re.findall(r"([a-z ]+?) \d+\.\d\ds", value["timings"].replace("  ", " "))

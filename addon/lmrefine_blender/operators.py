@@ -54,7 +54,8 @@ def _report_outcome(operator, context, outcome, seconds):
                           f"{summary['transition_widening']:.2f}x their area"
                           + (f" ({across:.2f}x across them)" if across is not None else "")
                           + ", a triangle's texels "
-                          f"{summary['density_min']:.2f}x to {summary['density_max']:.2f}x (chart repack included)"
+                          # .2g as in the panel: a triangle the repack shrank to 0.0019x does not read "0.00x".
+                          f"{summary['density_min']:.2g}x to {summary['density_max']:.3g}x (chart repack included)"
                           + (f"; {still} did not move (see warnings)" if still else ""))
     result.message += "; " + images_sentence(summary)
     if result.effects:

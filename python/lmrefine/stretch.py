@@ -263,9 +263,7 @@ TRIANGLE_BACKOFF = (1.0, 0.5, 0.25)
 # Before its whole chart steps down TRIANGLE_BACKOFF, a flip halves the
 # stretch of the triangles within this many rings of it, up to this many
 # times: a chart of thousands of triangles need not give up its stretch for
-# two flipped ones (the room's floor did, on one seed in two). 2 rings,
-# chosen on the tuning scenes; 5 lost courtyard's Smart UV row at 512^2
-# (docs/refiner.md, "Local back-off").
+# two flipped ones (docs/refiner.md, "Local back-off").
 LOCAL_BACKOFF_RINGS = 2
 LOCAL_BACKOFF_ROUNDS = 4
 # UV corners of one chart this close (in UV units, rounded) are one vertex of the fit.
@@ -385,7 +383,7 @@ def triangle_stretch(lightmap, mask, source_uvs, uvs, triangles, charts, resolut
         kept[whole] = smaller_share(kept[whole])
         local[whole[charts]] = 1.0
         local_rounds[whole] = 0
-    local[kept[charts] == 0] = 1.0
+    local[kept[charts] == 0] = 1.0  # a chart that keeps its shape has no triangle backed off
     report = {**stretch_figures(factor, kept[charts] * local),
               "charts_backed_off": int(((kept > 0) & (kept < 1)).sum()), "charts_kept_shape": int((kept == 0).sum()),
               "triangles_backed_off": int((local < 1).sum())}

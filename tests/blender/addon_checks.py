@@ -675,6 +675,7 @@ def _end_to_end(first, backend, passes):
         "result_valid": result.valid,
         "transition_widening": result.transition_widening,
         "density_range": [result.density_min, result.density_max],
+        "message": result.message,
         "timings": result.timings,
     }
     facts.update(_undo_once(before))
