@@ -136,6 +136,20 @@ def test_refine_uvs_triangle_stretch_report_and_validity():
         assert report["predicted_edge_error"] < 1.0
     else:
         assert report["reason"]
+    assert report["used"], "the stripe is the stretch's own case"
+    # The figures are the output's: each triangle's map from the layout before the stretch (the plain
+    # repack's, triangle_stretch=1) to the result, measured one by one.
+    before = lmrefine.refine_uvs(lightmap, uvs, tris, resolution, triangle_stretch=1).uvs
+    measured = []
+    for tri in tris:
+        a, b = before[tri].astype(np.float64), result.uvs[tri].astype(np.float64)
+        m = np.column_stack([b[1] - b[0], b[2] - b[0]]) @ np.linalg.inv(np.column_stack([a[1] - a[0], a[2] - a[0]]))
+        s = np.linalg.svd(m, compute_uv=False)
+        measured.append(np.sqrt(s[0] / s[1]))
+    measured = np.array(measured)
+    assert report["triangles_stretched"] == int((measured > stretch.MEASURED_STRETCH).sum()) > 0
+    assert report["largest_stretch"] == pytest.approx(measured.max(), rel=1e-6)
+    assert report["largest_stretch"] <= 2.0
     # The default is 2; 1 turns it off, and so does refining inside the charts only (no packing).
     assert lmrefine.refine_uvs(lightmap, uvs, tris, resolution).report["triangle_stretch"]["max_stretch"] == 2.0
     assert lmrefine.refine_uvs(lightmap, uvs, tris, resolution, triangle_stretch=1).report["triangle_stretch"] is None

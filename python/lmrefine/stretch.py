@@ -266,6 +266,9 @@ TRIANGLE_BACKOFF = (1.0, 0.5, 0.25)
 # two flipped ones (docs/refiner.md, "Local back-off").
 LOCAL_BACKOFF_RINGS = 2
 LOCAL_BACKOFF_ROUNDS = 4
+# A triangle of the output counts as stretched when its map from the refined
+# layout is this much longer one way than the other (1%).
+MEASURED_STRETCH = 1.01
 # UV corners of one chart this close (in UV units, rounded) are one vertex of the fit.
 WELD_STEP = 2.0 ** -20
 
@@ -404,10 +407,26 @@ def stretch_figures(factor, kept):
     """The report's figures of triangles stretched by `factor` (T,), each
     keeping the share `kept` (T,) of its stretch: how many, the largest and
     the mean stretch of those stretched."""
-    kept_factor = 1.0 + (np.asarray(factor) - 1.0) * np.asarray(kept)
-    stretched = kept_factor > 1.0
-    return {"triangles_stretched": int(stretched.sum()), "largest_stretch": float(kept_factor.max(initial=1.0)),
-            "mean_stretch": float(kept_factor[stretched].mean()) if stretched.any() else 1.0}
+    return _figures(1.0 + (np.asarray(factor) - 1.0) * np.asarray(kept), 1.0)
+
+
+def measured_stretch_figures(before_uvs, after_uvs, triangles):
+    """stretch_figures measured on the output: each triangle's stretch is
+    sqrt(s1 / s2) of its affine map from `before_uvs` to `after_uvs` (s1 >=
+    s2 its singular values; a chart's uniform scale and turn leave it at 1),
+    and a triangle counts as stretched above MEASURED_STRETCH (the fit's
+    compromise bends its neighbours by less)."""
+    maps, has_area = triangle_maps(before_uvs, after_uvs, triangles)
+    values = np.linalg.svd(maps, compute_uv=False) if len(maps) else np.ones((0, 2))
+    measured = np.ones(len(has_area))
+    measured[has_area] = np.sqrt(values[:, 0] / np.maximum(values[:, 1], 1e-300))
+    return _figures(measured, MEASURED_STRETCH)
+
+
+def _figures(stretches, above):
+    stretched = stretches > above
+    return {"triangles_stretched": int(stretched.sum()), "largest_stretch": float(stretches.max(initial=1.0)),
+            "mean_stretch": float(stretches[stretched].mean()) if stretched.any() else 1.0}
 
 
 def smaller_share(shares):
