@@ -8,6 +8,9 @@ first-call`, of one `refine_uvs` in a fresh process (what a click in the
 add-on or a level of the batch costs: the memory the call needs is touched
 for the first time), on the bench plane and on game_level's Smart UV atlas
 with its repack (bench_refine's smart_uv_repack case), wall and CPU time;
+with `--case tessellate`, of `tessellate` at the add-on's trial budget
+(`TRIAL_BUDGET`, 64x) on a plane of 100,352 triangles under two crossing
+shadow edges (about 7,000 splits at 1024^2, the split running to its end);
 in two builds, each in its own subprocess with PYTHONPATH set to that
 build's python/ directory, alternating base and new so both see the same
 machine load. Prints the best time of each and the ratio new / base.
@@ -19,6 +22,7 @@ time); a ratio within about 3% is noise.
     /usr/bin/python3 bench/compare_speed.py --base /tmp/base/python --new python [--rounds 5] [--size 1024] [--threads 1]
     /usr/bin/python3 bench/compare_speed.py --base /tmp/base/python --new python --case route --rounds 3
     /usr/bin/python3 bench/compare_speed.py --base /tmp/base/python --new python --case first-call --threads 2
+    /usr/bin/python3 bench/compare_speed.py --base /tmp/base/python --new python --case tessellate --rounds 3
 """
 
 import argparse
@@ -112,6 +116,29 @@ lmrefine.refine_uvs(lightmap, uvs, tris, size)
 print(json.dumps({case + ", wall": time.perf_counter() - wall, case + ", CPU": time.process_time() - cpu}))
 """
 
+TESSELLATE_CHILD = r"""
+import json, sys, time
+size = int(sys.argv[1])
+import numpy as np
+from lmrefine.tessellation import TRIAL_BUDGET, tessellate
+n = 224  # 2 n^2 = 100,352 triangles
+xs = np.linspace(0.0, 1.0, n + 1)
+x, y = np.meshgrid(xs, xs, indexing="xy")
+positions = np.stack([x.ravel(), y.ravel(), np.zeros(x.size)], axis=1)
+v = (np.arange(n)[None, :] + (n + 1) * np.arange(n)[:, None]).ravel()
+triangles = np.concatenate([np.stack([v, v + 1, v + n + 2], 1), np.stack([v, v + n + 2, v + n + 1], 1)])
+uvs = (0.02 + 0.96 * positions[triangles.ravel()][:, :2]).astype(np.float32)
+strength = np.zeros((size, size))
+strength[:, int(0.437 * size) - 1:int(0.437 * size) + 1] = 1.0
+strength[int(0.61 * size) - 1:int(0.61 * size) + 1, :] = 1.0
+best = float("inf")
+for _ in range(2):
+    start = time.process_time()
+    tessellate(positions, triangles, uvs, strength, budget=TRIAL_BUDGET)
+    best = min(best, time.process_time() - start)
+print(json.dumps({"tessellate": best}))
+"""
+
 
 def first_call(python_dir, size, threads, folder):
     """One refine_uvs per fresh process, on the plane and on game_level."""
@@ -132,7 +159,7 @@ def run_child(python_dir, threads, child, *args):
 
 
 def measure(python_dir, size, threads, case="automaton"):
-    child = ROUTE_CHILD if case == "route" else CHILD
+    child = {"route": ROUTE_CHILD, "tessellate": TESSELLATE_CHILD}.get(case, CHILD)
     return run_child(python_dir, threads, child, str(size), os.path.join(HERE, "..", "tests"))
 
 
@@ -143,9 +170,9 @@ def main():
     parser.add_argument("--rounds", type=int, default=5, help="subprocesses per build, alternating (default 5)")
     parser.add_argument("--size", type=int, default=1024, help="lightmap resolution (default 1024)")
     parser.add_argument("--threads", type=int, default=1, help="LMREFINE_THREADS (default 1)")
-    parser.add_argument("--case", choices=("automaton", "route", "first-call"), default="automaton",
-                        help="run_automaton on the plane (default), refine_uvs' re-chart route, or one refine_uvs "
-                             "per fresh process")
+    parser.add_argument("--case", choices=("automaton", "route", "first-call", "tessellate"), default="automaton",
+                        help="run_automaton on the plane (default), refine_uvs' re-chart route, one refine_uvs "
+                             "per fresh process, or tessellate at the trial budget")
     args = parser.parse_args()
     runs = {"base": [], "new": []}
     with tempfile.TemporaryDirectory() as folder:
@@ -157,7 +184,8 @@ def main():
                                    else measure(path, args.size, args.threads, args.case))
     what, per_run, unit = {"route": ("refine_uvs on courtyard's Smart UV atlas", 2, "CPU seconds"),
                            "first-call": ("the first refine_uvs of a process", 1, "seconds"),
-                           "automaton": ("run_automaton", 3, "CPU seconds")}[args.case]
+                           "automaton": ("run_automaton", 3, "CPU seconds"),
+                           "tessellate": ("tessellate on a plane of 100,352 triangles", 2, "CPU seconds")}[args.case]
     print(f"{what} at {args.size}^2, {args.threads} thread(s), {unit}, best of {per_run * args.rounds}:")
     for name in runs["base"][0]:
         base = min(r[name] for r in runs["base"])

@@ -296,3 +296,20 @@ def test_the_budget_a_split_needs_reads_as_two_digits_rounded_up():
     assert [budget_to_end(a, v) for a, v in ((60, 9), (44, 16), (291, 289), (80, 915), (576, 9), (0, 9))] == \
         [6.7, 2.8, 1.1, 0.088, 64.0, 0.0]
     assert all(budget_to_end(a, v) >= a / v for a, v in ((1, 3), (7, 11), (1000, 7), (5, 100000)))
+
+
+def test_a_round_samples_only_what_the_last_one_split():
+    # The candidates after a round, from the peaks kept and the changed rows sampled again,
+    # are those a full sampling finds.
+    from lmrefine.tessellation import _candidates
+    positions, triangles, uvs = bent_grid(n=6)
+    strength = np.tile(np.linspace(0.0, 1.0, R) ** 2, (R, 1))  # a ramp: a piece's peak is not its parent's
+    first = tessellate(positions, triangles, uvs, strength, budget=0.15, min_texels=1)  # one round
+    corner_uvs = first.uvs.astype(np.float64).reshape(-1, 3, 2)
+    _, before, _ = _candidates(np.asarray(uvs, np.float64).reshape(-1, 3, 2), strength, 1, 0.25)
+    split = np.unique(first.parent[len(triangles):])  # the input rows the split changed in place
+    kept = _candidates(corner_uvs, strength, 1, 0.25, previous=before, changed=split)
+    full = _candidates(corner_uvs, strength, 1, 0.25)
+    assert first.report["rounds"] == 1 and len(split) > 5
+    for a, b in zip(kept, full):
+        np.testing.assert_array_equal(a, b)

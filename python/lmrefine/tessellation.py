@@ -102,14 +102,23 @@ def peak_strength(corner_uvs, strength):
     return peak
 
 
-def _candidates(corner_uvs, strength, min_texels, threshold):
+def _candidates(corner_uvs, strength, min_texels, threshold, previous=None, changed=()):
     """The triangles to split (indices): more than `min_texels` texels, peak strength >= `threshold`;
-    with every triangle's peak strength (0 where not looked at) and texel area."""
+    with every triangle's peak strength (0 where not looked at) and texel area. `previous`: the
+    peak strengths of an earlier call, still those of its triangles but the rows `changed` (rows
+    past its end are new), which are all that is sampled again."""
     texels = _texel_areas(corner_uvs, strength.shape)
-    large = np.nonzero(texels > min_texels)[0]
     peak = np.zeros(len(corner_uvs))
-    if large.size:
-        peak[large] = peak_strength(corner_uvs[large], strength)
+    look = np.ones(len(corner_uvs), bool)
+    if previous is not None:
+        peak[:len(previous)] = previous
+        look[:len(previous)] = False
+        look[np.asarray(changed, np.int64)] = True
+        peak[look] = 0.0
+    look &= texels > min_texels
+    if look.any():
+        peak[look] = peak_strength(corner_uvs[look], strength)
+    large = np.nonzero(texels > min_texels)[0]
     return large[peak[large] >= threshold], peak, texels
 
 
@@ -254,8 +263,10 @@ def tessellate(positions, triangles, uvs, strength, *, budget=DEFAULT_BUDGET, mi
     rounds, stopped = 0, "no triangle crossed by a transition is larger than min_texels"
     next_vertex = vertex_count
     candidates_left = 0
+    peak, changed = None, []  # a round samples the strength only in the triangles the last one split
     while rounds < MAX_ROUNDS:
-        candidates, peak, texels = _candidates(corner["uv"], strength, min_texels, threshold)
+        candidates, peak, texels = _candidates(corner["uv"], strength, min_texels, threshold, peak, changed)
+        changed = []
         candidates_left = int(candidates.size)
         if not candidates.size:
             break
@@ -295,6 +306,7 @@ def tessellate(positions, triangles, uvs, strength, *, budget=DEFAULT_BUDGET, mi
             splits.append((a, b, m))
             for u in users:
                 touched[u] = True
+                changed.append(u)
                 k = int(np.nonzero(triangles[u] == a)[0][0])
                 if triangles[u, (k + 1) % 3] != b:  # the edge runs b -> a in this triangle
                     k = int(np.nonzero(triangles[u] == b)[0][0])
