@@ -557,6 +557,37 @@ def _diagnose(result, context):
     return notes
 
 
+def into_pieces(to_unsplit, points):
+    """Surface points of an input mesh (metrics.SurfaceSamples: input
+    triangle, barycentric coordinates there) as points of its tessellation:
+    the piece of that triangle that holds each point, and its barycentric
+    coordinates in the piece. `to_unsplit`: (parent triangle per piece, (3T', 3)
+    barycentric coordinates of every piece corner in its parent), as
+    _tessellated returns it. Positions and normals are kept."""
+    parent, parent_bary = to_unsplit
+    parent = np.asarray(parent, np.int64)
+    # A point's coordinates b in its parent are l @ B, B the piece's corners (rows) there: l = b @ B^-1.
+    inverse = np.linalg.inv(np.asarray(parent_bary, np.float64).reshape(-1, 3, 3))
+    order = np.argsort(parent, kind="stable")
+    count = np.bincount(parent, minlength=int(points.triangle.max(initial=-1)) + 1)
+    start = np.concatenate([[0], np.cumsum(count)[:-1]])
+    first, pieces = start[points.triangle], count[points.triangle]
+    best = np.full(len(points.triangle), -1, np.int64)
+    best_bary = np.zeros((len(best), 3))
+    best_inside = np.full(len(best), -np.inf)
+    for k in range(int(pieces.max(initial=0))):
+        rows = np.nonzero(pieces > k)[0]
+        piece = order[first[rows] + k]
+        bary = np.einsum("pk,pkj->pj", points.bary[rows], inverse[piece])
+        inside = bary.min(axis=1)  # >= 0 in the piece that holds the point (rounding aside)
+        better = inside > best_inside[rows]
+        rows, piece, bary = rows[better], piece[better], bary[better]
+        best[rows], best_bary[rows], best_inside[rows] = piece, bary, inside[better]
+    best_bary = np.clip(best_bary, 0.0, None)
+    best_bary /= best_bary.sum(axis=1, keepdims=True)
+    return metrics.SurfaceSamples(best, best_bary, points.points, points.normals)
+
+
 def surface_points(sample, density, options):
     """The points the error is measured at (area-uniform on the receivers)
     and, for the transition detector, two neighbours of each along the
@@ -636,7 +667,17 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
     areas = sample.triangle_areas()
     density_base = metrics.texel_density(uvs, triangles, areas, resolution)
     density_refined = metrics.texel_density(refined.uvs, triangles, areas, resolution)
-    points, stencil_points, stencil_normals, distances, median_texel = surface_points(sample, density_base, options)
+    if unsplit is None:
+        points, stencil_points, stencil_normals, distances, median_texel = surface_points(sample, density_base,
+                                                                                          options)
+    else:
+        # The points of the run without the split (same seed), found in its pieces: every split rule
+        # and the plain refinement are measured at the same points against the same truth.
+        unsplit_uvs, unsplit_triangles = unsplit.layout(variant)
+        unsplit_density = metrics.texel_density(unsplit_uvs, unsplit_triangles, unsplit.triangle_areas(), resolution)
+        points, stencil_points, stencil_normals, distances, median_texel = surface_points(unsplit, unsplit_density,
+                                                                                          options)
+        points = into_pieces(to_unsplit, points)
     step = 0.5 * median_texel
     scene = sample.to_scene(uvs)
 
