@@ -1305,7 +1305,7 @@ def test_addon_says_tessellate_when_large_triangles_hold_the_light_changes(facts
                                                    "vertices: 2 added) with ")
     assert f"with {on['tessellation']['coarse_left']} triangle(s) of more than 8 texels still crossed" in spent[0]
     # Spent with only small triangles left (the split goes on to 1 texel; a warp serves these): no warning.
-    fine = value["tessellate_True_budget_8"]
+    fine = value["tessellate_True_budget_16"]
     assert fine["error"] is None and fine["tessellation"]["stopped"] == "the vertex budget is spent"
     assert fine["tessellation"]["candidates_left"] > 0 and fine["tessellation"]["coarse_left"] == 0
     assert not any("Tessellate spent" in w or "turn on Tessellate" in w for w in fine["warnings"])

@@ -313,3 +313,33 @@ def test_a_round_samples_only_what_the_last_one_split():
     assert first.report["rounds"] == 1 and len(split) > 5
     for a, b in zip(kept, full):
         np.testing.assert_array_equal(a, b)
+
+
+def min_angles(corners):
+    """(T,) each triangle's smallest angle in degrees (corners (T, 3, 2) or (T, 3, 3))."""
+    angles = []
+    for k in range(3):
+        u = corners[:, (k + 1) % 3] - corners[:, k]
+        v = corners[:, (k + 2) % 3] - corners[:, k]
+        cos = np.einsum("td,td->t", u, v) / (np.linalg.norm(u, axis=1) * np.linalg.norm(v, axis=1))
+        angles.append(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
+    return np.min(angles, axis=0)
+
+
+@pytest.mark.parametrize("position", [0.3, 0.52, 0.77])
+def test_every_piece_is_cut_along_its_longest_edge_so_no_sliver_is_made(position):
+    # Quads three times longer than wide in the lightmap (a table leg, a beam), a light change
+    # across them. Cutting a neighbour along the edge its partner chose, not its own longest,
+    # makes slivers; bisecting each triangle along its own longest edge keeps the smallest
+    # angle at least half the mesh's (Rivara).
+    positions, triangles, uvs = bent_grid(n=4)
+    uvs = uvs.copy()
+    uvs[:, 1] = 0.05 + (uvs[:, 1] - 0.05) / 3.0
+    strength = np.zeros((R, R))
+    strength[:, int(position * R) - 1:int(position * R) + 1] = 1.0
+    result = tessellate(positions, triangles, uvs, strength, budget=8.0, min_texels=1)
+    assert result.report["vertices_added"] > 20
+    texel = R * np.asarray(uvs, np.float64).reshape(-1, 3, 2)
+    smallest_before = min_angles(texel).min()
+    after = min_angles(R * result.uvs.astype(np.float64).reshape(-1, 3, 2))
+    assert after.min() >= 0.5 * smallest_before - 1e-6

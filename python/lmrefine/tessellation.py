@@ -6,13 +6,17 @@ from the refinement, however the automaton deforms the grid there. So before
 refining, the triangles that a strong transition crosses and that cover more
 than a few texels are split, within a vertex budget.
 
-The rule: longest-edge bisection. Each round takes the candidate triangles
-(peak transition strength >= `threshold` somewhere inside, more than
-`min_texels` texels in the lightmap layout), largest transition mass first,
-and splits each one's longest edge (measured in texels) at its midpoint,
-together with every triangle across that edge, so the mesh stays conforming
-(no T-junctions). A triangle is split at most once per round; rounds repeat
-until no candidate is left or the budget of new vertices is spent.
+The rule: longest-edge bisection (Rivara's). Each round takes the candidate
+triangles (peak transition strength >= `threshold` somewhere inside, more
+than `min_texels` texels in the lightmap layout), largest transition mass
+first. A candidate's longest edge (measured in texels) is split at its
+midpoint, together with every triangle across it, so the mesh stays
+conforming (no T-junctions), once it is the longest edge of those triangles
+too; until then the split goes to the triangle across, whose longest edge is
+longer, and on along that path. So every triangle is cut along its own
+longest edge and no piece becomes a sliver. A triangle is split at most
+once per round; rounds repeat until no candidate is left or the budget of
+new vertices is spent.
 
 Every split puts the new vertex on the edge: positions, and every per-corner
 attribute (UV maps, normals, colours) of each triangle touching the edge,
@@ -277,29 +281,28 @@ def tessellate(positions, triangles, uvs, strength, *, budget=DEFAULT_BUDGET, mi
         next_report = len(splits) + _PROGRESS_SPLITS
         rounds += 1
         order = candidates[np.argsort(-(peak[candidates] * texels[candidates]), kind="stable")]
-        # Each candidate's longest edge in texels: a triangle split this round is touched and
-        # left alone after, so its corners are still the ones measured here.
-        texel_uv = corner["uv"][order] * np.array([strength.shape[1], strength.shape[0]])
-        longest = np.argmax(np.linalg.norm(texel_uv - np.roll(texel_uv, -1, axis=1), axis=2), axis=1)
         edge_users = _EdgeUsers(triangles)
+        # Every triangle's longest edge, from the round's start: a triangle split this round is
+        # touched and left alone after, so its corners are still the ones measured here.
+        longest = _longest_edges(corner["uv"] * np.array([strength.shape[1], strength.shape[0]]), triangles,
+                                 edge_users)
+        longest_key = np.take_along_axis(edge_users.keys_of(triangles), longest[:, None], axis=1)[:, 0]
         # A triangle that repeats a vertex is never split, nor is an edge it uses:
         # it lists that edge twice and has no interior to split.
         touched = ((triangles[:, 0] == triangles[:, 1]) | (triangles[:, 1] == triangles[:, 2])
                    | (triangles[:, 2] == triangles[:, 0]))
         new_rows = {name: [] for name in corner}
         new_triangles, new_parent, round_positions = [], [], []
-        for t, local in zip(order.tolist(), longest.tolist()):
+        for t in order.tolist():
             if len(splits) >= allowed:
                 break
             if len(splits) >= next_report:
                 report_progress()
                 next_report = len(splits) + _PROGRESS_SPLITS
-            if touched[t]:
+            edge = _terminal_edge(t, triangles, longest, longest_key, edge_users, touched)
+            if edge is None:
                 continue
-            a, b = triangles[t, local], triangles[t, (local + 1) % 3]
-            users = edge_users(a, b)
-            if touched[users].any():
-                continue
+            a, b, users = edge
             m = next_vertex
             next_vertex += 1
             round_positions.append(0.5 * (_position(new_positions, a) + _position(new_positions, b)))
@@ -348,6 +351,41 @@ def tessellate(positions, triangles, uvs, strength, *, budget=DEFAULT_BUDGET, mi
         parent=parent, splits=np.array(splits, np.int64).reshape(-1, 3), report=report)
 
 
+def _longest_edges(texel_uv, triangles, edge_users):
+    """(T,) the local index k of each triangle's longest edge (corners k, k + 1) in texels. An
+    edge's length is the largest its triangles give it (the two sides of a UV seam may differ),
+    so every triangle across an edge agrees on it; equal lengths go to the larger edge key, so
+    the order is total and a propagation path always ends."""
+    lengths = np.linalg.norm(texel_uv - np.roll(texel_uv, -1, axis=1), axis=2)
+    lengths = edge_users.edge_max(lengths)
+    keys = edge_users.keys_of(triangles)
+    ties = np.where(lengths == lengths.max(axis=1, keepdims=True), keys, -1)
+    return ties.argmax(axis=1)
+
+
+def _terminal_edge(t, triangles, longest, longest_key, edge_users, touched):
+    """Rivara's longest-edge propagation from triangle t: the first edge along the path t ->
+    the triangle across t's longest edge -> ... that is the longest edge of every triangle
+    using it, as (a, b, users); None when the path reaches a triangle split this round. Splitting
+    only such edges bisects every triangle along its own longest edge, which bounds the
+    smallest angle of every piece by half the mesh's smallest (a neighbour cut along a
+    shorter edge becomes a sliver). t itself is split in a later round if the edge is ahead."""
+    current = t
+    while True:
+        if touched[current]:
+            return None
+        k = longest[current]
+        a, b = triangles[current, k], triangles[current, (k + 1) % 3]
+        users = edge_users(a, b)
+        if touched[users].any():
+            return None
+        key = edge_users.key(a, b)
+        ahead = users[longest_key[users] != key]
+        if not ahead.size:
+            return a, b, users
+        current = ahead[0]  # its longest edge is longer than this one: the path climbs
+
+
 def _position(chunks, index):
     for chunk in chunks:
         if index < len(chunk):
@@ -371,9 +409,28 @@ class _EdgeUsers:
         self._keys = keys[self._order]
 
     def __call__(self, a, b):
-        key = min(a, b) * self._stride + max(a, b)
+        key = self.key(a, b)
         lo, hi = np.searchsorted(self._keys, [key, key + 1])
         return self._order[lo:hi] // 3
+
+    def key(self, a, b):
+        return min(a, b) * self._stride + max(a, b)
+
+    def keys_of(self, triangles):
+        """(T, 3) the key of each triangle's edges (k, k + 1)."""
+        second = np.roll(triangles, -1, axis=1)
+        return np.minimum(triangles, second) * self._stride + np.maximum(triangles, second)
+
+    def edge_max(self, values):
+        """(T, 3) per-edge `values` (T, 3) replaced by their largest over the edge's triangles."""
+        flat = values.reshape(-1)[self._order]
+        if not flat.size:
+            return values.copy()
+        starts = np.flatnonzero(np.r_[True, self._keys[1:] != self._keys[:-1]])
+        group_max = np.maximum.reduceat(flat, starts)
+        out = np.empty_like(flat)
+        out[self._order] = np.repeat(group_max, np.diff(np.r_[starts, flat.size]))
+        return out.reshape(values.shape)
 
 
 def budget_to_end(added, vertices):

@@ -2006,10 +2006,10 @@ def coarse_floor_suggests_tessellation():
         return floor
 
     facts = {}
-    # strength 0: nothing to tessellate for; budget 64: enough for the split to end by itself; budget 8:
+    # strength 0: nothing to tessellate for; budget 64: enough for the split to end by itself; budget 16:
     # spent, with only triangles a warp serves left to split.
     for tessellate, strength, budget in ((False, 24.0, 0.25), (True, 24.0, 0.25), (False, 0.0, 0.25),
-                                         (True, 24.0, 64.0), (True, 24.0, 8.0)):
+                                         (True, 24.0, 64.0), (True, 24.0, 16.0)):
         floor = coarse_floor(tessellate=tessellate, strength=strength, tessellate_budget=budget)
         vertices = len(floor.data.vertices)
         outcome, warnings, error = _run_pipeline([floor])
