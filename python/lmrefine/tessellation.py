@@ -284,9 +284,8 @@ def tessellate(positions, triangles, uvs, strength, *, budget=DEFAULT_BUDGET, mi
         edge_users = _EdgeUsers(triangles)
         # Every triangle's longest edge, from the round's start: a triangle split this round is
         # touched and left alone after, so its corners are still the ones measured here.
-        longest = _longest_edges(corner["uv"] * np.array([strength.shape[1], strength.shape[0]]), triangles,
-                                 edge_users)
-        longest_key = np.take_along_axis(edge_users.keys_of(triangles), longest[:, None], axis=1)[:, 0]
+        longest, longest_key = _longest_edges(corner["uv"] * np.array([strength.shape[1], strength.shape[0]]),
+                                              edge_users)
         # A triangle that repeats a vertex is never split, nor is an edge it uses:
         # it lists that edge twice and has no interior to split.
         touched = ((triangles[:, 0] == triangles[:, 1]) | (triangles[:, 1] == triangles[:, 2])
@@ -351,16 +350,16 @@ def tessellate(positions, triangles, uvs, strength, *, budget=DEFAULT_BUDGET, mi
         parent=parent, splits=np.array(splits, np.int64).reshape(-1, 3), report=report)
 
 
-def _longest_edges(texel_uv, triangles, edge_users):
-    """(T,) the local index k of each triangle's longest edge (corners k, k + 1) in texels. An
-    edge's length is the largest its triangles give it (the two sides of a UV seam may differ),
-    so every triangle across an edge agrees on it; equal lengths go to the larger edge key, so
-    the order is total and a propagation path always ends."""
+def _longest_edges(texel_uv, edge_users):
+    """(T,) the local index k of each triangle's longest edge (corners k, k + 1) in texels, and
+    (T,) that edge's key. An edge's length is the largest its triangles give it (the two sides
+    of a UV seam may differ), so every triangle across an edge agrees on it; equal lengths go to
+    the larger edge key, so the order is total and a propagation path always ends."""
     lengths = np.linalg.norm(texel_uv - np.roll(texel_uv, -1, axis=1), axis=2)
     lengths = edge_users.edge_max(lengths)
-    keys = edge_users.keys_of(triangles)
-    ties = np.where(lengths == lengths.max(axis=1, keepdims=True), keys, -1)
-    return ties.argmax(axis=1)
+    keys = edge_users.triangle_keys
+    longest = np.where(lengths == lengths.max(axis=1, keepdims=True), keys, -1).argmax(axis=1)
+    return longest, keys[np.arange(len(keys)), longest]
 
 
 def _terminal_edge(t, triangles, longest, longest_key, edge_users, touched):
@@ -405,6 +404,7 @@ class _EdgeUsers:
         second = np.roll(triangles, -1, axis=1).reshape(-1)  # edges (0, 1), (1, 2), (2, 0) of each triangle
         self._stride = int(triangles.max(initial=0)) + 1
         keys = np.minimum(first, second) * self._stride + np.maximum(first, second)
+        self.triangle_keys = keys.reshape(-1, 3)  # (T, 3) the key of each triangle's edges (k, k + 1)
         self._order = np.argsort(keys, kind="stable")
         self._keys = keys[self._order]
 
@@ -415,11 +415,6 @@ class _EdgeUsers:
 
     def key(self, a, b):
         return min(a, b) * self._stride + max(a, b)
-
-    def keys_of(self, triangles):
-        """(T, 3) the key of each triangle's edges (k, k + 1)."""
-        second = np.roll(triangles, -1, axis=1)
-        return np.minimum(triangles, second) * self._stride + np.maximum(triangles, second)
 
     def edge_max(self, values):
         """(T, 3) per-edge `values` (T, 3) replaced by their largest over the edge's triangles."""
