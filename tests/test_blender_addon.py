@@ -376,6 +376,12 @@ def test_a_shared_atlas_with_cycles_and_with_stages(facts, name):
     assert set(value["shared_texels"].values()) == {0}
     assert value["joined_check"]["valid"] and value["joined_check"]["min_gutter_texels"] >= 2
     assert value["changed_after_undo"] == [] and value["can_undo_further"] is False
+    # The panel's short line for each map that stopped early names the report's reason.
+    for line in filter(None, value["stages_stopped"].split("; ")):
+        map_name, why = line.split(": ", 1)
+        reason = value["message"].split(f"{map_name}: ", 1)[1].split(":")[0]  # "stage N ... under X%"
+        assert why.startswith(f"stage {reason.split()[1]} "), (line, reason)
+        assert ("backed off to" in why) == ("kept only" in reason), (line, reason)
 
 
 def test_a_shared_atlas_driven_by_an_existing_atlas_image(facts):

@@ -404,7 +404,7 @@ def test_rechart_and_tessellation_combine(tmp_path):
     assert len(layout["triangles"]) == report["tessellation"]["triangles_after"]
     assert lmrefine.check_layout(layout["uvs"], layout["triangles"], 48)["valid"]
 @pytest.mark.slow
-def test_multi_stage_refinement_reports_every_stage_and_stops_when_the_layout_settles():
+def test_multi_stage_refinement_reports_every_stage_and_stops_when_a_stage_backs_off_or_settles():
     from lmrefine.evaluation import EvaluationOptions, evaluate_sample
 
     scene = tiny_scene(24)
@@ -412,7 +412,11 @@ def test_multi_stage_refinement_reports_every_stage_and_stops_when_the_layout_se
     one = evaluate_sample(scene, EvaluationOptions(**common))
     many = evaluate_sample(scene, EvaluationOptions(**common, stages=4))
     history = many["stages"]["stages"]
-    assert [e["stage"] for e in history] == [1, 2, 3, 4] and "stages" not in one
+    assert [e["stage"] for e in history] == [1, 2, 3] and "stages" not in one
+    # Stage 3 flipped triangles and backed off to under a tenth of its deformation: it ends the stages.
+    assert [e["kept"] for e in history] == [True, True, False]
+    assert history[2]["backoff"] < metrics.STAGE_MIN_BACKOFF <= history[1]["backoff"]
+    assert "stage 2 kept" in many["stages"]["stopped"] and "backed off" in many["stages"]["stopped"]
     assert many["stages"]["repack"] is True  # not re-charted from a layout with no room: repacked again
     assert history[0]["rmse"] == pytest.approx(one["rmse_refined"])  # stage 1 is the plain refinement
     # Stage 2, refined from stage 1's sharper bake, has a lower world-space error.

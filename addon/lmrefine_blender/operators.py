@@ -94,9 +94,15 @@ def images_sentence(summary):
 
 def _stage_stop(name, entry):
     """Short, for the panel: which stage an object stopped at and why (the report has the sentence)."""
+    from lmrefine.metrics import STAGE_MIN_CHANGE
     last = entry["stages"][-1]
-    moved = f"moved {last['layout_change']:.1%}" if last["moved"] else "did not move"
-    return f"{name}: stage {last['stage']} {moved}"
+    if not last["moved"]:
+        why = "did not move"
+    elif last["layout_change"] < STAGE_MIN_CHANGE:
+        why = f"moved {last['layout_change']:.1%}"
+    else:
+        why = f"backed off to {last.get('backoff', 1.0):.0%}"
+    return f"{name}: stage {last['stage']} {why}"
 
 
 def _rollback(operator, journal):

@@ -744,7 +744,8 @@ def _tessellate(lmrefine, target, lightmap, budget, journal, outcome, start, spa
 def _further_stages(context, lmrefine, groups, refined_uvs, options, journal, outcome, done, span):
     """Stages 2..options["stages"]: bake the driving pass with each map's refined layout, refine that
     layout from it, write it. A map stops at the first stage that moves its layout by less than
-    lmrefine.metrics.STAGE_MIN_CHANGE (the rule of `evaluate --stages`); its last kept layout stays.
+    lmrefine.metrics.STAGE_MIN_CHANGE or backs off below STAGE_MIN_BACKOFF (the rule of `evaluate
+    --stages`, metrics.stage_stop_reason); its last kept layout stays.
     Updates `refined_uvs` (group name -> joined UVs) and outcome.stages; returns the progress steps done."""
     from lmrefine import metrics
     resolution, padding = options["resolution"], options["padding"]
@@ -754,7 +755,8 @@ def _further_stages(context, lmrefine, groups, refined_uvs, options, journal, ou
         first = outcome.reports[group.name]
         further[group.name] = {**options["refine_options"], **metrics.further_stage_options(first)}
         outcome.stages[group.name] = {
-            "stages": [{"stage": 1, "moved": bool(first["moved"]), "kept": True}],
+            "stages": [{"stage": 1, "moved": bool(first["moved"]), "backoff": float(first.get("backoff", 1.0)),
+                        "kept": True}],
             "stopped": f"{options['stages']} stages done",
             "repack": bool(further[group.name].get("repack", True))}
     active = list(groups)
@@ -787,9 +789,10 @@ def _further_stages(context, lmrefine, groups, refined_uvs, options, journal, ou
             change = metrics.layout_change(previous, result.uvs, group.triangles)
             moved = bool(result.report["moved"])
             history = outcome.stages[name]
-            reason = metrics.stage_stop_reason(stage, moved, change)
+            backoff = float(result.report.get("backoff", 1.0))
+            reason = metrics.stage_stop_reason(stage, moved, change, backoff)
             history["stages"].append({"stage": stage, "moved": moved, "layout_change": change,
-                                      "kept": reason is None})
+                                      "backoff": backoff, "kept": reason is None})
             if reason is not None:
                 history["stopped"] = reason
                 active.remove(group)

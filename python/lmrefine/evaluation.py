@@ -320,7 +320,8 @@ def _further_stages(sample, triangles, resolution, padding, options, stages, poi
                     refined_map, lookup):
     """Stages 2..options.stages: refine the previous stage's layout from its
     own bake, bake again. Stops when a stage's layout hardly differs from the
-    previous one (STAGE_MIN_CHANGE); the world-space error of every stage is
+    previous one (STAGE_MIN_CHANGE) or its refinement backed off below
+    STAGE_MIN_BACKOFF (metrics.stage_stop_reason); the world-space error of every stage is
     measured at the evaluation's points for the report, never used to choose.
     Returns the last kept stage's (refine result, map, lookup) and the history."""
     everywhere = np.ones(len(truth), bool)
@@ -328,7 +329,7 @@ def _further_stages(sample, triangles, resolution, padding, options, stages, poi
     def errors(stage, result, lookup, change=None):
         entry = {"stage": stage, "rmse": metrics.error_stats(lookup, truth, everywhere)["rmse"],
                  "transition_rmse": metrics.error_stats(lookup, truth, transitions)["rmse"],
-                 "moved": bool(result.report["moved"])}
+                 "moved": bool(result.report["moved"]), "backoff": float(result.report.get("backoff", 1.0))}
         if change is not None:
             entry["layout_change"] = change
         return entry
@@ -341,10 +342,11 @@ def _further_stages(sample, triangles, resolution, padding, options, stages, poi
         candidate = stages.run("refine", lambda p: refine_uvs(previous_map, previous.uvs, triangles, resolution,
                                                               padding=padding, progress=p, **further))
         change = metrics.layout_change(previous.uvs, candidate.uvs, triangles)
-        reason = metrics.stage_stop_reason(stage, bool(candidate.report["moved"]), change)
+        backoff = float(candidate.report.get("backoff", 1.0))
+        reason = metrics.stage_stop_reason(stage, bool(candidate.report["moved"]), change, backoff)
         if reason is not None:
             history.append({"stage": stage, "moved": bool(candidate.report["moved"]), "layout_change": change,
-                            "kept": False})
+                            "backoff": backoff, "kept": False})
             stopped = reason
             break
         candidate_map = stages.run("bake refined", lambda p: _bake_map(sample, candidate.uvs, resolution, options, p))

@@ -72,6 +72,12 @@ def uv_areas(uvs, triangles):
 # (layout_change): the rule needs no ground truth, so `evaluate --stages` and
 # the add-on's Stages setting stop on the same rule.
 STAGE_MIN_CHANGE = 0.05
+# ... and only if its refinement kept at least this share of its deformation
+# everywhere (refine_uvs' report["backoff"]): a stage that flipped and backed
+# off below it refined little from its bake, and on the tuning scenes every
+# such stage measured worse than the one before (docs/refiner.md,
+# "Multi-stage refinement").
+STAGE_MIN_BACKOFF = 0.1
 
 
 def layout_change(previous_uvs, uvs, triangles):
@@ -84,14 +90,19 @@ def layout_change(previous_uvs, uvs, triangles):
     return float(np.median(np.abs(after[has_area] / before[has_area] - 1))) if has_area.any() else 0.0
 
 
-def stage_stop_reason(stage, moved, change):
+def stage_stop_reason(stage, moved, change, backoff=1.0):
     """None when refinement stage `stage` (2, 3, ...) is kept: it moved the
-    layout by `change` (layout_change) of at least STAGE_MIN_CHANGE; else why
-    the stages stop there (stage - 1 is the last one kept)."""
-    if moved and change >= STAGE_MIN_CHANGE:
-        return None
-    return (f"stage {stage} changed the layout by {change:.1%} (median texel density), under "
-            f"{STAGE_MIN_CHANGE:.0%}: stage {stage - 1} kept")
+    layout by `change` (layout_change) of at least STAGE_MIN_CHANGE and its
+    refinement kept at least STAGE_MIN_BACKOFF of its deformation (`backoff`,
+    refine_uvs' report["backoff"]); else why the stages stop there (stage - 1
+    is the last one kept)."""
+    if not (moved and change >= STAGE_MIN_CHANGE):
+        return (f"stage {stage} changed the layout by {change:.1%} (median texel density), under "
+                f"{STAGE_MIN_CHANGE:.0%}: stage {stage - 1} kept")
+    if backoff < STAGE_MIN_BACKOFF:
+        return (f"stage {stage} kept only {backoff:.0%} of its deformation in places (the rest flipped or "
+                f"overlapped and was backed off), under {STAGE_MIN_BACKOFF:.0%}: stage {stage - 1} kept")
+    return None
 
 
 def further_stage_options(first_report):

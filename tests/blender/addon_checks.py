@@ -1141,6 +1141,7 @@ def _atlas_run(**values):
     ours = [image for image in bpy.data.images if image.get("lmrefine_object")]
     facts = {"outcome": outcome, "message": bpy.context.scene.lmrefine.result.message,
              "result_images": bpy.context.scene.lmrefine.result.images,
+             "stages_stopped": bpy.context.scene.lmrefine.result.stages_stopped,
              "images": {image.name: image["lmrefine_objects"] for image in ours}, "objects": {}}
     refined = {obj.name: bridge.read_uv_layer(obj.data, "Lightmap_refined") for obj in objects}
     source = {obj.name: bridge.read_layout(obj.data, "Lightmap") for obj in objects}  # tessellated, maybe
