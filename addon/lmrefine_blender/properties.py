@@ -92,7 +92,8 @@ class LMREFINE_PG_result(bpy.types.PropertyGroup):
     effects: StringProperty(name="Effects", description="Layouts: Per Effect: each effect's resolution and "
                             "widening ('direct 181px 1.42x; indirect 181px 1.05x'), empty otherwise")
     stages_stopped: StringProperty(name="Stages Stopped",
-                                   description="Objects whose stages stopped early: the stage that moved too little")
+                                   description="Objects whose stages stopped early: the stage that moved too "
+                                               "little or backed off")
     recharted: IntProperty(name="Re-charted", description="Objects whose source map gave the refiner no room or "
                            "folded over sharp edges, re-charted from the mesh and refined", default=0)
     stretched: IntProperty(name="Stretched", description="Charts of the refined maps stretched across their light "
@@ -210,7 +211,8 @@ class LMREFINE_PG_settings(bpy.types.PropertyGroup):
     stages: IntProperty(
         name="Stages",
         description="Bake, refine, bake, refine...: each further stage refines the layout again from a bake "
-                    "with it. An object stops at the first stage that changes its layout by less than 5%",
+                    "with it. An object stops at the first stage that changes its layout by less than 5% or "
+                    "backs off to under a tenth of its deformation (its triangles flipped)",
         default=1, min=1, max=8,
     )
     tessellate: BoolProperty(
