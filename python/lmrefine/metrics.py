@@ -74,9 +74,9 @@ def uv_areas(uvs, triangles):
 STAGE_MIN_CHANGE = 0.05
 # ... and only if its refinement kept at least this share of its deformation
 # everywhere (refine_uvs' report["backoff"]): a stage that flipped and backed
-# off below it refined little from its bake, and on the tuning scenes every
-# such stage measured worse than the one before (docs/refiner.md,
-# "Multi-stage refinement").
+# off below it refined little from its bake, and on the tuning scenes four of
+# the five such stages measured worse than the one before (docs/refiner.md,
+# "Stages that back off stop").
 STAGE_MIN_BACKOFF = 0.1
 
 
