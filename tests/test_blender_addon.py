@@ -382,6 +382,7 @@ def test_a_shared_atlas_with_cycles_and_with_stages(facts, name):
         reason = value["message"].split(f"{map_name}: ", 1)[1].split(":")[0]  # "stage N ... under X%"
         assert why.startswith(f"stage {reason.split()[1]} "), (line, reason)
         assert ("backed off to" in why) == ("kept only" in reason), (line, reason)
+        assert ("gave edges" in why) == ("gave its light changes" in reason), (line, reason)
 
 
 def test_a_shared_atlas_driven_by_an_existing_atlas_image(facts):

@@ -270,6 +270,10 @@ def test_layout_change_is_the_median_texel_density_change_and_drives_the_stage_r
     assert metrics.stage_stop_reason(2, True, 0.5, backoff=metrics.STAGE_MIN_BACKOFF) is None
     stopped = metrics.stage_stop_reason(3, True, 0.5, backoff=0.05)
     assert "stage 2 kept" in stopped and "5% of its deformation" in stopped
+    # ... and so does one that gave its light changes no more texels than the stage before.
+    assert metrics.stage_stop_reason(2, True, 0.5, widening=1.01) is None
+    stopped = metrics.stage_stop_reason(2, True, 0.5, widening=0.99)
+    assert "stage 1 kept" in stopped and "0.99x" in stopped
 
 
 def _quad_plane(size, uv_scale=1.0):

@@ -744,8 +744,8 @@ def _tessellate(lmrefine, target, lightmap, budget, journal, outcome, start, spa
 def _further_stages(context, lmrefine, groups, refined_uvs, options, journal, outcome, done, span):
     """Stages 2..options["stages"]: bake the driving pass with each map's refined layout, refine that
     layout from it, write it. A map stops at the first stage that moves its layout by less than
-    lmrefine.metrics.STAGE_MIN_CHANGE or backs off below STAGE_MIN_BACKOFF (the rule of `evaluate
-    --stages`, metrics.stage_stop_reason); its last kept layout stays.
+    lmrefine.metrics.STAGE_MIN_CHANGE, backs off below STAGE_MIN_BACKOFF or gives its light changes no
+    more texels (the rule of `evaluate --stages`, metrics.stage_stop_reason); its last kept layout stays.
     Updates `refined_uvs` (group name -> joined UVs) and outcome.stages; returns the progress steps done."""
     from lmrefine import metrics
     resolution, padding = options["resolution"], options["padding"]
@@ -790,9 +790,10 @@ def _further_stages(context, lmrefine, groups, refined_uvs, options, journal, ou
             moved = bool(result.report["moved"])
             history = outcome.stages[name]
             backoff = float(result.report.get("backoff", 1.0))
-            reason = metrics.stage_stop_reason(stage, moved, change, backoff)
+            widening = result.report.get("transition_widening")
+            reason = metrics.stage_stop_reason(stage, moved, change, backoff, widening)
             history["stages"].append({"stage": stage, "moved": moved, "layout_change": change,
-                                      "backoff": backoff, "kept": reason is None})
+                                      "backoff": backoff, "widening": widening, "kept": reason is None})
             if reason is not None:
                 history["stopped"] = reason
                 active.remove(group)

@@ -93,7 +93,7 @@ class LMREFINE_PG_result(bpy.types.PropertyGroup):
                             "widening ('direct 181px 1.42x; indirect 181px 1.05x'), empty otherwise")
     stages_stopped: StringProperty(name="Stages Stopped",
                                    description="Objects whose stages stopped early: the stage that moved too "
-                                               "little or backed off")
+                                               "little, backed off or gave the light changes no texels")
     recharted: IntProperty(name="Re-charted", description="Objects whose source map gave the refiner no room or "
                            "folded over sharp edges, re-charted from the mesh and refined", default=0)
     stretched: IntProperty(name="Stretched", description="Charts of the refined maps stretched across their light "
@@ -211,8 +211,9 @@ class LMREFINE_PG_settings(bpy.types.PropertyGroup):
     stages: IntProperty(
         name="Stages",
         description="Bake, refine, bake, refine...: each further stage refines the layout again from a bake "
-                    "with it. An object stops at the first stage that changes its layout by less than 5% or "
-                    "backs off to under a tenth of its deformation (its triangles flipped)",
+                    "with it. An object stops at the first stage that changes its layout by less than 5%, "
+                    "backs off to under a tenth of its deformation (its triangles flipped) or gives the light "
+                    "changes no more texels",
         default=1, min=1, max=8,
     )
     tessellate: BoolProperty(

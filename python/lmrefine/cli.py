@@ -223,8 +223,8 @@ def add_evaluation_arguments(parser, resolution, points):
                         help="width in pixels of the pictures of the lit surface, 16 to 2048 (default: 480; 0: none)")
     parser.add_argument("--stages", type=int, default=1,
                         help="bake-refine stages, each refining the previous stage's layout from its own bake "
-                             "(default: 1); stops early when a stage hardly changes the layout or backs off "
-                             "most of its deformation")
+                             "(default: 1); stops early when a stage hardly changes the layout, backs off "
+                             "most of its deformation or gives the light changes no more texels")
     parser.add_argument("--tessellate", type=float, nargs="?", const=0.25, metavar="BUDGET",
                         help="split the triangles strong transitions cross before refining, at most BUDGET more "
                              "vertices as a fraction (default 0.25 = +25%%; docs/refiner.md, Tessellation)")

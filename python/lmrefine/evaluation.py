@@ -320,8 +320,9 @@ def _further_stages(sample, triangles, resolution, padding, options, stages, poi
                     refined_map, lookup):
     """Stages 2..options.stages: refine the previous stage's layout from its
     own bake, bake again. Stops when a stage's layout hardly differs from the
-    previous one (STAGE_MIN_CHANGE) or its refinement backed off below
-    STAGE_MIN_BACKOFF (metrics.stage_stop_reason); the world-space error of every stage is
+    previous one (STAGE_MIN_CHANGE), its refinement backed off below
+    STAGE_MIN_BACKOFF or it gave the light changes no more texels
+    (metrics.stage_stop_reason); the world-space error of every stage is
     measured at the evaluation's points for the report, never used to choose.
     Returns the last kept stage's (refine result, map, lookup) and the history."""
     everywhere = np.ones(len(truth), bool)
@@ -329,7 +330,8 @@ def _further_stages(sample, triangles, resolution, padding, options, stages, poi
     def errors(stage, result, lookup, change=None):
         entry = {"stage": stage, "rmse": metrics.error_stats(lookup, truth, everywhere)["rmse"],
                  "transition_rmse": metrics.error_stats(lookup, truth, transitions)["rmse"],
-                 "moved": bool(result.report["moved"]), "backoff": float(result.report.get("backoff", 1.0))}
+                 "moved": bool(result.report["moved"]), "backoff": float(result.report.get("backoff", 1.0)),
+                 "widening": result.report.get("transition_widening")}
         if change is not None:
             entry["layout_change"] = change
         return entry
@@ -343,10 +345,11 @@ def _further_stages(sample, triangles, resolution, padding, options, stages, poi
                                                               padding=padding, progress=p, **further))
         change = metrics.layout_change(previous.uvs, candidate.uvs, triangles)
         backoff = float(candidate.report.get("backoff", 1.0))
-        reason = metrics.stage_stop_reason(stage, bool(candidate.report["moved"]), change, backoff)
+        widening = candidate.report.get("transition_widening")
+        reason = metrics.stage_stop_reason(stage, bool(candidate.report["moved"]), change, backoff, widening)
         if reason is not None:
             history.append({"stage": stage, "moved": bool(candidate.report["moved"]), "layout_change": change,
-                            "backoff": backoff, "kept": False})
+                            "backoff": backoff, "widening": widening, "kept": False})
             stopped = reason
             break
         candidate_map = stages.run("bake refined", lambda p: _bake_map(sample, candidate.uvs, resolution, options, p))

@@ -78,6 +78,11 @@ STAGE_MIN_CHANGE = 0.05
 # the five such stages measured worse than the one before (docs/refiner.md,
 # "Stages that back off stop").
 STAGE_MIN_BACKOFF = 0.1
+# ... and only if it gave its light changes more texels than the layout it
+# refined had there (refine_uvs' report["transition_widening"] above 1): a
+# stage that takes texels from them is not refining (the plaza's second stage,
+# 0.99x, measured 25% worse than its first).
+STAGE_MIN_WIDENING = 1.0
 
 
 def layout_change(previous_uvs, uvs, triangles):
@@ -90,18 +95,22 @@ def layout_change(previous_uvs, uvs, triangles):
     return float(np.median(np.abs(after[has_area] / before[has_area] - 1))) if has_area.any() else 0.0
 
 
-def stage_stop_reason(stage, moved, change, backoff=1.0):
+def stage_stop_reason(stage, moved, change, backoff=1.0, widening=None):
     """None when refinement stage `stage` (2, 3, ...) is kept: it moved the
-    layout by `change` (layout_change) of at least STAGE_MIN_CHANGE and its
+    layout by `change` (layout_change) of at least STAGE_MIN_CHANGE, its
     refinement kept at least STAGE_MIN_BACKOFF of its deformation (`backoff`,
-    refine_uvs' report["backoff"]); else why the stages stop there (stage - 1
-    is the last one kept)."""
+    refine_uvs' report["backoff"]) and gave its light changes more texels
+    (`widening`, report["transition_widening"]; None: not known); else why
+    the stages stop there (stage - 1 is the last one kept)."""
     if not (moved and change >= STAGE_MIN_CHANGE):
         return (f"stage {stage} changed the layout by {change:.1%} (median texel density), under "
                 f"{STAGE_MIN_CHANGE:.0%}: stage {stage - 1} kept")
     if backoff < STAGE_MIN_BACKOFF:
         return (f"stage {stage} kept only {backoff:.0%} of its deformation in places (the rest flipped or "
                 f"overlapped and was backed off), under {STAGE_MIN_BACKOFF:.0%}: stage {stage - 1} kept")
+    if widening is not None and widening <= STAGE_MIN_WIDENING:
+        return (f"stage {stage} gave its light changes {widening:.2f}x the texels the stage before gave them, "
+                f"no more: stage {stage - 1} kept")
     return None
 
 
