@@ -195,7 +195,7 @@ class LMREFINE_PT_refine_result(_LightmapTab, bpy.types.Panel):
         rows.append((f"Stages kept: {result.stages_kept} of {result.stages}" if staged else "Stages: 1", 'SORTTIME',
                      staged))
         if staged:  # more than one stage is a setting: its rows come with it
-            # An object whose next stage moved its texels too little (under 5%).
+            # An object whose next stage moved its texels too little, backed off or gave edges no texels.
             rows += [(entry, 'BLANK1', True) for entry in result.stages_stopped.split("; ") if entry]
         timings = dict(entry.rsplit(" ", 1) for entry in result.timings.split("  ") if entry)
         for stage in ("first bake", "refine", "second bake"):
