@@ -94,13 +94,13 @@ def images_sentence(summary):
 
 def _stage_stop(name, entry):
     """Short, for the panel: which stage an object stopped at and why (the report has the sentence)."""
-    from lmrefine.metrics import STAGE_MIN_BACKOFF, STAGE_MIN_CHANGE
+    from lmrefine.metrics import STAGE_BACKOFF_FROM, STAGE_MIN_BACKOFF, STAGE_MIN_CHANGE
     last = entry["stages"][-1]
     if not last["moved"]:
         why = "did not move"
     elif last["layout_change"] < STAGE_MIN_CHANGE:
         why = f"moved {last['layout_change']:.1%}"
-    elif last.get("backoff", 1.0) < STAGE_MIN_BACKOFF:
+    elif last["stage"] >= STAGE_BACKOFF_FROM and last.get("backoff", 1.0) < STAGE_MIN_BACKOFF:
         why = f"backed off to {last['backoff']:.0%}"
     else:
         why = f"gave edges {last.get('widening') or 1.0:.2f}x"

@@ -212,8 +212,8 @@ class LMREFINE_PG_settings(bpy.types.PropertyGroup):
         name="Stages",
         description="Bake, refine, bake, refine...: each further stage refines the layout again from a bake "
                     "with it. An object stops at the first stage that changes its layout by less than 5%, "
-                    "backs off to under a tenth of its deformation (its triangles flipped) or gives the light "
-                    "changes no more texels",
+                    "backs off to under a tenth of its deformation (its triangles flipped; from the third "
+                    "stage on) or gives the light changes no more texels",
         default=1, min=1, max=8,
     )
     tessellate: BoolProperty(

@@ -72,12 +72,14 @@ def uv_areas(uvs, triangles):
 # (layout_change): the rule needs no ground truth, so `evaluate --stages` and
 # the add-on's Stages setting stop on the same rule.
 STAGE_MIN_CHANGE = 0.05
-# ... and only if its refinement kept at least this share of its deformation
-# everywhere (refine_uvs' report["backoff"]): a stage that flipped and backed
-# off below it refined little from its bake, and on the tuning scenes four of
-# the five such stages measured worse than the one before (docs/refiner.md,
+# ... and, from stage STAGE_BACKOFF_FROM on, only if its refinement kept at
+# least this share of its deformation everywhere (refine_uvs'
+# report["backoff"]). On the tuning scenes eight of ten third stages below it
+# measured worse than the second, by up to 8%; second stages below it (at 16
+# bake samples) measured 5-8% better than the first (docs/refiner.md,
 # "Stages that back off stop").
 STAGE_MIN_BACKOFF = 0.1
+STAGE_BACKOFF_FROM = 3
 # ... and only if it gave its light changes more texels than the layout it
 # refined had there (refine_uvs' report["transition_widening"] above 1): a
 # stage that takes texels from them is not refining (the plaza's second stage,
@@ -99,13 +101,14 @@ def stage_stop_reason(stage, moved, change, backoff=1.0, widening=None):
     """None when refinement stage `stage` (2, 3, ...) is kept: it moved the
     layout by `change` (layout_change) of at least STAGE_MIN_CHANGE, its
     refinement kept at least STAGE_MIN_BACKOFF of its deformation (`backoff`,
-    refine_uvs' report["backoff"]) and gave its light changes more texels
-    (`widening`, report["transition_widening"]; None: not known); else why
-    the stages stop there (stage - 1 is the last one kept)."""
+    refine_uvs' report["backoff"]; from stage STAGE_BACKOFF_FROM on) and gave
+    its light changes more texels (`widening`, report["transition_widening"];
+    None: not known); else why the stages stop there (stage - 1 is the last
+    one kept)."""
     if not (moved and change >= STAGE_MIN_CHANGE):
         return (f"stage {stage} changed the layout by {change:.1%} (median texel density), under "
                 f"{STAGE_MIN_CHANGE:.0%}: stage {stage - 1} kept")
-    if backoff < STAGE_MIN_BACKOFF:
+    if stage >= STAGE_BACKOFF_FROM and backoff < STAGE_MIN_BACKOFF:
         return (f"stage {stage} kept only {backoff:.0%} of its deformation in places (the rest flipped or "
                 f"overlapped and was backed off), under {STAGE_MIN_BACKOFF:.0%}: stage {stage - 1} kept")
     if widening is not None and widening <= STAGE_MIN_WIDENING:
