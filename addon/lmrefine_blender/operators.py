@@ -93,7 +93,8 @@ def images_sentence(summary):
 
 
 def _stage_stop(name, entry):
-    """Short, for the panel: which stage an object stopped at and why (the report has the sentence)."""
+    """Short, for the panel: which stage an object stopped at and why (the report has the sentence); the
+    panel shows the name and the rest on two rows of at most 23 characters."""
     from lmrefine.metrics import STAGE_BACKOFF_FROM, STAGE_MIN_BACKOFF, STAGE_MIN_CHANGE
     last = entry["stages"][-1]
     if not last["moved"]:
@@ -101,9 +102,9 @@ def _stage_stop(name, entry):
     elif last["layout_change"] < STAGE_MIN_CHANGE:
         why = f"moved {last['layout_change']:.1%}"
     elif last["stage"] >= STAGE_BACKOFF_FROM and last.get("backoff", 1.0) < STAGE_MIN_BACKOFF:
-        why = f"backed off to {last['backoff']:.0%}"
+        why = "backed off"
     else:
-        why = f"gave edges {last.get('widening') or 1.0:.2f}x"
+        why = "no edge gain"
     return f"{name}: stage {last['stage']} {why}"
 
 

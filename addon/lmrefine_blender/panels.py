@@ -195,8 +195,11 @@ class LMREFINE_PT_refine_result(_LightmapTab, bpy.types.Panel):
         rows.append((f"Stages kept: {result.stages_kept} of {result.stages}" if staged else "Stages: 1", 'SORTTIME',
                      staged))
         if staged:  # more than one stage is a setting: its rows come with it
-            # An object whose next stage moved its texels too little, backed off or gave edges no texels.
-            rows += [(entry, 'BLANK1', True) for entry in result.stages_stopped.split("; ") if entry]
+            # An object whose next stage moved its texels too little, backed off or gave edges no texels:
+            # its name, then why on a row of its own, so that the sidebar does not elide the reason.
+            for entry in filter(None, result.stages_stopped.split("; ")):
+                name, _, why = entry.partition(": ")
+                rows += [(f"{name}:", 'BLANK1', True), (why, 'BLANK1', True)]
         timings = dict(entry.rsplit(" ", 1) for entry in result.timings.split("  ") if entry)
         for stage in ("first bake", "refine", "second bake"):
             seconds = timings.get(stage)

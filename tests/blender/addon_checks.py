@@ -1529,6 +1529,11 @@ def menus_and_panel_rows():
     bpy.context.scene.lmrefine.result.moved = 0
     bpy.context.scene.lmrefine.result.objects = "ArcadeNorth, ArcadeWest, Floor, LowWall, Well"  # five names
     states["nothing_moved"] = {"LMREFINE_PT_refine_result": draw(panels.LMREFINE_PT_refine_result)}
+    result = bpy.context.scene.lmrefine.result
+    result.stages, result.stages_kept = 3, 2  # a map that stopped early: its name, then why, on rows of their own
+    result.stages_stopped = "Floor_atlas: stage 3 backed off; Lonely: stage 2 moved 0.4%"
+    states["staged"] = {"LMREFINE_PT_refine_result": draw(panels.LMREFINE_PT_refine_result)}
+    result.stages, result.stages_kept, result.stages_stopped = 1, 1, ""
     settings(layouts='PER_EFFECT')
     per_effect_outcome = refine()
     states["per_effect"] = {name: draw(getattr(panels, name)) for name in
