@@ -95,16 +95,11 @@ def images_sentence(summary):
 def _stage_stop(name, entry):
     """Short, for the panel: which stage an object stopped at and why (the report has the sentence); the
     panel shows the name and the rest on two rows of at most 23 characters."""
-    from lmrefine.metrics import STAGE_BACKOFF_FROM, STAGE_MIN_BACKOFF, STAGE_MIN_CHANGE
+    from lmrefine.metrics import stage_stop_kind
     last = entry["stages"][-1]
-    if not last["moved"]:
-        why = "did not move"
-    elif last["layout_change"] < STAGE_MIN_CHANGE:
-        why = f"moved {last['layout_change']:.1%}"
-    elif last["stage"] >= STAGE_BACKOFF_FROM and last.get("backoff", 1.0) < STAGE_MIN_BACKOFF:
-        why = "backed off"
-    else:
-        why = "no edge gain"
+    why = stage_stop_kind(last["stage"], last["moved"], last["layout_change"], last["backoff"], last["widening"])
+    if why == "settled":
+        why = f"moved {last['layout_change']:.1%}" if last["moved"] else "did not move"
     return f"{name}: stage {last['stage']} {why}"
 
 

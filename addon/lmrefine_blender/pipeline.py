@@ -755,8 +755,7 @@ def _further_stages(context, lmrefine, groups, refined_uvs, options, journal, ou
         first = outcome.reports[group.name]
         further[group.name] = {**options["refine_options"], **metrics.further_stage_options(first)}
         outcome.stages[group.name] = {
-            "stages": [{"stage": 1, "moved": bool(first["moved"]), "backoff": float(first.get("backoff", 1.0)),
-                        "kept": True}],
+            "stages": [{**metrics.stage_entry(1, first), "kept": True}],
             "stopped": f"{options['stages']} stages done",
             "repack": bool(further[group.name].get("repack", True))}
     active = list(groups)
@@ -787,13 +786,10 @@ def _further_stages(context, lmrefine, groups, refined_uvs, options, journal, ou
                 done * span, span, parts=REFINE_STAGES)
             done += 1
             change = metrics.layout_change(previous, result.uvs, group.triangles)
-            moved = bool(result.report["moved"])
+            entry = metrics.stage_entry(stage, result.report, change)
             history = outcome.stages[name]
-            backoff = float(result.report.get("backoff", 1.0))
-            widening = result.report.get("transition_widening")
-            reason = metrics.stage_stop_reason(stage, moved, change, backoff, widening)
-            history["stages"].append({"stage": stage, "moved": moved, "layout_change": change,
-                                      "backoff": backoff, "widening": widening, "kept": reason is None})
+            reason = metrics.stage_stop_reason(stage, entry["moved"], change, entry["backoff"], entry["widening"])
+            history["stages"].append({**entry, "kept": reason is None})
             if reason is not None:
                 history["stopped"] = reason
                 active.remove(group)

@@ -328,13 +328,9 @@ def _further_stages(sample, triangles, resolution, padding, options, stages, poi
     everywhere = np.ones(len(truth), bool)
 
     def errors(stage, result, lookup, change=None):
-        entry = {"stage": stage, "rmse": metrics.error_stats(lookup, truth, everywhere)["rmse"],
-                 "transition_rmse": metrics.error_stats(lookup, truth, transitions)["rmse"],
-                 "moved": bool(result.report["moved"]), "backoff": float(result.report.get("backoff", 1.0)),
-                 "widening": result.report.get("transition_widening")}
-        if change is not None:
-            entry["layout_change"] = change
-        return entry
+        return {"stage": stage, "rmse": metrics.error_stats(lookup, truth, everywhere)["rmse"],
+                "transition_rmse": metrics.error_stats(lookup, truth, transitions)["rmse"],
+                **metrics.stage_entry(stage, result.report, change)}
 
     history = [errors(1, refined, lookup)]
     stopped = f"{options.stages} stages done"
@@ -344,12 +340,10 @@ def _further_stages(sample, triangles, resolution, padding, options, stages, poi
         candidate = stages.run("refine", lambda p: refine_uvs(previous_map, previous.uvs, triangles, resolution,
                                                               padding=padding, progress=p, **further))
         change = metrics.layout_change(previous.uvs, candidate.uvs, triangles)
-        backoff = float(candidate.report.get("backoff", 1.0))
-        widening = candidate.report.get("transition_widening")
-        reason = metrics.stage_stop_reason(stage, bool(candidate.report["moved"]), change, backoff, widening)
+        entry = metrics.stage_entry(stage, candidate.report, change)
+        reason = metrics.stage_stop_reason(stage, entry["moved"], change, entry["backoff"], entry["widening"])
         if reason is not None:
-            history.append({"stage": stage, "moved": bool(candidate.report["moved"]), "layout_change": change,
-                            "backoff": backoff, "widening": widening, "kept": False})
+            history.append({**entry, "kept": False})
             stopped = reason
             break
         candidate_map = stages.run("bake refined", lambda p: _bake_map(sample, candidate.uvs, resolution, options, p))

@@ -97,21 +97,45 @@ def layout_change(previous_uvs, uvs, triangles):
     return float(np.median(np.abs(after[has_area] / before[has_area] - 1))) if has_area.any() else 0.0
 
 
-def stage_stop_reason(stage, moved, change, backoff=1.0, widening=None):
+def stage_entry(stage, report, change=None):
+    """What the stop rule reads of refinement stage `stage`, from its
+    refine_uvs report (and `change`, its layout_change, from stage 2 on):
+    moved, backoff, widening (report["transition_widening"])."""
+    entry = {"stage": stage, "moved": bool(report["moved"]), "backoff": float(report.get("backoff", 1.0)),
+             "widening": report.get("transition_widening")}
+    if change is not None:
+        entry["layout_change"] = change
+    return entry
+
+
+def stage_stop_kind(stage, moved, change, backoff=1.0, widening=None):
     """None when refinement stage `stage` (2, 3, ...) is kept: it moved the
     layout by `change` (layout_change) of at least STAGE_MIN_CHANGE, its
     refinement kept at least STAGE_MIN_BACKOFF of its deformation (`backoff`,
     refine_uvs' report["backoff"]; from stage STAGE_BACKOFF_FROM on) and gave
     its light changes more texels (`widening`, report["transition_widening"];
-    None: not known); else why the stages stop there (stage - 1 is the last
-    one kept)."""
+    None: not known); else which rule stopped it: "settled", "backed off" or
+    "no edge gain"."""
     if not (moved and change >= STAGE_MIN_CHANGE):
+        return "settled"
+    if stage >= STAGE_BACKOFF_FROM and backoff < STAGE_MIN_BACKOFF:
+        return "backed off"
+    if widening is not None and widening <= STAGE_MIN_WIDENING:
+        return "no edge gain"
+    return None
+
+
+def stage_stop_reason(stage, moved, change, backoff=1.0, widening=None):
+    """None when refinement stage `stage` is kept (stage_stop_kind); else why
+    the stages stop there, as a sentence (stage - 1 is the last one kept)."""
+    kind = stage_stop_kind(stage, moved, change, backoff, widening)
+    if kind == "settled":
         return (f"stage {stage} changed the layout by {change:.1%} (median texel density), under "
                 f"{STAGE_MIN_CHANGE:.0%}: stage {stage - 1} kept")
-    if stage >= STAGE_BACKOFF_FROM and backoff < STAGE_MIN_BACKOFF:
+    if kind == "backed off":
         return (f"stage {stage} kept only {backoff:.0%} of its deformation in places (the rest flipped or "
                 f"overlapped and was backed off), under {STAGE_MIN_BACKOFF:.0%}: stage {stage - 1} kept")
-    if widening is not None and widening <= STAGE_MIN_WIDENING:
+    if kind == "no edge gain":
         return (f"stage {stage} gave its light changes {widening:.2f}x the texels the stage before gave them, "
                 f"no more: stage {stage - 1} kept")
     return None
