@@ -3,6 +3,11 @@ and benchmark (numpy only; no Blender)."""
 
 import numpy as np
 
+# refine_uvs keywords for the small synthetic atlases whose decisions (a packing dense enough or not,
+# the re-chart route kept or not) were sized with chart scales within 2x the median chart's, the
+# bound before max_chart_scale 4 (docs/refiner.md, "Chosen for the weakest tuning row").
+SCALES_WITHIN_2 = {"max_chart_scale": 2.0}
+
 
 def grid_chart(n, lo=(0.0, 0.0), hi=(1.0, 1.0)):
     """A square chart of n x n quads (2 n^2 triangles) over [lo, hi], per-corner

@@ -7,7 +7,7 @@ import pytest
 
 import lmrefine
 from lmrefine import allocation
-from layouts import grid_chart, merge
+from layouts import SCALES_WITHIN_2, grid_chart, merge
 
 RESOLUTION = 64
 
@@ -253,7 +253,8 @@ def test_a_repack_too_loose_at_the_signal_scales_is_kept_at_their_square_roots()
     (the scales' square roots) it packs densely enough and is kept, not all of the gain dropped."""
     uvs, tris, lightmap = _checkered_corner()
     resolution, padding = 64, 2
-    result = lmrefine.refine_uvs(lightmap, uvs, tris, resolution, padding=padding, max_stretch=1.0)
+    result = lmrefine.refine_uvs(lightmap, uvs, tris, resolution, padding=padding, max_stretch=1.0,
+                                 **SCALES_WITHIN_2)
     repack = result.report["repack"]
     refused = repack["softened"]["refused"]
     assert repack["used"] and repack["softened"]["used"]
@@ -279,7 +280,7 @@ def test_a_repack_too_loose_at_the_signal_scales_is_kept_at_their_square_roots()
                f"{refused['padded_utilisation_after']:.0%} full" in note for note in result.report["notes"])
     # Deterministic.
     assert np.array_equal(lmrefine.refine_uvs(lightmap, uvs, tris, resolution, padding=padding,
-                                              max_stretch=1.0).uvs, result.uvs)
+                                              max_stretch=1.0, **SCALES_WITHIN_2).uvs, result.uvs)
 
 
 def test_a_layout_the_library_packed_itself_is_repacked_on_the_models_word_alone():

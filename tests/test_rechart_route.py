@@ -10,7 +10,7 @@ import pytest
 import lmrefine
 from lmrefine import metrics, rechart_route
 from lmrefine.allocation import signed_areas
-from layouts import floor_grid, grid_chart, lightmap_pack, smart_uv
+from layouts import SCALES_WITHIN_2, floor_grid, grid_chart, lightmap_pack, smart_uv
 from test_metrics import bilinear_reference
 
 CELLS = 12
@@ -378,14 +378,16 @@ def test_route_does_not_make_the_source_repack_the_bound_rules_out(lightmap_pack
     made = []
     repacked = refine._repacked
     monkeypatch.setattr(refine, "_repacked", lambda stage, *own: made.append(stage) or repacked(stage, *own))
-    skipped = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, positions=corners)
+    skipped = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, positions=corners,
+                                  **SCALES_WITHIN_2)
     info = skipped.report["rechart"]
     assert info["used"] and info["predicted_error_source_route"] is None
     assert info["predicted_error"] < info["source_route_bound"] < 1.0
     assert "at least" in skipped.report["notes"][0] and len(made) == 1  # the re-charted layout's alone
     monkeypatch.setattr(refine, "_source_lowest", lambda stage: None)
     made.clear()
-    full = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, positions=corners)
+    full = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, positions=corners,
+                               **SCALES_WITHIN_2)
     assert len(made) == 2 and np.array_equal(full.uvs, skipped.uvs)
     assert full.report["rechart"]["predicted_error_source_route"] >= info["source_route_bound"]
 
@@ -486,7 +488,8 @@ def test_route_keeps_a_polygons_triangles_in_one_chart(monkeypatch):
     # The baker reads a mesh per corner.
     lightmap = _shadowed_floor(uvs[triangles].reshape(-1, 2), np.arange(3 * len(triangles)).reshape(-1, 3),
                                corners[triangles].reshape(-1, 3))
-    result = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, positions=corners)
+    result = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, positions=corners,
+                                 **SCALES_WITHIN_2)
     info = result.report["rechart"]
     assert info["used"], info
     assert result.uvs.shape == uvs.shape  # one UV per loop, as the source
@@ -509,16 +512,17 @@ def test_route_keeps_the_faces_it_is_given_of_a_per_corner_layout_whole():
     lightmap = _shadowed_floor(corner_uvs, corner_triangles, corner_positions)
     faces = np.repeat(np.arange(len(triangles) // 2) * 7 + 100, 2)  # any integer ids, one per quad
     kept = lmrefine.refine_uvs(lightmap, corner_uvs, corner_triangles, RESOLUTION, padding=2,
-                               positions=corner_positions, polygons=faces)
+                               positions=corner_positions, polygons=faces, **SCALES_WITHIN_2)
     assert kept.report["rechart"]["used"], kept.report["rechart"]
     charts = lmrefine.find_charts(kept.uvs, corner_triangles, lmrefine.CHART_TOLERANCE)
     assert (charts[0::2] == charts[1::2]).all()
     # The same layout per loop gives the same layout (within float32 rounding: UVs are welded per index).
-    per_loop = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, positions=corners)
+    per_loop = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, positions=corners,
+                                   **SCALES_WITHIN_2)
     np.testing.assert_allclose(per_loop.uvs[triangles].reshape(-1, 2), kept.uvs, rtol=0, atol=1e-6)
     # Without the faces the hills cut quads along their diagonals.
     cut = lmrefine.refine_uvs(lightmap, corner_uvs, corner_triangles, RESOLUTION, padding=2,
-                              positions=corner_positions)
+                              positions=corner_positions, **SCALES_WITHIN_2)
     charts = lmrefine.find_charts(cut.uvs, corner_triangles, lmrefine.CHART_TOLERANCE)
     assert cut.report["rechart"]["used"] and (charts[0::2] != charts[1::2]).any()
 
@@ -558,7 +562,10 @@ def test_route_packs_charts_apart_when_the_automaton_fit_undid_a_region(monkeypa
     uvs, triangles = scene.layout("lightmap")
     positions = scene.positions[scene.triangles].reshape(-1, 3)
     lightmap = lmrefine.bake(scene.to_scene(uvs), 256, passes="direct", samples=8, seed=1)[0][..., :3]
-    result = lmrefine.refine_uvs(lightmap, uvs, triangles, 256, positions=positions, normals=scene.normals)
+    # The automaton's bounds of the time it was found (min_shrink 0.25, edge_shrink 0.8, scales within 2x):
+    # with today's defaults this bake's fit no longer resets.
+    result = lmrefine.refine_uvs(lightmap, uvs, triangles, 256, positions=positions, normals=scene.normals,
+                                 min_shrink=0.25, edge_shrink=0.8, **SCALES_WITHIN_2)
     info = result.report["rechart"]
     assert info["used"] and info["edge_room"] is True, info
     assert lmrefine.check_layout(result.uvs, triangles, 256, padding=2)["valid"]

@@ -5,7 +5,7 @@ import pytest
 
 import lmrefine
 from lmrefine import metrics, stretch
-from layouts import grid_chart, merge
+from layouts import SCALES_WITHIN_2, grid_chart, merge
 
 RESOLUTION = 128
 
@@ -114,7 +114,7 @@ def _nine_charts():
 
 def test_refine_uvs_stretches_striped_charts_across_their_stripes():
     uvs, triangles, lightmap = _nine_charts()
-    result = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2)
+    result = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, **SCALES_WITHIN_2)
     report = result.report["repack"]["stretch"]
     assert result.report["repack"]["used"] and report["used"], report
     assert report["charts_stretched"] == 2 and report["largest_stretch"] == pytest.approx(2.0)
@@ -134,13 +134,13 @@ def test_refine_uvs_stretches_striped_charts_across_their_stripes():
         gains.append(np.median(after / before))
     assert gains[0] > 3.0 * gains[1]  # a stretch of 2: 4x the ratio across over along
     # Off: no stretch is tried, and the layout differs.
-    off = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, max_stretch=1.0)
+    off = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, max_stretch=1.0, **SCALES_WITHIN_2)
     assert off.report["repack"]["stretch"] is None and off.report["repack"]["used"]
     assert not np.array_equal(off.uvs, result.uvs)
     # The input's density, which both packings must keep, does not depend on the stretch chosen.
     assert result.report["repack"]["padded_utilisation_before"] == \
         pytest.approx(off.report["repack"]["padded_utilisation_before"])
-    again = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2)
+    again = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, **SCALES_WITHIN_2)
     assert np.array_equal(again.uvs, result.uvs)  # deterministic
     for bad in (0.5, float("inf"), float("nan"), True, "2"):
         with pytest.raises(ValueError, match="max_stretch"):
@@ -175,7 +175,8 @@ def test_a_stretch_too_loose_at_its_factor_is_kept_at_its_square_root():
     packs densely enough, and that is kept, with the report's factors the ones used."""
     uvs, triangles, lightmap = _four_charts_one_striped(gap=0.04)
     # The chart stretch alone (the triangle stretch would stretch the striped chart's triangles further).
-    result = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, triangle_stretch=1.0)
+    result = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, triangle_stretch=1.0,
+                                 **SCALES_WITHIN_2)
     report = result.report["repack"]["stretch"]
     full, root = report["candidates"]  # the stripes run along an axis: no sheared chart to turn
     assert full["largest_stretch"] == pytest.approx(2.0) and not full["dense"]
@@ -318,7 +319,7 @@ def test_diagonally_stretched_charts_too_loose_to_keep_are_packed_turned_to_thei
     """Stretched along a diagonal, the striped charts are sheared and their atlas fails the density
     rule; turned to their smallest boxes they pack closer, and that packing is kept."""
     uvs, triangles, lightmap = _diagonal_stripes(gap=0.02)
-    result = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2)
+    result = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, **SCALES_WITHIN_2)
     report = result.report["repack"]["stretch"]
     assert report["used"] and report["charts_stretched"] == 2 and report["charts_turned"] == 2, report
     plain, turned = report["candidates"]
@@ -346,7 +347,8 @@ def test_a_stretched_packing_dense_enough_keeps_its_orientation_and_no_turn_is_p
     """The same charts with more room: the sheared charts pack densely enough as they are, so they
     keep their orientation to the texel grid and the turned fallback is not packed."""
     uvs, triangles, lightmap = _diagonal_stripes(gap=0.03)
-    report = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2).report["repack"]["stretch"]
+    report = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2,
+                                 **SCALES_WITHIN_2).report["repack"]["stretch"]
     assert report["used"] and report["charts_turned"] == 0
     assert len(report["candidates"]) == 1 and report["candidates"][0]["dense"]
 

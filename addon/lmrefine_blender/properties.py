@@ -146,7 +146,7 @@ class LMREFINE_PG_settings(bpy.types.PropertyGroup):
     )
     min_shrink: FloatProperty(
         name="Min Shrink", description="Smallest a texel's area may become in flat light (texel-density ratio)",
-        default=0.25, min=0.01, max=1.0,
+        default=0.15, min=0.01, max=1.0,
     )
     max_stretch: FloatProperty(
         name="Max Stretch",

@@ -254,9 +254,9 @@ def identity_grid(resolution):
 
 
 def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gradient=None, strength=24.0,
-               max_magnification=8.0, min_shrink=0.25, edge_shrink=0.8, delta=0.02, passes=1, border="same",
+               max_magnification=8.0, min_shrink=0.15, edge_shrink=0.6, delta=0.02, passes=1, border="same",
                directional=False, wavelet="d4", diffusion=0.05, max_steps=8, progress=None, repack=True,
-               min_chart_scale=0.5, max_chart_scale=2.0, positions=None, rechart=True, world_areas=None,
+               min_chart_scale=0.5, max_chart_scale=4.0, positions=None, rechart=True, world_areas=None,
                normals=None, max_stretch=2.0, polygons=None, triangle_stretch=2.0, finest_block=None):
     """Refine a lightmap UV layout: more texels where light changes fast.
 
