@@ -856,3 +856,63 @@ def test_layout_figures_count_the_light_changes_where_the_first_refinement_found
                                              light_changes=result.light_changes)
     for key in ("transition_widening", "transition_widening_across", "transition_triangle_texels"):
         assert figures[key] == pytest.approx(result.report[key], rel=1e-9), key
+
+
+def _grown_area(polygon, radius, step=0.01):
+    """Plain reference: the area of a convex polygon (counter-clockwise, (n, 2)) grown by a disc,
+    counted on a grid of `step`: a point is in it when it is inside the polygon or within `radius`
+    of one of its edges."""
+    lo, hi = polygon.min(axis=0) - radius - step, polygon.max(axis=0) + radius + step
+    x, y = np.meshgrid(np.arange(lo[0], hi[0], step) + step / 2, np.arange(lo[1], hi[1], step) + step / 2)
+    points = np.column_stack([x.ravel(), y.ravel()])
+    inside = np.ones(len(points), bool)
+    near = np.zeros(len(points), bool)
+    for a, b in zip(polygon, np.roll(polygon, -1, axis=0)):
+        edge = b - a
+        inside &= edge[0] * (points[:, 1] - a[1]) - edge[1] * (points[:, 0] - a[0]) >= 0
+        t = np.clip(((points - a) @ edge) / (edge @ edge), 0.0, 1.0)
+        near |= np.linalg.norm(points - (a + t[:, None] * edge), axis=1) <= radius
+    return (inside | near).sum() * step * step
+
+
+def test_a_triangle_or_convex_quadrilateral_grown_by_a_disc_covers_its_perimeter_bound():
+    # Steiner: a convex chart of area a grown by r covers a + perimeter r + pi r^2, and no equal-area
+    # stretch of a triangle (a quadrilateral) has a smaller perimeter than the equilateral one (the square).
+    rng = np.random.default_rng(5)
+    radius = 0.3
+    for factor, polygon in ((rechart_route.TRIANGLE_PERIMETER, np.array([[0, 0], [1, 0], [0.5, np.sqrt(0.75)]])),
+                            (rechart_route.QUADRILATERAL_PERIMETER, np.array([[0, 0], [1, 0], [1, 1], [0, 1.0]]))):
+        area = 0.5 * abs(np.cross(polygon[1] - polygon[0], polygon[-1] - polygon[0])) * (len(polygon) - 2)
+        bound = lambda a: a + factor * np.sqrt(a) * radius + np.pi * radius ** 2  # noqa: E731
+        # The regular one meets the bound.
+        assert _grown_area(polygon, radius) == pytest.approx(bound(area), rel=0.01)
+        for _ in range(4):
+            # Any other shape of its kind (a random equal-area affine image) covers more.
+            matrix = rng.normal(size=(2, 2))
+            matrix /= np.sqrt(abs(np.linalg.det(matrix)))
+            shape = polygon @ matrix.T
+            if np.linalg.det(matrix) < 0:
+                shape = shape[::-1]
+            assert _grown_area(shape, radius) >= 0.99 * bound(area)
+    assert rechart_route.DISC_PERIMETER < rechart_route.QUADRILATERAL_PERIMETER < rechart_route.TRIANGLE_PERIMETER
+
+
+def test_perimeter_factors_by_the_shape_of_each_chart():
+    charts_uvs = [
+        [[0.0, 0.0], [0.1, 0.0], [0.0, 0.1]],  # one triangle
+        [[0.3, 0.0], [0.4, 0.0], [0.4, 0.1], [0.3, 0.0], [0.4, 0.1], [0.3, 0.1]],  # a square of two
+        [[0.6, 0.0], [0.7, 0.05], [0.62, 0.05], [0.6, 0.0], [0.62, 0.05], [0.6, 0.1]],  # a dart (concave)
+        [[0.0, 0.5], [0.1, 0.5], [0.1, 0.6], [0.0, 0.5], [0.1, 0.6], [0.0, 0.6],
+         [0.1, 0.5], [0.2, 0.5], [0.1, 0.6]],  # three triangles
+    ]
+    uvs = np.array([p for chart in charts_uvs for p in chart], np.float32)
+    triangles = np.arange(len(uvs), dtype=np.int32).reshape(-1, 3)
+    charts, vertex, _ = rechart_route._chart_borders(uvs, triangles)
+    count = int(charts.max()) + 1
+    factors = rechart_route.perimeter_factors(uvs, triangles, charts, vertex, count)
+    by_triangle = factors[charts]
+    assert by_triangle[0] == rechart_route.TRIANGLE_PERIMETER
+    assert by_triangle[1] == by_triangle[2] == rechart_route.QUADRILATERAL_PERIMETER
+    assert by_triangle[3] == by_triangle[4] == rechart_route.DISC_PERIMETER
+    assert (by_triangle[5:] == rechart_route.DISC_PERIMETER).all()
+    assert count == 4

@@ -90,6 +90,55 @@ def _chart_borders(uvs, triangles):
     return charts, vertex, (uses[edge_id] == 1).reshape(count, 3)
 
 
+# The least perimeter over sqrt(area) of a chart's equal-area affine images
+# (ErrorModel.lowest_packed lets a packing stretch its charts): a triangle's
+# is the equilateral one's, a convex quadrilateral's the square's (a regular
+# n-gon has the least perimeter of the n-gons of its area). Steiner's formula,
+# area + perimeter r + pi r^2, is a convex chart's area grown by r; for any
+# other chart the disc's factor gives the Brunn-Minkowski bound.
+TRIANGLE_PERIMETER = 2.0 * np.sqrt(3.0 * np.sqrt(3.0))
+QUADRILATERAL_PERIMETER = 4.0
+DISC_PERIMETER = 2.0 * np.sqrt(np.pi)
+
+
+def perimeter_factors(uvs, triangles, charts, vertex, count):
+    """(count,) per chart a factor k such that the chart, of area a, turned,
+    moved or stretched at equal area and grown by r covers at least a + k
+    sqrt(a) r + pi r^2: TRIANGLE_PERIMETER for a chart of one triangle,
+    QUADRILATERAL_PERIMETER for two triangles that share one edge and make a
+    convex quadrilateral (a Lightmap Pack quad), DISC_PERIMETER otherwise.
+    `charts` (T,) and `vertex` (T, 3) as _chart_borders gives them."""
+    charts = np.asarray(charts, np.int64)
+    factors = np.full(count, DISC_PERIMETER)
+    if not len(charts):
+        return factors
+    size = np.bincount(charts, minlength=count)[:count]
+    factors[size == 1] = TRIANGLE_PERIMETER
+    pairs = np.flatnonzero(size == 2)
+    if not len(pairs):
+        return factors
+    order = np.argsort(charts, kind="stable")
+    first = order[np.searchsorted(charts[order], pairs)]
+    second = order[np.searchsorted(charts[order], pairs) + 1]
+    shared = vertex[first][:, :, None] == vertex[second][:, None, :]  # (P, 3, 3)
+    one_edge = (shared.sum(axis=(1, 2)) == 2) & (shared.any(axis=2).sum(axis=1) == 2)
+    corners = np.asarray(uvs, np.float64)[np.asarray(triangles)]
+    a, b = corners[first], corners[second]
+    rows = np.arange(len(pairs))
+    x = a[rows, np.argmin(shared.any(axis=2), axis=1)]  # the corner of `first` off the shared edge
+    y = b[rows, np.argmin(shared.any(axis=1), axis=1)]  # and of `second`
+    on_edge = np.argsort(~shared.any(axis=2), axis=1, kind="stable")[:, :2]
+    p, q = a[rows, on_edge[:, 0]], a[rows, on_edge[:, 1]]
+
+    def side(o, d, point):
+        return (d[:, 0] - o[:, 0]) * (point[:, 1] - o[:, 1]) - (d[:, 1] - o[:, 1]) * (point[:, 0] - o[:, 0])
+
+    # Convex: x and y on either side of the shared edge pq, and p and q on either side of xy.
+    convex = one_edge & (side(p, q, x) * side(p, q, y) < 0) & (side(x, y, p) * side(x, y, q) < 0)
+    factors[pairs[convex]] = QUADRILATERAL_PERIMETER
+    return factors
+
+
 def resample_lightmap(lightmap, source_uvs, source_triangles, uvs, triangles, mask):
     """The lightmap baked on (source_uvs, source_triangles) carried over to
     the layout (uvs, triangles) of the same triangles: each texel of `mask`
@@ -172,7 +221,7 @@ class ErrorModel:
                 return 1.0
             return float((edge[keep] / np.sqrt(np.maximum(after[keep], 1e-300) / before[keep])).sum() / total)
         keep, size_after = self._kept(after)
-        edge_terms, border_terms, _ = self._terms(uvs, size_after, keep)
+        edge_terms, border_terms, _, _ = self._terms(uvs, size_after, keep)
         source_error = self._source(keep)
         error = (allocation.EDGE_ERROR * edge_terms[keep].sum()
                  + allocation.BORDER_ERROR * border_terms[keep].sum())
@@ -189,21 +238,23 @@ class ErrorModel:
         (before their constants) of `layout`, whose texel sizes are `size`:
         the light changes it keeps inside its charts times the source's and
         its texel size; the slope along its charts' borders times its texel
-        size squared; and each triangle's chart."""
+        size squared; each triangle's chart, and its corners' chart vertices
+        (_chart_borders)."""
         size_before = np.where(keep, self.size_before, 0.0)
         slope_world = np.where(keep, self.slope_texel / np.maximum(size_before, 1e-300), 0.0)
-        charts, _, border = _chart_borders(layout, self.triangles)
+        charts, vertex, border = _chart_borders(layout, self.triangles)
         border = (border * self.lengths).sum(axis=1)
         held = self.edge if self.folds is None else np.maximum(
             self.edge - self.folds.energy_removed(layout, self.triangles), 0.0)
-        return held * size_before * size, slope_world * border * size * size, charts
+        return held * size_before * size, slope_world * border * size * size, charts, vertex
 
     def _source(self, keep):
         """The source layout's error over the `keep` triangles. It depends on
         the layout compared only through `keep`: computed once per mask."""
         key = keep.tobytes()
         if key not in self._source_error:
-            edge_terms, border_terms, _ = self._terms(self.source_uvs, np.where(keep, self.size_before, 0.0), keep)
+            edge_terms, border_terms, _, _ = self._terms(self.source_uvs, np.where(keep, self.size_before, 0.0),
+                                                         keep)
             self._source_error[key] = (allocation.EDGE_ERROR * edge_terms[keep].sum()
                                        + allocation.BORDER_ERROR * border_terms[keep].sum())
         return self._source_error[key]
@@ -220,8 +271,10 @@ class ErrorModel:
         Chart c scaled by s predicts A_c / s + B_c / s^2 (its edge term by
         texel size, its border term by its square, from `base_uvs`' texel
         sizes), falling as g grows. Grown by a disc of radius r = padding /
-        2, a chart of texel area a_c s^2 covers at least (sqrt(a_c) s +
-        sqrt(pi) r)^2 texels (Brunn-Minkowski), and the grown charts are
+        2, a chart of texel area a_c s^2 covers at least a_c s^2 + k_c
+        sqrt(a_c) s r + pi r^2 texels (perimeter_factors: k_c = 2 sqrt(pi)
+        by Brunn-Minkowski for any chart, more by Steiner's formula for a
+        triangle or a convex quadrilateral), and the grown charts are
         disjoint inside the atlas grown by r: the largest g that allows
         bounds the error from below. A chart whose triangles overlap covers
         less than their areas: the caller gives only layouts without
@@ -232,7 +285,7 @@ class ErrorModel:
         area = np.abs(allocation.signed_areas(base, self.triangles))
         # Scaled whole, a chart keeps its triangles' areas > 0, its borders and the folds it holds.
         keep, size = self._kept(area)
-        edge_terms, border_terms, charts = self._terms(base, size, keep)
+        edge_terms, border_terms, charts, vertex = self._terms(base, size, keep)
         count = len(scales)
         edge = allocation.EDGE_ERROR * np.bincount(charts[keep], edge_terms[keep], minlength=count)
         slope = allocation.BORDER_ERROR * np.bincount(charts[keep], border_terms[keep], minlength=count)
@@ -242,11 +295,12 @@ class ErrorModel:
         live = (texels > 0) & (scales > 0)
         if total <= 0 or not live.any():
             return None
-        grown = np.sqrt(np.pi) * 0.5 * padding
+        radius = 0.5 * padding
         root = np.sqrt(texels[live]) * scales[live]
-        # sum (root g + grown)^2 <= budget, a quadratic in g.
-        quadratic, linear = float((root * root).sum()), 2.0 * grown * float(root.sum())
-        constant = live.sum() * grown * grown - (shape[0] + padding) * (shape[1] + padding)
+        perimeter = perimeter_factors(base, self.triangles, charts, vertex, count)[live]
+        # sum (root^2 g^2 + k root g r + pi r^2) <= budget, a quadratic in g.
+        quadratic, linear = float((root * root).sum()), radius * float((perimeter * root).sum())
+        constant = live.sum() * np.pi * radius * radius - (shape[0] + padding) * (shape[1] + padding)
         if constant >= 0:
             return None  # no packing could hold the charts: nothing to bound
         g = (-linear + np.sqrt(linear * linear - 4.0 * quadratic * constant)) / (2.0 * quadratic)
