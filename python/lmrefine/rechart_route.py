@@ -118,16 +118,17 @@ def perimeter_factors(uvs, triangles, charts, vertex, count):
     if not len(pairs):
         return factors
     order = np.argsort(charts, kind="stable")
-    first = order[np.searchsorted(charts[order], pairs)]
-    second = order[np.searchsorted(charts[order], pairs) + 1]
+    start = np.searchsorted(charts[order], pairs)
+    first, second = order[start], order[start + 1]
     shared = vertex[first][:, :, None] == vertex[second][:, None, :]  # (P, 3, 3)
-    one_edge = (shared.sum(axis=(1, 2)) == 2) & (shared.any(axis=2).sum(axis=1) == 2)
+    in_first, in_second = shared.any(axis=2), shared.any(axis=1)  # corners on the shared edge
+    one_edge = (shared.sum(axis=(1, 2)) == 2) & (in_first.sum(axis=1) == 2)
     corners = np.asarray(uvs, np.float64)[np.asarray(triangles)]
     a, b = corners[first], corners[second]
     rows = np.arange(len(pairs))
-    x = a[rows, np.argmin(shared.any(axis=2), axis=1)]  # the corner of `first` off the shared edge
-    y = b[rows, np.argmin(shared.any(axis=1), axis=1)]  # and of `second`
-    on_edge = np.argsort(~shared.any(axis=2), axis=1, kind="stable")[:, :2]
+    x = a[rows, np.argmin(in_first, axis=1)]  # the corner of `first` off the shared edge
+    y = b[rows, np.argmin(in_second, axis=1)]  # and of `second`
+    on_edge = np.argsort(~in_first, axis=1, kind="stable")[:, :2]
     p, q = a[rows, on_edge[:, 0]], a[rows, on_edge[:, 1]]
 
     def side(o, d, point):
