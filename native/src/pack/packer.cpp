@@ -39,6 +39,7 @@ struct Trial {
     std::vector<Placement> placements;  // per chart
     int64_t texels = 0;        // footprint cells placed
     int64_t total_texels = 0;  // footprint cells of every chart (upright)
+    double bottom = 0;         // the lowest grid row the placed charts reach
 };
 
 // Footprint bitmaps reused by the trials and by later calls: a fresh bitmap
@@ -201,6 +202,7 @@ Trial run_trial(const Problem& problem, double global_scale, Progress* progress)
         if (!found) return trial;
         const Footprint& f = footprints[size_t(c) * size_t(turn_options) + size_t(best.turns)];
         occupancy.place(f, int(best.x), int(best.y));
+        trial.bottom = std::max(trial.bottom, best.y + f.covered.height);
         trial.texels += f.texels;
         trial.placements[size_t(c)] = best;
     }
@@ -232,7 +234,9 @@ Trial run_boxes(const Problem& problem, double global_scale, const std::vector<i
         const int32_t c = order[n];
         if (problem.pieces[size_t(c)].corners.empty()) continue;
         const glm::dvec2 box = box_size(problem, size_t(c), global_scale);
-        if (!place(box, trial.placements[size_t(c)])) return trial;
+        Placement& at = trial.placements[size_t(c)];
+        if (!place(box, at)) return trial;
+        trial.bottom = std::max(trial.bottom, at.y + (at.turns ? box.x : box.y));
         trial.texels += int64_t(std::ceil(box.x * box.y));
     }
     trial.fits = true;
@@ -291,16 +295,36 @@ struct Search {
     int trials = 0;
 };
 
-// The largest global scale in (0, bound] at which `run` places every chart.
+// The search ends when the largest scale that fits and the smallest that
+// does not are this close.
+constexpr double kCloseEnough = 1.004;
+// The two scales tried around an estimate, this far apart (a hair closer
+// than kCloseEnough), and how many rounds try them.
+constexpr double kEstimateStep = 1.0039;
+constexpr int kEstimateRounds = 6;
+
+// Trial scales lie on a lattice, 1e-4 apart in log scale: layouts that
+// differ by float rounding (a layout per corner and the same per loop) get
+// the same bound to within the rounding, and would otherwise try scales that
+// far apart, where an estimate aimed at the largest that fits can flip a
+// trial.
+double on_lattice(double scale) {
+    constexpr double kStep = 1e-4;
+    return std::exp(std::round(std::log(scale) / kStep) * kStep);
+}
+
+// The largest global scale in (0, bound] at which `run` places every chart
+// in a grid `height` rows tall.
 template <class Run>
-Search search_scale(Run run, double bound, const PackOptions& options, int32_t chart_count, Progress* progress) {
+Search search_scale(Run run, double bound, int height, const PackOptions& options, int32_t chart_count,
+                    Progress* progress) {
     // Bracket [low, high): `low` fits, `high` does not (the bound never
-    // fits better than exactly). Two trials per round (one per core) cut the
-    // bracket in three; the sequence of scales tried does not depend on the
-    // thread count, so neither does the result.
+    // fits better than exactly). Two trials per round (one per core); the
+    // sequence of scales tried does not depend on the thread count, so
+    // neither does the result.
     Search search;
     double low = 0.0, high = bound * 1.0000001;
-    double guess = bound * 0.9;
+    double guess = on_lattice(bound * 0.9);
     while (!search.best.fits) {
         Trial t = run(guess);
         ++search.trials;
@@ -316,7 +340,7 @@ Search search_scale(Run run, double bound, const PackOptions& options, int32_t c
             // The next guess shrinks by the square root of the area that did
             // not fit (charts placed / all, in footprint cells), a little more.
             const double placed = t.total_texels > 0 ? double(t.texels) / double(t.total_texels) : 0.5;
-            guess *= std::clamp(0.98 * std::sqrt(placed), 0.5, 0.97);
+            guess = on_lattice(guess * std::clamp(0.98 * std::sqrt(placed), 0.5, 0.97));
             if (guess < bound * 1e-9) {
                 LMREFINE_THROW(InvalidArgument,
                                std::to_string(chart_count) + " charts do not fit a " + std::to_string(options.height) +
@@ -326,11 +350,37 @@ Search search_scale(Run run, double bound, const PackOptions& options, int32_t c
             }
         }
     }
-    while (high / low > 1.004) {
+    // Charts go in rows from the top, so a trial that fits leaves the rows
+    // below its lowest chart free, and the scale that would fill the atlas's
+    // height is about low * sqrt(height / bottom) (on the bundled layouts
+    // from half a percent above the largest that fits to three below,
+    // docs/packer.md). A round tries a scale just below that estimate and
+    // one just above (a fit and a failure that close end the search; both
+    // fitting, the next estimate starts from the higher). Where the estimate
+    // would leave the bracket, and after kEstimateRounds rounds, a round
+    // cuts the bracket in three.
+    int estimated = 0;
+    double estimated_from = 0;  // the bottom the last estimate came from
+    while (high / low > kCloseEnough) {
         const double ratio = high / low;
-        const double s1 = low * std::pow(ratio, 1.0 / 3.0), s2 = low * std::pow(ratio, 2.0 / 3.0);
+        double s1 = low * std::pow(ratio, 1.0 / 3.0), s2 = low * std::pow(ratio, 2.0 / 3.0);
+        // A larger scale that fits without reaching lower (charts of a few
+        // equal sizes fill whole rows or none) says the estimate does not
+        // follow the scale: the rounds cut the bracket from then on.
+        if (search.best.bottom <= estimated_from) estimated = kEstimateRounds;
+        if (search.best.bottom > 0 && estimated < kEstimateRounds) {
+            estimated_from = search.best.bottom;
+            const double estimate = low * std::sqrt(double(height) / search.best.bottom);
+            // At least half a step above `low`: a failure there ends the search too.
+            const double e1 = std::max(estimate, low * kEstimateStep) / std::sqrt(kEstimateStep);
+            const double e2 = e1 * kEstimateStep;
+            if (e2 < high) {
+                s1 = e1, s2 = e2;
+                ++estimated;
+            }
+        }
         Trial trials[2];
-        const double tried[2] = {s1, s2};
+        const double tried[2] = {on_lattice(s1), on_lattice(s2)};
         parallel_for(2, 1, [&](int64_t begin, int64_t end) {
             for (int64_t k = begin; k < end; ++k) trials[k] = run(tried[k]);
         });
@@ -340,14 +390,14 @@ Search search_scale(Run run, double bound, const PackOptions& options, int32_t c
             progress->advance(2);
         }
         if (trials[1].fits) {
-            low = s2;
+            low = tried[1];
             search.best = std::move(trials[1]);
         } else if (trials[0].fits) {
-            low = s1;
-            high = s2;
+            low = tried[0];
+            high = tried[1];
             search.best = std::move(trials[0]);
         } else {
-            high = s1;
+            high = tried[0];
         }
     }
     search.scale = low;
@@ -459,8 +509,8 @@ PackResult pack_charts(const UvLayout& layout, const std::vector<int32_t>& trian
     PackResult result;
     result.scale_bound = bound;
     if (progress) progress->begin("pack", 60);
-    Search search = search_scale([&](double scale) { return run_trial(problem, scale, progress); }, bound, options,
-                                 chart_count, progress);
+    Search search = search_scale([&](double scale) { return run_trial(problem, scale, progress); }, bound,
+                                 grid.height, options, chart_count, progress);
     // Bounding boxes at continuous positions win where charts are
     // rectangles small against the grid (docs/packer.md).
     bool boxes = false;
@@ -477,7 +527,7 @@ PackResult pack_charts(const UvLayout& layout, const std::vector<int32_t>& trian
                     Trial sky = run_skyline_trial(problem, scale, progress);
                     return sky.fits || sky.texels > shelf.texels ? sky : shelf;
                 },
-                box_scale_bound, options, chart_count, progress);
+                box_scale_bound, grid.height, options, chart_count, progress);
             search.trials += box_search.trials;
             // Each search ends within 0.4% of its largest scale: boxes must
             // beat the footprints by more than that (footprints are texel-exact).
