@@ -360,21 +360,23 @@ Search search_scale(Run run, double bound, int height, const PackOptions& option
     // would leave the bracket, and after kEstimateRounds rounds, a round
     // cuts the bracket in three.
     int estimated = 0;
-    double estimated_from = 0;  // the bottom the last estimate came from
+    bool overshot = false;  // the last round's two scales both failed
     while (high / low > kCloseEnough) {
         const double ratio = high / low;
         double s1 = low * std::pow(ratio, 1.0 / 3.0), s2 = low * std::pow(ratio, 2.0 / 3.0);
-        // A larger scale that fits without reaching lower (charts of a few
-        // equal sizes fill whole rows or none) says the estimate does not
-        // follow the scale: the rounds cut the bracket from then on.
-        if (search.best.bottom <= estimated_from) estimated = kEstimateRounds;
         if (search.best.bottom > 0 && estimated < kEstimateRounds) {
-            estimated_from = search.best.bottom;
-            const double estimate = low * std::sqrt(double(height) / search.best.bottom);
-            // At least half a step above `low`: a failure there ends the search too.
-            const double e1 = std::max(estimate, low * kEstimateStep) / std::sqrt(kEstimateStep);
-            const double e2 = e1 * kEstimateStep;
-            if (e2 < high) {
+            double e1, e2;
+            if (overshot) {
+                // Just below the failure (half a step: a fit there ends the search too).
+                e2 = high / std::sqrt(kEstimateStep);
+                e1 = e2 / kEstimateStep;
+            } else {
+                const double estimate = low * std::sqrt(double(height) / search.best.bottom);
+                // At least half a step above `low`: a failure there ends the search too.
+                e1 = std::max(estimate, low * kEstimateStep) / std::sqrt(kEstimateStep);
+                e2 = e1 * kEstimateStep;
+            }
+            if (e1 > low && e2 < high) {
                 s1 = e1, s2 = e2;
                 ++estimated;
             }
@@ -399,6 +401,7 @@ Search search_scale(Run run, double bound, int height, const PackOptions& option
         } else {
             high = tried[0];
         }
+        overshot = !trials[0].fits;
     }
     search.scale = low;
     return search;
