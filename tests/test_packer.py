@@ -195,6 +195,26 @@ def test_deterministic_and_independent_of_where_charts_start():
     assert third.report["global_scale"] == pytest.approx(first.report["global_scale"], rel=1e-6)
 
 
+@pytest.mark.parametrize("kind", ["lightmap_pack", "smart_uv", "mixed_sizes"])
+@pytest.mark.parametrize("scaled", [False, True])
+def test_a_layout_rounded_differently_packs_the_same(kind, scaled):
+    """The search aims its trial scales at the largest that fits, where a trial can flip with the
+    layout's last bit; trial scales on a lattice keep two roundings of one layout (a layout per corner
+    and the same per loop, docs/packer.md) in the same trials, so at the same scale. (Where each chart
+    lands may still differ: equal charts one rounding apart are placed in another order.)"""
+    uvs, tris = kinds()[kind]
+    rng = np.random.default_rng(3)
+    # Every UV one float32 step up, down or kept: the charts' sizes (and the scale bound) move by ~1e-7.
+    nudged = np.nextafter(uvs, rng.choice([-1.0, 0.0, 2.0], uvs.shape).astype(np.float32))
+    scales = rng.uniform(0.5, 2.0, int(lmrefine.find_charts(uvs, tris, 1e-5).max()) + 1) if scaled else None
+    charts = lmrefine.find_charts(uvs, tris, 1e-5) if scaled else None
+    first = lmrefine.pack_charts(uvs, tris, charts, scales, 256, 2.0)
+    second = lmrefine.pack_charts(nudged, tris, charts, scales, 256, 2.0)
+    assert second.report["scale_bound"] != first.report["scale_bound"]  # the rounding reached the bound
+    assert second.report["global_scale"] == first.report["global_scale"]
+    assert second.report["trials"] == first.report["trials"]
+
+
 def test_the_result_does_not_depend_on_the_thread_count(monkeypatch):
     uvs, tris = kinds()["mixed_sizes"]
     results = []

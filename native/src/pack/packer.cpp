@@ -356,9 +356,10 @@ Search search_scale(Run run, double bound, int height, const PackOptions& option
     // from half a percent above the largest that fits to three below,
     // docs/packer.md). A round tries a scale just below that estimate and
     // one just above (a fit and a failure that close end the search; both
-    // fitting, the next estimate starts from the higher). Where the estimate
-    // would leave the bracket, and after kEstimateRounds rounds, a round
-    // cuts the bracket in three.
+    // fitting, the next estimate starts from the higher; both failing, the
+    // next round tries just below the lower). Where these would leave the
+    // bracket, and after kEstimateRounds rounds, a round cuts the bracket
+    // in three.
     int estimated = 0;
     bool overshot = false;  // the last round's two scales both failed
     while (high / low > kCloseEnough) {
