@@ -206,8 +206,8 @@ def test_a_layout_rounded_differently_packs_the_same(kind, scaled):
     rng = np.random.default_rng(3)
     # Every UV one float32 step up, down or kept: the charts' sizes (and the scale bound) move by ~1e-7.
     nudged = np.nextafter(uvs, rng.choice([-1.0, 0.0, 2.0], uvs.shape).astype(np.float32))
-    scales = rng.uniform(0.5, 2.0, int(lmrefine.find_charts(uvs, tris, 1e-5).max()) + 1) if scaled else None
     charts = lmrefine.find_charts(uvs, tris, 1e-5) if scaled else None
+    scales = rng.uniform(0.5, 2.0, int(charts.max()) + 1) if scaled else None
     first = lmrefine.pack_charts(uvs, tris, charts, scales, 256, 2.0)
     second = lmrefine.pack_charts(nudged, tris, charts, scales, 256, 2.0)
     assert second.report["scale_bound"] != first.report["scale_bound"]  # the rounding reached the bound

@@ -554,8 +554,8 @@ def test_route_packs_charts_apart_when_the_automaton_fit_undid_a_region(monkeypa
     """The bundled hillside's Lightmap Pack source at 192^2: its re-charted terrain is one large chart,
     packed exactly the padding from the boulders' charts, so every edge texel is rigid, and the finest
     automaton level's fit sent a region back to rest (fit_reset). The route then packs the charts half a
-    texel farther apart, where the edge texels may shrink, and keeps that layout (its fit still resets,
-    over fewer rounds): the terrain's shadow edges gain the texels the cascade had taken back. (Which
+    texel farther apart, where the edge texels may shrink, and keeps that layout (its fit takes fewer
+    rounds and does not reset): the terrain's shadow edges gain the texels the cascade had taken back. (Which
     bakes cascade depends on where the packer puts the charts: first found at 256^2 with seed 1's bake,
     this case is seed 0's at 192^2 since the packer's scale estimate, docs/packer.md.)"""
     from lmrefine.sample_scenes import load_sample
@@ -589,7 +589,8 @@ def test_route_packs_charts_apart_when_the_automaton_fit_undid_a_region(monkeypa
         return np.percentile(density, 95) / np.percentile(density, 5)
 
     assert terrain_spread(result.uvs) > 1.4 * terrain_spread(first.uvs)  # measured 5.3 against 3.6
-    assert result.report["levels"][-1]["fit_rounds"] < first.report["levels"][-1]["fit_rounds"]
+    assert result.report["levels"][-1]["fit_rounds"] < first.report["levels"][-1]["fit_rounds"]  # 35 against 93
+    assert not result.report["levels"][-1]["fit_reset"]
 
 
 def test_later_stages_of_a_recharted_layout_with_no_room_refine_inside_its_charts(lightmap_pack_case):
