@@ -352,8 +352,9 @@ def test_the_stretch_candidates_of_a_layout_the_library_packed_are_judged_by_the
                                          1.0, dense, allocation.callers_rule())[0]["used"]
 
 
-def test_cancelling_during_the_softened_repack_cancels_the_refinement():
+def test_cancelling_during_the_softened_repack_cancels_the_refinement(monkeypatch):
     """The second packing honours the caller's progress: asked to stop there, refine_uvs stops."""
+    monkeypatch.setattr(allocation, "FILL_CANDIDATES", 0)  # the fill's placements would come second
     uvs, tris, lightmap = _checkered_corner()
     packs = []
 
@@ -365,6 +366,24 @@ def test_cancelling_during_the_softened_repack_cancels_the_refinement():
     with pytest.raises(lmrefine.CancelledError):
         lmrefine.refine_uvs(lightmap, uvs, tris, 64, padding=2, max_stretch=1.0, progress=progress)
     assert len(packs) == 3
+
+def test_cancelling_during_the_fill_cancels_the_refinement(monkeypatch):
+    """The fill's placements honour the caller's progress: a cancel there is no chart that did not fit."""
+    uvs, tris, lightmap = _checkered_corner()
+    tried = []
+    original = allocation.pack_charts
+
+    def pack_charts(*args, **kwargs):
+        if kwargs.get("fixed_scale") is not None:
+            tried.append(1)
+            kwargs["progress"] = lambda fraction, stage: False
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(allocation, "pack_charts", pack_charts)
+    with pytest.raises(lmrefine.CancelledError):
+        lmrefine.refine_uvs(lightmap, uvs, tris, 64, padding=2, max_stretch=1.0)
+    assert tried == [1]
+
 
 # Seeds 0-21 keep each candidate at least once: the softened scales (0, 6, 11), the turned stretch
 # (18, 21), the half stretch (20).
@@ -440,3 +459,55 @@ def test_a_repack_leaves_a_small_flat_chart_its_bilinear_texels():
     per_chart = np.bincount(charts, weights=texels)
     assert per_chart[charts[-1]] >= 0.9 * allocation.MIN_CHART_TEXELS, per_chart
     assert per_chart[charts[0]] > 1700  # the edge's chart grew
+
+
+def test_the_fill_grows_a_chart_into_the_space_the_packing_left_and_keeps_the_others():
+    # A chart twice as wide as tall fills the atlas's width, so the packing
+    # leaves the lower half nearly empty; the small chart beside it grows
+    # into it, the wide chart keeps its size.
+    uvs, tris = merge(grid_chart(4, (0.0, 0.0), (1.0, 0.5)), grid_chart(2, (2.0, 0.0), (2.2, 0.2)))
+    charts = lmrefine.find_charts(uvs, tris, tolerance=1e-5)
+    packed, report = lmrefine.pack_charts(uvs, tris, charts, None, 128, 2.0)
+    edge, smooth = np.array([1.0, 1.0]), np.zeros(2)
+    grown, grown_report, factors, ratio, fill = allocation.grow_into_free_space(
+        packed, tris, charts, edge, smooth, report["chart_scales"], 128, 2.0)
+    assert factors[0] == 1.0 and factors[1] > 1.8
+    assert fill["charts_grown"] == 1 and fill["ratio"] == pytest.approx(ratio)
+    assert ratio == pytest.approx(predicted_total(edge, smooth, factors) / predicted_total(edge, smooth, np.ones(2)))
+    np.testing.assert_allclose(grown_report["chart_scales"], factors, rtol=1e-12)
+    # Measured on the output: the wide chart's extent is the packing's, the small one's grew.
+    extent = [np.ptp(grown[np.unique(tris[charts == c])], axis=0) for c in (0, 1)]
+    before = [np.ptp(packed[np.unique(tris[charts == c])], axis=0) for c in (0, 1)]
+    np.testing.assert_allclose(sorted(extent[0]), sorted(before[0]), rtol=1e-5)
+    np.testing.assert_allclose(sorted(extent[1]), sorted(before[1] * factors[1]), rtol=1e-5)
+    check = lmrefine.check_layout(grown, tris, 128, 2.0)
+    assert check["valid"] and check["min_gutter_texels"] >= 2.0, check
+    # A chart whose growth could not lower the model's error by FILL_MIN_GAIN is not tried.
+    little = np.array([1.0, 1.8 * allocation.FILL_MIN_GAIN])
+    none, _, factors, ratio, fill = allocation.grow_into_free_space(
+        packed, tris, charts, little, smooth, report["chart_scales"], 128, 2.0)
+    assert none is None and ratio == 1.0 and (factors == 1.0).all()
+    assert fill["packings"] == 1  # the wide chart, which has no room
+
+
+def test_the_fill_leaves_a_packing_with_no_free_space_as_it_is():
+    # Four equal squares fill the atlas: none can grow by FILL_SMALLEST_GROWTH (one try each).
+    size = 0.5
+    uvs, tris = merge(*(grid_chart(1, (k * 2.0, 0.0), (k * 2.0 + size, size)) for k in range(4)))
+    charts = lmrefine.find_charts(uvs, tris, tolerance=1e-5)
+    packed, report = lmrefine.pack_charts(uvs, tris, charts, None, 64, 2.0)
+    uvs_out, _, factors, ratio, fill = allocation.grow_into_free_space(
+        packed, tris, charts, np.ones(4), np.zeros(4), report["chart_scales"], 64, 2.0)
+    assert uvs_out is None and ratio == 1.0 and (factors == 1.0).all()
+    assert fill["charts_grown"] == 0 and fill["packings"] == allocation.FILL_CANDIDATES
+
+
+def test_the_fill_tries_no_placement_where_the_free_area_cannot_hold_a_gain():
+    # One square chart fills nearly the whole atlas: the area left cannot hold its growth by
+    # FILL_SMALLEST_GROWTH, so no placement is tried.
+    uvs, tris = grid_chart(2, (0.0, 0.0), (1.0, 1.0))
+    charts = lmrefine.find_charts(uvs, tris, tolerance=1e-5)
+    packed, report = lmrefine.pack_charts(uvs, tris, charts, None, 64, 1.0)
+    none, _, _, _, fill = allocation.grow_into_free_space(
+        packed, tris, charts, np.ones(1), np.zeros(1), report["chart_scales"], 64, 1.0)
+    assert none is None and fill["packings"] == 0

@@ -298,6 +298,30 @@ def test_bad_input_raises_a_clear_value_error(change, message):
                              tolerance=args["tolerance"], subdivision=args["subdivision"])
 
 
+@pytest.mark.parametrize("kind", ["mixed_sizes", "lightmap_pack", "concave"])
+def test_a_fixed_scale_places_the_charts_at_that_scale_without_a_search(kind):
+    uvs, tris = kinds()[kind]
+    _, searched = lmrefine.pack_charts(uvs, tris, None, None, 256, 2.0)
+    scales = np.random.default_rng(2).uniform(0.9, 1.0, searched["charts"])
+    out, report = lmrefine.pack_charts(uvs, tris, searched["chart_ids"], scales, 256, 2.0,
+                                       fixed_scale=0.9 * searched["global_scale"])
+    assert report["trials"] <= 2  # the footprints, and the boxes where they fail
+    assert report["global_scale"] == 0.9 * searched["global_scale"]
+    np.testing.assert_allclose(report["chart_scales"], 0.9 * searched["global_scale"] * scales, rtol=1e-12)
+    check = lmrefine.check_layout(out, tris, 256, 2.0)
+    assert check["valid"] and check["min_gutter_texels"] >= 2.0, check
+    # Past the bound (the charts' area would exceed the atlas's) nothing fits.
+    with pytest.raises(ValueError, match="do not fit .* at global scale"):
+        lmrefine.pack_charts(uvs, tris, None, None, 256, 2.0, fixed_scale=1.01 * searched["scale_bound"])
+
+
+@pytest.mark.parametrize("value", [0.0, -1.0, float("nan"), float("inf")])
+def test_a_fixed_scale_must_be_a_positive_number(value):
+    uvs, tris = grid_chart(1, (0, 0), (0.5, 0.5))
+    with pytest.raises(ValueError, match="fixed_scale must be (finite|a finite global scale > 0)"):
+        lmrefine.pack_charts(uvs, tris, None, None, 64, 2.0, fixed_scale=value)
+
+
 def test_a_uv_index_shared_by_two_charts_is_refused():
     uvs, tris = grid_chart(1, (0, 0), (0.5, 0.5))
     with pytest.raises(ValueError, match="UV index"):

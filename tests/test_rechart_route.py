@@ -516,10 +516,15 @@ def test_route_keeps_the_faces_it_is_given_of_a_per_corner_layout_whole():
     assert kept.report["rechart"]["used"], kept.report["rechart"]
     charts = lmrefine.find_charts(kept.uvs, corner_triangles, lmrefine.CHART_TOLERANCE)
     assert (charts[0::2] == charts[1::2]).all()
-    # The same layout per loop gives the same layout (within float32 rounding: UVs are welded per index).
+    # The same layout per loop gives the same layout (within float32 rounding: UVs are welded per index)
+    # up to the triangle stretch, whose least-squares fit of the two differs by rounding: its packing
+    # may then end one step of the packer's lattice of scales (1e-4) apart.
     per_loop = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, positions=corners,
                                    **SCALES_WITHIN_2)
-    np.testing.assert_allclose(per_loop.uvs[triangles].reshape(-1, 2), kept.uvs, rtol=0, atol=1e-6)
+    np.testing.assert_allclose(per_loop.unstretched_uvs[triangles].reshape(-1, 2), kept.unstretched_uvs,
+                               rtol=0, atol=1e-6)
+    np.testing.assert_allclose(per_loop.uvs[triangles].reshape(-1, 2), kept.uvs, rtol=0, atol=2e-4)
+    assert per_loop.report["triangle_stretch"]["used"] == kept.report["triangle_stretch"]["used"]
     # Without the faces the hills cut quads along their diagonals.
     cut = lmrefine.refine_uvs(lightmap, corner_uvs, corner_triangles, RESOLUTION, padding=2,
                               positions=corner_positions, **SCALES_WITHIN_2)

@@ -331,7 +331,11 @@ def test_diagonally_stretched_charts_too_loose_to_keep_are_packed_turned_to_thei
     for candidate in (plain, turned):
         kept_density = lmrefine.allocation.MIN_UTILISATION_KEPT * before
         assert candidate["dense"] == (candidate["padded_utilisation"] >= kept_density)
-    assert result.report["repack"]["padded_utilisation_after"] == pytest.approx(turned["padded_utilisation"])
+    after = result.report["repack"]["padded_utilisation_after"]
+    if result.report["repack"]["fill"]["charts_grown"]:  # charts grew into the space the packing left
+        assert after > turned["padded_utilisation"]
+    else:
+        assert after == pytest.approx(turned["padded_utilisation"])
     assert lmrefine.check_layout(result.uvs, triangles, RESOLUTION, padding=2)["valid"]
     # Measured on the output: each stretched chart's box is its smallest (a stretch of 2 along the
     # diagonal of a square, unturned, fills a box 4 times its area).

@@ -40,12 +40,17 @@ double utilisation(const UvLayout& layout, int width, int height) {
 py::tuple pack(const py::handle& uvs_in, const py::handle& triangles_in, const py::handle& resolution,
                   const py::handle& padding_in, const py::handle& charts_in, const py::handle& scales_in,
                   const py::handle& rotate_in, py::object progress_callback, const py::handle& tolerance_in,
-                  const py::handle& subdivision_in, const py::handle& boxes_in) {
+                  const py::handle& subdivision_in, const py::handle& boxes_in, const py::handle& fixed_scale_in) {
     const double padding = py_util::real_param(padding_in, "padding");
     const bool rotate = py_util::bool_param(rotate_in, "rotations");
     const double tolerance = py_util::real_param(tolerance_in, "tolerance");
     const int subdivision = int(py_util::int_param(subdivision_in, "subdivision", 1, 8));
     const bool boxes = py_util::bool_param(boxes_in, "boxes");
+    const double fixed_scale = fixed_scale_in.is_none() ? 0.0 : py_util::real_param(fixed_scale_in, "fixed_scale");
+    if (!fixed_scale_in.is_none() && !(fixed_scale > 0.0)) {
+        throw py::value_error("fixed_scale must be a finite global scale > 0, or None to search it (got " +
+                              std::to_string(fixed_scale) + ")");
+    }
     const auto start = std::chrono::steady_clock::now();
     auto uvs = py_util::require_points(uvs_in, "uvs", 2, /*allow_empty=*/true);
     auto triangles = py_util::require_indices(triangles_in, "triangles", 3, /*allow_empty=*/true);
@@ -56,6 +61,7 @@ py::tuple pack(const py::handle& uvs_in, const py::handle& triangles_in, const p
     options.weld_tolerance = tolerance;
     options.subdivision = subdivision;
     options.boxes = boxes;
+    options.fixed_scale = fixed_scale;
     if (!(padding >= 0.0) || !std::isfinite(padding)) {
         throw py::value_error("padding must be a finite number of texels >= 0 (got " + std::to_string(padding) + ")");
     }
@@ -162,7 +168,7 @@ void bind_packer(py::module_& m) {
     m.def("pack_charts", &pack, py::arg("uvs"), py::arg("triangles"), py::arg("resolution"), py::arg("padding") = py::float_(2.0),
           py::kw_only(), py::arg("charts") = py::none(), py::arg("scales") = py::none(),
           py::arg("rotate") = py::bool_(true), py::arg("progress") = py::none(), py::arg("tolerance") = py::float_(1e-5),
-          py::arg("subdivision") = py::int_(2), py::arg("boxes") = py::bool_(true),
+          py::arg("subdivision") = py::int_(2), py::arg("boxes") = py::bool_(true), py::arg("fixed_scale") = py::none(),
           R"doc(The atlas packer's native entry; use lmrefine.pack_charts (python/lmrefine/packer.py,
 documented there and in docs/packer.md). Returns (uvs, report).)doc");
 }

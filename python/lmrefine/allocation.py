@@ -479,6 +479,19 @@ def _packing_at(scales, refined_uvs, triangles, charts, edge, smooth, stretched,
                                               final, predicted, padded_before, rule)
         if kept is not None:
             packed, pack_report, final, area_after, perimeter_out, predicted = kept
+    # The space the packing left: the charts the model counts most grow into it.
+    grown, grown_report, factors, ratio, fill_report = grow_into_free_space(
+        packed, triangles, charts, edge, smooth, final, resolution, padding, _reports_done(progress))
+    if grown is not None:
+        grown_area, perimeter_out = chart_outlines(grown, triangles, charts, resolution)
+        fill_report["texel_area"] = float(grown_area.sum() / max(float(area_after.sum()), 1e-300))
+        fill_report["utilisation_before"] = float(pack_report["utilisation"])
+        packed, area_after = grown, grown_area
+        pack_report = {**grown_report, "global_scale": pack_report["global_scale"],
+                       "utilisation_input": pack_report["utilisation_input"],
+                       "area_utilisation_input": pack_report["area_utilisation_input"]}
+        final = final * factors
+        predicted *= ratio
     report = {
         "charts": int(len(scales)),
         "chart_scales": np.asarray(final, np.float64),
@@ -495,6 +508,7 @@ def _packing_at(scales, refined_uvs, triangles, charts, edge, smooth, stretched,
         "predicted_error": predicted,
         "smooth_fraction": float(smooth.sum() / max(edge.sum() + smooth.sum(), 1e-300)),
         "stretch": stretch_report,
+        "fill": fill_report,
     }
     # The model must promise a clear gain, and the packed atlas must be about
     # as dense as the input for its padding (the model does not see what the
@@ -578,6 +592,104 @@ def _judge_stretch(stretched, packings, triangles, charts, resolution, padding, 
         best = min(e["predicted_error"] for e in judged if e.get("dense"))
         report["reason"] = f"the error model predicts {best:.3f} stretched against {predicted:.3f}"
     return report, kept
+
+
+# grow_into_free_space: the charts tried (largest model term first), the
+# growth a chart must fit to be grown at all, the most it may grow (linear),
+# and the bisection steps between the two.
+FILL_CANDIDATES = 4
+FILL_SMALLEST_GROWTH = 1.05
+FILL_MAX_GROWTH = 2.0
+FILL_STEPS = 3
+# The fill is kept only when it lowers the model's error by this share, and
+# a chart is tried only when growing it FILL_MAX_GROWTH times could: a
+# smaller gain is below what placing the charts anew moves a row by, and on
+# layouts of thousands of small charts each try costs a tenth of a second.
+FILL_MIN_GAIN = 0.01
+
+
+def grow_into_free_space(packed, triangles, charts, edge, smooth, scales, resolution, padding, progress=None):
+    """The charts of a `packed` layout (at linear `scales` against the layout
+    the model's `edge` and `smooth` terms refer to) grown one at a time into
+    the atlas space the packing left free, every other chart keeping its
+    size: of the FILL_CANDIDATES charts whose model terms are largest, those
+    whose growth could lower the model's error by FILL_MIN_GAIN, each by the
+    largest factor (bisected) at which the charts still pack at the
+    packing's own scale (pack_charts' fixed_scale). Returns (uvs, pack
+    report, factors (C,), the predicted error's ratio, report), or (None,
+    None, ones, 1.0, report) when no chart grew or the gain is below
+    FILL_MIN_GAIN (the report's `ratio` says what it would have been)."""
+    s = np.maximum(np.asarray(scales, np.float64), 1e-12)
+
+    def model(f):
+        return float((edge / (s * f) + smooth / (s * f) ** 2).sum())
+
+    factors = np.ones(len(s))
+    report = {"charts_grown": 0, "packings": 0}
+    before = model(factors)
+    if not before > 0:
+        return None, None, factors, 1.0, report
+    kept = None
+
+    def fits(trial):
+        report["packings"] += 1
+        try:
+            return pack_charts(packed, triangles, charts, trial, resolution, padding, progress=progress,
+                               fixed_scale=1.0)
+        except ValueError:
+            return None
+
+    def gain(c, g):
+        """The model's error chart c's growth by g takes off."""
+        return edge[c] / s[c] * (1 - 1 / g) + smooth[c] / s[c] ** 2 * (1 - 1 / g ** 2)
+
+    # No chart grows past the atlas area the charts leave (gutters aside): a
+    # bound on what each try can gain, so tries that cannot make a fill
+    # worth keeping are not made (a try past it would not fit either).
+    shape = (int(resolution),) * 2 if np.ndim(resolution) == 0 else tuple(resolution)
+    area = chart_outlines(packed, triangles, charts, shape)[0] / float(shape[0] * shape[1])
+    free = max(1.0 - float(area.sum()), 0.0)
+
+    def largest(c):
+        return min(FILL_MAX_GROWTH, np.sqrt(1.0 + free / area[c])) if area[c] > 0 else FILL_MAX_GROWTH
+
+    needed = FILL_MIN_GAIN * before
+    terms = edge / s + smooth / (s * s)
+    order = [c for c in np.argsort(-terms, kind="stable")[:FILL_CANDIDATES] if gain(c, FILL_MAX_GROWTH) >= needed]
+    gained = 0.0
+    for k, c in enumerate(order):
+        later = sum(gain(d, largest(d)) for d in order[k + 1:])  # what the charts after c could add
+        if gained + gain(c, largest(c)) + later < needed:
+            break  # a fill that cannot be kept: no more placements
+        if largest(c) < FILL_SMALLEST_GROWTH:
+            continue  # no room for the smallest growth
+        trial = factors.copy()
+        trial[c] *= FILL_SMALLEST_GROWTH
+        result = fits(trial)
+        if result is None:
+            continue
+        low, high = FILL_SMALLEST_GROWTH, FILL_MAX_GROWTH
+        for _ in range(FILL_STEPS):
+            if gained + gain(c, min(high, largest(c))) + later < needed:
+                break
+            g = np.sqrt(low * high)
+            trial[c] = factors[c] * g
+            grown = fits(trial)
+            if grown is None:
+                high = g
+            else:
+                low, result = g, grown
+        factors[c] *= low
+        gained += gain(c, low)
+        free = max(free - area[c] * (low * low - 1.0), 0.0)
+        kept = result
+    if kept is None:
+        return None, None, np.ones(len(s)), 1.0, report
+    report["ratio"] = model(factors) / before
+    if report["ratio"] > 1 - FILL_MIN_GAIN:
+        return None, None, np.ones(len(s)), 1.0, report
+    report["charts_grown"] = int((factors > 1.0).sum())
+    return kept[0], kept[1], factors, report["ratio"], report
 
 
 def _pack_or_none(uvs, triangles, charts, scales, resolution, padding, progress):

@@ -31,7 +31,7 @@ class PackResult(NamedTuple):
 
 
 def pack_charts(uvs, triangles, charts, scales, resolution, padding=2.0, rotations=True, progress=None, *,
-                tolerance=CHART_TOLERANCE, subdivision=2, boxes=True):
+                tolerance=CHART_TOLERANCE, subdivision=2, boxes=True, fixed_scale=None):
     """Pack a layout's charts into one atlas, [0, 1]^2, as large as it allows.
 
     Every chart moves as a whole: chart c is scaled by
@@ -78,6 +78,12 @@ def pack_charts(uvs, triangles, charts, scales, resolution, padding=2.0, rotatio
             reaches a 1% larger global scale: rectangular charts (Lightmap
             Pack's, one per face) fit exactly, where the footprint grid
             rounds up every small chart and gutter. False: footprints only.
+        fixed_scale: None (search the global scale), or a global scale > 0
+            to place the charts at without a search: one placement of the
+            footprints, and of the boxes where that fails (``boxes``);
+            ValueError when neither fits. What the atlas fill asks
+            (allocation.grow_into_free_space): does a chart grown by this
+            much still fit beside the others at their sizes?
 
     Returns:
         PackResult ``(uvs, report)``. ``uvs`` (N, 2) float32: the packed
@@ -113,13 +119,14 @@ def pack_charts(uvs, triangles, charts, scales, resolution, padding=2.0, rotatio
 
     Raises:
         ValueError: bad shapes or values (naming the argument), a UV index
-            used by two charts, or charts that do not fit even at a tiny
-            scale (a resolution too small for the padding and chart count).
+            used by two charts, charts that do not fit even at a tiny
+            scale (a resolution too small for the padding and chart count),
+            or with ``fixed_scale`` at that scale.
         lmrefine.CancelledError: the progress callback returned False.
     """
     new_uvs, report = _native.pack_charts(uvs, triangles, resolution, padding, charts=charts, scales=scales,
                                           rotate=rotations, progress=progress, tolerance=tolerance,
-                                          subdivision=subdivision, boxes=boxes)
+                                          subdivision=subdivision, boxes=boxes, fixed_scale=fixed_scale)
     report["offsets"] = report["transforms"][:, :, 2]
     if _flat_count(new_uvs, triangles) > _flat_count(uvs, triangles):
         # The scale search can end at a scale so small (absurd scales, a

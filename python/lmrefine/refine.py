@@ -300,7 +300,10 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
             slope, not read when gradient= is given)
             and pack all charts into one atlas with lmrefine.pack_charts
             (rotations, at least `padding` texels apart, or the input's
-            gutter where that is narrower, but at least a texel). Kept only
+            gutter where that is narrower, but at least a texel); then the
+            charts the model counts most grow into the space the packing
+            left, the others keeping their sizes (report["repack"]["fill"];
+            docs/refiner.md, "The space the packing left"). Kept only
             if the model predicts less error than the unpacked result, the
             packed atlas is about as dense as the input and the packed
             layout passes the same checks; report["repack"] says
@@ -757,6 +760,8 @@ def _triangle_stretched(stage, new_uvs, check, analysed=None):
             if np.array_equal(selected, kept > 0):
                 continue  # the stretch of every chart, judged above
             layout = _with_charts(new_uvs, stretched, triangles, charts, selected)
+            if np.array_equal(layout, stretched):
+                continue  # the charts left out do not stretch: the layout judged above, packed the same
             try:
                 candidate, candidate_check, worse, _ = _packed_again(stage, checker, failing_before, layout, padding)
             except ValueError:

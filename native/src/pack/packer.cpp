@@ -418,6 +418,9 @@ PackResult pack_charts(const UvLayout& layout, const std::vector<int32_t>& trian
         LMREFINE_THROW(InvalidArgument, "resolution must be positive (got " + std::to_string(options.height) + " x " +
                                             std::to_string(options.width) + ")");
     }
+    if (!(options.fixed_scale >= 0.0) || !std::isfinite(options.fixed_scale)) {
+        LMREFINE_THROW(InvalidArgument, "fixed_scale must be finite and >= 0 (got " + std::to_string(options.fixed_scale) + ")");
+    }
     if (!(options.padding >= 0.0) || options.padding > 1e4) {
         LMREFINE_THROW(InvalidArgument, "padding must be >= 0 texels and finite (got " + std::to_string(options.padding) + ")");
     }
@@ -515,25 +518,46 @@ PackResult pack_charts(const UvLayout& layout, const std::vector<int32_t>& trian
     PackResult result;
     result.scale_bound = bound;
     if (progress) progress->begin("pack", 60);
-    Search search = search_scale([&](double scale) { return run_trial(problem, scale, progress); }, bound,
-                                 grid.height, options, chart_count, progress);
+    const auto boxes_at = [&](double scale) {
+        // Shelves first (rows of near-equal boxes), the skyline where they fail.
+        Trial shelf = run_shelf_trial(problem, scale, progress);
+        if (shelf.fits) return shelf;
+        Trial sky = run_skyline_trial(problem, scale, progress);
+        return sky.fits || sky.texels > shelf.texels ? sky : shelf;
+    };
+    Search search;
+    bool boxes = false;
+    if (options.fixed_scale > 0) {
+        search.scale = options.fixed_scale;
+        // Past the bound the charts cannot fit (and a chart's footprint may
+        // not even fit in memory): no trial.
+        if (search.scale <= bound * 1.0000001) search.best = run_trial(problem, search.scale, progress);
+        search.trials = 1;
+        if (progress) progress->check();  // a cancelled trial stops early, and is no failure to fit
+        if (!search.best.fits && options.boxes && search.scale <= bound * 1.0000001) {
+            search.best = boxes_at(search.scale);
+            search.trials = 2;
+            boxes = true;
+            if (progress) progress->check();
+        }
+        if (!search.best.fits) {
+            LMREFINE_THROW(InvalidArgument, std::to_string(chart_count) + " charts do not fit a " +
+                                                std::to_string(options.height) + " x " + std::to_string(options.width) +
+                                                " atlas at global scale " + std::to_string(search.scale));
+        }
+    } else {
+        search = search_scale([&](double scale) { return run_trial(problem, scale, progress); }, bound, grid.height,
+                              options, chart_count, progress);
+    }
     // Bounding boxes at continuous positions win where charts are
     // rectangles small against the grid (docs/packer.md).
-    bool boxes = false;
     // Boxes cannot beat the footprints where the boxes' total area alone
     // would not fit at a larger scale (charts far from rectangles): skipped.
     const double box_scale_bound = box_area > 0 ? std::min(bound, std::sqrt(atlas / box_area)) : bound;
-    if (options.boxes && box_scale_bound > kBoxMargin * search.scale) {
+    if (options.fixed_scale <= 0 && options.boxes && box_scale_bound > kBoxMargin * search.scale) {
         try {
             // Shelves first (rows of near-equal boxes), the skyline where they fail.
-            Search box_search = search_scale(
-                [&](double scale) {
-                    Trial shelf = run_shelf_trial(problem, scale, progress);
-                    if (shelf.fits) return shelf;
-                    Trial sky = run_skyline_trial(problem, scale, progress);
-                    return sky.fits || sky.texels > shelf.texels ? sky : shelf;
-                },
-                box_scale_bound, grid.height, options, chart_count, progress);
+            Search box_search = search_scale(boxes_at, box_scale_bound, grid.height, options, chart_count, progress);
             search.trials += box_search.trials;
             // Each search ends within 0.4% of its largest scale: boxes must
             // beat the footprints by more than that (footprints are texel-exact).

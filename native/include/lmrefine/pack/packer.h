@@ -30,6 +30,11 @@ struct PackOptions {
     // and keep them when they reach a 1% larger scale: exact for rectangular
     // charts, which the footprint grid wastes up to a cell per side of.
     bool boxes = true;
+    // > 0: no search; the charts are placed at this global scale only (the
+    // footprints, then the boxes where they fail; InvalidArgument when
+    // neither fits). What the atlas fill asks: does a chart grown by this
+    // much still fit beside the others at their sizes?
+    double fixed_scale = 0;
 };
 
 struct PackResult {
