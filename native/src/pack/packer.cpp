@@ -300,8 +300,8 @@ struct Search {
 constexpr double kCloseEnough = 1.004;
 // The two scales tried around an estimate, this far apart (a hair closer
 // than kCloseEnough; on the lattice below they may land up to 1e-4 farther
-// apart, past it, and then one more round runs), and how many rounds try
-// them.
+// apart, past it, and then one more round runs: keeping them within it
+// measured no fewer trials, docs/packer.md), and how many rounds try them.
 constexpr double kEstimateStep = 1.0039;
 constexpr int kEstimateRounds = 6;
 
