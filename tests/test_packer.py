@@ -313,6 +313,9 @@ def test_a_fixed_scale_places_the_charts_at_that_scale_without_a_search(kind):
     # Past the bound (the charts' area would exceed the atlas's) nothing fits.
     with pytest.raises(ValueError, match="do not fit .* at global scale"):
         lmrefine.pack_charts(uvs, tris, None, None, 256, 2.0, fixed_scale=1.01 * searched["scale_bound"])
+    # So small that the charts' triangles collapse in float32: said so, with the fix.
+    with pytest.raises(ValueError, match="at fixed_scale 1e-30 the charts' triangles collapse to lines"):
+        lmrefine.pack_charts(uvs, tris, None, None, 256, 2.0, fixed_scale=1e-30)
 
 
 @pytest.mark.parametrize("value", [0.0, -1.0, float("nan"), float("inf")])

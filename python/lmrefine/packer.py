@@ -129,6 +129,9 @@ def pack_charts(uvs, triangles, charts, scales, resolution, padding=2.0, rotatio
                                           subdivision=subdivision, boxes=boxes, fixed_scale=fixed_scale)
     report["offsets"] = report["transforms"][:, :, 2]
     if _flat_count(new_uvs, triangles) > _flat_count(uvs, triangles):
+        if fixed_scale is not None:
+            raise ValueError(f"at fixed_scale {fixed_scale:.3g} the charts' triangles collapse to lines: give a "
+                             "larger fixed_scale (or None to search the largest that fits)")
         # The scale search can end at a scale so small (absurd scales, a
         # padding wider than the atlas) that charts collapse in float32.
         raise ValueError(f"the charts fit only at a global scale of {report['global_scale']:.3g}, where their "

@@ -292,10 +292,11 @@ def case_pack_charts(lm, rng):
     count = int(charts.max()) + 1 if len(charts) else 0
     kwargs = {"uvs": uvs, "triangles": triangles, "charts": charts if rng.random() < 0.5 else None,
               "scales": rng.uniform(0.3, 2.0, count) if rng.random() < 0.5 else None, "resolution": r,
-              "padding": float(rng.choice([0, 1, 2])), "rotations": bool(rng.random() < 0.5), "progress": None}
+              "padding": float(rng.choice([0, 1, 2])), "rotations": bool(rng.random() < 0.5), "progress": None,
+              "fixed_scale": float(rng.uniform(0.01, 3.0)) if rng.random() < 0.3 else None}
     makers = {"uvs": as_array, "triangles": as_array, "charts": as_array, "scales": as_array,
               "resolution": as_resolution, "padding": as_number, "rotations": as_number,
-              "progress": as_progress, "tolerance": as_number, "subdivision": as_number}
+              "progress": as_progress, "tolerance": as_number, "subdivision": as_number, "fixed_scale": as_number}
     kwargs, chosen = mutate(kwargs, rng, makers)
     layout = (kwargs["uvs"], kwargs["triangles"], kwargs["resolution"], kwargs["padding"])
     return Case("pack_charts", _call(lm.pack_charts, dict(kwargs)), list(kwargs.values()), layout=layout,

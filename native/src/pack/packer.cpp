@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <mutex>
 #include <numeric>
 #include <string>
@@ -541,9 +542,11 @@ PackResult pack_charts(const UvLayout& layout, const std::vector<int32_t>& trian
             if (progress) progress->check();
         }
         if (!search.best.fits) {
+            char scale[32];
+            std::snprintf(scale, sizeof(scale), "%.6g", search.scale);
             LMREFINE_THROW(InvalidArgument, std::to_string(chart_count) + " charts do not fit a " +
                                                 std::to_string(options.height) + " x " + std::to_string(options.width) +
-                                                " atlas at global scale " + std::to_string(search.scale));
+                                                " atlas at global scale " + scale);
         }
     } else {
         search = search_scale([&](double scale) { return run_trial(problem, scale, progress); }, bound, grid.height,
