@@ -367,6 +367,7 @@ def test_cancelling_during_the_softened_repack_cancels_the_refinement(monkeypatc
         lmrefine.refine_uvs(lightmap, uvs, tris, 64, padding=2, max_stretch=1.0, progress=progress)
     assert len(packs) == 3
 
+
 def test_cancelling_during_the_fill_cancels_the_refinement(monkeypatch):
     """The fill's placements honour the caller's progress: a cancel there is no chart that did not fit."""
     uvs, tris, lightmap = _checkered_corner()
