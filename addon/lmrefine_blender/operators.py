@@ -68,6 +68,8 @@ def _report_outcome(operator, context, outcome, seconds):
                            f"(up to {summary['largest_stretch']:.2f}x, their texel area kept)")
     if summary["stretched_triangles"]:
         result.message += f"; {summary['stretched_triangles']} triangle(s) stretched across their light changes"
+    if summary["grown_charts"]:
+        result.message += f"; {summary['grown_charts']} chart(s) grown into the space the packing left"
     if outcome.tessellation:
         result.message += f"; tessellation added {summary['vertices_added']} vertices"
     if outcome.stages:

@@ -135,6 +135,9 @@ class Outcome:
         # Triangles the output layouts stretched (refine_uvs' triangle stretch).
         triangles = [report.get("triangle_stretch") or {} for report in reports]
         triangles = [t for t in triangles if t.get("used")]
+        # Charts grown into the space the repack's packing left (its fill), in the kept repacks.
+        fills = [(report.get("repack") or {}) for report in reports]
+        grown = sum(int((r.get("fill") or {}).get("charts_grown", 0)) for r in fills if r.get("used"))
         return {
             "moved": moved,
             "transition_widening": widening,
@@ -147,6 +150,7 @@ class Outcome:
             "stretched_charts": sum(int(s["charts_stretched"]) for s in stretches),
             "largest_stretch": max((float(s["largest_stretch"]) for s in stretches), default=1.0),
             "stretched_triangles": sum(int(t["triangles_stretched"]) for t in triangles),
+            "grown_charts": grown,
             "objects": len(self.objects),
             "images_per_pass": len(self.images),
             "shared_images": {name: objects for name, objects in self.atlases.items() if len(objects) > 1},

@@ -1889,11 +1889,13 @@ def rechart_folded_source():
     check_ = lmrefine.check_layout(refined, layout.triangles, RESOLUTION, padding=2)
     options = pipeline.settings_snapshot(bpy.context.scene.lmrefine)
     seen = []
-    pipeline.run_blocking(pipeline.run(bpy.context, pipeline.validate(bpy.context, [roof], options), options,
-                                       Journal()),
-                          progress=lambda fraction, label: seen.append((fraction, label)))
+    run = pipeline.run_blocking(pipeline.run(bpy.context, pipeline.validate(bpy.context, [roof], options), options,
+                                             Journal()),
+                                progress=lambda fraction, label: seen.append((fraction, label)))
+    repack = run.reports["Roof"]["repack"] or {}
     return {"outcome": outcome, "message": message, "panel_recharted": result.recharted,
             "result_message": result.message, "valid": bool(check_["valid"]),
+            "fill": dict(repack.get("fill") or {}, repack_used=bool(repack.get("used"))),
             "source_charts": int(len(np.unique(lmrefine.find_charts(layout.uvs, layout.triangles,
                                                                      lmrefine.CHART_TOLERANCE)))),
             "refined_charts": int(len(np.unique(lmrefine.find_charts(refined, layout.triangles,
