@@ -481,7 +481,7 @@ def _packing_at(scales, refined_uvs, triangles, charts, edge, smooth, stretched,
             packed, pack_report, final, area_after, perimeter_out, predicted = kept
     # The space the packing left: the charts the model counts most grow into it.
     grown, grown_report, factors, ratio, fill_report = grow_into_free_space(
-        packed, triangles, charts, edge, smooth, final, resolution, padding, _reports_done(progress))
+        packed, triangles, charts, edge, smooth, final, resolution, padding, _reports_done(progress), area_after)
     if grown is not None:
         grown_area, perimeter_out = chart_outlines(grown, triangles, charts, resolution)
         fill_report["texel_area"] = float(grown_area.sum() / max(float(area_after.sum()), 1e-300))
@@ -608,7 +608,8 @@ FILL_STEPS = 3
 FILL_MIN_GAIN = 0.01
 
 
-def grow_into_free_space(packed, triangles, charts, edge, smooth, scales, resolution, padding, progress=None):
+def grow_into_free_space(packed, triangles, charts, edge, smooth, scales, resolution, padding, progress=None,
+                         areas=None):
     """The charts of a `packed` layout (at linear `scales` against the layout
     the model's `edge` and `smooth` terms refer to) grown one at a time into
     the atlas space the packing left free, every other chart keeping its
@@ -618,26 +619,25 @@ def grow_into_free_space(packed, triangles, charts, edge, smooth, scales, resolu
     packing's own scale (pack_charts' fixed_scale). Returns (uvs, pack
     report, factors (C,), the predicted error's ratio, report), or (None,
     None, ones, 1.0, report) when no chart grew or the gain is below
-    FILL_MIN_GAIN (the report's `ratio` says what it would have been)."""
+    FILL_MIN_GAIN (the report's `ratio` says what it would have been).
+    `areas`: the packed charts' texel areas (chart_outlines'), when the
+    caller has them."""
     s = np.maximum(np.asarray(scales, np.float64), 1e-12)
 
     def model(f):
         return float((edge / (s * f) + smooth / (s * f) ** 2).sum())
 
+    terms = edge / s + smooth / (s * s)  # each chart's model term at the packing's sizes
     factors = np.ones(len(s))
     report = {"charts_grown": 0, "packings": 0}
-    before = model(factors)
+    before = float(terms.sum())
     if not before > 0:
         return None, None, factors, 1.0, report
     kept = None
 
     def fits(trial):
         report["packings"] += 1
-        try:
-            return pack_charts(packed, triangles, charts, trial, resolution, padding, progress=progress,
-                               fixed_scale=1.0)
-        except ValueError:
-            return None
+        return _pack_or_none(packed, triangles, charts, trial, resolution, padding, progress, fixed_scale=1.0)
 
     def gain(c, g):
         """The model's error chart c's growth by g takes off."""
@@ -647,14 +647,15 @@ def grow_into_free_space(packed, triangles, charts, edge, smooth, scales, resolu
     # bound on what each try can gain, so tries that cannot make a fill
     # worth keeping are not made (a try past it would not fit either).
     shape = (int(resolution),) * 2 if np.ndim(resolution) == 0 else tuple(resolution)
-    area = chart_outlines(packed, triangles, charts, shape)[0] / float(shape[0] * shape[1])
+    if areas is None:
+        areas = chart_outlines(packed, triangles, charts, shape)[0]
+    area = np.asarray(areas, np.float64) / float(shape[0] * shape[1])
     free = max(1.0 - float(area.sum()), 0.0)
 
     def largest(c):
         return min(FILL_MAX_GROWTH, np.sqrt(1.0 + free / area[c])) if area[c] > 0 else FILL_MAX_GROWTH
 
     needed = FILL_MIN_GAIN * before
-    terms = edge / s + smooth / (s * s)
     order = [c for c in np.argsort(-terms, kind="stable")[:FILL_CANDIDATES] if gain(c, FILL_MAX_GROWTH) >= needed]
     gained = 0.0
     for k, c in enumerate(order):
@@ -692,10 +693,11 @@ def grow_into_free_space(packed, triangles, charts, edge, smooth, scales, resolu
     return kept[0], kept[1], factors, report["ratio"], report
 
 
-def _pack_or_none(uvs, triangles, charts, scales, resolution, padding, progress):
-    """pack_charts, or None when the charts do not fit."""
+def _pack_or_none(uvs, triangles, charts, scales, resolution, padding, progress, fixed_scale=None):
+    """pack_charts, or None when the charts do not fit (at `fixed_scale`, when given)."""
     try:
-        return pack_charts(uvs, triangles, charts, scales, resolution, padding, progress=progress)
+        return pack_charts(uvs, triangles, charts, scales, resolution, padding, progress=progress,
+                           fixed_scale=fixed_scale)
     except ValueError:
         return None
 

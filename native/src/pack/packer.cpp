@@ -532,10 +532,11 @@ PackResult pack_charts(const UvLayout& layout, const std::vector<int32_t>& trian
         search.scale = options.fixed_scale;
         // Past the bound the charts cannot fit (and a chart's footprint may
         // not even fit in memory): no trial.
-        if (search.scale <= bound * 1.0000001) search.best = run_trial(problem, search.scale, progress);
+        const bool within_bound = search.scale <= bound * 1.0000001;
+        if (within_bound) search.best = run_trial(problem, search.scale, progress);
         search.trials = 1;
         if (progress) progress->check();  // a cancelled trial stops early, and is no failure to fit
-        if (!search.best.fits && options.boxes && search.scale <= bound * 1.0000001) {
+        if (!search.best.fits && options.boxes && within_bound) {
             search.best = boxes_at(search.scale);
             search.trials = 2;
             boxes = true;
@@ -559,7 +560,6 @@ PackResult pack_charts(const UvLayout& layout, const std::vector<int32_t>& trian
     const double box_scale_bound = box_area > 0 ? std::min(bound, std::sqrt(atlas / box_area)) : bound;
     if (options.fixed_scale <= 0 && options.boxes && box_scale_bound > kBoxMargin * search.scale) {
         try {
-            // Shelves first (rows of near-equal boxes), the skyline where they fail.
             Search box_search = search_scale(boxes_at, box_scale_bound, grid.height, options, chart_count, progress);
             search.trials += box_search.trials;
             // Each search ends within 0.4% of its largest scale: boxes must
