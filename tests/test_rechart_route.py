@@ -373,11 +373,13 @@ def test_lowest_packed_bounds_every_packing_at_its_scales(lightmap_pack_case):
 def test_route_does_not_make_the_source_repack_the_bound_rules_out(lightmap_pack_case, monkeypatch):
     # The re-charted floor predicts less than any packing of the source's one-quad charts can:
     # the source's repack is not made, and the layout returned is the one the full comparison picks.
+    # Made, the source's repack is not finished (no triangle stretch): the re-charted layout wins.
     corners, uvs, triangles, lightmap = lightmap_pack_case
     from lmrefine import refine
-    made = []
-    repacked = refine._repacked
-    monkeypatch.setattr(refine, "_repacked", lambda stage, *own: made.append(stage) or repacked(stage, *own))
+    made, finished = [], []
+    repack_stage, finish = refine._repack_stage, refine._finished
+    monkeypatch.setattr(refine, "_repack_stage", lambda stage, *own: made.append(stage) or repack_stage(stage, *own))
+    monkeypatch.setattr(refine, "_finished", lambda stage, packed: finished.append(stage) or finish(stage, packed))
     skipped = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, positions=corners,
                                   **SCALES_WITHIN_2)
     info = skipped.report["rechart"]
@@ -386,9 +388,11 @@ def test_route_does_not_make_the_source_repack_the_bound_rules_out(lightmap_pack
     assert "at least" in skipped.report["notes"][0] and len(made) == 1  # the re-charted layout's alone
     monkeypatch.setattr(refine, "_source_lowest", lambda stage: None)
     made.clear()
+    finished.clear()
     full = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, positions=corners,
                                **SCALES_WITHIN_2)
-    assert len(made) == 2 and np.array_equal(full.uvs, skipped.uvs)
+    assert len(made) == 2 and len(finished) == 1 and finished[0] is made[0]  # the re-charted layout's
+    assert np.array_equal(full.uvs, skipped.uvs)
     assert full.report["rechart"]["predicted_error_source_route"] >= info["source_route_bound"]
 
 

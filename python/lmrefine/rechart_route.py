@@ -423,12 +423,13 @@ def _compared(result):
     return result.uvs if result.unstretched_uvs is None else result.unstretched_uvs
 
 
-def refine_recharted(refine, lightmap, uvs, triangles, shape, padding, positions, room, energy, source_route,
+def refine_recharted(refine, lightmap, uvs, triangles, shape, padding, positions, room, energy, source_layout,
                      original, progress, folds=None, normals=None, polygons=None, source_lowest=None):
     """The re-chart route: `refine(lightmap, uvs, mask, padding)` (refine_uvs without
     positions, with the caller's options) on the re-charted mesh, from
-    `lightmap` carried over to it. `source_route()` makes the source
-    layout's own refinement (called at most once, and not at all when
+    `lightmap` carried over to it. `source_layout()` makes the source
+    layout's own refinement up to the layout the model compares (before its
+    triangle stretch, as _compared; called at most once, and not at all when
     `source_lowest(model)`, given, bounds its prediction from below
     (ErrorModel.lowest_packed) above the re-charted layout's, which then
     wins: report predicted_error_source_route None, source_route_bound the
@@ -488,7 +489,7 @@ def refine_recharted(refine, lightmap, uvs, triangles, shape, padding, positions
         info.update(used=True, predicted_error_source_route=None)
         result.report["check"] = check
         return result, info
-    info["predicted_error_source_route"] = model.relative(_compared(source_route()))
+    info["predicted_error_source_route"] = model.relative(source_layout())
     # Both against the source layout; the lower prediction wins (the source
     # layout's own refinement is never worse than the source by its checks).
     if not (info["predicted_error"] < REQUIRED_GAIN

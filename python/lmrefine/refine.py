@@ -451,10 +451,15 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
     energy, source_mask = stage.energy, stage.mask
 
     @functools.lru_cache(maxsize=None)
+    def source_repack():
+        """The source layout's own refinement up to its repack: made only
+        when asked for (the re-chart route may win without it)."""
+        return _repack_stage(stage)
+
     def source_route():
-        """The source layout's own refinement, repacked: made only when
-        asked for (the re-chart route may win without it)."""
-        return _repacked(stage)[0]
+        """The source layout's own refinement, finished (its triangle
+        stretch): made only where it is returned."""
+        return _finished(stage, source_repack())[0]
 
     folds = None
     if rechart and not opened and gradient is None and lightmap is not None:
@@ -479,7 +484,8 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
             lambda carried, new_uvs, new_mask, new_padding: _refine(carried, new_uvs, triangles, shape, new_padding,
                                                                     new_mask, None, progress, options,
                                                                     own_packing=True)[0],
-            lightmap, uvs, triangles, shape, padding, positions, room, energy, source_route, stage.original,
+            lightmap, uvs, triangles, shape, padding, positions, room, energy, lambda: source_repack().uvs,
+            stage.original,
             progress, folds, normals, polygons, source_lowest=_source_lowest(stage))
         if rechart == "always":
             info["always"] = True
@@ -853,16 +859,33 @@ def _pack_padding(padding, original):
 def _repacked(stage, own_packing=False):
     """_refine from the in-chart `stage` (_in_charts) on: the chart repack
     (`own_packing`: allocation.repack's), the figures and the report."""
+    return _finished(stage, _repack_stage(stage, own_packing))
+
+
+@dataclass
+class _Repacked:
+    """The in-chart layout after its chart repack (_repack_stage), before the
+    triangle stretch (_finished): what the re-chart route's model compares."""
+
+    uvs: np.ndarray
+    check: dict
+    analysed: object          # (LayoutChecker, failing charts) of the packed layout, or None
+    report: object            # allocation.repack's report, or None when the repack was not run
+
+
+def _repack_stage(stage, own_packing=False):
+    """The chart repack of the in-chart `stage` (_in_charts): a _Repacked
+    (the stage's own layout when the repack is off or not kept; its notes
+    say why)."""
     options, uvs, triangles, shape, mask, original = \
         stage.options, stage.uvs, stage.triangles, stage.shape, stage.mask, stage.original
-    scalar_energy, limited_by, notes, timings = stage.energy, stage.limited_by, stage.notes, stage.timings
-    grid, new_uvs, check, kept = stage.grid, stage.new_uvs, stage.check, stage.kept
+    scalar_energy, notes, timings = stage.energy, stage.notes, stage.timings
+    new_uvs, check = stage.new_uvs, stage.check
     padding, progress = stage.padding, stage.progress
-    strength, max_magnification, min_shrink = options["strength"], options["max_magnification"], \
-        options["min_shrink"]
+    strength = options["strength"]
     repack, min_chart_scale, max_chart_scale = options["repack"], options["min_chart_scale"], \
         options["max_chart_scale"]
-    max_stretch, passes, border = options["max_stretch"], options["passes"], options["border"]
+    max_stretch = options["max_stretch"]
     repack_report = analysed = None
     if repack and strength > 0 and not stage.hold:
         clock = time.perf_counter()
@@ -913,6 +936,19 @@ def _repacked(stage, own_packing=False):
                          f"{repack_report['padded_utilisation_after']:.0%} full with its gutters "
                          f"(the input: {repack_report['padded_utilisation_before']:.0%})")
         timings["repack"] = time.perf_counter() - clock
+    return _Repacked(uvs=new_uvs, check=check, analysed=analysed, report=repack_report)
+
+
+def _finished(stage, repacked):
+    """_repacked from the `repacked` stage on: the triangle stretch, the
+    figures and the report."""
+    options, uvs, triangles, mask = stage.options, stage.uvs, stage.triangles, stage.mask
+    scalar_energy, limited_by, notes, timings = stage.energy, stage.limited_by, stage.notes, stage.timings
+    grid, kept = stage.grid, stage.kept
+    strength, max_magnification, min_shrink = options["strength"], options["max_magnification"], \
+        options["min_shrink"]
+    repack, passes, border = options["repack"], options["passes"], options["border"]
+    new_uvs, check, analysed, repack_report = repacked.uvs, repacked.check, repacked.analysed, repacked.report
     triangle_report, unstretched = None, None
     if options["triangle_stretch"] != 1.0 and repack and strength > 0 and not stage.hold:
         clock = time.perf_counter()
@@ -966,7 +1002,7 @@ def _repacked(stage, own_packing=False):
         "border": border,
         "seconds": time.perf_counter() - stage.start,
         "timings": timings,
-        "original_check": original,
+        "original_check": stage.original,
         "check": check,
         "repack": repack_report,
         "triangle_stretch": triangle_report,
