@@ -408,28 +408,21 @@ def _recharted_refinement(refine, lightmap, uvs, triangles, shape, positions, no
     return recharted.report, refine(carried, new_uvs, new_mask, padding)
 
 
-def fit_reset(result):
-    """Whether the automaton's finest level of `result` started with a fit
-    that sent a region back to rest (it cascaded: run_automaton's
-    `fit_reset`), undoing that region's deformation."""
-    levels = result.report["levels"]
+def fit_reset(levels):
+    """Whether the automaton's finest level (of a report's `levels`) started
+    with a fit that sent a region back to rest (it cascaded:
+    run_automaton's `fit_reset`), undoing that region's deformation."""
     return bool(levels) and bool(levels[-1].get("fit_reset"))
-
-
-def _compared(result):
-    """The layout of a refinement the route's model compares: the one before
-    the triangle stretch (refine.RefineResult.unstretched_uvs), whose gain
-    is in the texels' shapes the model does not see."""
-    return result.uvs if result.unstretched_uvs is None else result.unstretched_uvs
 
 
 def refine_recharted(refine, lightmap, uvs, triangles, shape, padding, positions, room, energy, source_layout,
                      original, progress, folds=None, normals=None, polygons=None, source_lowest=None):
     """The re-chart route: `refine(lightmap, uvs, mask, padding)` (refine_uvs without
-    positions, with the caller's options) on the re-charted mesh, from
-    `lightmap` carried over to it. `source_layout()` makes the source
-    layout's own refinement up to the layout the model compares (before its
-    triangle stretch, as _compared; called at most once, and not at all when
+    positions, with the caller's options, up to its repack: refine._Unfinished,
+    its `compared` layout before the triangle stretch and `finished()` the
+    result) on the re-charted mesh, from `lightmap` carried over to it.
+    `source_layout()` makes the source layout's own refinement up to the
+    layout the model compares (called at most once, and not at all when
     `source_lowest(model)`, given, bounds its prediction from below
     (ErrorModel.lowest_packed) above the re-charted layout's, which then
     wins: report predicted_error_source_route None, source_route_bound the
@@ -454,8 +447,11 @@ def refine_recharted(refine, lightmap, uvs, triangles, shape, padding, positions
         return None, info
     # One model of the source layout for every prediction (its texel sizes, slope and error).
     model = ErrorModel(uvs, triangles, energy, positions, lightmap, folds=folds)
-    predicted = model.relative(_compared(result))
-    if fit_reset(result) and result.report["edge_shrink"] == 1.0:
+    # Layouts are compared before their triangle stretch, whose gain is in the
+    # texels' shapes the model does not see; a refinement is finished (the
+    # stretch made) only where it may be returned.
+    predicted = model.relative(result.compared)
+    if result.fit_reset and result.edge_shrink == 1.0:
         # Charts exactly the padding apart keep every edge texel rigid, and
         # the automaton's fit undid a region's deformation: charts packed
         # farther apart let the edge texels shrink (docs/refiner.md, "Edge
@@ -466,12 +462,14 @@ def refine_recharted(refine, lightmap, uvs, triangles, shape, padding, positions
             pack_padding + backoff.EDGE_SHRINK_GUTTER_MARGIN, progress)
         info["edge_room"] = False
         if roomier is not None:
-            retried_predicted = model.relative(_compared(retried))
-            retried_check = backoff.worse_than_source(retried.uvs, uvs, triangles, shape, padding, source=original,
-                                                      recharted=True)
-            if retried_predicted < predicted and not retried_check[0]:
-                recharted, result, predicted = roomier, retried, retried_predicted
-                info["edge_room"] = True
+            retried_predicted = model.relative(retried.compared)
+            if retried_predicted < predicted:
+                retried_check = backoff.worse_than_source(retried.finished().uvs, uvs, triangles, shape, padding,
+                                                          source=original, recharted=True)
+                if not retried_check[0]:
+                    recharted, result, predicted = roomier, retried, retried_predicted
+                    info["edge_room"] = True
+    result = result.finished()
     info.update({key: recharted[key] for key in ("charts", "split_charts", "degenerate_triangles",
                                                  "utilisation", "area_utilisation")})
     worse, check = (retried_check if info["edge_room"] else

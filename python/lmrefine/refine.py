@@ -481,12 +481,10 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
     else:
         shape = _resolution(resolution)
         recharted, info = rechart_route.refine_recharted(
-            lambda carried, new_uvs, new_mask, new_padding: _refine(carried, new_uvs, triangles, shape, new_padding,
-                                                                    new_mask, None, progress, options,
-                                                                    own_packing=True)[0],
+            lambda carried, new_uvs, new_mask, new_padding: _Unfinished(_in_charts(
+                carried, new_uvs, triangles, shape, new_padding, new_mask, None, progress, options), True),
             lightmap, uvs, triangles, shape, padding, positions, room, energy, lambda: source_repack().uvs,
-            stage.original,
-            progress, folds, normals, polygons, source_lowest=_source_lowest(stage))
+            stage.original, progress, folds, normals, polygons, source_lowest=_source_lowest(stage))
         if rechart == "always":
             info["always"] = True
         if recharted is not None:
@@ -871,6 +869,39 @@ class _Repacked:
     check: dict
     analysed: object          # (LayoutChecker, failing charts) of the packed layout, or None
     report: object            # allocation.repack's report, or None when the repack was not run
+
+
+class _Unfinished:
+    """A refinement of the in-chart `stage` repacked (`own_packing`: the
+    re-chart route's layout), finished (_finished: its triangle stretch,
+    figures and report) when first asked for: the route compares layouts
+    before the triangle stretch, and finishes only those it may return."""
+
+    def __init__(self, stage, own_packing):
+        self.stage = stage
+        self.repacked = _repack_stage(stage, own_packing)
+        self._result = None
+
+    @property
+    def compared(self):
+        """The layout the route's model compares (before the triangle stretch)."""
+        return self.repacked.uvs
+
+    @property
+    def fit_reset(self):
+        """Whether the automaton's finest level started with a fit that sent a
+        region back to rest (rechart_route.fit_reset)."""
+        return rechart_route.fit_reset(self.stage.run["levels"])
+
+    @property
+    def edge_shrink(self):
+        return self.stage.edge_shrink_used
+
+    def finished(self):
+        """The RefineResult."""
+        if self._result is None:
+            self._result = _finished(self.stage, self.repacked)[0]
+        return self._result
 
 
 def _repack_stage(stage, own_packing=False):
