@@ -13,9 +13,17 @@ with its repack (bench_refine's smart_uv_repack case), wall and CPU time;
 with `--case tessellate`, of `tessellate` at the add-on's trial budget
 (`TRIAL_BUDGET`, 64x) on a plane of 100,352 triangles under two crossing
 shadow edges (about 7,000 splits at 1024^2, the split running to its end);
-in two builds, each in its own subprocess with PYTHONPATH set to that
-build's python/ directory, alternating base and new so both see the same
-machine load. Prints the best time of each and the ratio new / base.
+with `--case packing`, of the native atlas packer alone
+(`_native.pack_charts`) on every packing one `refine_uvs` makes on the
+routes of courtyard's and game_level's Lightmap Pack and Smart UV layouts
+and of hillside's Lightmap Pack layout (each scene's bake at a quarter of
+the size scaled up, with its faces, as bench_refine's route case), per
+route and their sum: a process of the new build records the packings'
+arguments (wrapping `_native.pack_charts` during the refinements) into a
+temporary folder, so both builds replay the same packings; in two builds,
+each in its own subprocess with PYTHONPATH set to that build's python/
+directory, alternating base and new so both see the same machine load.
+Prints the best time of each and the ratio new / base.
 
 CPU time of the whole process, one worker thread by default: on a shared
 machine that is steadier than wall time (other jobs take cores, not CPU
@@ -25,6 +33,7 @@ time); a ratio within about 3% is noise.
     /usr/bin/python3 bench/compare_speed.py --base /tmp/base/python --new python --case route --rounds 3
     /usr/bin/python3 bench/compare_speed.py --base /tmp/base/python --new python --case first-call --threads 2
     /usr/bin/python3 bench/compare_speed.py --base /tmp/base/python --new python --case tessellate --rounds 3
+    /usr/bin/python3 bench/compare_speed.py --base /tmp/base/python --new python --case packing --rounds 3
 """
 
 import argparse
@@ -155,6 +164,63 @@ for _ in range(2):
 print(json.dumps({"tessellate": best}))
 """
 
+# Records the native pack_charts calls of one refine_uvs per route into
+# folder/packings.pkl: (route, args, keywords) without the progress callback.
+PACKING_INPUTS = r"""
+import pickle, sys
+import numpy as np
+import lmrefine
+from lmrefine import _native
+from lmrefine.sample_scenes import load_sample
+size, folder = int(sys.argv[1]), sys.argv[2]
+native, calls, route = _native.pack_charts, [], [None]
+
+
+def recording(*args, **keywords):
+    keywords.pop("progress", None)
+    calls.append((route[0], args, keywords))
+    return native(*args, **keywords)
+
+
+_native.pack_charts = recording
+for name, variant in (("courtyard", "lightmap"), ("courtyard", "smart"), ("game_level", "lightmap"),
+                      ("game_level", "smart"), ("hillside", "lightmap")):
+    sample = load_sample(name)
+    uvs, tris = sample.layout(variant)
+    small = lmrefine.bake(sample.to_scene(uvs), size // 4, passes="direct", samples=8, seed=0)[0][..., :3]
+    lightmap = np.ascontiguousarray(np.kron(small, np.ones((4, 4, 1))), dtype=np.float32)
+    route[0] = f"{name} {variant}"
+    lmrefine.refine_uvs(lightmap, uvs, tris, size, positions=sample.positions[sample.triangles].reshape(-1, 3),
+                        polygons=sample.polygons)
+with open(folder + "/packings.pkl", "wb") as file:
+    pickle.dump(calls, file)
+"""
+
+PACKING_CHILD = r"""
+import json, pickle, sys, time
+from lmrefine import _native
+folder = sys.argv[1]
+with open(folder + "/packings.pkl", "rb") as file:
+    calls = pickle.load(file)
+routes = {}
+for route, args, keywords in calls:
+    routes.setdefault(route, []).append((args, keywords))
+times = {}
+for route, packings in routes.items():
+    best = float("inf")
+    for _ in range(2):
+        start = time.process_time()
+        for args, keywords in packings:
+            try:
+                _native.pack_charts(*args, **keywords)
+            except ValueError:  # a fixed scale that does not fit: the refinement asked, and it costs as much
+                pass
+        best = min(best, time.process_time() - start)
+    times[f"{route} ({len(packings)})"] = best
+times["all packings"] = sum(times.values())  # the routes' best times summed
+print(json.dumps(times))
+"""
+
 
 def first_call(python_dir, size, threads, folder):
     """One refine_uvs per fresh process, on the plane and on game_level."""
@@ -174,7 +240,9 @@ def run_child(python_dir, threads, child, *args):
     return json.loads(out) if out.strip() else {}
 
 
-def measure(python_dir, size, threads, case="automaton"):
+def measure(python_dir, size, threads, case="automaton", folder=None):
+    if case == "packing":
+        return run_child(python_dir, threads, PACKING_CHILD, folder)
     child = {"route": ROUTE_CHILD, "tessellate": TESSELLATE_CHILD}.get(case, CHILD)
     return run_child(python_dir, threads, child, str(size), os.path.join(HERE, "..", "tests"))
 
@@ -186,27 +254,32 @@ def main():
     parser.add_argument("--rounds", type=int, default=5, help="subprocesses per build, alternating (default 5)")
     parser.add_argument("--size", type=int, default=1024, help="lightmap resolution (default 1024)")
     parser.add_argument("--threads", type=int, default=1, help="LMREFINE_THREADS (default 1)")
-    parser.add_argument("--case", choices=("automaton", "route", "first-call", "tessellate"), default="automaton",
+    parser.add_argument("--case", choices=("automaton", "route", "first-call", "tessellate", "packing"),
+                        default="automaton",
                         help="run_automaton on the plane (default), refine_uvs' re-chart route, one refine_uvs "
-                             "per fresh process, or tessellate at the trial budget")
+                             "per fresh process, tessellate at the trial budget, or the packings of the routes")
     args = parser.parse_args()
     runs = {"base": [], "new": []}
     with tempfile.TemporaryDirectory() as folder:
         if args.case == "first-call":
             run_child(args.new, args.threads, FIRST_CALL_INPUTS, str(args.size), folder)
+        if args.case == "packing":
+            run_child(args.new, args.threads, PACKING_INPUTS, str(args.size), folder)
         for _ in range(args.rounds):
             for build, path in (("base", args.base), ("new", args.new)):
                 runs[build].append(first_call(path, args.size, args.threads, folder) if args.case == "first-call"
-                                   else measure(path, args.size, args.threads, args.case))
+                                   else measure(path, args.size, args.threads, args.case, folder))
     what, per_run, unit = {"route": ("refine_uvs' re-chart routes", 2, "CPU seconds"),
                            "first-call": ("the first refine_uvs of a process", 1, "seconds"),
                            "automaton": ("run_automaton", 3, "CPU seconds"),
-                           "tessellate": ("tessellate on a plane of 100,352 triangles", 2, "CPU seconds")}[args.case]
+                           "tessellate": ("tessellate on a plane of 100,352 triangles", 2, "CPU seconds"),
+                           "packing": ("the native pack_charts on the routes' packings", 2, "CPU seconds")}[args.case]
     print(f"{what} at {args.size}^2, {args.threads} thread(s), {unit}, best of {per_run * args.rounds}:")
+    width = max(18, *(len(name) for name in runs["base"][0]))
     for name in runs["base"][0]:
         base = min(r[name] for r in runs["base"])
         new = min(r[name] for r in runs["new"])
-        print(f"  {name:<18} base {base:.3f}  new {new:.3f}  new/base {new / base:.3f}")
+        print(f"  {name:<{width}} base {base:.3f}  new {new:.3f}  new/base {new / base:.3f}")
     if args.case == "route":
         for build in runs:
             route, source = (min(r[name] for r in runs[build]) for name in ("re-chart route", "source refinement"))

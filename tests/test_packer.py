@@ -444,6 +444,48 @@ def test_placement_rule_reads_any_nonzero_mask_value_as_covered():
     assert lmrefine._native._first_fit(as_bytes(occupied, 255), as_bytes(chart, 7), 1.5) == expected
 
 
+def reference_dilation(mask, padding):
+    """Every cell closer than `padding` to a covered cell of `mask`,
+    measured between texel squares (hypot(max(0, |di| - 1), max(0, |dj| -
+    1)), a cell always its own neighbour), plainly: the mask shifted by every
+    such offset, on a canvas grown by ceil(padding) on every side."""
+    reach = int(np.ceil(padding))
+    height, width = mask.shape
+    out = np.zeros((height + 2 * reach, width + 2 * reach), bool)
+    for di in range(-reach, reach + 1):
+        for dj in range(-reach, reach + 1):
+            gap = np.hypot(max(0, abs(di) - 1), max(0, abs(dj) - 1))
+            if gap ** 2 < padding ** 2 or di == dj == 0:
+                out[reach + di:reach + di + height, reach + dj:reach + dj + width] |= mask
+    return out
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_footprints_and_their_dilation_match_the_plain_reference(seed):
+    # The kernel builds a footprint's quarter turn and its dilation from row
+    # spans (footprint.cpp), not bitmaps: the result must be the mask turned
+    # (np.rot90: a quarter counter-clockwise) and the plain dilation of it.
+    rng = np.random.default_rng(3000 + seed)
+    height, width = (int(n) for n in rng.integers(1, 30, 2))
+    mask = rng.random((height, width)) < rng.uniform(0.05, 0.95)  # holes, several spans a row, empty rows
+    if seed % 3 == 0:  # a sheared band, as a stretched chart's
+        mask = np.zeros((height, width), bool)
+        for row in range(height):
+            start = int(row * width / (height + 1))
+            mask[row, start:start + int(rng.integers(1, 5))] = True
+    elif seed % 3 == 1:  # rectangles: runs of equal rows, as Lightmap Pack's faces
+        mask = np.zeros((height, width), bool)
+        for _ in range(int(rng.integers(1, 4))):
+            top, left = int(rng.integers(0, height)), int(rng.integers(0, width))
+            mask[top:top + int(rng.integers(1, height + 1)), left:left + int(rng.integers(1, width + 1))] = True
+    padding = float(rng.choice([0.0, 0.5, 1.0, 1.5, 2.0, 3.7, 4.0, 6.2]))
+    for turned in (False, True):
+        covered, dilated = lmrefine._native._footprint_masks(mask, padding, turned)
+        expected = np.rot90(mask) if turned else mask
+        assert np.array_equal(covered.astype(bool), expected)
+        assert np.array_equal(dilated.astype(bool), reference_dilation(expected, padding))
+
+
 def test_a_triangle_smaller_than_the_tolerance_is_not_collapsed():
     # A sliver whose short edge (5e-6) is below the tolerance, beside a quad
     # sharing its long corner: snapping its two close corners together would

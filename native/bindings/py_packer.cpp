@@ -165,6 +165,23 @@ void bind_packer(py::module_& m) {
         py::arg("occupied"), py::arg("chart"), py::arg("padding"), py::arg("first_row") = 0,
         "The packer's placement rule on masks (tests): the first (x, y) in scan order, from row `first_row` "
         "on, where `chart` fits `occupied` with the padding, or None.");
+    m.def(
+        "_footprint_masks",
+        [](const py::array_t<uint8_t, py::array::c_style | py::array::forcecast>& chart, double padding, bool turned) {
+            if (chart.ndim() != 2 || chart.shape(0) < 1 || chart.shape(1) < 1) {
+                throw py::value_error("chart must be a non-empty 2-D mask");
+            }
+            if (!(padding >= 0.0) || padding > 64.0) throw py::value_error("padding must be in [0, 64] texels");
+            std::vector<uint8_t> bits(size_t(chart.size()));
+            std::transform(chart.data(), chart.data() + chart.size(), bits.begin(), [](uint8_t v) { return uint8_t(v != 0); });
+            FootprintMasks masks = footprint_masks(bits, int(chart.shape(1)), int(chart.shape(0)), padding, turned);
+            const py::ssize_t h = masks.height, w = masks.width, grown = 2 * py::ssize_t(masks.reach);
+            return py::make_tuple(py_util::to_numpy(std::move(masks.covered), {h, w}),
+                                  py_util::to_numpy(std::move(masks.dilated), {h + grown, w + grown}));
+        },
+        py::arg("chart"), py::arg("padding"), py::arg("turned") = false,
+        "The packer's footprint of a mask (tests): (covered, dilated) as 0/1 uint8 masks, the chart turned a "
+        "quarter counter-clockwise when `turned`, the dilation by `padding` with the chart at (reach, reach).");
     m.def("pack_charts", &pack, py::arg("uvs"), py::arg("triangles"), py::arg("resolution"), py::arg("padding") = py::float_(2.0),
           py::kw_only(), py::arg("charts") = py::none(), py::arg("scales") = py::none(),
           py::arg("rotate") = py::bool_(true), py::arg("progress") = py::none(), py::arg("tolerance") = py::float_(1e-5),

@@ -38,6 +38,18 @@ struct Footprint {
     int tightest = 0;              // the covered row with the longest span
 };
 
+// Work vectors a footprint is built in, reused from chart to chart: a trial
+// builds every chart's footprints, and allocating these each time cost more
+// than using them.
+struct FootprintScratch {
+    struct Run {
+        int32_t column, first, end;  // a column's vertical run of covered rows [first, end)
+    };
+    std::vector<Span> row, merged;
+    std::vector<Run> runs;
+    std::vector<int32_t> start, count;
+};
+
 // One chart as the packer sees it: its triangles and used UV indices.
 struct ChartPiece {
     std::vector<int64_t> triangles;
@@ -54,18 +66,16 @@ std::vector<glm::dvec2> local_pixels(const ChartPiece& piece, const std::vector<
 glm::ivec2 footprint_size(const std::vector<glm::dvec2>& local);
 
 // The footprint of the chart at those local pixels; `padding` in texels.
-// `bits` is scratch the caller may reuse: it is left holding the covered
-// texels, row-major (1 = covered, 0 = not), as turned_footprint reads them.
+// `bits` and `scratch` are scratch the caller may reuse (the covered texels
+// are rasterized into `bits`, row-major, 1 = covered).
 Footprint make_footprint(const ChartPiece& piece, const UvLayout& layout, const std::vector<glm::dvec2>& local,
-                         double padding, std::vector<uint8_t>& bits);
+                         double padding, std::vector<uint8_t>& bits, FootprintScratch& scratch);
 
 // A quarter turn counter-clockwise (on the image, so in UV too), in texel
-// space: the footprint's texels (`bits`, as make_footprint left them)
-// turned, and a local point of a footprint `width` columns wide moved with
-// them. Exact on the texel lattice, so the turned chart lies in the turned
-// footprint as the chart in the footprint. `turned` is scratch.
-Footprint turned_footprint(const Footprint& fp, const std::vector<uint8_t>& bits, double padding,
-                           std::vector<uint8_t>& turned);
+// space: the footprint's texels turned, and a local point of a footprint
+// `width` columns wide moved with them. Exact on the texel lattice, so the
+// turned chart lies in the turned footprint as the chart in the footprint.
+Footprint turned_footprint(const Footprint& fp, FootprintScratch& scratch);
 glm::dvec2 turn_local(const glm::dvec2& p, double width);
 
 // The footprint of a bitmap ((height * width) bytes, 1 = covered, 0 = not).

@@ -76,28 +76,43 @@ bool Occupancy::first_fit(const Footprint& fp, int& out_x, int& out_y, int last_
     // rows of a chart rule out nearly the same corners, and far rows of a
     // tall or sheared chart rule out different ones: a failing row comes
     // sooner. Intersections do not depend on the order, so neither does the
-    // position found.
-    row_order_.assign(1, fp.tightest);
-    int bits = 0;
-    while ((1 << bits) < fh) ++bits;
-    for (int k = 0; k < (1 << bits); ++k) {
-        int reversed = 0;
-        for (int b = 0; b < bits; ++b) reversed |= (k >> b & 1) << (bits - 1 - b);
-        if (reversed < fh && reversed != fp.tightest) row_order_.push_back(reversed);
-    }
+    // position found. Made only when a corner row gets that far (a call may
+    // end before).
+    const auto order_rows = [&] {
+        row_order_.assign(1, fp.tightest);
+        int bits = 0;
+        while ((1 << bits) < fh) ++bits;
+        for (int k = 0; k < (1 << bits); ++k) {
+            int reversed = 0;
+            for (int b = 0; b < bits; ++b) reversed |= (k >> b & 1) << (bits - 1 - b);
+            if (reversed < fh && reversed != fp.tightest) row_order_.push_back(reversed);
+        }
+    };
+    bool ordered = false;
+    // Atlas rows from the corner row y to clear_to each have a free run as
+    // long as the footprint's longest span: a corner row whose rows all lie
+    // there passes the row test below without walking the footprint's rows
+    // (y only moves down, so each atlas row is looked at about once).
+    const int widest = fp.longest[size_t(fp.tightest)];
+    int clear_to = 0;
     for (int y = std::max(first_row, 0); y + fh <= height_ && y <= last_row;) {
         // A row whose longest free run is too short rules the row out at once.
-        if (longest_[size_t(y + fp.tightest)] < fp.longest[size_t(fp.tightest)]) {
+        if (longest_[size_t(y + fp.tightest)] < widest) {
             y = next_row(y + fp.tightest, fp.tightest);
             continue;
         }
-        int long_enough = 0;  // footprint rows from the top whose atlas row has a long enough run
+        clear_to = std::max(clear_to, y);
+        while (clear_to < y + fh && longest_[size_t(clear_to)] >= widest) ++clear_to;
+        // Footprint rows from the top whose atlas row has a long enough run.
+        int long_enough = clear_to >= y + fh ? fh : 0;
         while (long_enough < fh && longest_[size_t(y + long_enough)] >= fp.longest[size_t(long_enough)]) ++long_enough;
         if (long_enough < fh) {
             y = next_row(y + long_enough, long_enough);
             continue;
         }
         // The corners where every span lies in a free run, narrowed row by row.
+        if (!ordered) order_rows();
+        ordered = true;
         candidates_.assign(1, {0, width_ - fw + 1});
         for (int n = 0; n < fh && !candidates_.empty(); ++n) {
             const int r = row_order_[size_t(n)];

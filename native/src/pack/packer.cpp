@@ -154,18 +154,19 @@ Trial run_trial(const Problem& problem, double global_scale, Progress* progress)
     std::vector<Footprint> footprints(count * size_t(turn_options));
     parallel_for(int64_t(count), 16, [&](int64_t begin, int64_t end) {
         BitmapPool& pool = footprint_bitmaps();
-        std::vector<uint8_t> bits = pool.take(), turned = pool.take();
+        std::vector<uint8_t> bits = pool.take();
+        pack::FootprintScratch scratch;
         for (int64_t c = begin; c < end; ++c) {
             const auto local = pack::local_pixels(problem.pieces[size_t(c)], problem.uvs, global_scale * problem.scales[size_t(c)],
                                                   problem.options.width, problem.options.height);
             Footprint& upright = footprints[size_t(c) * size_t(turn_options)];
-            upright = pack::make_footprint(problem.pieces[size_t(c)], problem.layout, local, problem.options.padding, bits);
+            upright = pack::make_footprint(problem.pieces[size_t(c)], problem.layout, local, problem.options.padding, bits,
+                                           scratch);
             if (turn_options > 1) {
-                footprints[size_t(c) * 2 + 1] = pack::turned_footprint(upright, bits, problem.options.padding, turned);
+                footprints[size_t(c) * 2 + 1] = pack::turned_footprint(upright, scratch);
             }
         }
         pool.give(bits);
-        pool.give(turned);
     });
     const std::vector<int32_t> order = placement_order(count, [&](int32_t c) {
         const Footprint& f = footprints[size_t(c) * size_t(turn_options)];
@@ -627,6 +628,28 @@ bool first_fit_position(const std::vector<uint8_t>& occupied, int width, int hei
     occupancy.place(pack::footprint_of_bits(occupied, width, height, padding), 0, 0);
     return occupancy.first_fit(pack::footprint_of_bits(chart, chart_width, chart_height, padding), x, y, INT32_MAX,
                                first_row);
+}
+
+FootprintMasks footprint_masks(const std::vector<uint8_t>& chart, int width, int height, double padding, bool turned) {
+    Footprint fp = pack::footprint_of_bits(chart, width, height, padding);
+    pack::FootprintScratch scratch;
+    if (turned) fp = pack::turned_footprint(fp, scratch);
+    FootprintMasks masks;
+    masks.width = fp.covered.width;
+    masks.height = fp.covered.height;
+    masks.reach = fp.reach;
+    const auto paint = [](const pack::SpanRows& rows, std::vector<uint8_t>& mask) {
+        mask.assign(size_t(rows.width) * size_t(rows.height), 0);
+        for (int r = 0; r < rows.height; ++r) {
+            const auto row = mask.begin() + int64_t(r) * rows.width;
+            for (int k = rows.offsets[size_t(r)]; k < rows.offsets[size_t(r) + 1]; ++k) {
+                std::fill(row + rows.spans[size_t(k)].first, row + rows.spans[size_t(k)].second, uint8_t(1));
+            }
+        }
+    };
+    paint(fp.covered, masks.covered);
+    paint(fp.dilated, masks.dilated);
+    return masks;
 }
 
 }  // namespace lmrefine

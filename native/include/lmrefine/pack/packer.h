@@ -57,6 +57,18 @@ struct PackResult {
 PackResult pack_charts(const UvLayout& layout, const std::vector<int32_t>& triangle_chart, int32_t chart_count,
                        const std::vector<double>& scales, const PackOptions& options, Progress* progress = nullptr);
 
+// A footprint as bitmaps (a test's window on the kernel): `chart`
+// ((height * width) bytes, nonzero = covered), turned a quarter
+// counter-clockwise when `turned`, as the packer sees it (`covered`), and
+// its dilation by `padding` (`dilated`: every cell closer than that to a
+// covered one, texel-square distance), (height + 2 reach) rows of (width +
+// 2 reach) with `covered`'s corner at (reach, reach). Masks are row-major, 0 or 1.
+struct FootprintMasks {
+    std::vector<uint8_t> covered, dilated;
+    int width = 0, height = 0, reach = 0;  // `covered`'s size; the dilation's margin
+};
+FootprintMasks footprint_masks(const std::vector<uint8_t>& chart, int width, int height, double padding, bool turned);
+
 // The placement rule alone, on bitmaps (a test's window on the kernel):
 // the first (x, y) in scan order where `chart` ((chart_height * chart_width)
 // bytes, nonzero = covered) fits inside the atlas with no covered texel
