@@ -434,7 +434,8 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
             raise ValueError(f"{name}= is read only with positions= (the re-chart route): pass the UVs' 3-D "
                              f"positions too, or leave {name} out")
     if positions is None:
-        result, _, _ = _refine(lightmap, uvs, triangles, resolution, padding, mask, gradient, progress, options)
+        result = _repacked(_in_charts(lightmap, uvs, triangles, resolution, padding, mask, gradient, progress,
+                                      options))
         result.report["rechart"] = None
         return result
     start = time.perf_counter()
@@ -451,15 +452,11 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
     energy, source_mask = stage.energy, stage.mask
 
     @functools.lru_cache(maxsize=None)
-    def source_repack():
-        """The source layout's own refinement up to its repack: made only
-        when asked for (the re-chart route may win without it)."""
-        return _repack_stage(stage)
-
     def source_route():
-        """The source layout's own refinement, finished (its triangle
-        stretch): made only where it is returned."""
-        return _finished(stage, source_repack())[0]
+        """The source layout's own refinement up to its repack, finished
+        where it is returned: made only when asked for (the re-chart route
+        may win without it)."""
+        return _Unfinished(stage, False)
 
     folds = None
     if rechart and not opened and gradient is None and lightmap is not None:
@@ -483,7 +480,7 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
         recharted, info = rechart_route.refine_recharted(
             lambda carried, new_uvs, new_mask, new_padding: _Unfinished(_in_charts(
                 carried, new_uvs, triangles, shape, new_padding, new_mask, None, progress, options), True),
-            lightmap, uvs, triangles, shape, padding, positions, room, energy, lambda: source_repack().uvs,
+            lightmap, uvs, triangles, shape, padding, positions, room, energy, lambda: source_route().compared,
             stage.original, progress, folds, normals, polygons, source_lowest=_source_lowest(stage))
         if rechart == "always":
             info["always"] = True
@@ -491,7 +488,7 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
             result = _recharted_result(recharted, stage.original, uvs, triangles, energy, source_mask, info,
                                        lightmap if gradient is None else None)
     if not info["used"]:
-        result = source_route()
+        result = source_route().finished()
     if not info["used"] and (opened or folded) and rechart:
         result.report["notes"].append(f"not re-charted: {info['reason']}")
     result.report["rechart"] = info
@@ -567,19 +564,10 @@ def _recharted_result(recharted, original, uvs, triangles, energy, mask, info, l
     return recharted
 
 
-def _refine(lightmap, uvs, triangles, resolution, padding, mask, gradient, progress, options, room=None,
-            own_packing=False):
-    """refine_uvs without the re-chart route: (RefineResult, the first bake's
-    gradient energy per texel (H, W), the source layout's coverage). `room`:
-    rechart_route.layout_room of the layout, when the caller has it;
-    `own_packing`: the layout is the re-chart route's (allocation.repack)."""
-    return _repacked(_in_charts(lightmap, uvs, triangles, resolution, padding, mask, gradient, progress, options,
-                                room), own_packing)
-
-
 def _in_charts(lightmap, uvs, triangles, resolution, padding, mask, gradient, progress, options, room=None):
-    """_refine up to the repack: the gradient map, the automaton and the warp
-    kept by the checks, as the _InCharts _repacked finishes."""
+    """refine_uvs without the re-chart route up to the repack: the gradient
+    map, the automaton and the warp kept by the checks, as the _InCharts
+    _repacked finishes."""
     strength, max_magnification, min_shrink = options["strength"], options["max_magnification"], \
         options["min_shrink"]
     edge_shrink, delta, passes, border = options["edge_shrink"], options["delta"], options["passes"], \
@@ -854,10 +842,11 @@ def _pack_padding(padding, original):
     return min(float(padding), max(float(original["min_gutter_texels"]), min(float(padding), 1.0)))
 
 
-def _repacked(stage, own_packing=False):
-    """_refine from the in-chart `stage` (_in_charts) on: the chart repack
-    (`own_packing`: allocation.repack's), the figures and the report."""
-    return _finished(stage, _repack_stage(stage, own_packing))
+def _repacked(stage):
+    """refine_uvs without the re-chart route from the in-chart `stage`
+    (_in_charts) on: the chart repack, the triangle stretch, the figures and
+    the report (a RefineResult)."""
+    return _finished(stage, _repack_stage(stage))
 
 
 @dataclass
@@ -900,7 +889,7 @@ class _Unfinished:
     def finished(self):
         """The RefineResult."""
         if self._result is None:
-            self._result = _finished(self.stage, self.repacked)[0]
+            self._result = _finished(self.stage, self.repacked)
         return self._result
 
 
@@ -972,7 +961,7 @@ def _repack_stage(stage, own_packing=False):
 
 def _finished(stage, repacked):
     """_repacked from the `repacked` stage on: the triangle stretch, the
-    figures and the report."""
+    figures and the report (a RefineResult)."""
     options, uvs, triangles, mask = stage.options, stage.uvs, stage.triangles, stage.mask
     scalar_energy, limited_by, notes, timings = stage.energy, stage.limited_by, stage.notes, stage.timings
     grid, kept = stage.grid, stage.kept
@@ -1039,9 +1028,8 @@ def _finished(stage, repacked):
         "triangle_stretch": triangle_report,
     }
     kept_stretch = triangle_report is not None and triangle_report["used"]
-    return (RefineResult(uvs=new_uvs, grid=grid, report=report, unstretched_uvs=unstretched if kept_stretch else None,
-                         light_changes=(uvs, at_change, _source_tensors(stage))),
-            scalar_energy, mask)
+    return RefineResult(uvs=new_uvs, grid=grid, report=report, unstretched_uvs=unstretched if kept_stretch else None,
+                        light_changes=(uvs, at_change, _source_tensors(stage)))
 
 
 def _found_light_changes(light_changes, uvs, triangles):
