@@ -7,8 +7,7 @@ them, beside the model's prediction (rechart_route.ErrorModel, relative
 to the source layout's plain error) for each layout. The route compares
 the layouts before their triangle stretch; a row where the better
 measured layout is not the one the model predicts lower is a wrong choice
-(docs/evaluation.md, "The route the model refuses is the better one at
-512^2").
+(docs/evaluation.md, "The route the model refused").
 
     PYTHONPATH=python /usr/bin/python3 bench/route_choice.py [--scenes courtyard:lightmap,...] [--resolution 512]
 

@@ -961,8 +961,9 @@ def test_batch_stages_and_tessellate(facts, work_dir):
 
 
 def test_batch_rechart_flag(facts, work_dir):
-    """The coarse floor's Lightmap map has one chart per quad: re-charted by default, not with --no-rechart.
-    Re-charted, a second stage refines inside the new charts (lmrefine.metrics.further_stage_options)."""
+    """The coarse floor's Lightmap map has one chart per quad: the route re-charts it and lets the model
+    choose by default, and never re-charts with --no-rechart. A second stage refines inside the charts
+    of the first (lmrefine.metrics.further_stage_options)."""
     blend = fact(facts, "save_coarse_scene_for_batch")["path"]
     used = {}
     for flag, stages in (("--rechart", "2"), ("--no-rechart", "1")):
@@ -974,7 +975,9 @@ def test_batch_rechart_flag(facts, work_dir):
         report = json.loads((out / "report.json").read_text())
         floor = report["objects"]["Floor"]["report"]
         assert floor["check_layout"]["valid"] is True
-        used[flag] = floor["rechart"]["used"]
+        used[flag] = floor["rechart"].get("predicted_error") is not None  # a re-charted layout was made
+        assert floor["rechart"]["used"] in ((False,) if flag == "--no-rechart" else (True, False))
+        assert ("re-charting is off" in floor["rechart"].get("reason", "")) == (flag == "--no-rechart")
         assert floor["rechart"]["room"]["no_room"] is True
         assert floor.get("stages", {}).get("repack") is (False if stages == "2" else None)
         if stages == "1":  # --max-stretch 1: no stretch is even tried

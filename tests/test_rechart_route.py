@@ -14,30 +14,39 @@ from layouts import SCALES_WITHIN_2, floor_grid, grid_chart, lightmap_pack, smar
 from test_metrics import bilinear_reference
 
 CELLS = 12
-RESOLUTION = 128
+# The floor's quads are about 7 texels wide at 96^2: re-charted it measures
+# less error than its one-quad charts refined (at 128^2 they measure less:
+# test_route_chooses_what_measures_less_error).
+RESOLUTION = 96
 
 
-def _floor_layouts():
+def _floor_layouts(resolution=RESOLUTION):
     """A floor of CELLS x CELLS quads with per-corner positions (3T, 3), and
     two layouts of it: one chart per quad (Lightmap Pack's kind) and one
     chart for the whole floor (Smart UV's kind), both (3T, 2) per corner."""
     positions, triangles = floor_grid(CELLS, 1.0)
     corners = positions[triangles].reshape(-1, 3).astype(np.float64)
-    per_face = lightmap_pack(charts_across=CELLS, margin_texels=2, resolution=RESOLUTION)
+    per_face = lightmap_pack(charts_across=CELLS, margin_texels=2, resolution=resolution)
     one_chart = grid_chart(CELLS, (0.05, 0.05), (0.95, 0.95))
     return corners, per_face, one_chart
 
 
-def _shadowed_floor(uvs, triangles, corners=None):
+def _floor_scene(uvs, triangles, corners=None):
     """The floor under a sun, half of it in the shadow of a roof (a hard
-    edge across the quads), baked on the layout (uvs, triangles); `corners`:
-    its positions per corner (default the CELLS x CELLS floor's)."""
+    edge across the quads), with the layout (uvs, triangles); `corners`: its
+    positions per corner (default the CELLS x CELLS floor's)."""
     scene = lmrefine.Scene()
     scene.add_mesh(_corner_positions() if corners is None else corners, triangles, uvs=uvs)
     roof = np.array([(-2, -2, 1), (0.13, -2, 1), (0.13, 2, 1), (-2, 2, 1)], np.float32)
     scene.add_mesh(roof, np.array([(0, 1, 2), (0, 2, 3)], np.int32), receiver=False)
     scene.add_light("sun", energy=3.0, angle=0.01, direction=(0.25, 0.1, -1.0))
-    return np.ascontiguousarray(lmrefine.bake(scene, RESOLUTION, passes=("direct",), samples=8, seed=0)[0][..., :3])
+    return scene
+
+
+def _shadowed_floor(uvs, triangles, corners=None, resolution=RESOLUTION, samples=8, seed=0):
+    """_floor_scene baked at `resolution`."""
+    return np.ascontiguousarray(lmrefine.bake(_floor_scene(uvs, triangles, corners), resolution,
+                                              passes=("direct",), samples=samples, seed=seed)[0][..., :3])
 
 
 def _corner_positions():
@@ -312,6 +321,24 @@ def test_one_error_model_predicts_as_fresh_calls(lightmap_pack_case):
     assert shared[1] == 1.0
 
 
+def test_the_model_counts_the_texels_across_the_light_change():
+    # The floor's shadow edge runs along v (the roof's edge): its gradient points along u. At the
+    # same texel area, texels twice as fine across it (2 x u, v / 2) predict about half the edge
+    # error, twice as fine along it (u / 2, 2 x v) more than before; area alone would say the same.
+    corners, _, (one_chart, triangles) = _floor_layouts()
+    lightmap = _shadowed_floor(one_chart, triangles)
+    mask = lmrefine.coverage_mask(one_chart, triangles, RESOLUTION)
+    energy = lmrefine.gradient_map(lightmap, mask).sum(axis=2)
+    model = rechart_route.ErrorModel(one_chart, triangles, energy, corners, lightmap)
+    centre = one_chart.mean(axis=0)
+    across = (centre + (one_chart - centre) * np.float32([2.0, 0.5])).astype(np.float32)
+    along = (centre + (one_chart - centre) * np.float32([0.5, 2.0])).astype(np.float32)
+    assert model.relative(across) < 0.7 < 1.0 < model.relative(along)
+    # A uniform scale counts as before: half the texel size, half the edge error (the border term,
+    # of the light's slope, falls as its square).
+    assert 0.25 < model.relative((centre + (one_chart - centre) * 2.0).astype(np.float32)) <= 0.5 + 1e-6
+
+
 def test_predicted_error_counts_chart_borders():
     # A smooth light ramp (no edges): the same floor at the same texel density costs less with
     # one chart than with a chart per quad, whose borders the dilation fills.
@@ -367,7 +394,9 @@ def test_lowest_packed_bounds_every_packing_at_its_scales(lightmap_pack_case):
             direction = np.column_stack([np.cos(factor), np.sin(factor)])
             stretched = stretch.stretch_charts(uvs, triangles, charts, factor, direction)
             packed, _ = lmrefine.pack_charts(stretched, triangles, charts, scales, RESOLUTION, padding)
-            assert bound <= model.relative(packed)
+            # A stretch by up to 2 may space the light changes up to twice as finely.
+            assert model.lowest_packed((RESOLUTION, RESOLUTION), padding, scales, max_stretch=2.0) <= \
+                model.relative(packed)
 
 
 def test_route_does_not_make_the_source_repack_the_bound_rules_out(lightmap_pack_case, monkeypatch):
@@ -434,6 +463,38 @@ def test_lowest_packed_bounds_the_packings_of_a_layout_moved_inside_its_charts(l
 
 
 # --- the route ----------------------------------------------------------------
+
+@pytest.mark.parametrize("resolution", [96, 128])
+def test_route_chooses_what_measures_less_error(resolution, monkeypatch):
+    # The floor from one-quad charts, its two choices forced and baked, measured against the light
+    # at points on it: the route returns the one that measures less error. At 96^2 that is the
+    # re-charted floor (its quads are 7 texels wide), at 128^2 the quads' own refinement (9 texels).
+    from lmrefine import refine
+    corners, (uvs, triangles), _ = _floor_layouts(resolution)
+    lightmap = _shadowed_floor(uvs, triangles, resolution=resolution)
+    rng = np.random.default_rng(0)
+    triangle = rng.integers(0, len(triangles), 4000)
+    bary = rng.dirichlet([1, 1, 1], len(triangle))
+    points = np.einsum("nk,nkc->nc", bary, corners[triangles[triangle]]).astype(np.float32)
+    truth = lmrefine.evaluate(_floor_scene(uvs, triangles, corners), points,
+                              np.tile(np.float32([0, 0, 1]), (len(points), 1)), passes=("direct",), samples=128,
+                              seed=5)[:, :3]
+
+    def error(layout):
+        baked = _shadowed_floor(layout, triangles, corners, resolution, samples=32, seed=1)
+        read = lmrefine.metrics.bilinear_lookup(baked, lmrefine.metrics.interpolate_corners(layout, triangle, bary))
+        return float(np.sqrt(((read - truth) ** 2).sum(axis=1).mean()))
+
+    refine_route = lambda **options: lmrefine.refine_uvs(lightmap, uvs, triangles, resolution, padding=2,  # noqa: E731
+                                                         positions=corners, **options)
+    chosen = refine_route()
+    source = refine_route(rechart=False)
+    monkeypatch.setattr(refine, "_source_lowest", lambda stage: (lambda model: np.inf))  # re-charting wins
+    recharted = refine_route()
+    assert recharted.report["rechart"]["used"] and not source.report["rechart"]["used"]
+    better = recharted if error(recharted.uvs) < error(source.uvs) else source
+    assert np.array_equal(chosen.uvs, better.uvs)
+    assert chosen.report["rechart"]["used"] == (resolution == 96)
 
 def test_route_recharts_a_lightmap_pack_source(lightmap_pack_case):
     corners, uvs, triangles, lightmap = lightmap_pack_case
@@ -800,9 +861,9 @@ def test_texel_points_refuse_bad_input():
 
 
 def test_route_decides_on_the_layouts_before_the_triangle_stretch(lightmap_pack_case, monkeypatch):
-    """The route's model sees texel areas, not shapes: it compares its candidates before the triangle
-    stretch (RefineResult.unstretched_uvs), so the stretch never changes which route is taken. Here
-    every stretch is kept (the judgement's bar raised), which costs each candidate packing scale."""
+    """The route compares its candidates before the triangle stretch (RefineResult.unstretched_uvs), so
+    the stretch never changes which route is taken. Here every stretch is kept (the judgement's bar
+    raised), which costs each candidate packing scale."""
     from lmrefine import refine as refine_module
 
     corners, uvs, triangles, lightmap = lightmap_pack_case

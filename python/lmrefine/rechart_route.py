@@ -15,7 +15,7 @@ route".
 
 import numpy as np
 
-from . import _native, allocation, backoff
+from . import _native, allocation, backoff, stretch
 from .charting import rechart
 from .packer import CHART_TOLERANCE
 from .rows import group_rows
@@ -43,6 +43,13 @@ PADDING = 2.0
 # when its prediction is this much (relative) below the repack's lower bound:
 # the packed charts' float32 UVs scale each triangle to a few ulps.
 _BOUND_MARGIN = 1e-4
+# The border term's weight in the route's model, over allocation.BORDER_ERROR
+# (derived before the baker clamped a border texel's samples onto its chart,
+# it overstated the borders of one-face charts): chosen with
+# bench/route_choice.py on the tuning scenes (docs/refiner.md, "The re-chart
+# route").
+BORDER_WEIGHT = 0.25
+_BORDER = allocation.BORDER_ERROR * BORDER_WEIGHT
 # UVs closer than this (a power of two near CHART_TOLERANCE) are one vertex
 # of a chart when telling border corners from inner ones.
 _VERTEX_GRID = float(1 << 17)
@@ -163,12 +170,14 @@ def predicted_error(source_uvs, uvs, triangles, energy, positions=None, lightmap
 
     Both terms of docs/refiner.md "Chart scaling", in world units so that
     layouts with different charts compare: the edge term, each triangle's
-    gradient energy times its texel size in the source and in `uvs`
-    (EDGE_ERROR); the border term, each chart border edge's world length
-    times the luminance slope of its triangle (per world unit) times the
-    squared texel size there (BORDER_ERROR: the border texels, filled by
-    dilation, miss the slope over a quarter texel). Without positions the
-    edge term alone, by the linear texel scale sqrt(new / source UV area).
+    gradient energy times its texel size in the source and its texel
+    spacing in `uvs` across the light changes (EDGE_ERROR;
+    ErrorModel.gradient_spacing); the border term, each chart border edge's
+    world length times the luminance slope of its triangle (per world unit)
+    times the squared texel size there (BORDER_ERROR x BORDER_WEIGHT: the
+    border texels, filled by dilation, miss part of the slope). Without
+    positions the edge term alone, by the linear texel scale sqrt(new /
+    source UV area).
 
     `folds` (lmrefine.folds.Folds of the source layout): the light changes
     in a fold's band count in the edge term only for layouts that keep the
@@ -206,6 +215,10 @@ class ErrorModel:
         slope = allocation.opening(slope, mask)
         rows, cols = allocation.triangle_texels(source_uvs, triangles, energy.shape)
         self.slope_texel = slope[rows, cols].mean(axis=1)
+        # The first bake's light changes per triangle by direction: a layout's
+        # texels count by how they space the light's gradient, not by their area.
+        self.tensors = stretch.source_tensors(lightmap, mask, source_uvs, triangles)
+        self.tensor_trace = self.tensors[:, 0, 0] + self.tensors[:, 1, 1]
         self.lengths = np.linalg.norm(corners - np.roll(corners, -1, axis=1), axis=2)  # edge k: corner k to k + 1
         self.source_uvs = source_uvs
         self._source_error = {}  # per keep mask's bytes: the source layout's error over those triangles
@@ -225,7 +238,7 @@ class ErrorModel:
         edge_terms, border_terms, _, _ = self._terms(uvs, size_after, keep)
         source_error = self._source(keep)
         error = (allocation.EDGE_ERROR * edge_terms[keep].sum()
-                 + allocation.BORDER_ERROR * border_terms[keep].sum())
+                 + _BORDER * border_terms[keep].sum())
         return float(error / source_error) if source_error > 0 else 1.0
 
     def _kept(self, after):
@@ -237,17 +250,32 @@ class ErrorModel:
     def _terms(self, layout, size, keep):
         """Per triangle, the edge term's and the border term's products
         (before their constants) of `layout`, whose texel sizes are `size`:
-        the light changes it keeps inside its charts times the source's and
-        its texel size; the slope along its charts' borders times its texel
-        size squared; each triangle's chart, and its corners' chart vertices
-        (_chart_borders)."""
+        the light changes it keeps inside its charts times the source's
+        texel size and the texel spacing across them (gradient_spacing); the
+        slope along its charts' borders times its texel size squared; each
+        triangle's chart, and its corners' chart vertices (_chart_borders)."""
         size_before = np.where(keep, self.size_before, 0.0)
         slope_world = np.where(keep, self.slope_texel / np.maximum(size_before, 1e-300), 0.0)
         charts, vertex, border = _chart_borders(layout, self.triangles)
         border = (border * self.lengths).sum(axis=1)
         held = self.edge if self.folds is None else np.maximum(
             self.edge - self.folds.energy_removed(layout, self.triangles), 0.0)
-        return held * size_before * size, slope_world * border * size * size, charts, vertex
+        spacing = self.gradient_spacing(layout, size, keep)
+        return held * size_before * spacing, slope_world * border * size * size, charts, vertex
+
+    def gradient_spacing(self, layout, size, keep):
+        """Per triangle, the world size of `layout`'s texels across the first
+        bake's light changes: the source texel size times sqrt(tr(A^-T S A^-1)
+        / tr S), S the triangle's structure tensor in the source layout and A
+        its map from the source layout to `layout` (a gradient maps by A^-T).
+        A uniform scale s gives 1 / s, as the texel size `size` does, which a
+        triangle without light changes keeps; texels long across the light
+        changes count for less than their area, long along them for more."""
+        mapped = stretch.triangle_tensors(None, None, self.source_uvs, layout, self.triangles, source=self.tensors)
+        lit = keep & (self.tensor_trace > 0) & ((mapped[:, 0, 0] + mapped[:, 1, 1]) > 0)
+        ratio = np.ones(len(lit))
+        ratio[lit] = (mapped[lit, 0, 0] + mapped[lit, 1, 1]) / self.tensor_trace[lit]
+        return np.where(lit, np.where(keep, self.size_before, 0.0) * np.sqrt(ratio), size)
 
     def _source(self, keep):
         """The source layout's error over the `keep` triangles. It depends on
@@ -257,21 +285,25 @@ class ErrorModel:
             edge_terms, border_terms, _, _ = self._terms(self.source_uvs, np.where(keep, self.size_before, 0.0),
                                                          keep)
             self._source_error[key] = (allocation.EDGE_ERROR * edge_terms[keep].sum()
-                                       + allocation.BORDER_ERROR * border_terms[keep].sum())
+                                       + _BORDER * border_terms[keep].sum())
         return self._source_error[key]
 
-    def lowest_packed(self, shape, padding, scales, base_uvs=None):
+    def lowest_packed(self, shape, padding, scales, base_uvs=None, max_stretch=1.0):
         """A lower bound on `relative(uvs)` over every layout that keeps each
         chart of `base_uvs` (default the source layout; the same charts,
         moved inside by the automaton) whole, turned, moved or stretched at
-        equal area, scaled linearly by g * scales[c] for one g (the scales of
+        equal area by at most `max_stretch` (the map's larger singular value),
+        scaled linearly by g * scales[c] for one g (the scales of
         allocation.signal_scales: the repack's packings), at least `padding`
         texels apart inside the (H, W) = `shape` atlas. None without
         positions.
 
         Chart c scaled by s predicts A_c / s + B_c / s^2 (its edge term by
-        texel size, its border term by its square, from `base_uvs`' texel
-        sizes), falling as g grows. Grown by a disc of radius r = padding /
+        texel spacing across the light changes, its border term by the
+        texel size squared, from `base_uvs`' texels), falling as g grows; a
+        stretch T lowers no triangle's spacing below 1 / sigma_max(T) of it
+        (gradient_spacing: the gradient maps by T^-T), so A_c counts
+        divided by `max_stretch`. Grown by a disc of radius r = padding /
         2, a chart of texel area a_c s^2 covers at least a_c s^2 + k_c
         sqrt(a_c) s r + pi r^2 texels (perimeter_factors: k_c = 2 sqrt(pi)
         by Brunn-Minkowski for any chart, more by Steiner's formula for a
@@ -288,8 +320,8 @@ class ErrorModel:
         keep, size = self._kept(area)
         edge_terms, border_terms, charts, vertex = self._terms(base, size, keep)
         count = len(scales)
-        edge = allocation.EDGE_ERROR * np.bincount(charts[keep], edge_terms[keep], minlength=count)
-        slope = allocation.BORDER_ERROR * np.bincount(charts[keep], border_terms[keep], minlength=count)
+        edge = allocation.EDGE_ERROR / max_stretch * np.bincount(charts[keep], edge_terms[keep], minlength=count)
+        slope = _BORDER * np.bincount(charts[keep], border_terms[keep], minlength=count)
         total = float(self._source(keep))
         texels = np.bincount(charts, area, minlength=count) * self.texels
         scales = np.asarray(scales, np.float64)
@@ -447,9 +479,10 @@ def refine_recharted(refine, lightmap, uvs, triangles, shape, padding, positions
         return None, info
     # One model of the source layout for every prediction (its texel sizes, slope and error).
     model = ErrorModel(uvs, triangles, energy, positions, lightmap, folds=folds)
-    # Layouts are compared before their triangle stretch, whose gain is in the
-    # texels' shapes the model does not see; a refinement is finished (the
-    # stretch made) only where it may be returned.
+    # Layouts are compared before their triangle stretch (its gain on the
+    # one-face charts of a source layout the model overstates as often as it
+    # understates: docs/refiner.md, "Compared finished, tried"); a refinement
+    # is finished (the stretch made) only where it may be returned.
     predicted = model.relative(result.compared)
     if result.fit_reset and result.edge_shrink == 1.0:
         # Charts exactly the padding apart keep every edge texel rigid, and

@@ -501,8 +501,8 @@ def _source_lowest(stage):
     without overlaps: model -> the least error the ErrorModel `model` can
     predict for the source layout's refinement made from it: the in-chart
     layout itself, or its charts packed whole at the repack's scales or
-    their square roots (ErrorModel.lowest_packed). The scales are kept for
-    its repack."""
+    their square roots (ErrorModel.lowest_packed), stretched by at most the
+    chart stretch's bound. The scales are kept for its repack."""
     options = stage.options
     if stage.check["overlapping"]:
         return None
@@ -518,7 +518,8 @@ def _source_lowest(stage):
             stage.mask, stage.world_areas)
         scales = stage.signal[1]
         padding = _pack_padding(stage.padding, stage.original)
-        bounds = [model.lowest_packed(stage.shape, padding, variant, stage.new_uvs)
+        stretch = max(1.0, float(options["max_stretch"]))
+        bounds = [model.lowest_packed(stage.shape, padding, variant, stage.new_uvs, stretch)
                   for variant in (scales, np.sqrt(scales))]
         return None if None in bounds else min([unpacked] + bounds)
 
