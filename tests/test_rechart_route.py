@@ -485,8 +485,9 @@ def test_route_chooses_what_measures_less_error(resolution, monkeypatch):
         read = lmrefine.metrics.bilinear_lookup(baked, lmrefine.metrics.interpolate_corners(layout, triangle, bary))
         return float(np.sqrt(((read - truth) ** 2).sum(axis=1).mean()))
 
-    refine_route = lambda **options: lmrefine.refine_uvs(lightmap, uvs, triangles, resolution, padding=2,  # noqa: E731
-                                                         positions=corners, **options)
+    def refine_route(**options):
+        return lmrefine.refine_uvs(lightmap, uvs, triangles, resolution, padding=2, positions=corners, **options)
+
     chosen = refine_route()
     source = refine_route(rechart=False)
     monkeypatch.setattr(refine, "_source_lowest", lambda stage: (lambda model: np.inf))  # re-charting wins

@@ -272,10 +272,11 @@ class ErrorModel:
         triangle without light changes keeps; texels long across the light
         changes count for less than their area, long along them for more."""
         mapped = stretch.triangle_tensors(None, None, self.source_uvs, layout, self.triangles, source=self.tensors)
-        lit = keep & (self.tensor_trace > 0) & ((mapped[:, 0, 0] + mapped[:, 1, 1]) > 0)
+        trace = mapped[:, 0, 0] + mapped[:, 1, 1]
+        lit = keep & (self.tensor_trace > 0) & (trace > 0)
         ratio = np.ones(len(lit))
-        ratio[lit] = (mapped[lit, 0, 0] + mapped[lit, 1, 1]) / self.tensor_trace[lit]
-        return np.where(lit, np.where(keep, self.size_before, 0.0) * np.sqrt(ratio), size)
+        ratio[lit] = trace[lit] / self.tensor_trace[lit]
+        return np.where(lit, self.size_before * np.sqrt(ratio), size)
 
     def _source(self, keep):
         """The source layout's error over the `keep` triangles. It depends on
