@@ -488,7 +488,10 @@ def test_route_chooses_what_measures_less_error(resolution, monkeypatch):
     def refine_route(**options):
         return lmrefine.refine_uvs(lightmap, uvs, triangles, resolution, padding=2, positions=corners, **options)
 
+    finished, finish = [], refine._finished
+    monkeypatch.setattr(refine, "_finished", lambda stage, packed: finished.append(stage) or finish(stage, packed))
     chosen = refine_route()
+    assert len(finished) == 1  # only the layout returned gets its triangle stretch
     source = refine_route(rechart=False)
     monkeypatch.setattr(refine, "_source_lowest", lambda stage: (lambda model: np.inf))  # re-charting wins
     recharted = refine_route()

@@ -466,8 +466,11 @@ def refine_recharted(refine, lightmap, uvs, triangles, shape, padding, positions
     None: the faces are read from the UV indices the triangles share). When
     the refinement's automaton fit reset a region of a layout whose chart
     edges were all rigid, the charts are packed once more half a texel
-    farther apart and refined (report "edge_room"). Returns (result or None,
-    rechart report)."""
+    farther apart and refined, and tried first where the model prefers it
+    (report "edge_room": whether the layout reported is that one). A
+    re-charted refinement is finished (its triangle stretch made) and
+    checked against the source layout only once the model has chosen it.
+    Returns (result or None, rechart report)."""
     info = {"used": False, "room": room, "angle": float(ANGLE), "folds": fold_report(folds), "edge_room": None,
             "source_route_bound": None}
     # The new layout is not held to the source's gutter: at least PADDING.
@@ -485,6 +488,8 @@ def refine_recharted(refine, lightmap, uvs, triangles, shape, padding, positions
     # understates: docs/refiner.md, "Compared finished, tried"); a refinement
     # is finished (the stretch made) only where it may be returned.
     predicted = model.relative(result.compared)
+    # The candidates in the order tried: the one packed farther apart first where the model prefers it.
+    candidates = [(recharted, result, predicted, False)]
     if result.fit_reset and result.edge_shrink == 1.0:
         # Charts exactly the padding apart keep every edge texel rigid, and
         # the automaton's fit undid a region's deformation: charts packed
@@ -498,41 +503,42 @@ def refine_recharted(refine, lightmap, uvs, triangles, shape, padding, positions
         if roomier is not None:
             retried_predicted = model.relative(retried.compared)
             if retried_predicted < predicted:
-                retried_check = backoff.worse_than_source(retried.finished().uvs, uvs, triangles, shape, padding,
-                                                          source=original, recharted=True)
-                if not retried_check[0]:
-                    recharted, result, predicted = roomier, retried, retried_predicted
-                    info["edge_room"] = True
-    result = result.finished()
-    info.update({key: recharted[key] for key in ("charts", "split_charts", "degenerate_triangles",
-                                                 "utilisation", "area_utilisation")})
-    worse, check = (retried_check if info["edge_room"] else
-                    backoff.worse_than_source(result.uvs, uvs, triangles, shape, padding, source=original,
-                                              recharted=True))
-    if worse:
-        info["reason"] = f"the re-charted layout failed {', '.join(worse)} against the source layout"
-        return None, info
-    info["predicted_error"] = predicted
+                candidates.insert(0, (roomier, retried, retried_predicted, True))
     if source_lowest is not None:
         info["source_route_bound"] = source_lowest(model)
     bound = info["source_route_bound"]
-    if bound is not None and predicted < REQUIRED_GAIN and predicted <= bound * (1.0 - _BOUND_MARGIN):
-        # The source layout's refinement could only predict more error: not made.
-        info.update(used=True, predicted_error_source_route=None)
-        result.report["check"] = check
-        return result, info
-    info["predicted_error_source_route"] = model.relative(source_layout())
-    # Both against the source layout; the lower prediction wins (the source
-    # layout's own refinement is never worse than the source by its checks).
-    if not (info["predicted_error"] < REQUIRED_GAIN
-            and info["predicted_error"] <= info["predicted_error_source_route"]):
-        info["reason"] = (f"the error model predicts {info['predicted_error']:.3f} of the source layout's error "
-                          f"re-charted and {info['predicted_error_source_route']:.3f} refining the source layout "
-                          f"(re-charting needs below {REQUIRED_GAIN} and below the other)")
-        return None, info
-    info["used"] = True
-    result.report["check"] = check
-    return result, info
+    source_predicted = None
+    for recharted, result, predicted, edge_room in candidates:
+        info.update({key: recharted[key] for key in ("charts", "split_charts", "degenerate_triangles",
+                                                     "utilisation", "area_utilisation")})
+        info["predicted_error"] = predicted
+        if info["edge_room"] is not None:
+            info["edge_room"] = edge_room
+        if bound is not None and predicted < REQUIRED_GAIN and predicted <= bound * (1.0 - _BOUND_MARGIN):
+            # The source layout's refinement could only predict more error: not made.
+            info["predicted_error_source_route"] = None
+        else:
+            if source_predicted is None:
+                source_predicted = model.relative(source_layout())
+            info["predicted_error_source_route"] = source_predicted
+            # Both against the source layout; the lower prediction wins (the source
+            # layout's own refinement is never worse than the source by its checks).
+            # A later candidate predicts more error, so it loses too.
+            if not (predicted < REQUIRED_GAIN and predicted <= source_predicted):
+                info["reason"] = (f"the error model predicts {predicted:.3f} of the source layout's error "
+                                  f"re-charted and {source_predicted:.3f} refining the source layout "
+                                  f"(re-charting needs below {REQUIRED_GAIN} and below the other)")
+                return None, info
+        # Finished (its triangle stretch made) and checked only where it may be returned.
+        result = result.finished()
+        worse, check = backoff.worse_than_source(result.uvs, uvs, triangles, shape, padding, source=original,
+                                                 recharted=True)
+        if not worse:
+            info["used"] = True
+            result.report["check"] = check
+            return result, info
+        info["reason"] = f"the re-charted layout failed {', '.join(worse)} against the source layout"
+    return None, info
 
 
 def fold_report(folds):
