@@ -253,8 +253,10 @@ def test_a_repack_too_loose_at_the_signal_scales_is_kept_at_their_square_roots()
     (the scales' square roots) it packs densely enough and is kept, not all of the gain dropped."""
     uvs, tris, lightmap = _checkered_corner()
     resolution, padding = 64, 2
+    # No stretch, so the output is the repack's (the fill after the triangle stretch would grow the
+    # checkered chart further).
     result = lmrefine.refine_uvs(lightmap, uvs, tris, resolution, padding=padding, max_stretch=1.0,
-                                 **SCALES_WITHIN_2)
+                                 triangle_stretch=1.0, **SCALES_WITHIN_2)
     repack = result.report["repack"]
     refused = repack["softened"]["refused"]
     assert repack["used"] and repack["softened"]["used"]
@@ -280,7 +282,39 @@ def test_a_repack_too_loose_at_the_signal_scales_is_kept_at_their_square_roots()
                f"{refused['padded_utilisation_after']:.0%} full" in note for note in result.report["notes"])
     # Deterministic.
     assert np.array_equal(lmrefine.refine_uvs(lightmap, uvs, tris, resolution, padding=padding,
-                                              max_stretch=1.0, **SCALES_WITHIN_2).uvs, result.uvs)
+                                              max_stretch=1.0, triangle_stretch=1.0, **SCALES_WITHIN_2).uvs,
+                          result.uvs)
+
+
+def test_the_charts_grow_into_the_space_the_triangle_stretchs_packing_left(monkeypatch):
+    """The triangle stretch packs its charts again at a scale of its own, which leaves space of its
+    own: the charts the model counts most grow into it evenly (so no triangle is stretched further),
+    the others keep their size, and the grown layout is the one returned."""
+    uvs, tris, lightmap = _checkered_corner()
+    seen = []
+    grow = allocation.grow_finished_packing
+
+    def recorded(packed, *args, **kwargs):
+        grown, report = grow(packed, *args, **kwargs)
+        seen.append((packed, grown))
+        return grown, report
+
+    monkeypatch.setattr(allocation, "grow_finished_packing", recorded)
+    result = lmrefine.refine_uvs(lightmap, uvs, tris, 64, padding=2, max_stretch=1.0, **SCALES_WITHIN_2)
+    stretch_report = result.report["triangle_stretch"]
+    fill = stretch_report["fill"]
+    assert stretch_report["used"] and fill["used"] and fill["charts_grown"] >= 1 and not fill["charts_grown_one_way"]
+    (packed, grown), = seen
+    assert np.array_equal(result.uvs, grown)
+    charts = lmrefine.find_charts(uvs, tris, lmrefine.CHART_TOLERANCE)
+    area = lambda u: np.bincount(charts, weights=np.abs(allocation.signed_areas(u, tris)))  # noqa: E731
+    growth = area(grown) / area(packed)
+    assert (growth > 1 - 1e-5).all() and (growth > allocation.FILL_SMALLEST_GROWTH ** 2 - 1e-5).sum() == \
+        fill["charts_grown"]
+    assert fill["texel_area"] == pytest.approx(area(grown).sum() / area(packed).sum())
+    assert stretch_report["largest_stretch"] <= 2.0
+    check = lmrefine.check_layout(result.uvs, tris, 64, 2)
+    assert check["valid"] and check["min_gutter_texels"] >= 2.0, check
 
 
 def test_a_layout_the_library_packed_itself_is_repacked_on_the_models_word_alone():
@@ -489,6 +523,60 @@ def test_the_fill_grows_a_chart_into_the_space_the_packing_left_and_keeps_the_ot
         packed, tris, charts, little, smooth, report["chart_scales"], 128, 2.0)
     assert none is None and ratio == 1.0 and (factors == 1.0).all()
     assert fill["packings"] == 1  # the wide chart, which has no room
+
+
+def test_a_chart_that_cannot_grow_evenly_grows_along_one_axis_into_the_space_left():
+    # A chart twice as wide as tall fills the atlas's width: it cannot grow evenly, but the packing
+    # leaves the lower half empty, so it grows along v (its light changes half across each axis).
+    uvs, tris = grid_chart(4, (0.0, 0.0), (1.0, 0.5))
+    charts = lmrefine.find_charts(uvs, tris, tolerance=1e-5)
+    packed, report = lmrefine.pack_charts(uvs, tris, charts, None, 128, 2.0)
+    edge, smooth = np.array([1.0]), np.array([0.5])
+    asked = []
+
+    def shares():
+        asked.append(True)
+        return np.array([0.5])
+
+    grown, _, factors, ratio, fill = allocation.grow_into_free_space(
+        packed, tris, charts, edge, smooth, report["chart_scales"], 128, 2.0, shares=shares)
+    assert asked == [True] and fill["charts_grown"] == fill["charts_grown_one_way"] == 1
+    before, after = np.ptp(packed.astype(np.float64), axis=0), np.ptp(grown.astype(np.float64), axis=0)
+    wide = int(np.argmax(before))  # the packer may turn the chart: the grown axis is the short one
+    g = after[1 - wide] / before[1 - wide]
+    assert after[wide] == pytest.approx(before[wide], rel=1e-5) and 1.5 < g <= allocation.FILL_MAX_GROWTH
+    assert factors[0] == pytest.approx(np.sqrt(g), rel=1e-4)  # its linear scale of area
+    s = report["chart_scales"][0]
+    model = edge / s * (0.5 + 0.5 / g) + smooth / s ** 2 / g  # the even share, then the grown one
+    assert ratio == pytest.approx(float(model[0] / (edge / s + smooth / s ** 2)[0]), rel=1e-4)
+    check = lmrefine.check_layout(grown, tris, 128, 2.0)
+    assert check["valid"] and check["min_gutter_texels"] >= 2.0, check
+    # Without the light changes' shares the fill grows evenly only: nothing here.
+    none, _, _, _, fill = allocation.grow_into_free_space(
+        packed, tris, charts, edge, smooth, report["chart_scales"], 128, 2.0)
+    assert none is None and fill["packings"] == 1
+
+
+@pytest.mark.parametrize("share_u, axis", [(0.9, 0), (0.1, 1), (0.5, 1)])
+def test_a_chart_grows_along_the_axis_the_model_credits_more(share_u, axis):
+    # Either axis fits (up to 1.6 along u, 1.8 along v): the growth that takes off more predicted error
+    # wins, the one across the light changes; with no preference the longer growth.
+    uvs, tris = grid_chart(2, (0.25, 0.25), (0.5, 0.5))
+    charts = np.zeros(len(tris), np.int64)
+    extent = np.ptp(uvs, axis=0)
+    limits = (1.6, 1.8)
+
+    def fits(factors, layout):
+        grown = np.ptp(layout.astype(np.float64), axis=0) / extent
+        return ("packed", layout) if (grown <= np.array(limits) + 1e-9).all() else None
+
+    axis_kept, g, packing, layout = allocation._grow_one_axis(
+        0, uvs, np.ones(1), np.array([share_u]), np.array([1.0]), np.array([0.0]), np.ones(1), np.array([0.0625]),
+        1.0, fits, tris, charts, 0.0, 0.0)
+    assert axis_kept == axis and packing[1] is layout
+    assert 1.4 < g <= limits[axis]
+    assert np.ptp(layout[:, 1 - axis]) == pytest.approx(extent[1 - axis])
+    assert np.ptp(layout[:, axis]) == pytest.approx(extent[axis] * g)
 
 
 def test_the_fill_leaves_a_packing_with_no_free_space_as_it_is():

@@ -135,9 +135,11 @@ class Outcome:
         # Triangles the output layouts stretched (refine_uvs' triangle stretch).
         triangles = [report.get("triangle_stretch") or {} for report in reports]
         triangles = [t for t in triangles if t.get("used")]
-        # Charts grown into the space the repack's packing left (its fill), in the kept repacks.
-        fills = [(report.get("repack") or {}) for report in reports]
-        grown = sum(int((r.get("fill") or {}).get("charts_grown", 0)) for r in fills if r.get("used"))
+        # Charts grown into the space a packing left: the kept repacks' fill, and the fill of the kept
+        # triangle stretches' own packing (a chart grown by both counts twice).
+        fills = [(report.get("repack") or {}) for report in reports] + triangles
+        grown = sum(int((r.get("fill") or {}).get("charts_grown", 0)) for r in fills
+                    if r.get("used") and (r.get("fill") or {}).get("used", True))
         return {
             "moved": moved,
             "transition_widening": widening,

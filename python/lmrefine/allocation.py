@@ -388,15 +388,20 @@ def repack(source_uvs, refined_uvs, triangles, energy, resolution, padding, min_
     if max_stretch > 1.0 and lightmap is not None:
         stretched = _stretch_candidate(source_uvs, refined_uvs, triangles, charts, lightmap, mask, resolution,
                                        max_stretch, source_tensors)
+    shares = None
+    if lightmap is not None:
+        def shares(uvs):
+            covered = coverage_mask(source_uvs, triangles, resolution) if mask is None else mask
+            return axis_shares(lightmap, covered, source_uvs, uvs, triangles, charts, source_tensors)
     packed, report = _packing_at(scales, refined_uvs, triangles, charts, edge, smooth, stretched, resolution,
-                                 padding, progress, rule)
+                                 padding, progress, rule, shares)
     report["own_packing"] = bool(own_packing)
     if not report["used"] and report.get("predicted_error", 1.0) < rule.required_gain:
         # Refused for its density alone: the signal's spread of chart sizes
         # costs more gutter than the input's. The scales half way to uniform
         # (in log scale) cost less, so the choice is not all or nothing.
         soft_packed, soft = _packing_at(np.sqrt(scales), refined_uvs, triangles, charts, edge, smooth, stretched,
-                                        resolution, padding, _reports_done(progress), rule)
+                                        resolution, padding, _reports_done(progress), rule, shares)
         softened = {"used": soft["used"], "refused": {
             key: report[key] for key in ("predicted_error", "padded_utilisation_before", "padded_utilisation_after")}}
         if soft["used"]:
@@ -435,10 +440,12 @@ def _reports_done(progress):
 
 
 def _packing_at(scales, refined_uvs, triangles, charts, edge, smooth, stretched, resolution, padding, progress,
-                rule):
+                rule, shares=None):
     """repack's packing of `refined_uvs`'s charts at relative `scales` (and of
     the `stretched` candidate, when given) and its judgement by `rule` (a
-    KeepRule): (packed uvs, report)."""
+    KeepRule): (packed uvs, report). `shares(uvs)`: axis_shares in the frame
+    of a layout of these charts, or None (no lightmap: the fill grows charts
+    evenly only)."""
     try:
         (packed, pack_report), stretched_pack = _pack_both(
             refined_uvs, None if stretched is None else stretched["uvs"],
@@ -481,7 +488,8 @@ def _packing_at(scales, refined_uvs, triangles, charts, edge, smooth, stretched,
             packed, pack_report, final, area_after, perimeter_out, predicted = kept
     # The space the packing left: the charts the model counts most grow into it.
     grown, grown_report, factors, ratio, fill_report = grow_into_free_space(
-        packed, triangles, charts, edge, smooth, final, resolution, padding, _reports_done(progress), area_after)
+        packed, triangles, charts, edge, smooth, final, resolution, padding, _reports_done(progress), area_after,
+        None if shares is None else (lambda: shares(packed)))
     if grown is not None:
         grown_area, perimeter_out = chart_outlines(grown, triangles, charts, resolution)
         fill_report["texel_area"] = float(grown_area.sum() / max(float(area_after.sum()), 1e-300))
@@ -609,7 +617,7 @@ FILL_MIN_GAIN = 0.01
 
 
 def grow_into_free_space(packed, triangles, charts, edge, smooth, scales, resolution, padding, progress=None,
-                         areas=None):
+                         areas=None, shares=None):
     """The charts of a `packed` layout (at linear `scales` against the layout
     the model's `edge` and `smooth` terms refer to) grown one at a time into
     the atlas space the packing left free, every other chart keeping its
@@ -621,23 +629,32 @@ def grow_into_free_space(packed, triangles, charts, edge, smooth, scales, resolu
     None, ones, 1.0, report) when no chart grew or the gain is below
     FILL_MIN_GAIN (the report's `ratio` says what it would have been).
     `areas`: the packed charts' texel areas (chart_outlines'), when the
-    caller has them."""
+    caller has them. `shares()`: each chart's share of its light changes
+    across the u axis of `packed` (axis_shares), or None; given, the
+    charts that could not grow evenly then grow along one axis of their
+    frame where that fits (_grow_one_axis), after the others grew: a
+    factor g along u divides the chart's edge term by g for that share
+    alone, and its smooth term (per texel area) by g. A chart grown one way
+    counts in the returned factors by its linear scale of area, sqrt(g)."""
     s = np.maximum(np.asarray(scales, np.float64), 1e-12)
+    along = [np.ones(len(s)), np.ones(len(s))]  # growth along u and along v, on top of the even growth
+    share_u = np.full(len(s), 0.5)
 
     def model(f):
-        return float((edge / (s * f) + smooth / (s * f) ** 2).sum())
+        edge_factor = share_u / (f * along[0]) + (1.0 - share_u) / (f * along[1])
+        return float((edge / s * edge_factor + smooth / (s * f) ** 2 / (along[0] * along[1])).sum())
 
     terms = edge / s + smooth / (s * s)  # each chart's model term at the packing's sizes
     factors = np.ones(len(s))
-    report = {"charts_grown": 0, "packings": 0}
+    report = {"charts_grown": 0, "charts_grown_one_way": 0, "packings": 0}
     before = float(terms.sum())
     if not before > 0:
         return None, None, factors, 1.0, report
     kept = None
 
-    def fits(trial):
+    def fits(trial, uvs=packed):
         report["packings"] += 1
-        return _pack_or_none(packed, triangles, charts, trial, resolution, padding, progress, fixed_scale=1.0)
+        return _pack_or_none(uvs, triangles, charts, trial, resolution, padding, progress, fixed_scale=1.0)
 
     def gain(c, g):
         """The model's error chart c's growth by g takes off."""
@@ -657,7 +674,7 @@ def grow_into_free_space(packed, triangles, charts, edge, smooth, scales, resolu
 
     needed = FILL_MIN_GAIN * before
     order = [c for c in np.argsort(-terms, kind="stable")[:FILL_CANDIDATES] if gain(c, FILL_MAX_GROWTH) >= needed]
-    gained = 0.0
+    gained, blocked = 0.0, []
     for k, c in enumerate(order):
         later = sum(gain(d, largest(d)) for d in order[k + 1:])  # what the charts after c could add
         if gained + gain(c, largest(c)) + later < needed:
@@ -668,6 +685,7 @@ def grow_into_free_space(packed, triangles, charts, edge, smooth, scales, resolu
         trial[c] *= FILL_SMALLEST_GROWTH
         result = fits(trial)
         if result is None:
+            blocked.append(c)
             continue
         low, high = FILL_SMALLEST_GROWTH, FILL_MAX_GROWTH
         for _ in range(FILL_STEPS):
@@ -684,13 +702,111 @@ def grow_into_free_space(packed, triangles, charts, edge, smooth, scales, resolu
         gained += gain(c, low)
         free = max(free - area[c] * (low * low - 1.0), 0.0)
         kept = result
+    if blocked and shares is not None:
+        share_u = np.clip(np.asarray(shares(), np.float64), 0.0, 1.0)
+        layout = packed  # with the growths along an axis so far (the even ones are `factors`, packed with it)
+        for c in blocked:
+            growth = _grow_one_axis(c, layout, factors, share_u, edge, smooth, s, area, free, fits, triangles, charts,
+                                    gained, needed)
+            if growth is None:
+                continue
+            axis, g, kept, layout = growth
+            along[axis][c] = g
+            gained += _axis_gain(edge[c], smooth[c], s[c], share_u[c] if axis == 0 else 1.0 - share_u[c], g)
+            free = max(free - area[c] * (g - 1.0), 0.0)
     if kept is None:
         return None, None, np.ones(len(s)), 1.0, report
     report["ratio"] = model(factors) / before
     if report["ratio"] > 1 - FILL_MIN_GAIN:
         return None, None, np.ones(len(s)), 1.0, report
-    report["charts_grown"] = int((factors > 1.0).sum())
-    return kept[0], kept[1], factors, report["ratio"], report
+    one_way = (along[0] > 1.0) | (along[1] > 1.0)
+    report["charts_grown"] = int(((factors > 1.0) | one_way).sum())
+    report["charts_grown_one_way"] = int(one_way.sum())
+    return kept[0], kept[1], factors * np.sqrt(along[0] * along[1]), report["ratio"], report
+
+
+def grow_finished_packing(packed, source_uvs, triangles, charts, energy, resolution, padding, lightmap=None,
+                          mask=None, world_areas=None, progress=None):
+    """The charts of `packed`, a packing made after the repack (the triangle
+    stretch packs its charts again, at a scale of its own), grown evenly into
+    the space it left (grow_into_free_space), the model's terms measured per
+    chart on `source_uvs` (where `energy` and `lightmap` were baked, `mask`
+    its coverage) and its scales read from the charts' areas: (uvs or None,
+    report, as grow_into_free_space's with its texel_area)."""
+    edge, smooth, area = chart_errors(source_uvs, triangles, charts, energy, lightmap, mask, world_areas=world_areas)
+    before = np.bincount(charts, weights=np.abs(signed_areas(packed, triangles)), minlength=len(edge))
+    scales = np.sqrt(before / np.maximum(np.asarray(area, np.float64), 1e-300))
+    # Evenly only: a growth along one axis would stretch the triangles past the stretch's bound.
+    grown, _, _, _, report = grow_into_free_space(packed, triangles, charts, edge, smooth, scales, resolution,
+                                                  padding, progress)
+    if grown is not None:
+        report["texel_area"] = float(np.abs(signed_areas(grown, triangles)).sum() / max(float(before.sum()), 1e-300))
+    return grown, report
+
+
+def _axis_gain(edge, smooth, scale, share, g):
+    """The model's error a chart's growth by g along one axis takes off:
+    `share` of its light changes lie across that axis."""
+    return (edge / scale * share + smooth / scale ** 2) * (1.0 - 1.0 / g)
+
+
+def _grow_one_axis(c, layout, factors, share_u, edge, smooth, s, area, free, fits, triangles, charts, gained,
+                   needed):
+    """Chart c of `layout` grown along the u or the v axis of its frame by
+    the largest factor (bisected, up to FILL_MAX_GROWTH and the atlas area
+    left `free`) at which the charts still pack at the packing's scale
+    (`fits`), the axis whose growth the model credits more: (axis, factor,
+    packing, the grown layout), or None when neither grows by
+    FILL_SMALLEST_GROWTH or could make a fill worth keeping (`gained` +
+    its gain below `needed`)."""
+    best, corners = None, np.unique(np.asarray(triangles)[np.asarray(charts) == c])
+    largest = min(FILL_MAX_GROWTH, 1.0 + free / area[c]) if area[c] > 0 else FILL_MAX_GROWTH
+    for axis in (0, 1):
+        share = share_u[c] if axis == 0 else 1.0 - share_u[c]
+
+        def gain(g):
+            return _axis_gain(edge[c], smooth[c], s[c], share, g)
+
+        if largest < FILL_SMALLEST_GROWTH or gained + gain(largest) < needed:
+            continue
+        grown = _axis_grown(layout, corners, axis, FILL_SMALLEST_GROWTH)
+        result = fits(factors, grown)
+        if result is None:
+            continue
+        low, high, kept = FILL_SMALLEST_GROWTH, largest, (result, grown)
+        for _ in range(FILL_STEPS):
+            if gained + gain(high) < needed:
+                break
+            g = np.sqrt(low * high)
+            grown = _axis_grown(layout, corners, axis, g)
+            result = fits(factors, grown)
+            if result is None:
+                high = g
+            else:
+                low, kept = g, (result, grown)
+        if best is None or gain(low) > best[-1]:
+            best = (axis, low, kept[0], kept[1], gain(low))
+    return None if best is None else best[:4]
+
+
+def _axis_grown(uvs, corners, axis, factor):
+    """`uvs` with the UVs `corners` (a chart's) scaled by `factor` along `axis` about their mean."""
+    out = np.array(uvs, copy=True)
+    values = out[corners, axis].astype(np.float64)
+    centre = values.mean()
+    out[corners, axis] = centre + (values - centre) * factor
+    return out
+
+
+def axis_shares(lightmap, mask, source_uvs, uvs, triangles, charts, source_tensors=None):
+    """(C,) each chart's share of its light changes across the u axis of
+    layout `uvs` (its structure tensor's uu entry over its trace: 1 where
+    the light changes along u alone, 0.5 where it has none; stretch.chart_tensors)."""
+    from . import stretch
+
+    tensors = stretch.chart_tensors(lightmap, mask, source_uvs, uvs, triangles, charts, source_tensors)
+    trace = tensors[:, 0, 0] + tensors[:, 1, 1]
+    return np.where(trace > 0, tensors[:, 0, 0] / np.where(trace > 0, trace, 1.0), 0.5)
 
 
 def _pack_or_none(uvs, triangles, charts, scales, resolution, padding, progress, fixed_scale=None):

@@ -777,6 +777,16 @@ def _triangle_stretched(stage, new_uvs, check, analysed=None):
         return new_uvs, check, report
     report["used"] = True
     report["charts_stretched"] = int((kept > 0).sum())
+    grown, report["fill"] = allocation.grow_finished_packing(
+        packed, stage.uvs, triangles, charts, stage.energy, shape, padding, stage.lightmap, stage.mask,
+        stage.world_areas, allocation._reports_done(stage.progress))
+    if grown is not None:
+        grown_check, worse, _ = _checked(stage, checker, failing_before, grown)
+        report["fill"]["used"] = not worse
+        if worse:
+            report["fill"]["reason"] = f"the grown layout failed {', '.join(worse)}"
+        else:
+            packed, packed_check = grown, grown_check
     # Measured on the output: the fit meets each triangle's target only in the least-squares sense.
     report.update(stretch.measured_stretch_figures(new_uvs, packed, triangles))
     return packed, packed_check, report
@@ -791,12 +801,19 @@ def _packed_again(stage, checker, failing_before, layout, padding):
     report is check_layout's."""
     packed, _ = pack_charts(layout, stage.triangles, checker.charts, None, stage.shape, padding,
                             progress=allocation._reports_done(stage.progress))
+    return (packed, *_checked(stage, checker, failing_before, packed))
+
+
+def _checked(stage, checker, failing_before, packed):
+    """A packing of the refined layout's charts (checker.charts) checked:
+    (its check_layout report, the checks it fails that the refined layout
+    passed, the charts failing that did not before)."""
     packed_check = checker.check(packed, failing_charts=True)
     failing = set(packed_check.pop("failing_charts").tolist()) - failing_before
     worse = backoff.failures(packed_check, stage.original, stage.padding)
     if worse == ["overlapping"] and not failing:
         worse = []  # counted in texels: a chart that overlapped itself before may count a few more
-    return packed, packed_check, worse, failing
+    return packed_check, worse, failing
 
 
 # When the stretch of every chart is refused, the stretch of the charts it

@@ -1896,6 +1896,7 @@ def rechart_folded_source():
     return {"outcome": outcome, "message": message, "panel_recharted": result.recharted,
             "result_message": result.message, "valid": bool(check_["valid"]),
             "fill": dict(repack.get("fill") or {}, repack_used=bool(repack.get("used"))),
+            "stretch_fill": (run.reports["Roof"].get("triangle_stretch") or {}).get("fill") or {},
             "source_charts": int(len(np.unique(lmrefine.find_charts(layout.uvs, layout.triangles,
                                                                      lmrefine.CHART_TOLERANCE)))),
             "refined_charts": int(len(np.unique(lmrefine.find_charts(refined, layout.triangles,
