@@ -555,6 +555,44 @@ def test_a_chart_that_cannot_grow_evenly_grows_along_one_axis_into_the_space_lef
     none, _, _, _, fill = allocation.grow_into_free_space(
         packed, tris, charts, edge, smooth, report["chart_scales"], 128, 2.0)
     assert none is None and fill["packings"] == 1
+    # Held to the chart stretch's bound: at most 1.3 one way, and not at all where no stretch is allowed.
+    held, _, factors, _, fill = allocation.grow_into_free_space(
+        packed, tris, charts, edge, smooth, report["chart_scales"], 128, 2.0, shares=shares,
+        one_way_limit=np.array([1.3]))
+    g = np.ptp(held.astype(np.float64), axis=0)[1 - wide] / before[1 - wide]
+    assert 1.2 < g <= 1.3 + 1e-6 and fill["charts_grown_one_way"] == 1
+    none, _, _, _, fill = allocation.grow_into_free_space(
+        packed, tris, charts, edge, smooth, report["chart_scales"], 128, 2.0, shares=shares,
+        one_way_limit=np.array([1.0]))
+    assert none is None and fill["packings"] == 1
+
+
+def test_refine_uvs_grows_a_chart_along_one_axis_only_where_a_stretch_is_allowed():
+    # A wide chart across the atlas and a small one, both under vertical stripes: with the chart stretch
+    # allowed (max_stretch 2) a chart grows along one axis into the space the packing left; with no
+    # stretch allowed (max_stretch 1) every chart keeps its shape (measured on the output: its box's
+    # aspect, up to a quarter turn).
+    n = 64
+    uvs, tris = merge(grid_chart(6, (0.02, 0.02), (0.98, 0.45)), grid_chart(3, (0.1, 0.6), (0.3, 0.8)))
+    j = np.mgrid[0:n, 0:n][1]
+    lightmap = np.repeat(np.where((j // 3) % 2 == 0, 1.0, 0.2).astype(np.float32)[..., None], 3, axis=2)
+    charts = lmrefine.find_charts(uvs, tris, lmrefine.CHART_TOLERANCE)
+
+    def aspects(layout):
+        boxes = [np.ptp(layout[np.unique(tris[charts == c])].astype(np.float64), axis=0) for c in range(2)]
+        return np.array([box.max() / box.min() for box in boxes])
+
+    for max_stretch in (2.0, 1.0):
+        result = lmrefine.refine_uvs(lightmap, uvs, tris, n, padding=2, max_stretch=max_stretch, triangle_stretch=1.0)
+        fill = result.report["repack"]["fill"]
+        assert result.report["repack"]["used"] and fill["charts_grown"] >= 1, fill
+        assert lmrefine.check_layout(result.uvs, tris, n, padding=2)["valid"]
+        if max_stretch == 1.0:
+            assert fill["charts_grown_one_way"] == 0
+            np.testing.assert_allclose(aspects(result.uvs), aspects(uvs), rtol=0.02)
+        else:
+            assert fill["charts_grown_one_way"] >= 1
+            assert (np.abs(aspects(result.uvs) / aspects(uvs) - 1) > 0.05).any()
 
 
 @pytest.mark.parametrize("share_u, axis", [(0.9, 0), (0.1, 1), (0.5, 1)])

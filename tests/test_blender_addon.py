@@ -670,8 +670,13 @@ def test_tessellation_adds_vertices_within_the_budget_and_keeps_every_attribute(
     assert value["uvmap_residual"] < 1e-6 and value["lightmap_residual"] < 1e-6
     assert value["tint_residual"] < 1e-6
     assert value["refined_triangles"] > 32  # the refinement ran on the tessellated layout (32 before)
-    # Its quads were one chart each before the split (the split put vertices inside them): re-charted still.
-    assert value["panel_recharted"] == 1
+    # Its quads were one chart each before the split (the split put vertices inside them): the route stays
+    # open ('always'), and the error model chooses between the re-charted layout and the split quads' own
+    # refinement.
+    calls = value["rechart_calls"]
+    assert calls and all(call["rechart"] == "always" and call["always"] for call in calls), calls
+    assert value["panel_recharted"] == sum(call["used"] for call in calls)
+    assert all(call["used"] or "the error model predicts" in call["reason"] for call in calls), calls
     assert value["leftover_meshes"] == ["Cube", "FloorMesh"]  # the rollback copy is gone after success
     # Ctrl+Z: one step back restores the original mesh exactly.
     assert value["undo_vertices"] == 25 and value["undo_coordinates_equal"]

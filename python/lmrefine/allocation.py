@@ -389,19 +389,19 @@ def repack(source_uvs, refined_uvs, triangles, energy, resolution, padding, min_
         stretched = _stretch_candidate(source_uvs, refined_uvs, triangles, charts, lightmap, mask, resolution,
                                        max_stretch, source_tensors)
     shares = None
-    if lightmap is not None:
+    if lightmap is not None and max_stretch > 1.0:
         def shares(uvs):
             covered = coverage_mask(source_uvs, triangles, resolution) if mask is None else mask
             return axis_shares(lightmap, covered, source_uvs, uvs, triangles, charts, source_tensors)
     packed, report = _packing_at(scales, refined_uvs, triangles, charts, edge, smooth, stretched, resolution,
-                                 padding, progress, rule, shares)
+                                 padding, progress, rule, shares, max_stretch)
     report["own_packing"] = bool(own_packing)
     if not report["used"] and report.get("predicted_error", 1.0) < rule.required_gain:
         # Refused for its density alone: the signal's spread of chart sizes
         # costs more gutter than the input's. The scales half way to uniform
         # (in log scale) cost less, so the choice is not all or nothing.
         soft_packed, soft = _packing_at(np.sqrt(scales), refined_uvs, triangles, charts, edge, smooth, stretched,
-                                        resolution, padding, _reports_done(progress), rule, shares)
+                                        resolution, padding, _reports_done(progress), rule, shares, max_stretch)
         softened = {"used": soft["used"], "refused": {
             key: report[key] for key in ("predicted_error", "padded_utilisation_before", "padded_utilisation_after")}}
         if soft["used"]:
@@ -440,12 +440,14 @@ def _reports_done(progress):
 
 
 def _packing_at(scales, refined_uvs, triangles, charts, edge, smooth, stretched, resolution, padding, progress,
-                rule, shares=None):
+                rule, shares=None, max_stretch=1.0):
     """repack's packing of `refined_uvs`'s charts at relative `scales` (and of
     the `stretched` candidate, when given) and its judgement by `rule` (a
     KeepRule): (packed uvs, report). `shares(uvs)`: axis_shares in the frame
-    of a layout of these charts, or None (no lightmap: the fill grows charts
-    evenly only)."""
+    of a layout of these charts, or None (no lightmap, or no stretch allowed:
+    the fill grows charts evenly only); a chart's growth along one axis is
+    held to (max_stretch / its chart stretch)^2, the texel aspect the chart
+    stretch may give."""
     try:
         (packed, pack_report), stretched_pack = _pack_both(
             refined_uvs, None if stretched is None else stretched["uvs"],
@@ -489,7 +491,7 @@ def _packing_at(scales, refined_uvs, triangles, charts, edge, smooth, stretched,
     # The space the packing left: the charts the model counts most grow into it.
     grown, grown_report, factors, ratio, fill_report = grow_into_free_space(
         packed, triangles, charts, edge, smooth, final, resolution, padding, _reports_done(progress), area_after,
-        None if shares is None else (lambda: shares(packed)))
+        None if shares is None else (lambda: shares(packed)), _one_way_limit(stretch_report, max_stretch, len(scales)))
     if grown is not None:
         grown_area, perimeter_out = chart_outlines(grown, triangles, charts, resolution)
         fill_report["texel_area"] = float(grown_area.sum() / max(float(area_after.sum()), 1e-300))
@@ -527,6 +529,16 @@ def _packing_at(scales, refined_uvs, triangles, charts, edge, smooth, stretched,
     report["used"] = bool(predicted < rule.required_gain and report["padded_utilisation_after"]
                           >= rule.min_utilisation * report["padded_utilisation_before"])
     return packed, report
+
+
+def _one_way_limit(stretch_report, max_stretch, count):
+    """(C,) the most each chart may grow along one axis: a chart stretched by
+    a (the kept chart stretch's factor) has texels a^2 times longer one way
+    than the other, and max_stretch^2 is what the chart stretch may give."""
+    stretched = np.ones(count)
+    if stretch_report is not None and stretch_report["used"]:
+        stretched = np.asarray(stretch_report["chart_stretch"], np.float64)
+    return (float(max_stretch) / stretched) ** 2
 
 
 def _stretch_candidate(source_uvs, refined_uvs, triangles, charts, lightmap, mask, resolution, max_stretch,
@@ -617,7 +629,7 @@ FILL_MIN_GAIN = 0.01
 
 
 def grow_into_free_space(packed, triangles, charts, edge, smooth, scales, resolution, padding, progress=None,
-                         areas=None, shares=None):
+                         areas=None, shares=None, one_way_limit=None):
     """The charts of a `packed` layout (at linear `scales` against the layout
     the model's `edge` and `smooth` terms refer to) grown one at a time into
     the atlas space the packing left free, every other chart keeping its
@@ -632,7 +644,8 @@ def grow_into_free_space(packed, triangles, charts, edge, smooth, scales, resolu
     caller has them. `shares()`: each chart's share of its light changes
     across the u axis of `packed` (axis_shares), or None; given, the
     charts that could not grow evenly then grow along one axis of their
-    frame where that fits (_grow_one_axis), after the others grew: a
+    frame where that fits (_grow_one_axis), after the others grew, each by
+    at most its `one_way_limit` (C,) (None: FILL_MAX_GROWTH): a
     factor g along u divides the chart's edge term by g for that share
     alone, and its smooth term (per texel area) by g. A chart grown one way
     counts in the returned factors by its linear scale of area, sqrt(g)."""
@@ -706,8 +719,9 @@ def grow_into_free_space(packed, triangles, charts, edge, smooth, scales, resolu
         share_u = np.clip(np.asarray(shares(), np.float64), 0.0, 1.0)
         layout = packed  # with the growths along an axis so far (the even ones are `factors`, packed with it)
         for c in blocked:
+            limit = FILL_MAX_GROWTH if one_way_limit is None else min(FILL_MAX_GROWTH, float(one_way_limit[c]))
             growth = _grow_one_axis(c, layout, factors, share_u, edge, smooth, s, area, free, fits, triangles, charts,
-                                    gained, needed)
+                                    gained, needed, limit)
             if growth is None:
                 continue
             axis, g, kept, layout = growth
@@ -751,16 +765,16 @@ def _axis_gain(edge, smooth, scale, share, g):
 
 
 def _grow_one_axis(c, layout, factors, share_u, edge, smooth, s, area, free, fits, triangles, charts, gained,
-                   needed):
+                   needed, limit=FILL_MAX_GROWTH):
     """Chart c of `layout` grown along the u or the v axis of its frame by
-    the largest factor (bisected, up to FILL_MAX_GROWTH and the atlas area
-    left `free`) at which the charts still pack at the packing's scale
+    the largest factor (bisected, up to `limit` and the atlas area left
+    `free`) at which the charts still pack at the packing's scale
     (`fits`), the axis whose growth the model credits more: (axis, factor,
     packing, the grown layout), or None when neither grows by
     FILL_SMALLEST_GROWTH or could make a fill worth keeping (`gained` +
     its gain below `needed`)."""
     best, corners = None, np.unique(np.asarray(triangles)[np.asarray(charts) == c])
-    largest = min(FILL_MAX_GROWTH, 1.0 + free / area[c]) if area[c] > 0 else FILL_MAX_GROWTH
+    largest = min(limit, 1.0 + free / area[c]) if area[c] > 0 else limit
     for axis in (0, 1):
         share = share_u[c] if axis == 0 else 1.0 - share_u[c]
 

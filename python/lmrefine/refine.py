@@ -302,8 +302,10 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
             (rotations, at least `padding` texels apart, or the input's
             gutter where that is narrower, but at least a texel); then the
             charts the model counts most grow into the space the packing
-            left, the others keeping their sizes (report["repack"]["fill"];
-            docs/refiner.md, "The space the packing left"). Kept only
+            left, the others keeping their sizes, a chart with no room to
+            grow evenly along one axis where max_stretch allows
+            (report["repack"]["fill"]; docs/refiner.md, "The space the
+            packing left"). Kept only
             if the model predicts less error than the unpacked result, the
             packed atlas is about as dense as the input and the packed
             layout passes the same checks; report["repack"] says
@@ -325,8 +327,10 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
             (lmrefine.stretch.triangle_stretch; docs/refiner.md, "Triangle
             stretch"). Kept when that layout passes the checks and the
             chart model predicts less edge error for it, the packing's loss
-            of scale counted. 1 = off. report["triangle_stretch"] says what
-            happened (None when off, or when the repack is).
+            of scale counted; its charts then grow evenly into the space
+            that packing left (report["triangle_stretch"]["fill"]). 1 = off.
+            report["triangle_stretch"] says what happened (None when off,
+            or when the repack is).
         positions: (N, 3) the 3-D position of each UV (the uvs' indexing),
             or None. With positions and rechart, a source layout that gives
             the refiner no room (rechart_route.layout_room: one chart per

@@ -1290,7 +1290,21 @@ def tessellation_writes_the_split_into_the_mesh():
     window = bpy.context.window_manager.windows[0]
     with bpy.context.temp_override(window=window):
         bpy.ops.ed.undo_push(message="before refine")
-    outcome, message = refine(undo=True)
+    # What the pipeline asked of the re-chart route, and what its model chose.
+    calls, refine_uvs = [], lmrefine.refine_uvs
+
+    def recorded(*args, **kwargs):
+        result = refine_uvs(*args, **kwargs)
+        info = result.report.get("rechart") or {}
+        calls.append({"rechart": kwargs.get("rechart", True), "used": bool(info.get("used")),
+                      "always": bool(info.get("always")), "reason": info.get("reason")})
+        return result
+
+    lmrefine.refine_uvs = recorded
+    try:
+        outcome, message = refine(undo=True)
+    finally:
+        lmrefine.refine_uvs = refine_uvs
     mesh = bpy.data.objects["Floor"].data
     positions, polygon_of, maps = _corner_arrays(mesh)
     # The original quad each loop lies in: its polygon's centroid inside that quad's square.
@@ -1303,7 +1317,7 @@ def tessellation_writes_the_split_into_the_mesh():
         "outcome": outcome, "message": message, "result_message": result.message,
         "vertices_before": len(vertices_before), "vertices_after": len(mesh.vertices),
         "panel_vertices_added": result.vertices_added, "panel_tessellated": result.tessellated,
-        "panel_recharted": result.recharted,
+        "panel_recharted": result.recharted, "rechart_calls": calls,
         "triangles_after": sum(1 for polygon in mesh.polygons if polygon.loop_total == 3),
         "largest_height": float(np.abs(positions[:, 2]).max()),
         "uvmap_residual": _affine_residual(positions, maps["UVMap"], np.zeros(len(positions))),
