@@ -784,6 +784,7 @@ def _triangle_stretched(stage, new_uvs, check, analysed=None):
     grown, report["fill"] = allocation.grow_finished_packing(
         packed, stage.uvs, triangles, charts, stage.energy, shape, padding, stage.lightmap, stage.mask,
         stage.world_areas, allocation._reports_done(stage.progress))
+    report["fill"]["used"] = False
     if grown is not None:
         grown_check, worse, _ = _checked(stage, checker, failing_before, grown)
         report["fill"]["used"] = not worse
