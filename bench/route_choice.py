@@ -1,7 +1,8 @@
 """The re-chart route's choice, measured: for each scene row, the layout
 refine_uvs returns with the route left to its error model and with each
-of its two choices forced (re-charted: rechart="always"; the source
-layout's own refinement: rechart=False), each before and after its
+of its two choices forced (re-charted: the bound on the source layout's
+refinement made infinite, so the route never makes that refinement; the
+source layout's own refinement: rechart=False), each before and after its
 triangle stretch, baked and measured as `lmrefine evaluate` measures
 them, beside the model's prediction (rechart_route.ErrorModel, relative
 to the source layout's plain error) for each layout. The route compares
@@ -41,7 +42,8 @@ CHOICES = ("re-charted", "source layout")
 @contextlib.contextmanager
 def forced(choice):
     """refine_uvs with the route's choice forced to `choice`: its keyword
-    arguments (the re-charted layout through the bound, see the top)."""
+    arguments (the re-charted layout through refine._source_lowest, whose
+    bound then rules the source layout's refinement out)."""
     if choice == "source layout":
         yield {"rechart": False}
         return
@@ -103,7 +105,7 @@ def row(scene, variant, resolution, cache):
             if name == "re-charted" and not report["rechart"]["used"]:
                 print(f"    {name:>13}: not possible ({report['rechart'].get('reason')})", flush=True)
                 break
-            if stretch:
+            if stretch:  # the route compares the layouts before their triangle stretch
                 compared[name] = (rmse, predicted)
             print(f"    {name:>13}, {stretch_label:>27}: {ratio:.2f}x, RMSE {rmse:.5f}, model {predicted:.3f}",
                   flush=True)

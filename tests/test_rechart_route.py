@@ -500,6 +500,7 @@ def test_route_chooses_what_measures_less_error(resolution, monkeypatch):
     assert np.array_equal(chosen.uvs, better.uvs)
     assert chosen.report["rechart"]["used"] == (resolution == 96)
 
+
 def test_route_recharts_a_lightmap_pack_source(lightmap_pack_case):
     corners, uvs, triangles, lightmap = lightmap_pack_case
     copies = [a.copy() for a in (corners, uvs, triangles, lightmap)]
