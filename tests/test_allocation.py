@@ -508,6 +508,7 @@ def test_the_fill_grows_a_chart_into_the_space_the_packing_left_and_keeps_the_ot
         packed, tris, charts, edge, smooth, report["chart_scales"], 128, 2.0)
     assert factors[0] == 1.0 and factors[1] > 1.8
     assert fill["charts_grown"] == 1 and fill["ratio"] == pytest.approx(ratio)
+    assert fill["grown_chart_triangles"] == [int(np.flatnonzero(charts == 1)[0])]  # the chart named by its lowest
     assert ratio == pytest.approx(predicted_total(edge, smooth, factors) / predicted_total(edge, smooth, np.ones(2)))
     np.testing.assert_allclose(grown_report["chart_scales"], factors, rtol=1e-12)
     # Measured on the output: the wide chart's extent is the packing's, the small one's grew.

@@ -1237,8 +1237,14 @@ def test_addon_recharts_a_source_folded_over_a_lit_ridge(facts):
     # (with the charts the triangle stretch's packing grew, when it did).
     fill, stretch_fill = value["fill"], value["stretch_fill"]
     assert fill["repack_used"] and fill["charts_grown"] >= 1 and fill["ratio"] <= 0.99, fill
-    grown = fill["charts_grown"] + (stretch_fill["charts_grown"] if stretch_fill.get("used") else 0)
-    assert f"{grown} chart(s) grown into the space the packing left" in value["result_message"]
+    # Counted once per chart of the output: both fills name a chart by its lowest triangle.
+    named = set(fill["grown_chart_triangles"])
+    if value["stretch_used"] and stretch_fill.get("used"):
+        named |= set(stretch_fill["grown_chart_triangles"])
+    charts_of = value["refined_chart_ids"]
+    assert len({charts_of[t] for t in named}) == len(named) <= value["refined_charts"]
+    assert all(min(t for t, c in enumerate(charts_of) if c == charts_of[n]) == n for n in named)
+    assert f"{len(named)} chart(s) grown into the space the packing left" in value["result_message"]
     # The progress counts the route's stages for a folded source too: it moves through them, never back.
     stages = [stage for _, stage in value["progress"]]
     assert "rechart: unwrap charts" in stages and stages.index("rechart: unwrap charts") > 0

@@ -100,6 +100,19 @@ class Target:
     zero_area: int = 0  # triangles of zero area in 3-D: they need no texels, the baker skips them
 
 
+def grown_charts(report):
+    """The charts of a refine_uvs report's output grown into the space a
+    packing left, by the kept repack's fill or by the fill of the kept
+    triangle stretch's own packing: a set of lowest triangle indices, one per
+    chart (both fills name a chart so), so a chart grown by both is one."""
+    grown = set()
+    for part in (report.get("repack") or {}, report.get("triangle_stretch") or {}):
+        fill = part.get("fill") or {}
+        if part.get("used") and fill.get("used", True):
+            grown.update(fill.get("grown_chart_triangles", ()))
+    return grown
+
+
 @dataclass
 class Outcome:
     objects: list
@@ -135,11 +148,9 @@ class Outcome:
         # Triangles the output layouts stretched (refine_uvs' triangle stretch).
         triangles = [report.get("triangle_stretch") or {} for report in reports]
         triangles = [t for t in triangles if t.get("used")]
-        # Charts grown into the space a packing left: the kept repacks' fill, and the fill of the kept
-        # triangle stretches' own packing (a chart grown by both counts twice).
-        fills = [(report.get("repack") or {}) for report in reports] + triangles
-        grown = sum(int((r.get("fill") or {}).get("charts_grown", 0)) for r in fills
-                    if r.get("used") and (r.get("fill") or {}).get("used", True))
+        # Charts grown into the space a packing left: by the kept repack's fill or the fill of the kept
+        # triangle stretch's own packing, each chart once (named by its lowest triangle in both).
+        grown = sum(len(grown_charts(report)) for report in reports)
         return {
             "moved": moved,
             "transition_widening": widening,

@@ -734,8 +734,14 @@ def grow_into_free_space(packed, triangles, charts, edge, smooth, scales, resolu
     if report["ratio"] > 1 - FILL_MIN_GAIN:
         return None, None, np.ones(len(s)), 1.0, report
     one_way = (along[0] > 1.0) | (along[1] > 1.0)
-    report["charts_grown"] = int(((factors > 1.0) | one_way).sum())
+    grown_charts = np.flatnonzero((factors > 1.0) | one_way)
+    report["charts_grown"] = int(len(grown_charts))
     report["charts_grown_one_way"] = int(one_way.sum())
+    # Each grown chart named by its lowest triangle, which any numbering of the same charts shares: a
+    # chart grown by two fills (the repack's and the triangle stretch's) is counted once from these.
+    first = np.full(len(s), len(charts), np.int64)
+    np.minimum.at(first, np.asarray(charts, np.int64), np.arange(len(charts), dtype=np.int64))
+    report["grown_chart_triangles"] = sorted(int(t) for t in first[grown_charts])
     return kept[0], kept[1], factors * np.sqrt(along[0] * along[1]), report["ratio"], report
 
 

@@ -1911,6 +1911,8 @@ def rechart_folded_source():
             "result_message": result.message, "valid": bool(check_["valid"]),
             "fill": dict(repack.get("fill") or {}, repack_used=bool(repack.get("used"))),
             "stretch_fill": (run.reports["Roof"].get("triangle_stretch") or {}).get("fill") or {},
+            "stretch_used": bool((run.reports["Roof"].get("triangle_stretch") or {}).get("used")),
+            "refined_chart_ids": lmrefine.find_charts(refined, layout.triangles, lmrefine.CHART_TOLERANCE).tolist(),
             "source_charts": int(len(np.unique(lmrefine.find_charts(layout.uvs, layout.triangles,
                                                                      lmrefine.CHART_TOLERANCE)))),
             "refined_charts": int(len(np.unique(lmrefine.find_charts(refined, layout.triangles,
