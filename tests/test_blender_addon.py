@@ -33,7 +33,7 @@ def exr_header(path):
     while data[position] != 0:
         name_end = data.index(b"\0", position)
         type_end = data.index(b"\0", name_end + 1)
-        name, kind = data[position:name_end].decode(), data[name_end + 1:type_end].decode()
+        kind = data[name_end + 1:type_end].decode()  # the attribute's type (its name is data[position:name_end])
         size = int.from_bytes(data[type_end + 1:type_end + 5], "little")
         value = data[type_end + 5:type_end + 5 + size]
         position = type_end + 5 + size
