@@ -353,10 +353,11 @@ def test_a_layout_the_library_packed_itself_is_repacked_on_the_models_word_alone
 
 
 def test_the_stretch_candidates_of_a_layout_the_library_packed_are_judged_by_the_model_alone():
-    """The chart stretch's candidates come in order, each a fallback for the ones before (stretched,
-    turned, half the factors). For a caller's packing the first that packs densely enough and
-    predicts less error is kept; for the library's own (the re-chart route) every candidate is judged
-    by the model alone, and the lowest prediction wins."""
+    """The chart stretch's candidates come in order, each a fallback for the ones before (stretched
+    along the main directions, turned, along the charts' axes, half the factors). For a caller's
+    packing the first that packs densely enough and predicts less error is kept; for the library's
+    own (the re-chart route) every candidate is judged by the model alone, and the lowest prediction
+    wins."""
     uvs, tris = merge(grid_chart(2, (0.05, 0.05), (0.45, 0.45)), grid_chart(2, (0.55, 0.55), (0.95, 0.95)))
     charts = lmrefine.find_charts(uvs, tris)
     shape, padding, ones = (64, 64), 2.0, np.ones(2)
@@ -369,9 +370,9 @@ def test_the_stretch_candidates_of_a_layout_the_library_packed_are_judged_by_the
 
     def packings():
         """A dense candidate that gains a little (0.9), then a looser one that gains more (0.7)."""
-        for layout, edge in ((uvs, 0.9), (looser, 0.7)):
+        for kind, layout, edge in (("main", uvs, 0.9), ("axes", looser, 0.7)):
             made.append(edge)
-            yield np.zeros(2, bool), 1.5 * ones, edge * ones, (layout, {"chart_scales": ones})
+            yield kind, np.zeros(2, bool), 1.5 * ones, edge * ones, (layout, {"chart_scales": ones})
 
     for rule, expected, read in ((allocation.callers_rule(), 0.9, [0.9]),
                                  (allocation.OWN_PACKING_RULE, 0.7, [0.9, 0.7])):
@@ -381,6 +382,8 @@ def test_the_stretch_candidates_of_a_layout_the_library_packed_are_judged_by_the
         assert report["used"] and kept[-1] == pytest.approx(expected) and report["predicted_error"] == kept[-1]
         assert made == read  # a caller's packing reads no candidate past the one kept
         assert kept[0] is (uvs if expected == 0.9 else looser)
+        assert report["kind"] == ("main" if expected == 0.9 else "axes")
+        assert [e["kind"] for e in report["candidates"]] == (["main"] if expected == 0.9 else ["main", "axes"])
     # The looser candidate fails the density rule for a caller's packing.
     assert not allocation._judge_stretch(stretched, iter(list(packings())[1:]), tris, charts, shape, padding, ones,
                                          1.0, dense, allocation.callers_rule())[0]["used"]
@@ -420,16 +423,11 @@ def test_cancelling_during_the_fill_cancels_the_refinement(monkeypatch):
     assert tried == [1]
 
 
-# Seeds 0-21 keep each candidate at least once: the softened scales (0, 6, 11), the turned stretch
-# (18, 21), the half stretch (20).
-@pytest.mark.parametrize("seed", range(22))
-def test_random_atlases_keep_the_rules_whichever_candidate_is_kept(seed):
-    """Square charts with random gaps and random striped or checkered patches: whichever packing is
-    kept (the model's scales or their square roots; the stretch full, turned or at its square
-    root), the layout is valid, the kept packing passes the density rule and the report names the
-    factors and scales used."""
+def _random_atlas(seed):
+    """Square charts with a random gap in a grid of random size, under 1-3 random patches of stripes
+    along u or along the diagonal: (uvs, triangles, lightmap, resolution)."""
     rng = np.random.default_rng(seed)
-    resolution, padding = int(rng.choice([64, 96, 128])), 2.0
+    resolution = int(rng.choice([64, 96, 128]))
     across = int(rng.integers(2, 5))
     uvs, tris, _ = _checkered_corner(resolution, across, gap=float(rng.uniform(0.01, 0.05)))
     i, j = np.mgrid[0:resolution, 0:resolution]
@@ -441,7 +439,19 @@ def test_random_atlases_keep_the_rules_whichever_candidate_is_kept(seed):
         pattern = (j // period) % 2 if rng.random() < 0.5 else ((i + j) // period) % 2
         patch = (slice(r0, r0 + size), slice(c0, c0 + size))
         light[patch] = np.where(pattern[patch] == 0, 1.0, 0.2)
-    lightmap = np.repeat(light[..., None], 3, axis=2)
+    return uvs, tris, np.repeat(light[..., None], 3, axis=2), resolution
+
+
+# Seeds 0-21 keep each stretch candidate at least once: along the main directions (1, 4, 5, 8, 10,
+# 13, 15, 18, 19), turned (21), along the charts' axes (6, 7, 11, 14, 16, 17), at the square roots
+# (12, 20); none (0, 2, 3, 9).
+@pytest.mark.parametrize("seed", range(22))
+def test_random_atlases_keep_the_rules_whichever_candidate_is_kept(seed):
+    """Whichever packing is kept (the model's scales or their square roots; the stretch along the
+    main directions, turned, along the charts' axes or at its square root), the layout is valid,
+    the kept packing passes the density rule and the report names the factors and scales used."""
+    uvs, tris, lightmap, resolution = _random_atlas(seed)
+    padding = 2.0
     result = lmrefine.refine_uvs(lightmap, uvs, tris, resolution, padding=padding)
     # Valid at the padding, or at the input's gutter where that is narrower (a gap of 0.01 at 96^2).
     gutter = min(padding, lmrefine.check_layout(uvs, tris, resolution, padding)["min_gutter_texels"])
@@ -457,11 +467,42 @@ def test_random_atlases_keep_the_rules_whichever_candidate_is_kept(seed):
             allocation.MIN_UTILISATION_KEPT * refused["padded_utilisation_before"]
     stretch = repack["stretch"]
     if stretch and stretch["used"]:
-        first = stretch["candidates"][0]["largest_stretch"]
-        kept = [c for c in stretch["candidates"] if c.get("dense") and c["predicted_error"] < stretch[
-            "predicted_error_unstretched"]][0]
+        candidates = {c["kind"]: c for c in stretch["candidates"]}
+        passed = [c["kind"] for c in stretch["candidates"] if c.get("dense") and c["predicted_error"] < stretch[
+            "predicted_error_unstretched"]]
+        kept = candidates[stretch["kind"]]
+        assert stretch["kind"] == passed[0]  # the first that passes, in the candidates' order
+        assert [c["kind"] for c in stretch["candidates"]][-1] == stretch["kind"]  # none made past it
         assert stretch["largest_stretch"] == kept["largest_stretch"] == pytest.approx(stretch["chart_stretch"].max())
-        assert kept["largest_stretch"] in (pytest.approx(first), pytest.approx(np.sqrt(first)))
+        first = candidates["main"]["largest_stretch"]
+        expected = {"main": first, "turned": first, "half": np.sqrt(first)}.get(stretch["kind"])
+        assert expected is None or kept["largest_stretch"] == pytest.approx(expected)
+
+
+@pytest.mark.parametrize("seed", [6, 7])
+def test_charts_stretched_along_their_axes_stay_rectangles_where_a_sheared_stretch_packs_too_loosely(seed,
+                                                                                                     monkeypatch):
+    """Diagonal stripes shear square charts stretched across them; sheared, and turned to their
+    smallest boxes, they pack too loosely, and the stretch along each chart's u or v axis is kept:
+    measured on the output, every stretched chart is still a rectangle, its aspect its factor
+    squared (a quarter turn aside)."""
+    monkeypatch.setattr(allocation, "FILL_CANDIDATES", 0)  # no growth along one axis after the stretch
+    uvs, tris, lightmap, resolution = _random_atlas(seed)
+    result = lmrefine.refine_uvs(lightmap, uvs, tris, resolution, padding=2.0, triangle_stretch=1.0)
+    stretch = result.report["repack"]["stretch"]
+    assert stretch["used"] and stretch["kind"] == "axes"
+    assert [(c["kind"], c["dense"]) for c in stretch["candidates"]] == [("main", False), ("turned", False),
+                                                                          ("axes", True)]
+    assert stretch["predicted_error"] < stretch["predicted_error_unstretched"]
+    assert lmrefine.check_layout(result.uvs, tris, resolution, 2.0)["valid"]
+    charts = lmrefine.find_charts(uvs, tris, lmrefine.CHART_TOLERANCE)
+    areas = np.bincount(charts, weights=np.abs(allocation.signed_areas(result.uvs, tris)))
+    stretched = np.flatnonzero(stretch["chart_stretch"] > 1.0)
+    assert len(stretched) == stretch["charts_stretched"] >= 1
+    for chart in stretched:
+        width, height = np.ptp(result.uvs[np.unique(tris[charts == chart])].astype(np.float64), axis=0)
+        assert width * height == pytest.approx(areas[chart], rel=1e-4)
+        assert max(width / height, height / width) == pytest.approx(stretch["chart_stretch"][chart] ** 2, rel=1e-3)
 
 
 def test_texel_floor_keeps_two_by_two_texels_and_never_shrinks_a_smaller_chart():

@@ -462,7 +462,7 @@ def test_evaluate_recharts_a_source_with_no_room_and_measures_against_it(tmp_pat
 def test_the_report_says_when_the_repack_or_the_stretch_was_taken_at_square_roots():
     from lmrefine.evaluation_report import repack_lines
     assert repack_lines(None) == []
-    stretch = {"used": True, "charts_stretched": 2, "largest_stretch": 2 ** 0.5, "charts_turned": 0,
+    stretch = {"used": True, "kind": "half", "charts_stretched": 2, "largest_stretch": 2 ** 0.5, "charts_turned": 0,
                "candidates": [{"largest_stretch": 2.0}, {"largest_stretch": 2 ** 0.5}]}
     softened = {"used": True, "refused": {"predicted_error": 0.6, "padded_utilisation_before": 0.93,
                                           "padded_utilisation_after": 0.81}}
@@ -470,9 +470,14 @@ def test_the_report_says_when_the_repack_or_the_stretch_was_taken_at_square_root
     assert "81% full" in scales and "input 93%" in scales and "square roots were packed and kept" in scales
     assert "up to 1.41x; kept (each at the square root of its factor: stretched fully, up to 2.00x" in stretched
     # The full stretch kept, or the repack not softened: no such words.
-    full = dict(stretch, largest_stretch=2.0, candidates=[{"largest_stretch": 2.0}])
+    full = dict(stretch, kind="main", largest_stretch=2.0, candidates=[{"largest_stretch": 2.0}])
     (line,) = repack_lines({"softened": dict(softened, used=False), "stretch": full})
     assert "square root" not in line and "up to 2.00x; kept." in line
+    # Along the charts' axes (a smaller stretch than the full one, not its square root).
+    axes = dict(stretch, kind="axes", largest_stretch=1.6, candidates=[{"largest_stretch": 2.0},
+                                                                       {"largest_stretch": 1.6}])
+    (line,) = repack_lines({"stretch": axes})
+    assert "up to 1.60x; kept, each along its chart's u or v axis" in line and "square root" not in line
     refused = dict(stretch, used=False, reason="the stretched charts do not fit")
     (line,) = repack_lines({"stretch": refused})
     assert "not kept (the stretched charts do not fit)" in line and "square root" not in line

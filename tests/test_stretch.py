@@ -102,6 +102,53 @@ def test_stretch_factor_is_the_models_optimum_and_respects_its_bounds():
     assert factor[2] == 1.0
 
 
+def test_tensor_edge_factor_is_the_trace_of_the_stretched_tensors_root():
+    # tr sqrt(J') / tr sqrt(J), J' the tensor in the stretched frame, read from its eigenvalues.
+    rng = np.random.default_rng(0)
+    shape = rng.normal(size=(6, 2, 2))
+    tensors = shape @ shape.transpose(0, 2, 1)
+    factor = np.array([1.0, 1.2, 1.5, 2.0, 3.0, 0.7])
+    angle = rng.uniform(0, np.pi, 6)
+    direction = np.stack([np.cos(angle), np.sin(angle)], -1)
+    for k in range(6):
+        e1, e2 = direction[k], np.array([-direction[k, 1], direction[k, 0]])
+        frame = np.stack([e1 / factor[k], e2 * factor[k]])  # a gradient's parts along e1, e2 after the stretch
+        stretched = frame @ tensors[k] @ frame.T
+        expected = np.sqrt(np.linalg.eigvalsh(stretched).clip(0)).sum() / np.sqrt(np.linalg.eigvalsh(tensors[k])).sum()
+        assert stretch.tensor_edge_factor(tensors[k:k + 1], factor[k:k + 1], direction[k:k + 1])[0] == \
+            pytest.approx(expected, rel=1e-9)
+    # Along the main direction it is the model's edge_factor.
+    values, vectors = np.linalg.eigh(tensors)
+    share = np.sqrt(values[:, 1]) / np.sqrt(values).sum(axis=1)
+    np.testing.assert_allclose(stretch.tensor_edge_factor(tensors, factor, vectors[:, :, 1]),
+                               stretch.edge_factor(factor, share), rtol=1e-9)
+
+
+def test_axis_stretch_is_the_models_optimum_along_the_axis_the_light_changes_cross_more():
+    # Stripes at 30 degrees to u: their light changes cross u three times as much as v (cos^2 : sin^2).
+    across = np.array([np.cos(np.pi / 6), np.sin(np.pi / 6)])
+    tensors = np.array([16.0 * np.outer(across, across) + np.eye(2), np.eye(2) * 0.5, np.eye(2) * 0.01])
+    uvs, triangles = merge(grid_chart(2, (0.0, 0.0), (0.3, 0.3)), grid_chart(2, (0.4, 0.0), (0.7, 0.3)),
+                           grid_chart(2, (0.0, 0.4), (0.3, 0.7)))
+    charts = lmrefine.find_charts(uvs, triangles, lmrefine.CHART_TOLERANCE)
+    factor, direction, edge = stretch.axis_stretch_factors(tensors, uvs, triangles, charts, (100, 100), 4.0)
+    uu, vv = tensors[0, 0, 0], tensors[0, 1, 1]
+    assert direction[0].tolist() == [1.0, 0.0] and factor[0] == pytest.approx((uu / vv) ** 0.25)
+    grid = np.linspace(1.0, 4.0, 3001)
+    along_u = stretch.tensor_edge_factor(np.repeat(tensors[:1], len(grid), 0), grid,
+                                         np.tile([1.0, 0.0], (len(grid), 1)))
+    assert grid[np.argmin(along_u)] == pytest.approx(factor[0], abs=1e-3)
+    assert edge[0] == pytest.approx(along_u.min(), rel=1e-6) and edge[0] < 1.0
+    # Its gain is less than the stretch along the stripes' own direction gives.
+    main, main_direction, share, _ = stretch.stretch_factors(tensors, uvs, triangles, charts, (100, 100), 4.0)
+    assert stretch.edge_factor(main[0], share[0]) < edge[0]
+    assert factor[1] == factor[2] == 1.0 and edge[1] == edge[2] == 1.0  # isotropic; below the mean chart
+    assert stretch.axis_stretch_factors(tensors, uvs, triangles, charts, (100, 100), 1.2)[0][0] == pytest.approx(1.2)
+    # Light changes crossing v more: stretched along v.
+    turned = tensors[:, ::-1, ::-1]
+    assert stretch.axis_stretch_factors(turned, uvs, triangles, charts, (100, 100), 4.0)[1][0].tolist() == [0.0, 1.0]
+
+
 def _nine_charts():
     """3 x 3 square charts; hard stripes along u over the two top-left ones, flat light elsewhere."""
     uvs, triangles = merge(*[grid_chart(4, (0.02 + a / 3, 0.02 + b / 3), (0.31 + a / 3, 0.31 + b / 3))

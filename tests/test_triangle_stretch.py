@@ -261,7 +261,8 @@ def striped_patches(resolution, seed):
 def test_the_best_served_charts_keep_their_stretch_when_all_are_refused():
     resolution = 128
     uvs, tris = lightmap_pack(6, 2, resolution, 4)
-    result = lmrefine.refine_uvs(striped_patches(resolution, 3), uvs, tris, resolution)
+    # The chart stretch off: the triangle stretch alone decides which charts keep their stretch.
+    result = lmrefine.refine_uvs(striped_patches(resolution, 3), uvs, tris, resolution, max_stretch=1.0)
     report = result.report["triangle_stretch"]
     # Every chart stretched packs too loosely for the model; a few of them do not.
     assert report["every_chart_edge_error"] >= 1.0

@@ -360,8 +360,9 @@ def repack(source_uvs, refined_uvs, triangles, energy, resolution, padding, min_
     each chart across its light changes (lmrefine.stretch) and is kept when
     the model predicts less error for it and it packs about as densely as
     the input; when it does not, a third turns the sheared stretched charts
-    to their smallest boxes, and a fourth stretches each chart by the square
-    root of its factor. A packing the model takes but the density rule
+    to their smallest boxes, a fourth stretches each chart along its u or v
+    axis instead (rectangles stay rectangles), and a fifth stretches each
+    chart by the square root of its factor. A packing the model takes but the density rule
     refuses is packed again at the square roots of the scales (and judged
     the same way). `signal`: signal_scales' result for these arguments, and
     `source_tensors`: stretch.source_tensors' for lightmap, mask and
@@ -468,20 +469,24 @@ def _packing_at(scales, refined_uvs, triangles, charts, edge, smooth, stretched,
             """(charts turned, stretch factors, edge-term factors, packing) of each stretched
             candidate, made only when asked for: the stretched charts as they are (packed beside
             the unstretched ones); when that is refused, the sheared ones among them turned to
-            their smallest boxes; then each chart stretched by the square root of its factor
-            (a stretch costs packing density: half of it costs less)."""
+            their smallest boxes; then each chart stretched along its u or v axis (a chart's box
+            keeps its shape); then each chart stretched by the square root of its factor (a
+            stretch costs packing density: half of it costs less)."""
             from . import stretch
 
             def pack(uvs):
                 return _pack_or_none(uvs, triangles, charts, scales, resolution, padding, _reports_done(progress))
 
-            factor = stretched["factor"]
-            yield np.zeros(len(scales), bool), factor, stretched["edge_factor"], stretched_pack
+            factor, none = stretched["factor"], np.zeros(len(scales), bool)
+            axis = stretched["axis"]
+            yield "main", none, factor, stretched["edge_factor"], stretched_pack
             turned_uvs, turned = stretch.turn_to_smallest_boxes(stretched["uvs"], triangles, charts, factor > 1.0)
             if turned.any():
-                yield turned, factor, stretched["edge_factor"], pack(turned_uvs)
+                yield "turned", turned, factor, stretched["edge_factor"], pack(turned_uvs)
+            if axis is not None:
+                yield "axes", none, axis["factor"], axis["edge_factor"], pack(axis["uvs"])
             half = np.sqrt(factor)
-            yield (np.zeros(len(scales), bool), half, stretch.edge_factor(half, stretched["share"]),
+            yield ("half", none, half, stretch.edge_factor(half, stretched["share"]),
                    pack(stretch.stretch_charts(refined_uvs, triangles, charts, half, stretched["direction"])))
 
         stretch_report, kept = _judge_stretch(stretched, packings(), triangles, charts, resolution, padding,
@@ -555,7 +560,16 @@ def _stretch_candidate(source_uvs, refined_uvs, triangles, charts, lightmap, mas
                                                                max_stretch)
     if not (factor > 1.0).any():
         return None
-    return {"uvs": stretch.stretch_charts(refined_uvs, triangles, charts, factor, direction), "factor": factor,
+    uvs = stretch.stretch_charts(refined_uvs, triangles, charts, factor, direction)
+    # Along the charts' u or v axes: rectangles stay rectangles (a second candidate, where it differs).
+    axis_factor, axis_direction, axis_edge_factor = stretch.axis_stretch_factors(
+        tensors, refined_uvs, triangles, charts, resolution, max_stretch)
+    axis = None
+    if (axis_factor > 1.0).any():
+        axis_uvs = stretch.stretch_charts(refined_uvs, triangles, charts, axis_factor, axis_direction)
+        if not np.array_equal(axis_uvs, uvs):
+            axis = {"uvs": axis_uvs, "factor": axis_factor, "edge_factor": axis_edge_factor}
+    return {"uvs": uvs, "axis": axis, "factor": factor,
             "edge_factor": stretch.edge_factor(factor, share), "weight": weight, "direction": direction,
             "share": share,
             "report": {"charts_stretched": int((factor > 1.0).sum()), "chart_stretch": factor,
@@ -569,17 +583,17 @@ def _judge_stretch(stretched, packings, triangles, charts, resolution, padding, 
     the first candidate that packs as densely as the input and predicts
     less error than the unstretched packing, by `rule` (a KeepRule; with
     rule.lowest every candidate is judged and the lowest prediction kept).
-    `packings` yields each candidate's (charts turned (C,) bool, packing or
-    None when it does not fit) and is read no further than the one kept
-    unless rule.lowest. `final`,
+    `packings` yields each candidate's (kind, charts turned (C,) bool,
+    stretch factors, edge-term factors, packing or None when it does not
+    fit) and is read no further than the one kept unless rule.lowest. `final`,
     `predicted` and `padded_before` are the unstretched packing's scales
     and predicted error and the input's padded density."""
     report = {"used": False, "predicted_error_unstretched": predicted, "charts_turned": 0, **stretched["report"]}
     weight = stretched["weight"]
     before = (weight / np.maximum(np.asarray(final, np.float64), 1e-12)).sum()
     judged, kept = [], None
-    for turned, factor, edge_factor, packing in packings:
-        entry = {"charts_turned": int(turned.sum()), "largest_stretch": float(factor.max()),
+    for kind, turned, factor, edge_factor, packing in packings:
+        entry = {"kind": kind, "charts_turned": int(turned.sum()), "largest_stretch": float(factor.max()),
                  "fits": packing is not None}
         judged.append(entry)
         if packing is None:
@@ -596,8 +610,8 @@ def _judge_stretch(stretched, packings, triangles, charts, resolution, padding, 
         entry["predicted_error"] = predicted * (float(after / before) if before > 0 else 1.0)
         if entry["dense"] and entry["predicted_error"] < (predicted if kept is None else kept[-1]):
             kept = (uvs, pack_report, scales, area, perimeter, entry["predicted_error"])
-            report.update(used=True, charts_turned=entry["charts_turned"], chart_stretch=factor,
-                          largest_stretch=entry["largest_stretch"])
+            report.update(used=True, kind=kind, charts_turned=entry["charts_turned"], chart_stretch=factor,
+                          charts_stretched=int((factor > 1.0).sum()), largest_stretch=entry["largest_stretch"])
             if not rule.lowest:
                 break
     report["candidates"] = judged

@@ -381,12 +381,14 @@ def repack_lines(repack):
     stretched = (repack or {}).get("stretch")
     if stretched:
         first = (stretched.get("candidates") or [{}])[0].get("largest_stretch", stretched["largest_stretch"])
-        half = stretched["used"] and stretched["largest_stretch"] < first * (1 - 1e-9)
+        half = stretched["used"] and stretched.get("kind") == "half"
         lines.append(f"- Chart stretch: {stretched['charts_stretched']} chart(s) stretched across their light "
                      f"changes, up to {stretched['largest_stretch']:.2f}x; " + (
                          "kept" if stretched["used"] else f"not kept ({stretched.get('reason', '')})") + (
                          f", {stretched['charts_turned']} of them turned to their smallest boxes"
                          if stretched.get("charts_turned") else "") + (
+                         ", each along its chart's u or v axis (stretched along the light changes' own directions "
+                         "the atlas packed too loosely)" if stretched.get("kind") == "axes" else "") + (
                          f" (each at the square root of its factor: stretched fully, up to {first:.2f}x, the "
                          f"atlas packed too loosely)" if half else "") + ".")
     return lines

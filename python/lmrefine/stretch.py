@@ -24,7 +24,9 @@ each chart weighted by sqrt(l1) + sqrt(l2), is lower than the unstretched
 packing's and it packs about as densely as the input. When it does not
 pack densely enough, the stretched charts that a stretch along a diagonal
 sheared are turned to their smallest boxes (`turn_to_smallest_boxes`) and
-packed once more, judged by the same rules.
+packed once more; then each chart is stretched along the u or the v axis
+of its frame instead (`axis_stretch_factors`: a rectangle stays a
+rectangle, for less gain, `tensor_edge_factor`), judged by the same rules.
 
 The triangle stretch (`triangle_stretch`, called by refine_uvs after the
 repack) does the same per triangle: each triangle's tensor, averaged with
@@ -150,6 +152,35 @@ def stretch_factors(tensors, uvs, triangles, charts, resolution, max_stretch):
     direction = vectors[:, :, 1]
     roots = np.sqrt(high) + np.sqrt(low)
     share = np.where(roots > 0, np.sqrt(high) / np.maximum(roots, 1e-300), 0.5)
+    factor = _bounded_factors(high, low, direction, roots, uvs, triangles, charts, resolution, max_stretch)
+    return factor, direction, share, roots
+
+
+def axis_stretch_factors(tensors, uvs, triangles, charts, resolution, max_stretch):
+    """Per chart (factor a >= 1, direction (C, 2), edge-term factor): the
+    stretch along the u or the v axis of `uvs`, whichever the chart's light
+    changes cross more (J_uu against J_vv), by the model's best (J_aa /
+    J_bb)^(1/4) (it minimises tensor_edge_factor along that axis), bounded
+    and selected as stretch_factors bounds and selects. A chart stretched
+    along an axis of its frame keeps a rectangular box rectangular, where a
+    stretch along a diagonal shears it: it may pack as densely as the input
+    where the stretch along the main direction does not."""
+    uu, vv = np.maximum(tensors[:, 0, 0], 0.0), np.maximum(tensors[:, 1, 1], 0.0)
+    along_u = uu >= vv
+    direction = np.where(along_u[:, None], np.array([1.0, 0.0]), np.array([0.0, 1.0]))
+    values = np.maximum(np.linalg.eigvalsh(tensors), 0.0)
+    roots = np.sqrt(values[:, 1]) + np.sqrt(values[:, 0])  # the chart's light changes, as stretch_factors'
+    factor = _bounded_factors(np.where(along_u, uu, vv), np.where(along_u, vv, uu), direction, roots, uvs,
+                              triangles, charts, resolution, max_stretch)
+    return factor, direction, tensor_edge_factor(tensors, factor, direction)
+
+
+def _bounded_factors(high, low, direction, roots, uvs, triangles, charts, resolution, max_stretch):
+    """The stretch along `direction` minimising the edge term, (high / low)^(1/4)
+    (`high` and `low` the tensor's entries along and across it), bounded by
+    `max_stretch` and by MIN_WIDTH_TEXELS across the squeezed direction; 1
+    below MIN_STRETCH and for charts whose light changes `roots` are below
+    the mean chart's."""
     with np.errstate(divide="ignore", invalid="ignore"):
         best = np.where(low > 0, (high / np.maximum(low, 1e-300)) ** 0.25, np.inf)
     factor = np.where(high > 0, np.minimum(best, max_stretch), 1.0)
@@ -158,14 +189,32 @@ def stretch_factors(tensors, uvs, triangles, charts, resolution, max_stretch):
     corner_uvs = np.asarray(uvs, np.float64)[triangles] * np.array([width, height])
     along = np.stack([-direction[:, 1], direction[:, 0]], -1)[charts]  # (T, 2)
     projected = np.einsum("tkc,tc->tk", corner_uvs, along)
+    count = len(roots)
     lo = np.full(count, np.inf)
     hi = np.full(count, -np.inf)
     np.minimum.at(lo, charts, projected.min(axis=1))
     np.maximum.at(hi, charts, projected.max(axis=1))
     extent = np.where(hi >= lo, hi - lo, 0.0)
     factor = np.minimum(factor, np.maximum(extent / MIN_WIDTH_TEXELS, 1.0))
-    factor = np.where((factor >= MIN_STRETCH) & (roots >= roots.mean()), factor, 1.0)
-    return factor, direction, share, roots
+    return np.where((factor >= MIN_STRETCH) & (roots >= roots.mean()), factor, 1.0)
+
+
+def tensor_edge_factor(tensors, factor, direction):
+    """The chart model's edge-term factor of stretching each chart by
+    `factor` along `direction` and squeezing it by 1 / factor across it:
+    tr sqrt(J') / tr sqrt(J), J' the structure tensor in the stretched
+    frame (entries J_11 / a^2 and J_22 a^2 along and across the direction,
+    the same determinant; tr sqrt(M) = sqrt(tr M + 2 sqrt(det M)) for a 2 x 2
+    M >= 0). Along the tensor's main direction it is edge_factor."""
+    e1 = np.asarray(direction, np.float64)
+    e2 = np.stack([-e1[:, 1], e1[:, 0]], -1)
+    a2 = np.asarray(factor, np.float64) ** 2
+    along = np.einsum("ci,cij,cj->c", e1, tensors, e1)
+    across = np.einsum("ci,cij,cj->c", e2, tensors, e2)
+    twice_root_det = 2.0 * np.sqrt(np.maximum(np.linalg.det(tensors), 0.0))
+    before = np.sqrt(np.maximum(along + across + twice_root_det, 0.0))
+    after = np.sqrt(np.maximum(along / a2 + across * a2 + twice_root_det, 0.0))
+    return np.where(before > 0, after / np.maximum(before, 1e-300), 1.0)
 
 
 def edge_factor(factor, share):
