@@ -483,7 +483,8 @@ def test_random_atlases_keep_the_rules_whichever_candidate_is_kept(seed):
 def test_charts_stretched_along_their_axes_stay_rectangles_where_a_sheared_stretch_packs_too_loosely(seed,
                                                                                                      monkeypatch):
     """Diagonal stripes shear square charts stretched across them; sheared, and turned to their
-    smallest boxes, they pack too loosely, and the stretch along each chart's u or v axis is kept:
+    smallest boxes, they pack too loosely for the density rule, and the stretch along each chart's u
+    or v axis is kept:
     measured on the output, every stretched chart is still a rectangle, its aspect its factor
     squared (a quarter turn aside)."""
     monkeypatch.setattr(allocation, "FILL_CANDIDATES", 0)  # no growth along one axis after the stretch
@@ -503,6 +504,11 @@ def test_charts_stretched_along_their_axes_stay_rectangles_where_a_sheared_stret
         width, height = np.ptp(result.uvs[np.unique(tris[charts == chart])].astype(np.float64), axis=0)
         assert width * height == pytest.approx(areas[chart], rel=1e-4)
         assert max(width / height, height / width) == pytest.approx(stretch["chart_stretch"][chart] ** 2, rel=1e-3)
+    # A fallback for the density rule alone: the library's own packing (no density rule) never tries it.
+    energy = lmrefine.gradient_map(lightmap).sum(axis=2)
+    report = allocation.repack(uvs, uvs, tris, energy, (resolution,) * 2, 2.0, 0.5, 2.0, lightmap=lightmap,
+                               max_stretch=2.0, own_packing=True)[1]
+    assert [c["kind"] for c in report["stretch"]["candidates"]] == ["main", "turned", "half"]  # every one judged
 
 
 def test_texel_floor_keeps_two_by_two_texels_and_never_shrinks_a_smaller_chart():
