@@ -360,11 +360,12 @@ def repack(source_uvs, refined_uvs, triangles, energy, resolution, padding, min_
     each chart across its light changes (lmrefine.stretch) and is kept when
     the model predicts less error for it and it packs about as densely as
     the input; when it does not, a third turns the sheared stretched charts
-    to their smallest boxes, a fourth stretches each chart along its u or v
-    axis instead (rectangles stay rectangles), and a fifth stretches each
-    chart by the square root of its factor. A packing the model takes but the density rule
-    refuses is packed again at the square roots of the scales (and judged
-    the same way). `signal`: signal_scales' result for these arguments, and
+    to their smallest boxes, a fourth (where a density rule refused those:
+    not for own_packing) stretches each chart along its u or v axis instead
+    (rectangles stay rectangles), and a fifth stretches each chart by the
+    square root of its factor. A packing the model takes but the density
+    rule refuses is packed again at the square roots of the scales (and
+    judged the same way). `signal`: signal_scales' result for these arguments, and
     `source_tensors`: stretch.source_tensors' for lightmap, mask and
     source_uvs, when the caller has them. `own_packing`: refined_uvs's
     charts were packed at one scale by this library (the re-chart route),
@@ -466,12 +467,13 @@ def _packing_at(scales, refined_uvs, triangles, charts, edge, smooth, stretched,
     stretch_report = None
     if stretched is not None:
         def packings():
-            """(charts turned, stretch factors, edge-term factors, packing) of each stretched
-            candidate, made only when asked for: the stretched charts as they are (packed beside
-            the unstretched ones); when that is refused, the sheared ones among them turned to
-            their smallest boxes; then each chart stretched along its u or v axis (a chart's box
-            keeps its shape); then each chart stretched by the square root of its factor (a
-            stretch costs packing density: half of it costs less)."""
+            """(kind, charts turned, stretch factors, edge-term factors, packing) of each
+            stretched candidate, made only when asked for: the stretched charts as they are
+            (packed beside the unstretched ones); when that is refused, the sheared ones among
+            them turned to their smallest boxes; then, where a density rule refused those, each
+            chart stretched along its u or v axis (a chart's box keeps its shape); then each
+            chart stretched by the square root of its factor (a stretch costs packing density:
+            half of it costs less)."""
             from . import stretch
 
             def pack(uvs):
