@@ -243,6 +243,18 @@ def test_layout_is_welded_within_blenders_connect_limit(facts):
     assert value["raw_unchanged"]
 
 
+def test_a_second_click_bakes_the_materials_not_the_preview(facts):
+    # The first run's preview shows the lightmap through an Emission: read as the floor's colour it
+    # doubled the indirect light, and in a Cycles bake it turned the first lightmap black.
+    value = fact(facts, "second_click_bakes_the_materials_not_the_preview")
+    for backend, run in value.items():
+        assert run["outcomes"] == ["FINISHED", "FINISHED"], run["messages"]
+        assert run["preview_output_active"] == [True, True]
+        for name, difference in run["max_difference"].items():
+            assert run["means"][0][name] > 0.01, (backend, name)
+            assert difference < 1e-5, (backend, name, run["means"])
+
+
 def test_default_source_layer(facts):
     assert fact(facts, "bridge_default_layers") == {
         "UVMap": "UVMap",
@@ -250,6 +262,8 @@ def test_default_source_layer(facts):
         "UVMap+Detail+LightmapUV": "LightmapUV",
         "A+B+C": "B",
         "UVMap+UVMap.001+UVMap.001_refined": "UVMap.001",
+        # A per-effect run's maps are outputs too, not the lightmap source.
+        "UVMap+UVMap_refined_direct+UVMap_refined_indirect": "UVMap",
     }
 
 

@@ -12,6 +12,7 @@ Nothing here decides anything about the method; it converts. Conventions:
   Image.pixels is bottom-up, so rows are flipped here and nowhere else.
 """
 
+import re
 from dataclasses import dataclass
 
 import bpy
@@ -56,7 +57,9 @@ def default_source_layer(mesh):
     A map named like "Lightmap"/"LM"/"UVMap.001" wins; else the second map
     (the first is by convention the texture UVs); a single map is used as is.
     """
-    names = [layer.name for layer in mesh.uv_layers if not layer.name.endswith("_refined")]
+    # The add-on's own output maps (`<source>_refined`, and a per-effect run's `<source>_refined_<effect>`)
+    # are never a source: refining a refined map takes texels from the light changes it gave them.
+    names = [layer.name for layer in mesh.uv_layers if not re.search(r"_refined(_[a-z]+)?$", layer.name)]
     for name in names:
         lowered = name.lower()
         if "lightmap" in lowered or lowered in {"lm", "uvmap.001", "uv2", "uvmap2"}:

@@ -5,6 +5,8 @@ Every node the add-on adds carries the custom property ``lmrefine_role`` (and
 removed again without guessing from names that the user may have changed.
 """
 
+import contextlib
+
 import bpy
 
 from .errors import UserError
@@ -194,6 +196,23 @@ def add_terms_preview(obj, after_images, after_uvs, before_images, before_uvs, j
     _apply_preview(obj, TERM_SEPARATOR.join(image.name for image in after_images), TERM_SEPARATOR.join(after_uvs),
                    before, TERM_SEPARATOR.join(before_uvs) if before_images else "", shown)
     journal.on_rollback(lambda: remove_preview(obj))
+
+
+@contextlib.contextmanager
+def previews_hidden(objects):
+    """The previews of `objects` taken off while a bake reads the scene's
+    materials, and put back as they were: a preview's Emission would be read
+    as the surface's colour by lmrefine's baker and would shine as a light
+    (or hide the surface) in a Cycles bake."""
+    hidden = [(obj, _preview_params(obj)) for obj in objects if obj.type == 'MESH' and has_preview(obj)]
+    for obj, _ in hidden:
+        remove_preview(obj)
+    try:
+        yield
+    finally:
+        for obj, params in hidden:
+            if not has_preview(obj):
+                _apply_preview(obj, **params)
 
 
 def preview_terms(obj):

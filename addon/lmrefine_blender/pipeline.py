@@ -837,7 +837,8 @@ def _bake_embree(context, lmrefine, targets, uv_name_of, passes, options, label,
     """Bake `passes` with lmrefine's baker; returns {pass: {object name: (R, R, 4) float32}}.
     Occluders left out of the bake are named in `warnings` (once)."""
     left_out = []
-    receivers, occluders = bridge.export_scene(context, [t.obj for t in targets], uv_name_of, left_out)
+    with materials.previews_hidden(context.scene.objects):  # the materials as the user made them
+        receivers, occluders = bridge.export_scene(context, [t.obj for t in targets], uv_name_of, left_out)
     for name in left_out:
         warning = (f"'{name}' casts no shadow in the bake: it has vertices at NaN, Inf or beyond 1e9 units; "
                    "fix or delete them (Edit Mode > Select > Select All by Trait), or check its transform")
@@ -874,8 +875,9 @@ def _bake_cycles(context, targets, uv_name_of, passes, options, label, start, sp
         for index, (name, target) in enumerate((n, t) for n in passes for t in targets):
             obj = target.obj
             yield NativeWork(f"{label}: {name} of {obj.name} (Cycles)", None, start + span * index / steps, 0.0)
-            baked[name][obj.name] = cycles_bake.bake_object(context, obj, uv_name_of[obj.name], name,
-                                                            options["resolution"], BAKE_MARGIN)
+            with materials.previews_hidden(context.scene.objects):  # the materials as the user made them
+                baked[name][obj.name] = cycles_bake.bake_object(context, obj, uv_name_of[obj.name], name,
+                                                                options["resolution"], BAKE_MARGIN)
     return baked
 
 

@@ -552,7 +552,8 @@ def bridge_default_layers():
     mesh.from_pydata([(0, 0, 0), (1, 0, 0), (1, 1, 0)], [], [(0, 1, 2)])
     answers = {}
     for names in (["UVMap"], ["UVMap", "UVMap.001"], ["UVMap", "Detail", "LightmapUV"], ["A", "B", "C"],
-                  ["UVMap", "UVMap.001", "UVMap.001_refined"]):
+                  ["UVMap", "UVMap.001", "UVMap.001_refined"],
+                  ["UVMap", "UVMap_refined_direct", "UVMap_refined_indirect"]):
         while mesh.uv_layers:
             mesh.uv_layers.remove(mesh.uv_layers[0])
         for name in names:
@@ -754,6 +755,33 @@ def end_to_end_two_objects_cycles():
     """The same with Cycles: its margin averages the box's neighbouring charts; the stored images have
     the gutter lmrefine's baker fills."""
     return _two_objects('CYCLES')
+
+
+@check("refine", "bake")
+def second_click_bakes_the_materials_not_the_preview():
+    """Refined twice with the same settings: the first run's preview (an Emission in the floor's
+    material) is off while the second run bakes, so both runs bake the same light, and it is back
+    (refreshed) after the run."""
+    facts = {}
+    for backend, passes in (('EMBREE', {'DIRECT', 'INDIRECT'}), ('CYCLES', {'DIRECT'})):
+        fresh_shadow_scene(first_lightmap=backend, backend=backend, bake_passes=passes)
+        floor = bpy.data.objects["Floor"]
+        runs = []
+        for _ in range(2):
+            outcome, message = refine()
+            images = {p: np.array(bpy.data.images[f"Floor_lightmap_{p.lower()}"].pixels[:]) for p in sorted(passes)}
+            nodes = bpy.data.materials["FloorMaterial"].node_tree.nodes
+            runs.append({"outcome": outcome, "message": message, "images": images,
+                         "preview_output_active": any(n.get("lmrefine_role") == "preview_output" and n.is_active_output
+                                                      for n in nodes)})
+        facts[backend] = {
+            "outcomes": [run["outcome"] for run in runs], "messages": [run["message"] for run in runs],
+            "means": [{p: float(image.mean()) for p, image in run["images"].items()} for run in runs],
+            "max_difference": {p: float(np.abs(runs[1]["images"][p] - runs[0]["images"][p]).max())
+                               for p in runs[0]["images"]},
+            "preview_output_active": [run["preview_output_active"] for run in runs],
+        }
+    return facts
 
 
 @check("refine")
