@@ -255,6 +255,20 @@ def test_a_second_click_bakes_the_materials_not_the_preview(facts):
             assert difference < 1e-5, (backend, name, run["means"])
 
 
+def test_undo_after_a_second_run_brings_back_the_first_runs_lightmap(facts):
+    # Pixels written from Python are not in Blender's undo: the second run writes a new image (and a
+    # new file) and the first run's stays as it was, so Ctrl+Z shows the first run's map, not garbage.
+    value = fact(facts, "undo_after_a_second_run_brings_back_the_first_runs_lightmap")
+    assert value["outcomes"] == ["FINISHED", "FINISHED"]
+    assert value["runs_differ"] > 0.01  # the second run's map is another
+    assert value["undone_difference"] == 0.0 and value["uvs_difference"] == 0.0
+    assert value["reloaded_difference"] < 1e-3  # its file too (half-float EXR)
+    assert value["files"] == ["Floor_lightmap_before.exr", "Floor_lightmap_before_2.exr",
+                              "Floor_lightmap_direct.exr", "Floor_lightmap_direct_2.exr"]
+    assert value["preview_images"] == ["Floor_lightmap_direct"]
+    assert "Floor_lightmap_direct (earlier run)" not in value["images"]  # undone with the run
+
+
 def test_default_source_layer(facts):
     assert fact(facts, "bridge_default_layers") == {
         "UVMap": "UVMap",

@@ -11,6 +11,7 @@ No algorithm here: the layout comes from lmrefine.refine_uvs and is checked
 with lmrefine.check_layout; lightmaps come from lmrefine.bake or Cycles.
 """
 
+import itertools
 import os
 import re
 import sys
@@ -914,32 +915,44 @@ def _write_refined_layer(target, uvs, journal):
 
 
 def _store_image(group, pass_name, pixels, journal):
-    """The lightmap image of an atlas group for `pass_name` (reused across runs), holding `pixels`:
+    """The lightmap image of an atlas group for `pass_name`, a new one holding `pixels`:
     `<group name>_lightmap_<pass>` (atlas.AtlasGroup.name: the object's name, or "<first>_atlas").
 
     Alpha is written as 1 everywhere, like Cycles' bake output: Blender stores
     EXR premultiplied, so an alpha-0 gutter would lose its dilated colour on
     the next load and seams would show. Coverage comes from the UV layout.
     The image keeps a fake user so it survives saving even without a material.
+
+    An earlier run's image of that name is left as it was (pixels and file): it
+    gives the name and every use (a user's own material's too) to the new one
+    and loses its fake user, so it is not saved with the .blend unless Ctrl+Z
+    brings it back (Blender's undo does not keep pixels written from Python,
+    so writing into it could not be undone).
     """
     pixels = np.array(pixels, dtype=np.float32)  # a copy: never modify the baker's array
     pixels[..., 3] = 1.0
     name = f"{group.name}_lightmap_{pass_name}"
-    image = bpy.data.images.get(name)
-    if image is not None and image.get("lmrefine_object") == group.name and image.library is None:
-        previous = bridge.image_to_array(image)
-        previous_objects = image.get("lmrefine_objects", group.name)
+    earlier = bpy.data.images.get(name)
+    if earlier is not None and not (earlier.get("lmrefine_object") == group.name and earlier.library is None):
+        earlier = None  # not the add-on's: the new image gets Blender's next free name
+    if earlier is not None:
+        earlier.name = f"{name} (earlier run)"
+        earlier.use_fake_user = False
+    image = bridge.new_float_image(name, pixels.shape[0])
+    image["lmrefine_object"] = group.name
+    image["lmrefine_pass"] = pass_name
+    image.use_fake_user = True
+    if earlier is not None:
+        earlier.user_remap(image)
 
-        def restore():
-            bridge.array_to_image(image, previous)
-            image["lmrefine_objects"] = previous_objects
-        journal.on_rollback(restore)
-    else:
-        image = bridge.new_float_image(name, pixels.shape[0])
-        image["lmrefine_object"] = group.name
-        image["lmrefine_pass"] = pass_name
-        image.use_fake_user = True
-        journal.on_rollback(lambda: bpy.data.images.remove(image))
+    def remove():
+        if earlier is not None:
+            image.user_remap(earlier)
+        bpy.data.images.remove(image)
+        if earlier is not None:
+            earlier.name = name
+            earlier.use_fake_user = True
+    journal.on_rollback(remove)
     image["lmrefine_objects"] = ", ".join(group.objects)  # who shares it (one object, or an atlas group)
     bridge.array_to_image(image, pixels)
     return image
@@ -953,15 +966,17 @@ def _save_image(lmrefine, image, image_dir, precision):
     one asked for, and the image is reloaded from it: what Blender shows is what
     was written. Runs last: a file on disk is the one change a rollback cannot take back.
     """
-    filename = bpy.path.clean_name(image.name) + ".exr"
     pixels = bridge.image_to_array(image)
     if image_dir is not None:
+        filename = _free_filename(os.path.abspath(image_dir), image)
         path = os.path.join(os.path.abspath(image_dir), filename)
         stored = path
     elif bpy.data.filepath:
+        filename = _free_filename(os.path.dirname(bpy.data.filepath), image)
         path = os.path.join(os.path.dirname(bpy.data.filepath), filename)
         stored = "//" + filename
     else:
+        filename = bpy.path.clean_name(image.name) + ".exr"
         with tempfile.TemporaryDirectory(prefix="lmrefine") as folder:
             temporary = os.path.join(folder, filename)
             lmrefine.write_image(temporary, pixels, format=precision)
@@ -975,6 +990,18 @@ def _save_image(lmrefine, image, image_dir, precision):
         raise RuntimeError(f"could not write lightmap '{path}': {error}") from error
     _load_from(image, stored)
     return path
+
+
+def _free_filename(folder, image):
+    """`<image name>.exr`, or `<image name>_2.exr`, ... where another image (an earlier run's, which
+    Ctrl+Z may bring back) reads that file: its file is never written over."""
+    used = {os.path.normpath(bpy.path.abspath(other.filepath_raw)) for other in bpy.data.images
+            if other != image and other.source == 'FILE' and other.filepath_raw}
+    stem = bpy.path.clean_name(image.name)
+    for number in itertools.count(1):
+        filename = f"{stem}.exr" if number == 1 else f"{stem}_{number}.exr"
+        if os.path.normpath(os.path.join(folder, filename)) not in used:
+            return filename
 
 
 def _load_from(image, filepath):

@@ -784,6 +784,39 @@ def second_click_bakes_the_materials_not_the_preview():
     return facts
 
 
+@check("refine", "bake")
+def undo_after_a_second_run_brings_back_the_first_runs_lightmap():
+    """A saved scene refined, then refined again with another Strength, then Ctrl+Z: the UV maps and
+    the lightmap image (its pixels, and its file, read again) are the first run's."""
+    fresh_shadow_scene(**EMBREE_DIRECT)
+    os.makedirs(os.path.join(WORK_DIR, "undo_rerun"), exist_ok=True)
+    bpy.ops.wm.save_as_mainfile(filepath=os.path.join(WORK_DIR, "undo_rerun", "scene.blend"))
+    floor = bpy.data.objects["Floor"]
+    name = "Floor_lightmap_direct"
+    first_outcome, _ = refine()
+    first = np.array(bpy.data.images[name].pixels[:])
+    first_uvs = bridge.read_uv_layer(floor.data, "Lightmap_refined")
+    settings(strength=2.0)
+    _, second_outcome, _ = _refine_as_one_undo_step()
+    second = np.array(bpy.data.images[name].pixels[:])
+    files = sorted(f for f in os.listdir(os.path.join(WORK_DIR, "undo_rerun")) if f.endswith(".exr"))
+    with bpy.context.temp_override(window=bpy.context.window_manager.windows[0]):
+        bpy.ops.ed.undo()
+    image = bpy.data.images[name]
+    undone = np.array(image.pixels[:])
+    image.reload()  # what its file holds
+    reloaded = np.array(image.pixels[:])
+    preview = [n.image.name for n in bpy.data.materials["FloorMaterial"].node_tree.nodes
+               if n.get("lmrefine_role") == "preview_image"]
+    return {"outcomes": [first_outcome, second_outcome], "runs_differ": float(np.abs(second - first).max()),
+            "undone_difference": float(np.abs(undone - first).max()),
+            "reloaded_difference": float(np.abs(reloaded - first).max()),
+            "uvs_difference": float(np.abs(bridge.read_uv_layer(bpy.data.objects["Floor"].data, "Lightmap_refined")
+                                           - first_uvs).max()),
+            "files": files, "preview_images": preview,
+            "images": sorted(i.name for i in bpy.data.images if i.name.startswith("Floor_lightmap"))}
+
+
 @check("refine")
 def black_first_lightmap_warns():
     """No light at all: the run succeeds, says why nothing moved, and the layout is the source's."""
