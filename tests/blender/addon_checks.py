@@ -765,7 +765,6 @@ def second_click_bakes_the_materials_not_the_preview():
     facts = {}
     for backend, passes in (('EMBREE', {'DIRECT', 'INDIRECT'}), ('CYCLES', {'DIRECT'})):
         fresh_shadow_scene(first_lightmap=backend, backend=backend, bake_passes=passes)
-        floor = bpy.data.objects["Floor"]
         runs = []
         for _ in range(2):
             outcome, message = refine()
