@@ -159,3 +159,25 @@ def test_inputs_are_not_modified():
     scene.add_mesh(positions, triangles, uvs=uvs, normals=normals)
     for original, copy in zip((positions, triangles, uvs, normals), copies):
         np.testing.assert_array_equal(original, copy)
+
+
+def test_a_scene_cannot_change_while_it_is_baked():
+    # The bake reads the scene's arrays with the GIL released; a light added from its progress
+    # callback (or another thread) would reallocate them under it.
+    scene = lmrefine.Scene()
+    uvs = np.float32([[0.1, 0.1], [0.9, 0.1], [0.9, 0.9], [0.1, 0.1], [0.9, 0.9], [0.1, 0.9]])
+    scene.add_mesh(np.float32([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]]), np.int32([[0, 1, 2], [0, 2, 3]]),
+                   uvs=uvs)
+    scene.add_light("point", energy=10.0, position=(0.5, 0.5, 1.0))
+
+    def progress(fraction, stage):
+        scene.add_light("point", energy=10.0, position=(0.5, 0.5, 2.0))
+
+    for call in (lambda: lmrefine.bake(scene, 16, samples=1, progress=progress),
+                 lambda: lmrefine.evaluate(scene, np.float32([[0.5, 0.5, 0.0]]), np.float32([[0, 0, 1]]),
+                                           samples=1, progress=progress)):
+        with pytest.raises(ValueError, match="while the scene is being baked"):
+            call()
+    assert scene.light_count == 1
+    scene.add_light("point", energy=10.0, position=(0.5, 0.5, 2.0))  # after the calls return
+    assert scene.light_count == 2

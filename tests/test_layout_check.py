@@ -71,6 +71,20 @@ def test_a_chart_inside_another_overlaps():
     assert lmrefine.check_layout(uvs, tris, R)["overlapping"] == 2 + 2 * 1  # the small chart and what it lies on
 
 
+def test_stacked_faces_all_overlap_whatever_the_stack_depth():
+    # A texture map taken for a lightmap: faces stacked on one square, each its own chart (UV indices
+    # of its own) or all one chart (shared UV indices); the squares elsewhere overlap nothing. Each
+    # stacked triangle is found once a partner is: the same triangles as testing every pair.
+    own = merge(*[square(0.1, 0.1, 0.3) for _ in range(30)])
+    shared_uvs, shared_tris = square(0.6, 0.1, 0.3)
+    shared = (shared_uvs, np.concatenate([shared_tris] * 30))
+    apart = merge(*[square(0.1 + 0.2 * k, 0.6, 0.1) for k in range(4)])
+    uvs, tris = merge(own, shared, apart)
+    report = lmrefine.check_layout(uvs, tris, R)
+    assert report["overlapping"] == 60 + 60 and not report["valid"]
+    assert lmrefine.check_layout(*apart, R)["overlapping"] == 0
+
+
 def test_flips_against_the_chart_majority_and_against_a_reference():
     uvs, tris = plane(4)
     one_flipped = tris.copy()

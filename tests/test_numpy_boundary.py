@@ -23,3 +23,15 @@ def test_arrays_from_another_process_are_accepted():
                                   lmrefine.run_automaton(energy, mask)["grid"])
     with pytest.raises(ValueError, match="float32"):
         lmrefine.gradient_map(energy.astype(">f4"), mask)
+
+
+def test_an_unaligned_array_is_copied_before_a_kernel_reads_it():
+    # A view at an odd byte offset is C-contiguous but not aligned for float32: read in place it is
+    # undefined behaviour (UBSan's misaligned load); the kernel gets an aligned copy, the same values.
+    rng = np.random.default_rng(0)
+    lightmap = rng.random((32, 32, 3), dtype=np.float32)
+    raw = np.zeros(lightmap.nbytes + 1, np.uint8)
+    raw[1:] = lightmap.view(np.uint8).ravel()
+    unaligned = np.frombuffer(raw.data, np.float32, offset=1).reshape(lightmap.shape)
+    assert not unaligned.flags.aligned and unaligned.flags.c_contiguous
+    np.testing.assert_array_equal(lmrefine.gradient_map(unaligned), lmrefine.gradient_map(lightmap))

@@ -286,7 +286,8 @@ def test_corners_within_the_tolerance_are_snapped_into_one_chart():
     (dict(charts=np.array([0, 7 << 24, 1], ">i4")), r"chart ids must be in \[0, 3\)"),
     (dict(tolerance=-1.0), "tolerance"),
     (dict(subdivision=0), "subdivision"),
-    (dict(resolution=4, padding=50.0), "fit"),
+    (dict(resolution=4, padding=50.0), "wider than the diagonal of the 4 x 4 atlas"),
+    (dict(resolution=4, padding=5.5), "fit"),
 ])
 def test_bad_input_raises_a_clear_value_error(change, message):
     uvs, tris = merge(grid_chart(1, (0, 0), (0.5, 0.5)), grid_chart(1, (0.6, 0.6), (0.9, 0.9)))
@@ -573,3 +574,10 @@ def test_charts_that_fit_only_collapsed_are_refused():
     charts = lmrefine.find_charts(uvs, tris)
     with pytest.raises(ValueError, match="collapse to lines"):
         lmrefine.pack_charts(uvs, tris, charts, np.array([1.0, 1e-30]), 64, 2.0)
+
+
+def test_a_padding_wider_than_the_atlas_is_refused_at_once():
+    uvs, tris = merge(grid_chart(1, (0.1, 0.1), (0.4, 0.4)), grid_chart(1, (0.6, 0.6), (0.9, 0.9)))
+    with pytest.raises(ValueError, match="wider than the diagonal of the 64 x 64 atlas"):
+        lmrefine.pack_charts(uvs, tris, None, None, 64, padding=3000.0)
+    lmrefine.pack_charts(uvs, tris, None, None, 64, padding=8.0)  # a wide gutter that fits

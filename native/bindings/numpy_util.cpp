@@ -31,10 +31,20 @@ std::string type_name(const py::handle& object) {
 
 }  // namespace
 
+namespace {
+
+// A view into a buffer at an odd offset is C-contiguous but not aligned: the
+// kernels read it as float or int, which needs the element's alignment.
+bool aligned(const py::array& array) {
+    return (array.flags() & py::detail::npy_api::NPY_ARRAY_ALIGNED_) != 0;
+}
+
+}  // namespace
+
 py::array contiguous_array(const py::handle& object, const char* name, const py::dtype& dtype) {
     if (py::isinstance<py::array>(object)) {
         auto array = py::reinterpret_borrow<py::array>(object);
-        const bool as_is = array.dtype().equal(dtype) && (array.flags() & py::array::c_style);
+        const bool as_is = array.dtype().equal(dtype) && (array.flags() & py::array::c_style) && aligned(array);
         if (as_is) return array;
         require_memory(std::string("a contiguous ") + py::str(py::handle(dtype)).cast<std::string>() + " copy of " + name +
                            " " + shape_string(array),
@@ -42,7 +52,11 @@ py::array contiguous_array(const py::handle& object, const char* name, const py:
                        std::string("pass a smaller ") + name);
     }
     try {
-        return py::module_::import("numpy").attr("ascontiguousarray")(object, dtype);
+        const py::module_ numpy = py::module_::import("numpy");
+        py::array array = numpy.attr("ascontiguousarray")(object, dtype);
+        // ascontiguousarray hands back an unaligned contiguous array as it is; a copy is aligned.
+        if (!aligned(array)) array = numpy.attr("array")(array, py::arg("copy") = true);
+        return array;
     } catch (py::error_already_set& e) {
         const std::string message = std::string(name) + " cannot be converted to a " +
                                     py::str(py::handle(dtype)).cast<std::string>() + " array: " + e.what();

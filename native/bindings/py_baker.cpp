@@ -57,6 +57,7 @@ py::tuple bake_native(const Scene& scene, const py::handle& resolution, const st
     options.denoise = denoise;
     options.atlas = atlas;
     py_util::PythonProgress reporter(progress);
+    const Scene::Reading reading(scene);
     BakeResult result = reporter.run([&](Progress& p) { return bake(scene, options, p); });
     py::list maps;
     for (auto& map : result.maps) {
@@ -80,6 +81,7 @@ py::tuple evaluate_native(const Scene& scene, const py::handle& points_in, const
     }
     const BakeOptions options = make_options(passes, samples, seed, bounces, ao_distance);
     py_util::PythonProgress reporter(progress);
+    const Scene::Reading reading(scene);
     const int64_t count = points.shape(0);
     EvaluateResult result =
         reporter.run([&](Progress& p) { return evaluate(scene, points.data(), normals.data(), count, options, p); });
@@ -142,6 +144,7 @@ void bind_baker(py::module_& m) {
             const int64_t count = rays.shape(0);
             OcclusionLoopResult result;
             {
+                const Scene::Reading reading(scene);
                 py::gil_scoped_release release;
                 result = time_occluded_loop(scene, rays.data(), count);
             }

@@ -23,6 +23,7 @@ py::tuple trace_rays(const Scene& scene, const py::handle& origins_in, const py:
     }
     const int64_t count = origins.shape(0);
     py_util::PythonProgress reporter(progress);
+    const Scene::Reading reading(scene);
     PrimaryHits hits = reporter.run(
         [&](Progress& p) { return trace_primary_rays(scene, origins.data(), directions.data(), count, p); });
     const py::ssize_t n = py::ssize_t(count);

@@ -871,7 +871,7 @@ def _pack_both(uvs, stretched_uvs, triangles, charts, scales, resolution, paddin
 
     def first_progress(fraction, stage):
         keep_going = True if progress is None else progress(fraction, stage)
-        if keep_going is False:
+        if keep_going is not None and not keep_going:  # any false value but None cancels
             cancelled.set()
         return keep_going
 

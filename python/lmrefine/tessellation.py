@@ -256,7 +256,8 @@ def tessellate(positions, triangles, uvs, strength, *, budget=DEFAULT_BUDGET, mi
     allowed = min(int(np.floor(budget * vertex_count)), strength.size)
 
     def report_progress():
-        if progress is not None and progress(min(len(splits) / max(allowed, 1), 1.0), "tessellate") is False:
+        answer = None if progress is None else progress(min(len(splits) / max(allowed, 1), 1.0), "tessellate")
+        if answer is not None and not answer:  # any false value but None cancels, as for every call
             raise _native.CancelledError("tessellation cancelled")
     # Copies: the caller's arrays are never modified.
     corner = {"uv": uvs.reshape(-1, 3, 2).copy()}

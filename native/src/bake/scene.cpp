@@ -33,7 +33,17 @@ bool is_degenerate(const glm::vec3& a, const glm::vec3& b, const glm::vec3& c) {
 
 }  // namespace
 
+void Scene::check_not_read(const char* what) const {
+    if (readers_.load() > 0) {
+        LMREFINE_THROW(InvalidArgument, std::string("cannot ") + what +
+                                            " while the scene is being baked, evaluated or traced (from its progress "
+                                            "callback or another thread): add everything before the call, or after "
+                                            "it returns");
+    }
+}
+
 int Scene::add_mesh(const MeshInput& in) {
+    check_not_read("add a mesh");
     const std::string where = mesh_name(meshes_.size());
     LMREFINE_REQUIRE(in.vertex_count > 0 && in.triangle_count > 0, where + "positions and triangles must not be empty");
     LMREFINE_REQUIRE(in.base_color_count == 1 || in.base_color_count == in.triangle_count,
@@ -122,12 +132,14 @@ int Scene::add_mesh(const MeshInput& in) {
 }
 
 int Scene::add_light(Light light) {
+    check_not_read("add a light");
     validate_light(light);
     lights_.push_back(light);
     return int(lights_.size() - 1);
 }
 
 void Scene::set_world(const glm::vec3& color) {
+    check_not_read("set the world colour");
     for (int k = 0; k < 3; ++k) {
         LMREFINE_REQUIRE(std::isfinite(color[k]) && color[k] >= 0.0f,
                          "world colour must be finite and >= 0 (it is the sky's radiance)");

@@ -122,15 +122,20 @@ void mark_overlaps_inside_charts(const UvLayout& layout, const LayoutRaster& ras
     for (size_t begin = 0; begin < stacked.size();) {
         size_t end = begin;
         while (end < stacked.size() && stacked[end].first == stacked[begin].first) ++end;
+        // Each triangle not known to overlap yet looks for one partner: the same
+        // triangles end up marked as by testing every pair, but a texel under n
+        // stacked faces (a texture map taken for a lightmap) costs about n tests,
+        // not n^2.
         for (size_t p = begin; p < end; ++p) {
             const int32_t a = stacked[p].second;
-            for (size_t q = p + 1; q < end; ++q) {
+            if (overlapping[size_t(a)]) continue;
+            for (size_t q = begin; q < end; ++q) {
                 const int32_t b = stacked[q].second;
-                if (charts.triangle_chart[size_t(a)] != charts.triangle_chart[size_t(b)]) continue;
-                if (overlapping[size_t(a)] && overlapping[size_t(b)]) continue;
+                if (q == p || charts.triangle_chart[size_t(a)] != charts.triangle_chart[size_t(b)]) continue;
                 if (triangles_overlap(pixel_triangle(layout, layout.uvs, a, width, height),
                                       pixel_triangle(layout, layout.uvs, b, width, height))) {
                     overlapping[size_t(a)] = overlapping[size_t(b)] = 1;
+                    break;
                 }
             }
         }
@@ -398,15 +403,17 @@ LayoutReport LayoutChecker::check_against(const UvLayout& layout, const LayoutRa
     for (size_t begin = 0; begin < shared.size();) {
         size_t end = begin;
         while (end < shared.size() && shared[end].first == shared[begin].first) ++end;
+        // One partner per triangle not known to overlap yet (as inside charts, below).
         for (size_t p = begin; p < end; ++p) {
             const int32_t a = shared[p].second;
-            for (size_t q = p + 1; q < end; ++q) {
+            if (overlapping[size_t(a)]) continue;
+            for (size_t q = begin; q < end; ++q) {
                 const int32_t b = shared[q].second;
-                if (charts.triangle_chart[size_t(a)] == charts.triangle_chart[size_t(b)]) continue;
-                if (overlapping[size_t(a)] && overlapping[size_t(b)]) continue;
+                if (q == p || charts.triangle_chart[size_t(a)] == charts.triangle_chart[size_t(b)]) continue;
                 if (triangles_overlap(pixel_triangle(layout, layout.uvs, a, width, height),
                                       pixel_triangle(layout, layout.uvs, b, width, height))) {
                     overlapping[size_t(a)] = overlapping[size_t(b)] = 1;
+                    break;
                 }
             }
         }

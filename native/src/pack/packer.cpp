@@ -426,6 +426,13 @@ PackResult pack_charts(const UvLayout& layout, const std::vector<int32_t>& trian
     if (!(options.padding >= 0.0) || options.padding > 1e4) {
         LMREFINE_THROW(InvalidArgument, "padding must be >= 0 texels and finite (got " + std::to_string(options.padding) + ")");
     }
+    // Two charts that far apart cannot share the atlas (and each trial would dilate by it, slowly).
+    if (options.padding > std::hypot(double(options.width), double(options.height))) {
+        LMREFINE_THROW(InvalidArgument, "padding " + std::to_string(options.padding) +
+                                            " texels is wider than the diagonal of the " +
+                                            std::to_string(options.height) + " x " + std::to_string(options.width) +
+                                            " atlas: give a padding of a few texels");
+    }
     if (options.subdivision < 1 || options.subdivision > 8 ||
         int64_t(std::max(options.width, options.height)) * options.subdivision > (int64_t(1) << 15)) {
         LMREFINE_THROW(InvalidArgument, "subdivision must be in [1, 8] with resolution * subdivision <= 32768 (got " +

@@ -3,6 +3,7 @@
 // already applied (world space). The scene owns copies of its arrays.
 #pragma once
 
+#include <atomic>
 #include <cstdint>
 #include <vector>
 
@@ -58,6 +59,21 @@ public:
     int add_light(Light light);
     void set_world(const glm::vec3& color);
 
+    // While a bake, an evaluate or a ray query reads the scene (its progress
+    // callback runs Python, and another thread may hold the scene too), adding
+    // to it would reallocate the arrays being read: add_mesh, add_light and
+    // set_world throw InvalidArgument then. A reader holds a Reading.
+    class Reading {
+    public:
+        explicit Reading(const Scene& scene) : scene_(scene) { ++scene_.readers_; }
+        ~Reading() { --scene_.readers_; }
+        Reading(const Reading&) = delete;
+        Reading& operator=(const Reading&) = delete;
+
+    private:
+        const Scene& scene_;
+    };
+
     const std::vector<Mesh>& meshes() const { return meshes_; }
     const std::vector<Light>& lights() const { return lights_; }
     const glm::vec3& world() const { return world_; }
@@ -66,6 +82,9 @@ public:
     float extent() const { return extent_; }
 
 private:
+    void check_not_read(const char* what) const;
+
+    mutable std::atomic<int> readers_{0};
     std::vector<Mesh> meshes_;
     std::vector<Light> lights_;
     glm::vec3 world_{0.0f};
