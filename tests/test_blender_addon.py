@@ -417,8 +417,11 @@ def test_a_shared_atlas_driven_by_an_existing_atlas_image(facts):
     value = fact(facts, "shared_atlas_from_an_existing_image")
     assert value["first"] == ["FINISHED", None]
     assert value["outcome"] == "FINISHED", value["message"]
-    # The members' one image drove one refinement; it stays their "before", no new one is stored.
-    assert value["images"] == ["Floor_atlas_lightmap_before", "Floor_atlas_lightmap_direct"]
+    # The members' one image drove one refinement; it stays their "before", no new one is stored. The
+    # first run's direct image stays as it was for Ctrl+Z, without its fake user (dropped on save).
+    assert value["images"] == ["Floor_atlas_lightmap_before", "Floor_atlas_lightmap_direct",
+                               "Floor_atlas_lightmap_direct (earlier run)"]
+    assert value["earlier_fake_user"] is False
     assert set(value["before_images"].values()) == {"Floor_atlas_lightmap_before"}
     assert set(value["after_images"].values()) == {"Floor_atlas_lightmap_direct"}
     assert value["result_images"] == 1 and value["moved"]["Floor"] > 0.01

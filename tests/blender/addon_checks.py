@@ -1280,7 +1280,8 @@ def shared_atlas_from_an_existing_image():
             "after_images": {obj.name: obj["lmrefine_preview"]["after_image"] for obj in members},
             "moved": {obj.name: float(np.abs(bridge.read_uv_layer(obj.data, "Lightmap_refined")
                                              - bridge.read_layout(obj.data, "Lightmap").uvs).max()) for obj in members},
-            "result_images": bpy.context.scene.lmrefine.result.images}
+            "result_images": bpy.context.scene.lmrefine.result.images,
+            "earlier_fake_user": bpy.data.images["Floor_atlas_lightmap_direct (earlier run)"].use_fake_user}
 
 
 @check("refine", "bake")
