@@ -114,6 +114,7 @@ ERRORS = {
     "error_no_bake_pass": "No bake pass chosen",
     "error_image_from_refined_bake": "was baked with a refined UV map",
     "error_uvs_outside_unit_square": "has 1 UVs outside [0, 1], so it looks like a texture map (tiling)",
+    "error_stacked_faces_in_the_source_map": "has faces stacked on each other (together they cover",
 }
 
 

@@ -333,6 +333,15 @@ def _validate_object(obj, options, owners, resolution, depsgraph):
     if zero_uv:
         raise UserError(f"'{obj.name}' has {zero_uv} triangles of zero area in UV map '{source}': "
                         "re-unwrap it (UV > Lightmap Pack) so every face has its own texels")
+    corners = layout.uvs[layout.triangles].astype(np.float64)
+    covered = 0.5 * np.abs(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])).sum()
+    if covered > 1.0 + 1e-6:
+        # More UV area than the unit square holds: faces lie on top of each other (UV > Reset, a
+        # texture map). No refinement or bake can give them texels of their own.
+        raise UserError(f"UV map '{source}' of '{obj.name}' has faces stacked on each other (together they "
+                        f"cover {covered:.1f} times the unit square), so it looks like a texture map, not a "
+                        "lightmap layout: add a UV map for the lightmap (Object Data > UV Maps > +, then UV > "
+                        "Lightmap Pack) and pick it as Source")
     problem = bridge.evaluated_problem(depsgraph, obj, source, layout, resolution)
     if problem:
         raise UserError(problem)
@@ -472,7 +481,9 @@ def run(context, targets, options, journal, image_dir=None):
             outcome.warnings.append(f"{label}: {why}")
         # Strength 0 moves nothing whatever the triangles, nor does a layout held for its light steps on
         # texel boundaries: the nothing-moved warning says why, Tessellate is no fix.
+        # A source map whose faces overlap or touch got the texture-map warning: Tessellate is no fix.
         if (options.get("tessellate") is None and options["refine_options"]["strength"] > 0
+                and not (source_check["overlapping"] or source_check["min_gutter_texels"] <= 0.0)
                 and "aligned_steps" not in result.report["limited_by"]
                 and lmrefine.tessellation.coarse_refinement(result.report)):
             _coarse_warning(lmrefine, label, lightmaps[name], group, result.report, outcome,

@@ -251,6 +251,20 @@ def error_uvs_outside_unit_square():
 
 
 @check()
+def error_stacked_faces_in_the_source_map():
+    def prepare():
+        # UV > Reset: every face over the whole unit square, as a texture map may be.
+        mesh = bpy.data.objects["Floor"].data
+        corners = [(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0)]
+        layer = mesh.uv_layers["Lightmap"]
+        for polygon in mesh.polygons:
+            for k, loop in enumerate(polygon.loop_indices):
+                layer.data[loop].uv = corners[k % 4]
+
+    return _error_case(prepare)
+
+
+@check()
 def error_image_from_refined_bake():
     def prepare():
         image = bpy.data.images.new("Floor_lightmap_direct", RESOLUTION, RESOLUTION, float_buffer=True)
