@@ -1363,7 +1363,7 @@ def test_addon_says_tessellate_when_large_triangles_hold_the_light_changes(facts
     # With Tessellate on at the default budget, the run says the budget ran out with triangles left to split.
     spent = [w for w in on["warnings"] if "Tessellate spent its Vertex Budget" in w]
     assert on["tessellation"]["vertices_added"] == 2 and on["tessellation"]["candidates_left"] > 0
-    assert len(spent) == 1 and spent[0].startswith("'Floor': Tessellate spent its Vertex Budget (0.25 of its 9 "
+    assert len(spent) == 1 and spent[0].startswith("'Floor': Tessellate spent its Vertex Budget (0.25x its 9 "
                                                    "vertices: 2 added) with ")
     assert f"with {on['tessellation']['coarse_left']} triangle(s) of more than 8 texels still crossed" in spent[0]
     # Spent with only small triangles left (the split goes on to 1 texel; a warp serves these): no warning.

@@ -762,7 +762,7 @@ def _tessellate(lmrefine, target, lightmap, budget, journal, outcome, start, spa
         report["coarse_left"] = coarse["triangles"]
         if coarse["triangles"]:
             outcome.warnings.append(
-                f"'{obj.name}': Tessellate spent its Vertex Budget ({budget:g} of its "
+                f"'{obj.name}': Tessellate spent its Vertex Budget ({budget:g}x its "
                 f"{report['vertices_before']} vertices: {added} added) with {coarse['triangles']} triangle(s) "
                 f"of more than {COARSE_MIN_TEXELS:g} texels still crossed by light changes: raise Vertex Budget "
                 "(Stages and Tessellation; a mesh of few vertices needs many times its count)")

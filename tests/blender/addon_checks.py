@@ -1080,13 +1080,15 @@ def progress_moves_per_map_and_stage():
 
 @check("refine", "bake")
 def texture_map_as_source_warns():
-    """A source map with every face of the box on the same square (a texture map's layout): the run
-    succeeds and says the map looks like a texture map, with the fix; the panel counts the warning."""
+    """A source map whose box faces overlap each other by half (a texture map's layout, though less
+    than the unit square in all, which would be refused outright): the run succeeds and says the map
+    looks like a texture map, with the fix; the panel counts the warning."""
     fresh_shadow_scene(first_lightmap='EMBREE', backend='EMBREE', bake_passes={'DIRECT'}, source_layer="Tex")
     box = bpy.data.objects["Blocker"]
     layer = box.data.uv_layers.new(name="Tex")
-    square = np.array([(0.1, 0.1), (0.9, 0.1), (0.9, 0.9), (0.1, 0.9)], np.float32)
-    layer.data.foreach_set("uv", np.tile(square, (len(box.data.polygons), 1)).ravel())
+    square = np.array([(0.0, 0.0), (0.3, 0.0), (0.3, 0.3), (0.0, 0.3)], np.float32)
+    faces = [square + np.float32([0.05 + 0.1 * k, 0.3]) for k in range(len(box.data.polygons))]
+    layer.data.foreach_set("uv", np.concatenate(faces).ravel())
     scenes.select_only(box)
     outcome, message = refine()
     result = bpy.context.scene.lmrefine.result
