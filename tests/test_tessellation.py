@@ -215,6 +215,8 @@ def test_peak_strength_sees_a_line_between_the_corners():
     (lambda a: a.update(positions=np.zeros((4, 2))), "positions must be a \\(V, 3\\)"),
     (lambda a: a.update(triangles=np.array([[0, 1, 99]])), "triangles index vertices outside"),
     (lambda a: a.update(uvs=np.zeros((5, 2))), "uvs must be per corner"),
+    # Beyond float32 the split's UVs came back inf (found by a crash hunt).
+    (lambda a: a.update(uvs=a["uvs"] * 1e300), "uvs must lie in \\[0, 1\\], a lightmap layout"),
     (lambda a: a.update(strength=np.zeros(5)), "strength must be an \\(H, W\\)"),
     (lambda a: a.update(budget=-1), "budget must be"),
     (lambda a: a.update(threshold=2), "threshold must be in"),

@@ -186,6 +186,11 @@ def _array(name, value, dtype):
         raise TypeError(f"{name} must be a numeric array: {error}") from None
 
 
+# How far outside [0, 1] a lightmap UV may lie (rounding of a packed layout); the split's output
+# UVs are float32, so a UV far beyond would come back as inf.
+UV_SLACK = 1e-3
+
+
 def _check_inputs(positions, triangles, uvs, strength, budget, min_texels, threshold, corner_attributes):
     positions = _array("positions", positions, np.float64)
     triangles = _array("triangles", triangles, None)
@@ -203,6 +208,9 @@ def _check_inputs(positions, triangles, uvs, strength, budget, min_texels, thres
         raise ValueError(f"uvs must be per corner, shape ({3 * len(triangles)}, 2); got {uvs.shape}")
     if not np.isfinite(uvs).all():
         raise ValueError("uvs hold NaN or Inf values")
+    if uvs.size and not (uvs.min() >= -UV_SLACK and uvs.max() <= 1.0 + UV_SLACK):
+        raise ValueError(f"uvs must lie in [0, 1], a lightmap layout (they span {uvs.min():.6g} to {uvs.max():.6g}): "
+                         "pass the lightmap's UVs, packed into the unit square")
     strength = _array("strength", strength, np.float64)
     if strength.ndim != 2 or min(strength.shape) < 1:
         raise ValueError(f"strength must be an (H, W) array, got shape {strength.shape}")
