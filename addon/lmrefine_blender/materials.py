@@ -204,7 +204,8 @@ def previews_hidden(objects):
     materials, and put back as they were: a preview's Emission would be read
     as the surface's colour by lmrefine's baker and would shine as a light
     (or hide the surface) in a Cycles bake."""
-    hidden = [(obj, _preview_params(obj)) for obj in objects if obj.type == 'MESH' and has_preview(obj)]
+    hidden = [(obj, _preview_params(obj)) for obj in objects
+              if obj.type == 'MESH' and obj.library is None and has_preview(obj)]
     for obj, _ in hidden:
         remove_preview(obj)
     try:
