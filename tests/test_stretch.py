@@ -131,7 +131,8 @@ def test_axis_stretch_is_the_models_optimum_along_the_axis_the_light_changes_cro
     uvs, triangles = merge(grid_chart(2, (0.0, 0.0), (0.3, 0.3)), grid_chart(2, (0.4, 0.0), (0.7, 0.3)),
                            grid_chart(2, (0.0, 0.4), (0.3, 0.7)))
     charts = lmrefine.find_charts(uvs, triangles, lmrefine.CHART_TOLERANCE)
-    factor, direction, edge = stretch.axis_stretch_factors(tensors, uvs, triangles, charts, (100, 100), 4.0)
+    main, _, share, roots = stretch.stretch_factors(tensors, uvs, triangles, charts, (100, 100), 4.0)
+    factor, direction, edge = stretch.axis_stretch_factors(tensors, roots, uvs, triangles, charts, (100, 100), 4.0)
     uu, vv = tensors[0, 0, 0], tensors[0, 1, 1]
     assert direction[0].tolist() == [1.0, 0.0] and factor[0] == pytest.approx((uu / vv) ** 0.25)
     grid = np.linspace(1.0, 4.0, 3001)
@@ -140,13 +141,14 @@ def test_axis_stretch_is_the_models_optimum_along_the_axis_the_light_changes_cro
     assert grid[np.argmin(along_u)] == pytest.approx(factor[0], abs=1e-3)
     assert edge[0] == pytest.approx(along_u.min(), rel=1e-6) and edge[0] < 1.0
     # Its gain is less than the stretch along the stripes' own direction gives.
-    main, main_direction, share, _ = stretch.stretch_factors(tensors, uvs, triangles, charts, (100, 100), 4.0)
     assert stretch.edge_factor(main[0], share[0]) < edge[0]
     assert factor[1] == factor[2] == 1.0 and edge[1] == edge[2] == 1.0  # isotropic; below the mean chart
-    assert stretch.axis_stretch_factors(tensors, uvs, triangles, charts, (100, 100), 1.2)[0][0] == pytest.approx(1.2)
+    assert stretch.axis_stretch_factors(tensors, roots, uvs, triangles, charts, (100, 100), 1.2)[0][0] == \
+        pytest.approx(1.2)
     # Light changes crossing v more: stretched along v.
-    turned = tensors[:, ::-1, ::-1]
-    assert stretch.axis_stretch_factors(turned, uvs, triangles, charts, (100, 100), 4.0)[1][0].tolist() == [0.0, 1.0]
+    turned = tensors[:, ::-1, ::-1]  # the same eigenvalues, so the same roots
+    assert stretch.axis_stretch_factors(turned, roots, uvs, triangles, charts, (100, 100), 4.0)[1][0].tolist() == \
+        [0.0, 1.0]
 
 
 def _nine_charts():

@@ -480,7 +480,6 @@ def _packing_at(scales, refined_uvs, triangles, charts, edge, smooth, stretched,
                 return _pack_or_none(uvs, triangles, charts, scales, resolution, padding, _reports_done(progress))
 
             factor, none = stretched["factor"], np.zeros(len(scales), bool)
-            axis = stretched["axis"]
             yield "main", none, factor, stretched["edge_factor"], stretched_pack
             turned_uvs, turned = stretch.turn_to_smallest_boxes(stretched["uvs"], triangles, charts, factor > 1.0)
             if turned.any():
@@ -488,8 +487,10 @@ def _packing_at(scales, refined_uvs, triangles, charts, edge, smooth, stretched,
             # A fallback for the density rule alone: the main direction is the model's optimum, and
             # where no density rule refuses it (the route's own packing) the stretch along the axes
             # won only by model margins of 0.5-2% and measured worse (docs/refiner.md).
-            if axis is not None and rule.min_utilisation > 0:
-                yield "axes", none, axis["factor"], axis["edge_factor"], pack(axis["uvs"])
+            if rule.min_utilisation > 0:
+                axis = _axis_candidate(stretched, refined_uvs, triangles, charts, resolution, max_stretch)
+                if axis is not None:
+                    yield "axes", none, axis["factor"], axis["edge_factor"], pack(axis["uvs"])
             half = np.sqrt(factor)
             yield ("half", none, half, stretch.edge_factor(half, stretched["share"]),
                    pack(stretch.stretch_charts(refined_uvs, triangles, charts, half, stretched["direction"])))
@@ -565,20 +566,30 @@ def _stretch_candidate(source_uvs, refined_uvs, triangles, charts, lightmap, mas
                                                                max_stretch)
     if not (factor > 1.0).any():
         return None
-    uvs = stretch.stretch_charts(refined_uvs, triangles, charts, factor, direction)
-    # Along the charts' u or v axes: rectangles stay rectangles (a second candidate, where it differs).
-    axis_factor, axis_direction, axis_edge_factor = stretch.axis_stretch_factors(
-        tensors, refined_uvs, triangles, charts, resolution, max_stretch)
-    axis = None
-    if (axis_factor > 1.0).any():
-        axis_uvs = stretch.stretch_charts(refined_uvs, triangles, charts, axis_factor, axis_direction)
-        if not np.array_equal(axis_uvs, uvs):
-            axis = {"uvs": axis_uvs, "factor": axis_factor, "edge_factor": axis_edge_factor}
-    return {"uvs": uvs, "axis": axis, "factor": factor,
+    return {"uvs": stretch.stretch_charts(refined_uvs, triangles, charts, factor, direction), "factor": factor,
+            "tensors": tensors,
             "edge_factor": stretch.edge_factor(factor, share), "weight": weight, "direction": direction,
             "share": share,
             "report": {"charts_stretched": int((factor > 1.0).sum()), "chart_stretch": factor,
                        "largest_stretch": float(factor.max())}}
+
+
+def _axis_candidate(stretched, refined_uvs, triangles, charts, resolution, max_stretch):
+    """The `stretched` candidate's charts stretched along their u or v axes
+    instead (rectangles stay rectangles; stretch.axis_stretch_factors), its
+    factors and edge-term factors; None when no chart stretches or the
+    layout is the main stretch's (light changes along the axes already).
+    Made only where the stretch along the main directions was refused."""
+    from . import stretch
+
+    factor, direction, edge_factor = stretch.axis_stretch_factors(
+        stretched["tensors"], stretched["weight"], refined_uvs, triangles, charts, resolution, max_stretch)
+    if not (factor > 1.0).any():
+        return None
+    uvs = stretch.stretch_charts(refined_uvs, triangles, charts, factor, direction)
+    if np.array_equal(uvs, stretched["uvs"]):
+        return None
+    return {"uvs": uvs, "factor": factor, "edge_factor": edge_factor}
 
 
 def _judge_stretch(stretched, packings, triangles, charts, resolution, padding, final, predicted, padded_before,

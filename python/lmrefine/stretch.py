@@ -156,20 +156,19 @@ def stretch_factors(tensors, uvs, triangles, charts, resolution, max_stretch):
     return factor, direction, share, roots
 
 
-def axis_stretch_factors(tensors, uvs, triangles, charts, resolution, max_stretch):
+def axis_stretch_factors(tensors, roots, uvs, triangles, charts, resolution, max_stretch):
     """Per chart (factor a >= 1, direction (C, 2), edge-term factor): the
     stretch along the u or the v axis of `uvs`, whichever the chart's light
     changes cross more (J_uu against J_vv), by the model's best (J_aa /
     J_bb)^(1/4) (it minimises tensor_edge_factor along that axis), bounded
-    and selected as stretch_factors bounds and selects. A chart stretched
+    and selected as stretch_factors bounds and selects (`roots`: its
+    sqrt(l1) + sqrt(l2) per chart). A chart stretched
     along an axis of its frame keeps a rectangular box rectangular, where a
     stretch along a diagonal shears it: it may pack as densely as the input
     where the stretch along the main direction does not."""
     uu, vv = np.maximum(tensors[:, 0, 0], 0.0), np.maximum(tensors[:, 1, 1], 0.0)
     along_u = uu >= vv
     direction = np.where(along_u[:, None], np.array([1.0, 0.0]), np.array([0.0, 1.0]))
-    values = np.maximum(np.linalg.eigvalsh(tensors), 0.0)
-    roots = np.sqrt(values[:, 1]) + np.sqrt(values[:, 0])  # the chart's light changes, as stretch_factors'
     factor = _bounded_factors(np.where(along_u, uu, vv), np.where(along_u, vv, uu), direction, roots, uvs,
                               triangles, charts, resolution, max_stretch)
     return factor, direction, tensor_edge_factor(tensors, factor, direction)
