@@ -651,6 +651,20 @@ def test_menu_entries_and_stable_panels(facts):
     assert len(value["icons_used"]) >= 8 and value["icons_missing"] == []
 
 
+def test_limit_row_and_its_words(facts):
+    value = fact(facts, "limit_wording")
+    assert value["limits"] == {
+        "": "Limit: none", "max_magnification, step_cap": "Limit: Max Growth/steps",
+        "flipped, overlapping, step_cap": "Limit: flips +2", "min_shrink, max_magnification": "Limit: Max Growth +1",
+        "original_gutter": "Limit: tight gaps", "aligned_steps": "Limit: texel-aligned",
+        "degenerate, grid, gutter, out_of_bounds": "Limit: Padding +3", "something_new": "Limit: something new"}
+    assert all(len(row) <= 23 for row in value["limits"].values())
+    assert value["words"] == [
+        ["Max Growth", "some texels grew as much as it allows"],
+        ["flips", "the deformation was scaled back where UV triangles would turn over"],
+        ["steps", "the automaton stopped at its step limit before the texel densities settled within Delta"]]
+
+
 def test_failed_rerun_restores_the_previous_result(facts):
     value = fact(facts, "rerun_failure_restores_previous_run")
     assert value["first_outcome"] == "FINISHED", value["message"]

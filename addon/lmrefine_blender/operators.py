@@ -12,7 +12,7 @@ import time
 
 import bpy
 
-from . import pipeline
+from . import panels, pipeline
 from .journal import Journal
 
 
@@ -57,6 +57,9 @@ def _report_outcome(operator, context, outcome, seconds):
                           # .2g as in the panel: a triangle the repack shrank to 0.0019x does not read "0.00x".
                           f"{summary['density_min']:.2g}x to {summary['density_max']:.3g}x (chart repack included)"
                           + (f"; {still} did not move (see warnings)" if still else ""))
+    limits = panels.limit_words(summary["limited_by"])
+    if limits:  # the panel's "Limit:" row, in words
+        result.message += "; limits: " + ", ".join(f"{short} ({meaning})" for short, meaning in limits)
     result.message += "; " + images_sentence(summary)
     if result.effects:
         result.message += f"; per effect (map side, edges): {result.effects}"

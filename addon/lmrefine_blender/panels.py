@@ -24,10 +24,47 @@ class _LightmapTab:
         return layout
 
 
-# refine_uvs' limit names, short enough for the sidebar (the Info report has the full text).
-# Short: two fit the default sidebar width, more are counted ("Limit: growth/shrink +1").
-LIMIT_NAMES = {"max_magnification": "growth", "min_shrink": "shrink", "step_cap": "steps",
-               "original_gutter": "gutter", "aligned_steps": "aligned"}
+# What held a refinement back (refine_uvs' report["limited_by"]) in plain words: a short name for the
+# panel's "Limit:" row, where two fit the default sidebar width and more are counted ("Limit: flips +2"),
+# and what it means, for the operator's report. Settings go by their panel labels; the order is the row's.
+LIMITS = {
+    "max_magnification": ("Max Growth", "some texels grew as much as it allows"),
+    "min_shrink": ("Min Shrink", "some texels shrank as much as it allows"),
+    "gutter": ("Padding", "the deformation was scaled back where charts would come closer than Padding"),
+    "original_gutter": ("tight gaps", "the source map has charts closer than Padding: they keep their own "
+                                      "distance"),
+    "flipped": ("flips", "the deformation was scaled back where UV triangles would turn over"),
+    "overlapping": ("overlaps", "the deformation was scaled back where UV triangles would overlap"),
+    "degenerate": ("collapses", "the deformation was scaled back where UV triangles would lose their area"),
+    "out_of_bounds": ("map edge", "the deformation was scaled back where UVs would leave the map"),
+    "grid": ("cell folds", "the deformation was scaled back further where the automaton's grid would fold"),
+    "step_cap": ("steps", "the automaton stopped at its step limit before the texel densities settled "
+                          "within Delta"),
+    "aligned_steps": ("texel-aligned", "the light's steps lie on texel boundaries that the layout's edges run "
+                                       "along, so the layout was kept as it is"),
+}
+LIMIT_ROW_CHARACTERS = 23  # the default sidebar's width beside an icon
+
+
+def limit_words(limited_by):
+    """[(short name, meaning)] for a result's limited_by ("flipped, step_cap"), in LIMITS' order; a key it
+    does not know comes last, its underscores as spaces."""
+    keys = [key for key in limited_by.split(", ") if key]
+    order = list(LIMITS)
+    keys.sort(key=lambda key: order.index(key) if key in LIMITS else len(order))
+    return [LIMITS.get(key, (key.replace("_", " "),) * 2) for key in keys]
+
+
+def limit_row(limited_by):
+    """The panel's "Limit:" row: as many short names as fit the sidebar, then a count of the others."""
+    names = [short for short, _ in limit_words(limited_by)]
+    if not names:
+        return "Limit: none"
+    for shown in range(len(names), 0, -1):
+        text = "Limit: " + "/".join(names[:shown]) + (f" +{len(names) - shown}" if shown < len(names) else "")
+        if len(text) <= LIMIT_ROW_CHARACTERS:
+            return text
+    return text  # one name that does not fit alone (none of LIMITS' does): the sidebar elides it
 
 
 def source_line(settings, obj):
@@ -159,11 +196,7 @@ class LMREFINE_PT_refine_result(_LightmapTab, bpy.types.Panel):
                     # A triangle's new / old texels, on the output: the repack's chart scale comes on top of
                     # the automaton's bounds (Min Shrink, Max Growth bound its cells), so it can exceed them.
                     (f"Triangles: {result.density_min:.2g}x-{result.density_max:.3g}x", 'MOD_UVPROJECT', True)]
-        names = [LIMIT_NAMES.get(name, name) for name in result.limited_by.split(", ") if name]
-        limits = "/".join(names)
-        if len(limits) > 16 and len(names) > 2:  # "Limit: growth/shrink/steps" is cut: two and a count
-            limits = "/".join(names[:2]) + f" +{len(names) - 2}"
-        rows.append((f"Limit: {limits}" if limits else "Limit: none", 'INFO', bool(limits)))
+        rows.append((limit_row(result.limited_by), 'INFO', bool(result.limited_by)))
         warnings = result.warnings if result.valid else 0
         rows.append((f"Warnings: {warnings} (Info log)" if warnings else "Warnings: none", 'ERROR' if warnings
                      else 'INFO', bool(warnings)))

@@ -1555,6 +1555,17 @@ def stages_refine_the_layout_again():
 
 
 @check()
+def limit_wording():
+    """The panel's Limit row and what its names mean, from made-up results."""
+    register()
+    from lmrefine_blender import panels
+    limits = {text: panels.limit_row(text) for text in (
+        "", "max_magnification, step_cap", "flipped, overlapping, step_cap", "min_shrink, max_magnification",
+        "original_gutter", "aligned_steps", "degenerate, grid, gutter, out_of_bounds", "something_new")}
+    return {"limits": limits, "words": panels.limit_words("step_cap, flipped, max_magnification")}
+
+
+@check()
 def menus_and_panel_rows():
     """The operator's menu entries (what F3 search finds) and panels that draw the same rows in every state."""
     register()
