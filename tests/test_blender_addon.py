@@ -665,6 +665,41 @@ def test_limit_row_and_its_words(facts):
         ["steps", "the automaton stopped at its step limit before the texel densities settled within Delta"]]
 
 
+def test_recharted_maps_are_explained_in_the_panels_words(facts):
+    """The Info line of a re-charted map: why, what it is predicted to give, and the setting that turns it
+    off; never refine_uvs' keywords (rechart='always') nor its error model's name."""
+    sentences = fact(facts, "rechart_wording")
+    tail = ("Predicted lightmap error (blur at the light changes): 0.64x the source map's (0.80x refining the "
+            "source map instead). To keep the source map's charts, turn off Re-chart if Better (Refinement)")
+    assert sentences["no_room"] == (
+        "re-charted from the mesh (25 charts of faces within 20 degrees) and refined, because its source map gives "
+        "the refiner no room (60 charts for 120 triangles, 0% of its area in triangles with a UV inside their "
+        "chart: a UV on a chart's border keeps its place). " + tail)
+    assert sentences["always"] == (
+        "re-charted from the mesh (25 charts of faces within 20 degrees, packed half a texel farther apart than "
+        "Padding so that their edge texels could shrink) and refined, because its source map's 60 charts were one "
+        "face each before Tessellate split their triangles. " + tail)
+    folds = ("re-charted from the mesh (25 charts of faces within 20 degrees) and refined, because its source map's "
+             "charts fold over 672 creases sharper than 20 degrees (188 world units, 3 of them smooth-shaded), which "
+             "hold 20% of its light changes. Predicted lightmap error (blur at the light changes): 0.64x the source "
+             "map's (refining the source map instead: at least 0.90x, so it was not finished). To keep the source "
+             "map's charts, turn off Re-chart if Better (Refinement)")
+    assert sentences["folds"] == folds and sentences["per_effect"] == "indirect: " + folds
+    for name in ("rechart_lightmap_pack_source", "rechart_folded_source"):
+        value = fact(facts, name)
+        value = value.get("rechart_True", value)
+        lines = [text for kind, text in value["reports"] if kind == "INFO" and "re-charted from the mesh (" in text]
+        assert len(lines) == 1, value["reports"]
+        assert lines[0].endswith("To keep the source map's charts, turn off Re-chart if Better (Refinement)")
+        assert "rechart=" not in lines[0] and "error model" not in lines[0]
+    line = next(text for kind, text in fact(facts, "rechart_lightmap_pack_source")["rechart_True"]["reports"]
+                if "re-charted from the mesh (" in text)
+    assert line.startswith("'Floor': re-charted from the mesh (1 charts of faces within 20 degrees) and refined, "
+                           "because its source map gives the refiner no room (64 charts for 128 triangles"), line
+    assert not any("re-charted from the mesh (" in text
+                   for _, text in fact(facts, "rechart_lightmap_pack_source")["rechart_False"]["reports"])
+
+
 def test_failed_rerun_restores_the_previous_result(facts):
     value = fact(facts, "rerun_failure_restores_previous_run")
     assert value["first_outcome"] == "FINISHED", value["message"]
@@ -723,6 +758,10 @@ def test_tessellation_adds_vertices_within_the_budget_and_keeps_every_attribute(
     assert calls and all(call["rechart"] == "always" and call["always"] for call in calls), calls
     assert value["panel_recharted"] == sum(call["used"] for call in calls)
     assert all(call["used"] or "the error model predicts" in call["reason"] for call in calls), calls
+    # Re-charted, the Info line says why in the panel's words (no 'rechart=' keyword).
+    lines = [text for kind, text in value["reports"] if "re-charted from the mesh (" in text]
+    assert len(lines) == value["panel_recharted"]
+    assert all("were one face each before Tessellate split their triangles" in text for text in lines), lines
     assert value["leftover_meshes"] == ["Cube", "FloorMesh"]  # the rollback copy is gone after success
     # Ctrl+Z: one step back restores the original mesh exactly.
     assert value["undo_vertices"] == 25 and value["undo_coordinates_equal"]

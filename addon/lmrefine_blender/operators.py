@@ -65,7 +65,7 @@ def _report_outcome(operator, context, outcome, seconds):
         result.message += f"; per effect (map side, edges): {result.effects}"
     if recharted:
         result.message += (f"; re-charted from the mesh: {', '.join(recharted)} (the source map gave the "
-                           "refiner no room, or its charts folded over sharp edges; Info has the reason)")
+                           "refiner no room, or its charts folded over sharp edges; the Info log says why)")
     if summary["stretched_charts"]:
         result.message += (f"; {summary['stretched_charts']} chart(s) stretched across their light changes "
                            f"(up to {summary['largest_stretch']:.2f}x, their texel area kept)")
@@ -81,7 +81,7 @@ def _report_outcome(operator, context, outcome, seconds):
                         for name, entry in outcome.stages.items())
         result.message += f"; stages kept: {summary['stages_kept']} of {result.stages} ({why})"
     for name in recharted_maps:
-        operator.report({'INFO'}, f"'{name}': " + outcome.reports[name]["notes"][0])
+        operator.report({'INFO'}, f"'{name}': " + rechart_sentence(outcome.reports[name]))
     for warning in outcome.warnings:
         operator.report({'WARNING'}, warning)
     operator.report({'INFO'}, result.message)
@@ -95,6 +95,39 @@ def images_sentence(summary):
     if shared:
         text += " (" + "; ".join(f"{name}_lightmap_*: {', '.join(names)}" for name, names in shared.items()) + ")"
     return text
+
+
+def rechart_sentence(report):
+    """Why a map was re-charted and what that is predicted to give, from its refine_uvs report, in the
+    panel's words: the core's own note (report["notes"][0]) names its keywords and its error model."""
+    if "effects" in report:  # Layouts: Per Effect: the first effect whose map was re-charted
+        name, own = next((name, own) for name, own in report["effects"].items()
+                         if (own.get("rechart") or {}).get("used"))
+        return f"{name}: " + rechart_sentence(own)
+    info = report["rechart"]
+    room = info["room"]
+    if room["no_room"]:
+        why = (f"its source map gives the refiner no room ({room['charts']} charts for {room['triangles']} "
+               f"triangles, {room['room_fraction']:.0%} of its area in triangles with a UV inside their chart: a "
+               "UV on a chart's border keeps its place)")
+    elif info.get("always"):  # the layout had no room before Tessellate split its triangles
+        why = f"its source map's {room['charts']} charts were one face each before Tessellate split their triangles"
+    else:
+        folds = info["folds"]
+        smooth = f", {folds['smooth']} of them smooth-shaded" if folds.get("smooth") else ""
+        why = (f"its source map's charts fold over {folds['count']} creases sharper than {info['angle']:g} degrees "
+               f"({folds['length']:.3g} world units{smooth}), which hold {folds['energy_fraction']:.0%} of its "
+               "light changes")
+    roomier = (", packed half a texel farther apart than Padding so that their edge texels could shrink"
+               if info.get("edge_room") else "")
+    source = info.get("predicted_error_source_route")
+    instead = (f"{source:.2f}x refining the source map instead" if source is not None else
+               f"refining the source map instead: at least {info['source_route_bound']:.2f}x, so it was not "
+               "finished")
+    return (f"re-charted from the mesh ({info['charts']} charts of faces within {info['angle']:g} "
+            f"degrees{roomier}) and refined, because {why}. Predicted lightmap error (blur at the light "
+            f"changes): {info['predicted_error']:.2f}x the source map's ({instead}). To keep the source map's "
+            "charts, turn off Re-chart if Better (Refinement)")
 
 
 def _stage_stop(name, entry):

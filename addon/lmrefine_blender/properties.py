@@ -152,14 +152,16 @@ class LMREFINE_PG_settings(bpy.types.PropertyGroup):
         name="Max Stretch",
         description="A chart whose light changes run mostly one way (stripes of beams, railings) may be "
                     "stretched across them by up to this and squeezed along them as much, its texel area kept; "
-                    "only where it predicts less error and the atlas stays as full. 1 turns it off",
+                    "only where the predicted lightmap error (blur at the light changes) is lower and the atlas "
+                    "stays as full. 1 turns it off",
         default=2.0, min=1.0, max=4.0,
     )
     triangle_stretch: FloatProperty(
         name="Tri Stretch",
         description="After the charts are scaled and packed, stretch each triangle across the light changes that "
                     "run one way inside it (a picket's shadow) by up to this, squeezed along them, and pack again; "
-                    "kept only where the error model predicts less error, packing included. 1 turns it off",
+                    "kept only where the predicted lightmap error (blur at the light changes) is lower, packing "
+                    "included. 1 turns it off",
         default=2.0, min=1.0, max=4.0,
     )
     delta: FloatProperty(
@@ -204,8 +206,8 @@ class LMREFINE_PG_settings(bpy.types.PropertyGroup):
         description="When the source map gives the refiner no room (one chart per face, as Lightmap Pack makes) "
                     "or its charts fold over sharp edges whose light differs (as Smart UV Project's do), "
                     "re-chart the mesh (charts of faces whose normals are within 20 degrees, conformal unwrap) "
-                    "and refine that layout instead, if the error model predicts less error. The source map is "
-                    "never changed; the refined map gets the new layout",
+                    "and refine that layout instead, if its predicted lightmap error (blur at the light changes) "
+                    "is lower. The source map is never changed; the refined map gets the new layout",
         default=True,
     )
     stages: IntProperty(

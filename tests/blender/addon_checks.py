@@ -82,6 +82,29 @@ def refine(undo=False, how='EXEC_DEFAULT'):
     return sorted(result)[0], None
 
 
+def refine_with_reports(undo=False):
+    """refine(undo), and the reports the operator made when it finished: [(kind, text)] ('INFO', 'WARNING'),
+    as the Info log and the status bar show them."""
+    reports, report_outcome = [], operators._report_outcome
+
+    class Recording:
+        """The operator, its reports recorded."""
+
+        def __init__(self, operator):
+            self.operator = operator
+
+        def report(self, kinds, text):
+            reports.append((sorted(kinds)[0], text))
+            self.operator.report(kinds, text)
+
+    operators._report_outcome = lambda operator, *args: report_outcome(Recording(operator), *args)
+    try:
+        outcome, message = refine(undo)
+    finally:
+        operators._report_outcome = report_outcome
+    return outcome, message, reports
+
+
 def settings(**values):
     target = bpy.context.scene.lmrefine
     for key, value in values.items():
@@ -1379,7 +1402,7 @@ def tessellation_writes_the_split_into_the_mesh():
 
     lmrefine.refine_uvs = recorded
     try:
-        outcome, message = refine(undo=True)
+        outcome, message, reports = refine_with_reports(undo=True)
     finally:
         lmrefine.refine_uvs = refine_uvs
     mesh = bpy.data.objects["Floor"].data
@@ -1394,7 +1417,7 @@ def tessellation_writes_the_split_into_the_mesh():
         "outcome": outcome, "message": message, "result_message": result.message,
         "vertices_before": len(vertices_before), "vertices_after": len(mesh.vertices),
         "panel_vertices_added": result.vertices_added, "panel_tessellated": result.tessellated,
-        "panel_recharted": result.recharted, "rechart_calls": calls,
+        "panel_recharted": result.recharted, "rechart_calls": calls, "reports": reports,
         "triangles_after": sum(1 for polygon in mesh.polygons if polygon.loop_total == 3),
         "largest_height": float(np.abs(positions[:, 2]).max()),
         "uvmap_residual": _affine_residual(positions, maps["UVMap"], np.zeros(len(positions))),
@@ -1563,6 +1586,25 @@ def limit_wording():
         "", "max_magnification, step_cap", "flipped, overlapping, step_cap", "min_shrink, max_magnification",
         "original_gutter", "aligned_steps", "degenerate, grid, gutter, out_of_bounds", "something_new")}
     return {"limits": limits, "words": panels.limit_words("step_cap, flipped, max_magnification")}
+
+
+@check()
+def rechart_wording():
+    """The Info line of a re-charted map for each reason, from made-up reports."""
+    register()
+    room = {"charts": 60, "triangles": 120, "room_fraction": 0.0, "no_room": True}
+    base = {"used": True, "room": room, "angle": 20.0, "charts": 25, "edge_room": False, "predicted_error": 0.6412,
+            "predicted_error_source_route": 0.8049, "source_route_bound": None, "folds": None}
+    folds = {"count": 672, "length": 188.2, "smooth": 3, "energy_fraction": 0.2}
+    reports = {
+        "no_room": {"rechart": base},
+        "always": {"rechart": dict(base, room=dict(room, no_room=False), always=True, edge_room=True)},
+        "folds": {"rechart": dict(base, room=dict(room, no_room=False), folds=folds,
+                                  predicted_error_source_route=None, source_route_bound=0.9)},
+    }
+    reports["per_effect"] = {"rechart": {"used": True}, "effects": {
+        "direct": {"rechart": {"used": False}}, "indirect": reports["folds"]}}
+    return {key: operators.rechart_sentence(report) for key, report in reports.items()}
 
 
 @check()
@@ -1944,13 +1986,13 @@ def rechart_lightmap_pack_source():
         layout = bridge.read_layout(mesh, "Lightmap")
         source_uvs = bridge.read_uv_layer(mesh, "Lightmap")
         geometry = geometry_digest(mesh)
-        outcome, message = refine()
+        outcome, message, reports = refine_with_reports()
         result = bpy.context.scene.lmrefine.result
         refined = bridge.read_uv_layer(mesh, "Lightmap_refined")
         check = lmrefine.check_layout(refined, layout.triangles, RESOLUTION, padding=2)
         facts[f"rechart_{rechart}"] = {
             "outcome": outcome, "message": message, "panel_recharted": result.recharted,
-            "result_message": result.message,
+            "result_message": result.message, "reports": reports,
             "valid": bool(check["valid"]), "min_gutter_texels": float(check["min_gutter_texels"]),
             "refined_charts": int(len(np.unique(lmrefine.find_charts(refined, layout.triangles,
                                                                       lmrefine.CHART_TOLERANCE)))),
@@ -1985,7 +2027,7 @@ def rechart_folded_source():
     mesh = roof.data
     layout = bridge.read_layout(mesh, "Lightmap")
     source_uvs = bridge.read_uv_layer(mesh, "Lightmap")
-    outcome, message = refine()
+    outcome, message, reports = refine_with_reports()
     result = bpy.context.scene.lmrefine.result
     refined = bridge.read_uv_layer(mesh, "Lightmap_refined")
     check_ = lmrefine.check_layout(refined, layout.triangles, RESOLUTION, padding=2)
@@ -1996,7 +2038,7 @@ def rechart_folded_source():
                                 progress=lambda fraction, label: seen.append((fraction, label)))
     repack = run.reports["Roof"]["repack"] or {}
     return {"outcome": outcome, "message": message, "panel_recharted": result.recharted,
-            "result_message": result.message, "valid": bool(check_["valid"]),
+            "result_message": result.message, "reports": reports, "valid": bool(check_["valid"]),
             "fill": dict(repack.get("fill") or {}, repack_used=bool(repack.get("used"))),
             "stretch_fill": (run.reports["Roof"].get("triangle_stretch") or {}).get("fill") or {},
             "stretch_used": bool((run.reports["Roof"].get("triangle_stretch") or {}).get("used")),
