@@ -126,6 +126,19 @@ def test_error_is_reported_and_changes_nothing(facts, name):
     assert value["changed"] == []
 
 
+def test_messages_name_settings_as_their_reader_sets_them(facts):
+    """The add-on's messages name a setting by its panel label (never a batch flag); the batch's, by its flag."""
+    message = fact(facts, "error_missing_source_layer")["message"]
+    assert message.strip().endswith("pick the lightmap UV map as Source (top of the panel)")
+    refusal = fact(facts, "setting_wording")
+    assert refusal["panel"].endswith("or turn off Tessellate (Stages and Tessellation)")
+    assert refusal["batch"].endswith("or pass --no-tessellate")
+    for case in ("shared", "modifier"):
+        message = fact(facts, "tessellation_refused_where_it_would_change_more")[case]["message"]
+        assert message.strip().endswith("or turn off Tessellate (Stages and Tessellation)")
+        assert "--" not in message
+
+
 def test_bad_objects_are_skipped_with_their_fix_and_the_others_refined(facts):
     value = fact(facts, "skip_bad_objects_refines_the_others")
     assert value["error"] is None and value["objects"] == ["Floor"]
@@ -883,7 +896,8 @@ def test_batch_refuses_numbers_out_of_range_instead_of_clamping(facts, work_dir)
     assert process.returncode == 1 and "--strength -1 is below 0: pass 0 or more" in process.stderr
     assert "e+38" not in process.stderr
     process = run_batch(blend, "--objects", "Floor", "--out", str(out), "--source-layer", "Nope")
-    assert process.returncode == 1 and "--source-layer in a batch" in process.stderr
+    assert process.returncode == 1 and "pass the lightmap UV map with --source-layer" in process.stderr
+    assert "top of the panel" not in process.stderr
 
 
 def readme_command(prefix):

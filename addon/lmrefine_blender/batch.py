@@ -25,7 +25,7 @@ for _path in (os.path.dirname(_HERE), os.path.join(_HERE, "..", "..", "python"))
 import bpy  # noqa: E402
 
 import lmrefine_blender  # noqa: E402
-from lmrefine_blender import bridge, pipeline  # noqa: E402
+from lmrefine_blender import bridge, errors, pipeline  # noqa: E402
 from lmrefine_blender.journal import Journal  # noqa: E402
 
 PASSES = ("direct", "indirect", "combined", "ao")
@@ -303,6 +303,7 @@ def main(argv):
     started = time.perf_counter()
     if not hasattr(bpy.types.Scene, "lmrefine"):
         lmrefine_blender.register()
+    errors.BATCH = True  # messages name settings by their flags
     try:
         report = run(args)
         code = 0

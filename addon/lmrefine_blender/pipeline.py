@@ -24,7 +24,7 @@ import bpy
 import numpy as np
 
 from . import atlas, bridge, cycles_bake, effects, materials, tessellation
-from .errors import Cancelled, UserError  # noqa: F401  (re-exported for the drivers)
+from .errors import Cancelled, UserError, setting  # noqa: F401  (re-exported for the drivers)
 
 REFINED_SUFFIX = "_refined"
 # The stages refine_uvs reports, each from 0 to 1: gradient map, automaton, pack.
@@ -299,11 +299,14 @@ def _validate_object(obj, options, owners, resolution, depsgraph):
                         "then UV > Lightmap Pack)")
     source = options["source_layer"] or bridge.default_source_layer(mesh)
     if source is None:
-        raise UserError(f"'{obj.name}' has only refined UV maps: set Source (the panel's source UV map) to the one to refine")
+        raise UserError(f"'{obj.name}' has only refined UV maps: "
+                        + setting("set Source (top of the panel) to the one to refine",
+                                  "pass the one to refine with --source-layer"))
     if source not in mesh.uv_layers:
         available = ", ".join(layer.name for layer in mesh.uv_layers)
-        raise UserError(f"'{obj.name}' has no UV map '{source}' (it has: {available}): pick the lightmap "
-                        "UV map (Source in the panel, --source-layer in a batch)")
+        raise UserError(f"'{obj.name}' has no UV map '{source}' (it has: {available}): "
+                        + setting("pick the lightmap UV map as Source (top of the panel)",
+                                  "pass the lightmap UV map with --source-layer"))
     refined = source + REFINED_SUFFIX
     if refined not in mesh.uv_layers and len(mesh.uv_layers) >= 8:
         raise UserError(f"'{obj.name}' already has 8 UV maps, Blender's limit: remove one to make room "

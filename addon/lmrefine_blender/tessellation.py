@@ -22,9 +22,12 @@ import bmesh
 import bpy
 import numpy as np
 
-from .errors import UserError
+from .errors import UserError, setting
 
-TOGGLE = "Tessellate (panel) or --tessellate (batch)"
+
+def _turn_off():
+    """The other fix for every problem below: no tessellation, as the reader sets it."""
+    return setting("turn off Tessellate (Stages and Tessellation)", "pass --no-tessellate")
 
 
 def problem(obj):
@@ -33,18 +36,18 @@ def problem(obj):
     if len(obj.modifiers):
         names = ", ".join(modifier.name for modifier in obj.modifiers)
         return (f"'{obj.name}' has modifiers ({names}): tessellation writes into the mesh under them, which they "
-                "would then change again; apply or remove the modifiers (Object > Apply), or turn off " + TOGGLE)
+                "would then change again; apply or remove the modifiers (Object > Apply), or " + _turn_off())
     if obj.instance_type != 'NONE':
         return (f"'{obj.name}' instances objects on its {obj.instance_type.lower()}: new vertices would add "
-                f"instances; set Object Properties > Instancing to None, or turn off " + TOGGLE)
+                f"instances; set Object Properties > Instancing to None, or " + _turn_off())
     users = mesh.users - int(mesh.use_fake_user)
     if users > 1:
         return (f"'{obj.name}' shares mesh '{mesh.name}' with {users - 1} other object(s) (or a library "
                 "override): tessellation would change all of them; make it single-user (Object > Relations > "
-                "Make Single User > Object & Data), or turn off " + TOGGLE)
+                "Make Single User > Object & Data), or " + _turn_off())
     if mesh.shape_keys is not None:
         return (f"'{obj.name}' has shape keys: tessellation writes the basis mesh only; apply or remove them "
-                "(Object Data > Shape Keys), or turn off " + TOGGLE)
+                "(Object Data > Shape Keys), or " + _turn_off())
     return None
 
 

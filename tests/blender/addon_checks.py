@@ -1608,6 +1608,24 @@ def rechart_wording():
 
 
 @check()
+def setting_wording():
+    """A message names a setting as its reader sets it: by its panel label, or (the batch) by its flag."""
+    register()
+    from lmrefine_blender import errors, tessellation
+    shared = bpy.data.objects.new("Twin", bpy.data.meshes.new("TwinMesh"))
+    bpy.context.scene.collection.objects.link(shared)
+    bpy.context.scene.collection.objects.link(bpy.data.objects.new("Twin2", shared.data))
+    by_reader = {}
+    for batch in (False, True):
+        errors.BATCH = batch
+        try:
+            by_reader["batch" if batch else "panel"] = tessellation.problem(shared)
+        finally:
+            errors.BATCH = False
+    return by_reader
+
+
+@check()
 def menus_and_panel_rows():
     """The operator's menu entries (what F3 search finds) and panels that draw the same rows in every state."""
     register()
