@@ -126,6 +126,17 @@ def test_error_is_reported_and_changes_nothing(facts, name):
     assert value["changed"] == []
 
 
+def test_refusals_of_several_objects_read_one_a_line(facts):
+    """Every selected object refused: one message, each refusal a sentence on a line of its own (Blender's
+    report popup and Info log show each line as a row); they used to run together."""
+    message = fact(facts, "error_only_bad_objects")["message"]
+    assert message.strip().removeprefix("Error: ").split("\n") == [
+        "'Bare' has no UV map: add one for the lightmap (Object Data > UV Maps > +, then UV > Lightmap Pack).",
+        "'Flat' has no area in 3-D (zero scale, or only degenerate faces): give it a non-zero scale or real faces."]
+    value = fact(facts, "refusal_wording")
+    assert value["one_per_line"] == ["'A' is hidden: show it.\n'B' has no UV map.", "'A' is hidden: show it"]
+
+
 def test_messages_name_settings_as_their_reader_sets_them(facts):
     """The add-on's messages name a setting by its panel label (never a batch flag); the batch's, by its flag."""
     message = fact(facts, "error_missing_source_layer")["message"]

@@ -267,8 +267,16 @@ def validate(context, objects, options):
         except UserError as error:
             targets.skipped.append(str(error))
     if not targets:
-        raise UserError(" ".join(targets.skipped))
+        raise UserError(one_per_line(targets.skipped))
     return targets
+
+
+def one_per_line(messages):
+    """Several refusals as one message: one a line, each a sentence of its own (Blender's report popup and
+    its Info log show each line as a row of its own); a single one as it is."""
+    if len(messages) == 1:
+        return messages[0]
+    return "\n".join(text if text.endswith(".") else text + "." for text in messages)
 
 
 class Targets(list):
@@ -498,7 +506,7 @@ def run(context, targets, options, journal, image_dir=None):
         refined_uvs[name] = result.uvs
         light_changes[name] = result.light_changes
     if not groups:
-        raise UserError(" ".join(w for w in outcome.warnings if w.startswith("Skipped: ")))
+        raise UserError(one_per_line([w for w in outcome.warnings if w.startswith("Skipped: ")]))
     outcome.atlases = {group.name: group.objects for group in groups}
     for group in groups:
         _write_group_layers(group, refined_uvs[group.name], journal)

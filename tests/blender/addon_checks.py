@@ -1626,6 +1626,13 @@ def setting_wording():
 
 
 @check()
+def refusal_wording():
+    """Several refusals in one message: one a line, each a sentence."""
+    return {"one_per_line": [pipeline.one_per_line(["'A' is hidden: show it", "'B' has no UV map."]),
+                             pipeline.one_per_line(["'A' is hidden: show it"])]}
+
+
+@check()
 def menus_and_panel_rows():
     """The operator's menu entries (what F3 search finds) and panels that draw the same rows in every state."""
     register()
