@@ -554,6 +554,21 @@ def test_a_texture_map_as_source_is_named_with_the_fix(facts):
     tight = [w for w in value["per_effect_tight_warnings"] if "was already invalid" in w]
     assert [w.split(":")[0] for w in tight] == ["'Blocker' (direct)", "'Blocker' (indirect)"]
     assert all("padding is 8" in w for w in tight)
+    # Charts closer than the padding: the repack's Margin is what to raise.
+    assert all(w.endswith("repack the source map (UV > Lightmap Pack) with a larger Margin (in the operator's "
+                          "Adjust Last Operation panel), so that its charts lie at least Padding (8 texels) apart")
+               for w in tight), tight
+
+
+def test_repack_advice_names_the_margin_only_where_charts_are_too_close(facts):
+    warnings = fact(facts, "repack_wording")
+    assert warnings["tight"] == (
+        "'Box': UV map 'Lightmap' was already invalid at 64 texels (charts 1.50 texels apart, padding is 2); the "
+        "refined map is no worse, but lightmap bleeding may show: repack the source map (UV > Lightmap Pack) with a "
+        "larger Margin (in the operator's Adjust Last Operation panel), so that its charts lie at least Padding "
+        "(2 texels) apart")
+    assert warnings["flipped"].endswith("(2 flipped); the refined map is no worse, but lightmap bleeding may show: "
+                                        "repack the source map (UV > Lightmap Pack)")
 
 
 def test_progress_moves_per_map_and_per_stage(facts):

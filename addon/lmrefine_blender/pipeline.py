@@ -620,9 +620,12 @@ def source_warning(label, group, source_check, padding, resolution, refined_chec
         return (f"{label}: UV map '{source}' was invalid at {resolution} texels "
                 f"({describe_problems(source_check, padding)}); the refined map is valid ({apart}), so only "
                 "the first lightmap, baked with the source map, may show bleeding")
+    # Charts closer than the padding: the packer's Margin is what keeps them apart.
+    margin = (f" with a larger Margin (in the operator's Adjust Last Operation panel), so that its charts lie "
+              f"at least Padding ({padding:g} texels) apart" if source_check["min_gutter_texels"] < padding else "")
     return (f"{label}: UV map '{source}' was already invalid at {resolution} texels "
             f"({describe_problems(source_check, padding)}); the refined map is no worse, but lightmap "
-            "bleeding may show: repack the source map (UV > Lightmap Pack)")
+            f"bleeding may show: repack the source map (UV > Lightmap Pack){margin}")
 
 
 def new_outcome(targets, options):

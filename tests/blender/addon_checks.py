@@ -1633,6 +1633,20 @@ def refusal_wording():
 
 
 @check()
+def repack_wording():
+    """The repack advice for a source map that was already invalid: the Margin only where charts are too close."""
+    register()
+    from types import SimpleNamespace
+    group = SimpleNamespace(targets=[SimpleNamespace(source="Lightmap")])
+    tight = {"valid": False, "flipped": 0, "degenerate": 0, "overlapping": 0, "out_of_bounds": 0,
+             "min_gutter_texels": 1.5}
+    flipped = dict(tight, flipped=2, min_gutter_texels=4.0)
+    return {"tight": pipeline.source_warning("'Box'", group, tight, 2, 64),
+            "flipped": pipeline.source_warning("'Box'", group, flipped, 2, 64)}
+
+
+@check()
+@check()
 def menus_and_panel_rows():
     """The operator's menu entries (what F3 search finds) and panels that draw the same rows in every state."""
     register()
