@@ -90,7 +90,7 @@ def fact(facts, name):
 def test_register_and_unregister(facts):
     value = fact(facts, "registration")
     registered, unregistered = value["registered"], value["unregistered"]
-    assert len(registered["panels"]) == 5
+    assert len(registered["panels"]) == 6
     assert registered["category"] == "Lightmap" and registered["space"] == "VIEW_3D"
     assert registered["operators"] == [True, True] and registered["label"] == "Refine Lightmap UVs"
     assert registered["scene_property"]
@@ -558,6 +558,11 @@ def test_a_texture_map_as_source_is_named_with_the_fix(facts):
     assert all(w.endswith("repack the source map (UV > Lightmap Pack) with a larger Margin (in the operator's "
                           "Adjust Last Operation panel), so that its charts lie at least Padding (8 texels) apart")
                for w in tight), tight
+    # The panel keeps the run's warnings, each wrapped to the sidebar, its first line marked.
+    assert value["panel_warning_text"] == "\n".join(value["warnings"])
+    starts = [text for text, icon in value["panel_warning_rows"] if icon == 'ERROR']
+    assert len(starts) == len(value["warnings"]) and starts[0].startswith("'Blocker': UV map")
+    assert " ".join(text for text, _ in value["panel_warning_rows"]) == " ".join(value["warnings"])
 
 
 def test_repack_advice_names_the_margin_only_where_charts_are_too_close(facts):
@@ -688,6 +693,19 @@ def test_menu_entries_and_stable_panels(facts):
     assert re.fullmatch(r"Triangles: [0-9.e+]+x-[0-9.e+]+x", labels["after_run"][3]) and len(labels["after_run"][3]) <= 24
     assert value["operators_after_run"] == ["object.lmrefine_show_preview"] * 2 + ["object.lmrefine_remove_preview"]
     assert len(value["icons_used"]) >= 8 and value["icons_missing"] == []
+    # What held the refinement back, in words (settings by their labels), and what that means in the report.
+    assert labels["after_run"][4] == "Limit: Max Growth/steps" and labels["warned"][4] == "Limit: flips +2"
+    assert "; limits: Max Growth (some texels grew as much as it allows), steps (the automaton stopped at its " \
+           "step limit before the texel densities settled within Delta); " in value["result_message"]
+    # Warnings stay in the panel after the run: counted in Last Result, listed in its Warnings sub-panel.
+    assert labels["warned"][5] == "Warnings: 7 (below)" and labels["nothing_moved"][3] == "The warnings say why"
+    rows = value["warning_rows"]
+    assert rows["nothing"] == [["No run yet", "INFO"]] and rows["after_run"] == [["No warnings", "INFO"]]
+    warned = rows["warned"]
+    assert warned[:4] == [["'Floor': nothing moved:", "ERROR"], ["strength is 0; the", "BLANK1"],
+                          ["layout returned is the", "BLANK1"], ["input", "BLANK1"]]
+    assert [text for text, icon in warned if icon == "ERROR"][1:] == [f"Skipped: 'Box{k}' has no" for k in range(4)]
+    assert warned[-1] == ["2 more in the Info log", "INFO"] and all(len(text) <= 23 for text, _ in warned)
 
 
 def test_limit_row_and_its_words(facts):

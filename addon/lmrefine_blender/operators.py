@@ -27,6 +27,7 @@ def _report_outcome(operator, context, outcome, seconds):
     result.density_max = summary["density_max"]
     result.limited_by = summary["limited_by"]
     result.warnings = len(outcome.warnings)
+    result.warning_text = "\n".join(outcome.warnings)  # the panel keeps them after the run
     result.timings = "  ".join(f"{stage} {value:.2f}s" for stage, value in outcome.timings.items())
     result.tessellated = bool(outcome.tessellation)
     result.vertices_added = summary["vertices_added"]

@@ -188,7 +188,7 @@ class LMREFINE_PT_refine_result(_LightmapTab, bpy.types.Panel):
             rows = [(f"Objects: {count}", 'OBJECT_DATA', True),
                     ("Nothing moved", 'ERROR', True),
                     ("Refined = source map", 'BLANK1', True),
-                    ("The Info log says why", 'BLANK1', True)]
+                    ("The warnings say why", 'BLANK1', True)]
         else:
             rows = [(f"Objects: {count}", 'OBJECT_DATA', True),
                     (f"Moved: {result.moved} object(s)", 'CHECKMARK', True),
@@ -198,7 +198,7 @@ class LMREFINE_PT_refine_result(_LightmapTab, bpy.types.Panel):
                     (f"Triangles: {result.density_min:.2g}x-{result.density_max:.3g}x", 'MOD_UVPROJECT', True)]
         rows.append((limit_row(result.limited_by), 'INFO', bool(result.limited_by)))
         warnings = result.warnings if result.valid else 0
-        rows.append((f"Warnings: {warnings} (Info log)" if warnings else "Warnings: none", 'ERROR' if warnings
+        rows.append((f"Warnings: {warnings} (below)" if warnings else "Warnings: none", 'ERROR' if warnings
                      else 'INFO', bool(warnings)))
         images = result.images if result.valid else 0
         rows.append((f"Images: {images} per pass" if images else "Images: -",
@@ -244,6 +244,51 @@ class LMREFINE_PT_refine_result(_LightmapTab, bpy.types.Panel):
             row.label(text=text, icon=icon)
 
 
+# The Warnings panel lists this many of the last run's warnings; the Info log has them all.
+SHOWN_WARNINGS = 5
+
+
+def wrap(text, region):
+    """`text` in lines that fit the sidebar `region` beside an icon (about 23 characters at its default
+    width; None: that width)."""
+    import textwrap
+    if region is None or region.width <= 1:
+        width = LIMIT_ROW_CHARACTERS
+    else:  # the UI font's mean character, the panel's margins and the icon, in pixels at this UI scale
+        scale = bpy.context.preferences.system.ui_scale
+        width = max(LIMIT_ROW_CHARACTERS, int((region.width - 56 * scale) / (7 * scale)))
+    return textwrap.wrap(text, width) or [""]
+
+
+def warning_rows(result, region=None):
+    """The Warnings panel's rows (text, icon): each warning of the last run wrapped to the sidebar, the first
+    line with a warning icon; one row when there is none."""
+    warnings = [text for text in result.warning_text.split("\n") if text] if result.valid else []
+    if not warnings:
+        return [("No warnings" if result.valid else "No run yet", 'INFO')]
+    rows = []
+    for text in warnings[:SHOWN_WARNINGS]:
+        lines = wrap(text, region)
+        rows += [(lines[0], 'ERROR')] + [(line, 'BLANK1') for line in lines[1:]]
+    if len(warnings) > SHOWN_WARNINGS:
+        rows.append((f"{len(warnings) - SHOWN_WARNINGS} more in the Info log", 'INFO'))
+    return rows
+
+
+class LMREFINE_PT_refine_warnings(_LightmapTab, bpy.types.Panel):
+    """The last run's warnings, kept after the run (the status bar shows only the last report)."""
+
+    bl_label = "Warnings"
+    bl_parent_id = "LMREFINE_PT_refine_result"
+
+    def draw(self, context):
+        result = context.scene.lmrefine.result
+        column = self.layout.column(align=True)
+        column.enabled = bool(result.valid and result.warnings)
+        for text, icon in warning_rows(result, context.region):
+            column.label(text=text, icon=icon)
+
+
 def density_rows(settings):
     """The Texel Density panel's three rows (text, enabled): the same rows whether the overlay is on or off."""
     view = overlay.current_view()
@@ -277,6 +322,6 @@ class LMREFINE_PT_density(_LightmapTab, bpy.types.Panel):
 
 
 CLASSES = (LMREFINE_PT_refine, LMREFINE_PT_refine_options, LMREFINE_PT_refine_stages, LMREFINE_PT_refine_bake,
-           LMREFINE_PT_refine_result, LMREFINE_PT_density)
+           LMREFINE_PT_refine_result, LMREFINE_PT_refine_warnings, LMREFINE_PT_density)
 
 register, unregister = bpy.utils.register_classes_factory(CLASSES)

@@ -78,6 +78,9 @@ class LMREFINE_PG_result(bpy.types.PropertyGroup):
         "this can exceed Max Growth")
     limited_by: StringProperty(name="Limited By", description="What kept the refinement from going further")
     warnings: IntProperty(name="Warnings", description="Warnings of the last run (in the Info log)")
+    warning_text: StringProperty(name="Warning Text",
+                                 description="The last run's warnings, one a line, as the Last Result panel "
+                                             "shows them")
     timings: StringProperty(name="Timings", description="Seconds per stage of the last run")
     message: StringProperty(name="Message", description="Summary of the last run")
     vertices_added: IntProperty(name="Vertices Added",

@@ -132,7 +132,7 @@ def registration():
     """register() adds the operators, the panels and Scene.lmrefine; unregister() removes all of them."""
     register()
     names = ("LMREFINE_PT_refine", "LMREFINE_PT_refine_options", "LMREFINE_PT_refine_stages",
-             "LMREFINE_PT_refine_bake", "LMREFINE_PT_refine_result")
+             "LMREFINE_PT_refine_bake", "LMREFINE_PT_refine_result", "LMREFINE_PT_refine_warnings")
     registered = {
         "panels": [name for name in names if hasattr(bpy.types, name)],
         "category": bpy.types.LMREFINE_PT_refine.bl_category,
@@ -1124,7 +1124,9 @@ def texture_map_as_source_warns():
     options.update(source_layer="Lightmap", padding=8)
     targets = pipeline.validate(bpy.context, [box], options)
     tight = pipeline.run_blocking(pipeline.run(bpy.context, targets, options, Journal()))
+    from lmrefine_blender.panels import warning_rows
     return {"outcome": outcome, "message": message, "warnings": run.warnings, "panel_warnings": result.warnings,
+            "panel_warning_text": result.warning_text, "panel_warning_rows": warning_rows(result),
             "per_effect_warnings": per_effect.warnings, "per_effect_tight_warnings": tight.warnings}
 
 
@@ -1699,26 +1701,35 @@ def menus_and_panel_rows():
     icons = set(bpy.types.UILayout.bl_rna.functions["prop"].parameters["icon"].enum_items.keys())
     states = {}
     scenes.select_only()
-    states["nothing"] = {name: draw(getattr(panels, name)) for name in
-                         ("LMREFINE_PT_refine", "LMREFINE_PT_refine_bake", "LMREFINE_PT_refine_result",
-                          "LMREFINE_PT_density")}
+    shown = ("LMREFINE_PT_refine", "LMREFINE_PT_refine_bake", "LMREFINE_PT_refine_result",
+             "LMREFINE_PT_refine_warnings", "LMREFINE_PT_density")
+    states["nothing"] = {name: draw(getattr(panels, name)) for name in shown}
     scenes.select_only(bpy.data.objects["Floor"])
     outcome, message = refine()
-    bpy.context.scene.lmrefine.density_overlay = True  # its panel draws the same rows on and off
-    states["after_run"] = {name: draw(getattr(panels, name)) for name in
-                           ("LMREFINE_PT_refine", "LMREFINE_PT_refine_bake", "LMREFINE_PT_refine_result",
-                            "LMREFINE_PT_density")}
-    bpy.context.scene.lmrefine.density_overlay = False
-    bpy.context.scene.lmrefine.result.moved = 0
-    bpy.context.scene.lmrefine.result.objects = "ArcadeNorth, ArcadeWest, Floor, LowWall, Well"  # five names
-    states["nothing_moved"] = {"LMREFINE_PT_refine_result": draw(panels.LMREFINE_PT_refine_result)}
     result = bpy.context.scene.lmrefine.result
+    result_message = result.message
+    bpy.context.scene.lmrefine.density_overlay = True  # its panel draws the same rows on and off
+    states["after_run"] = {name: draw(getattr(panels, name)) for name in shown}
+    bpy.context.scene.lmrefine.density_overlay = False
+    result.moved = 0
+    result.objects = "ArcadeNorth, ArcadeWest, Floor, LowWall, Well"  # five names
+    states["nothing_moved"] = {name: draw(getattr(panels, name)) for name in
+                               ("LMREFINE_PT_refine_result", "LMREFINE_PT_refine_warnings")}
     result.stages, result.stages_kept = 3, 2  # a map that stopped early: its name, then why, on rows of their own
     result.stages_stopped = "Floor_atlas: stage 3 backed off; Lonely: stage 2 moved 0.4%"
     states["staged"] = {"LMREFINE_PT_refine_result": draw(panels.LMREFINE_PT_refine_result)}
     result.stages, result.stages_kept, result.stages_stopped = 1, 1, ""
+    # Back-off limits, and warnings the panel keeps after the run (seven: five shown, two counted).
+    limited_by, result.limited_by = result.limited_by, "flipped, overlapping, step_cap"
+    result.warnings = 7
+    result.warning_text = "\n".join(["'Floor': nothing moved: strength is 0; the layout returned is the input"]
+                                     + [f"Skipped: 'Box{k}' has no UV map" for k in range(6)])
+    states["warned"] = {name: draw(getattr(panels, name)) for name in
+                        ("LMREFINE_PT_refine_result", "LMREFINE_PT_refine_warnings")}
+    result.limited_by, result.warnings, result.warning_text = limited_by, 0, ""
     settings(layouts='PER_EFFECT')
     per_effect_outcome = refine()
+    per_effect_message = result.message
     states["per_effect"] = {name: draw(getattr(panels, name)) for name in
                             ("LMREFINE_PT_refine_stages", "LMREFINE_PT_refine_result")}
     settings(layouts='ONE')
@@ -1740,6 +1751,9 @@ def menus_and_panel_rows():
         "rows": {state: {panel: len(log) for panel, log in logs.items()} for state, logs in states.items()},
         "labels": {state: [entry[1] for entry in logs["LMREFINE_PT_refine_result"] if entry[0] == "label"]
                    for state, logs in states.items()},
+        "warning_rows": {state: [entry[1:] for entry in logs["LMREFINE_PT_refine_warnings"] if entry[0] == "label"]
+                         for state, logs in states.items() if "LMREFINE_PT_refine_warnings" in logs},
+        "result_message": result_message, "per_effect_message": per_effect_message,
         "operators_after_run": [entry[1] for entry in states["after_run"]["LMREFINE_PT_refine_bake"]
                                 if entry[0] == "operator"],
         "icons_used": sorted(used - {'NONE'}), "icons_missing": sorted(used - icons - {'NONE'}),
