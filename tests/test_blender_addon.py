@@ -1314,6 +1314,12 @@ def test_per_effect_panel_rows(facts):
     assert len(effects) == 2
     assert all(re.fullmatch(r"(Direct|Indirect): \d+px, \d+\.\d\dx", label) for label in effects)
     assert all(len(label) <= 23 for label in labels), labels  # the default sidebar's width beside an icon
+    # One image per effect for the one map (the bake passes do not count here); the report says so too.
+    assert "Images: 1 per effect" in labels and not any("per pass" in label for label in labels)
+    assert "; 2 image(s) for 1 object(s), 1 per effect (direct, indirect); " in value["per_effect_message"]
+    assert fact(facts, "images_wording") == {
+        "one": "2 image(s) per pass for 3 object(s)",
+        "per_effect": "4 image(s) for 3 object(s), 2 per effect (direct, indirect)"}
 
 
 def test_per_effect_maps_add_up_to_the_combined_light(facts):

@@ -90,8 +90,12 @@ def _report_outcome(operator, context, outcome, seconds):
 
 def images_sentence(summary):
     """How many images a run wrote for how many objects, and which objects share which."""
-    per_pass, objects = summary["images_per_pass"], summary["objects"]
-    text = f"{per_pass} image(s) per pass for {objects} object(s)"
+    per_pass, objects, effects = summary["images_per_pass"], summary["objects"], summary["effects"]
+    if effects:  # Layouts: Per Effect: each map gets one image per effect, whatever the bake passes
+        text = (f"{per_pass * len(effects)} image(s) for {objects} object(s), {per_pass} per effect "
+                f"({', '.join(effects)})")
+    else:
+        text = f"{per_pass} image(s) per pass for {objects} object(s)"
     shared = summary["shared_images"]
     if shared:
         text += " (" + "; ".join(f"{name}_lightmap_*: {', '.join(names)}" for name, names in shared.items()) + ")"

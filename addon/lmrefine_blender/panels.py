@@ -201,8 +201,9 @@ class LMREFINE_PT_refine_result(_LightmapTab, bpy.types.Panel):
         rows.append((f"Warnings: {warnings} (below)" if warnings else "Warnings: none", 'ERROR' if warnings
                      else 'INFO', bool(warnings)))
         images = result.images if result.valid else 0
-        rows.append((f"Images: {images} per pass" if images else "Images: -",
-                     'IMAGE_DATA', bool(images)))
+        # Layouts: Per Effect writes one image per effect for each map, whatever the bake passes.
+        each = "effect" if result.valid and result.effects else "pass"
+        rows.append((f"Images: {images} per {each}" if images else "Images: -", 'IMAGE_DATA', bool(images)))
         if result.valid and result.effects:  # Layouts: Per Effect: a row per effect, its map side and its edges
             # "Indirect: 125px, 2.39x": its map's side and its edges' widening (23 characters at most)
             rows += [(f"{entry.split()[0].capitalize()}: {entry.split()[1]}, {entry.split()[2]}", 'LIGHT', True)

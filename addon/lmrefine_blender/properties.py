@@ -89,7 +89,8 @@ class LMREFINE_PG_result(bpy.types.PropertyGroup):
     stages: IntProperty(name="Stages", description="Refinement stages asked for in the last run", default=1)
     stages_kept: IntProperty(name="Stages Kept", description="Refinement stages the last run kept (the most of "
                              "any object)", default=1)
-    images: IntProperty(name="Images", description="Images the last run wrote per pass (one per atlas group)")
+    images: IntProperty(name="Images", description="Images the last run wrote per pass, or per effect with "
+                        "Layouts: Per Effect (one per atlas group)")
     shared: StringProperty(name="Shared Images",
                            description="Atlas groups of the last run that several objects share ('name: objects; ...')")
     effects: StringProperty(name="Effects", description="Layouts: Per Effect: each effect's resolution and "

@@ -1648,6 +1648,14 @@ def repack_wording():
 
 
 @check()
+def images_wording():
+    """How many images a run wrote, with Layouts: One and Per Effect."""
+    register()
+    summary = {"images_per_pass": 2, "objects": 3, "shared_images": {}}
+    return {"one": operators.images_sentence(dict(summary, effects={})),
+            "per_effect": operators.images_sentence(dict(summary, effects={"direct": {}, "indirect": {}}))}
+
+
 @check()
 def menus_and_panel_rows():
     """The operator's menu entries (what F3 search finds) and panels that draw the same rows in every state."""
