@@ -5,6 +5,8 @@ detail), and every panel draws the same rows whatever the state, greying out
 what does not apply, so the layout never jumps under the mouse.
 """
 
+import textwrap
+
 import bpy
 
 from . import bridge, materials, overlay
@@ -252,7 +254,6 @@ SHOWN_WARNINGS = 5
 def wrap(text, region):
     """`text` in lines that fit the sidebar `region` beside an icon (about 23 characters at its default
     width; None: that width)."""
-    import textwrap
     if region is None or region.width <= 1:
         width = LIMIT_ROW_CHARACTERS
     else:  # the UI font's mean character, the panel's margins and the icon, in pixels at this UI scale
