@@ -805,10 +805,16 @@ def test_route_bad_positions(lightmap_pack_case, positions, error, match):
         lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, positions=positions)
 
 
-def test_route_bad_switch(lightmap_pack_case):
+@pytest.mark.parametrize("rechart, error", [
+    # A str is the right type with a value the switch does not know (a TypeError until a crash hunt).
+    ("yes", ValueError), ("sometimes", ValueError), ("Always", ValueError),
+    (1, TypeError), (None, TypeError), (0.5, TypeError),
+])
+def test_route_bad_switch(lightmap_pack_case, rechart, error):
     corners, uvs, triangles, lightmap = lightmap_pack_case
-    with pytest.raises(TypeError, match="rechart must be True, False or 'always'"):
-        lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, positions=corners, rechart="yes")
+    with pytest.raises(error) as raised:
+        lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, positions=corners, rechart=rechart)
+    assert str(raised.value) == f"rechart must be True, False or 'always', got {rechart!r}"
 
 
 def _texel_points_reference(uvs, triangles, shape):
