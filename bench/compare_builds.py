@@ -107,7 +107,8 @@ def cases(size):
                 lmrefine.dwt2(images["grey"], wavelet=wavelet))))
 
     # Corners in crowds (some within the tolerance, some bit-identical) and spread.
-    crowds = np.repeat(rng.random((300, 2)), 10, axis=0) + rng.normal(0, 1e-5, (3000, 2)) * (rng.random((3000, 1)) < 0.7)
+    centres = np.repeat(rng.random((300, 2)), 10, axis=0)
+    crowds = centres + rng.normal(0, 1e-5, (3000, 2)) * (rng.random((3000, 1)) < 0.7)
     crowd_tris = rng.integers(0, 3000, (2000, 3)).astype(np.int32)
     listed.append(("find_charts crowds", lambda: {
         f"tolerance={tolerance:g}": lmrefine.find_charts(crowds.astype(np.float32), crowd_tris, tolerance)

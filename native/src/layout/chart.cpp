@@ -175,8 +175,9 @@ bool join_by_cells(const UvLayout& layout, double tolerance, const std::vector<i
         for (const auto& [di, dj] : offsets) {
             const int64_t b = index.find(cell_key(cell_i[p] + di, cell_j[p] + dj));
             if (b < 0 || sets.find(m[start[a]]) == sets.find(m[start[size_t(b)]])) continue;
-            join_first_close_pair(layout, m + start[a], m + start[a + 1], m + start[size_t(b)], m + start[size_t(b) + 1],
-                                  tolerance2, sets);
+            const int64_t* there = m + start[size_t(b)];
+            join_first_close_pair(layout, m + start[a], m + start[a + 1], there, m + start[size_t(b) + 1], tolerance2,
+                                  sets);
         }
     }
     return true;
