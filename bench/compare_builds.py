@@ -9,6 +9,7 @@ array exactly (same dtype, shape and bytes; NaNs compare equal to NaNs):
   Pack layout, and on the bundled scenes' layouts in blend_samples/;
 * gradient_map, dwt2 and idwt2 on random images (every wavelet);
 * check_layout on the same layouts and on the refined ones;
+* find_charts at several tolerances on the bundled layouts and on crowded corners;
 * bake of a small bundled scene with a fixed seed.
 
 Timings (report["timings"], bake stats' seconds and rays per second) are
@@ -105,6 +106,14 @@ def cases(size):
             lambda bands: {"bands": bands, "inverse": lmrefine.idwt2(bands, wavelet=wavelet)})(
                 lmrefine.dwt2(images["grey"], wavelet=wavelet))))
 
+    # Corners in crowds (some within the tolerance, some bit-identical) and spread.
+    centres = np.repeat(rng.random((300, 2)), 10, axis=0)
+    crowds = centres + rng.normal(0, 1e-5, (3000, 2)) * (rng.random((3000, 1)) < 0.7)
+    crowd_tris = rng.integers(0, 3000, (2000, 3)).astype(np.int32)
+    listed.append(("find_charts crowds", lambda: {
+        f"tolerance={tolerance:g}": lmrefine.find_charts(crowds.astype(np.float32), crowd_tris, tolerance)
+        for tolerance in (0.0, 5e-6, 1e-5, 3e-5, 1e-3)}))
+
     for layout, (uvs, tris) in layouts.items():
         listed.append((f"check_layout {layout}",
                        lambda uvs=uvs, tris=tris: lmrefine.check_layout(uvs, tris, size, failing_charts=True)))
@@ -119,6 +128,9 @@ def cases(size):
                            lambda uvs=uvs, tris=tris: lmrefine.check_layout(uvs, tris, size, failing_charts=True)))
             listed.append((f"refine {scene_name}/{variant} same scalar passes=1",
                            refine(f"{scene_name}/{variant}")))
+            listed.append((f"find_charts {scene_name}/{variant}", lambda uvs=uvs, tris=tris: {
+                f"tolerance={tolerance:g}": lmrefine.find_charts(uvs, tris, tolerance)
+                for tolerance in (0.0, 1e-6, 1e-5, 1e-3)}))
 
     # The re-chart route (refine_uvs with the mesh, the repack on): the source refinement, the
     # re-charting, the carried map and the second refinement, on every scene whose layout folds

@@ -1,5 +1,7 @@
 """Bad input to the baker: clear errors naming the problem, never a crash."""
 
+import time
+
 import numpy as np
 import pytest
 
@@ -130,6 +132,35 @@ def test_huge_resolution_is_refused_before_allocating():
         scene.add_mesh(positions, triangles, uvs=uvs)
     with pytest.raises(MemoryError, match=r"needs about \d+\.\d+ GiB"):
         lmrefine.bake(scene, 32768, passes=("direct", "ao", "indirect", "combined"))
+
+
+def test_a_deep_stack_at_a_high_resolution_is_refused_before_allocating():
+    # A texture map taken for a lightmap: the texel table holds a candidate per stacked face and
+    # texel, 670 GB for 1,000 quads at 4096^2, past the estimate's ~1.5 per texel (found by a
+    # crash hunt). The quads lie apart in 3-D, stacked in the map.
+    quad = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], np.float32)
+    count = 1000
+    positions = np.concatenate([quad + [0, 0, 0.01 * k] for k in range(count)]).astype(np.float32)
+    first = np.arange(count)[:, None] * 4
+    triangles = np.concatenate([first + [0, 1, 2], first + [0, 2, 3]]).astype(np.int32)
+    uvs = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], np.float32)[triangles.ravel() % 4]
+    scene = lmrefine.Scene()
+    scene.add_mesh(positions, triangles, uvs=uvs)
+    scene.add_light("sun", energy=1.0)
+    start = time.process_time()
+    with pytest.raises(MemoryError, match=r"baking at 4096x4096 \(a lightmap's faces are stacked, at least 99\d "
+                                          r"deep on average\) needs about \d+\.\d\d GiB of memory, more than half "
+                                          r"of this machine's \d+\.\d\d GiB; give the faces their own places in the "
+                                          r"lightmap \(Lightmap Pack or Smart UV Project\), fewer stacked faces, or a "
+                                          r"lower resolution"):
+        lmrefine.bake(scene, 4096, passes=("direct",))
+    assert time.process_time() - start < 5.0
+    # A shallow stack at a low resolution still bakes.
+    few = triangles[:, 0] < 12
+    shallow = lmrefine.Scene()
+    shallow.add_mesh(positions[:12], triangles[few], uvs=uvs.reshape(-1, 3, 2)[few].reshape(-1, 2))
+    shallow.add_light("sun", energy=1.0)
+    assert lmrefine.bake(shallow, 32, passes=("direct",), samples=2)[0].shape == (32, 32, 4)
 
 
 def test_bad_options():

@@ -1,3 +1,5 @@
+import time
+
 import numpy as np
 import pytest
 
@@ -69,6 +71,87 @@ def test_find_charts_joins_corners_within_the_tolerance_only():
     assert lmrefine.find_charts(uvs, tris, tolerance=2e-3).tolist() == [0, 0, 0, 0, 0, 0]
     with pytest.raises(ValueError, match="tolerance"):
         lmrefine.find_charts(uvs, tris, tolerance=-1.0)
+
+
+def _charts_by_every_pair(uvs, tris, tolerance):
+    """find_charts' rule, pair by pair: triangles share a UV index, or hold
+    corners closer than the tolerance (in doubles from the float32 UVs) or
+    bit-identical; charts numbered in order of first appearance."""
+    uvs = np.asarray(uvs, np.float32)
+    parent = list(range(len(uvs)))
+
+    def find(x):
+        while parent[x] != x:
+            x = parent[x]
+        return x
+
+    def join(a, b):
+        a, b = find(a), find(b)
+        parent[max(a, b)] = min(a, b)
+
+    used = np.unique(tris)
+    wide = uvs.astype(np.float64)
+    bits = uvs.view(np.uint32)
+    for k, i in enumerate(used):
+        others = used[k + 1:]
+        d = wide[others] - wide[i]
+        close = (d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] < tolerance * tolerance) | ((d == 0).all(axis=1))
+        close |= (bits[others] == bits[i]).all(axis=1)
+        for j in others[close]:
+            join(int(i), int(j))
+    for a, b, c in tris:
+        join(int(a), int(b))
+        join(int(a), int(c))
+    ids = {}
+    return [ids.setdefault(find(int(t[0])), len(ids)) for t in tris]
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_find_charts_joins_exactly_the_corners_closer_than_the_tolerance(seed):
+    # Crowds of corners (thousands at one point, or within a fraction of the
+    # tolerance), pairs exactly at the tolerance on a lattice, and spread
+    # corners: the charts of the every-pair rule.
+    rng = np.random.default_rng(seed)
+    tolerance = 10.0 ** rng.uniform(-6, -2)
+    centres = rng.random((8, 2))
+    uvs = np.concatenate([
+        np.repeat(centres[:2], 60, axis=0),                                # bit-identical crowds
+        centres[2:4].repeat(60, axis=0) + rng.normal(0, tolerance / 8, (120, 2)),  # crowds within the tolerance
+        centres[4] + np.round(rng.random((80, 2)) * 6) * tolerance,        # a lattice at the tolerance
+        centres[5:].repeat(40, axis=0) + rng.normal(0, tolerance, (120, 2)),
+        rng.random((80, 2)),
+    ]).astype(np.float32)
+    tris = rng.integers(0, len(uvs), (150, 3)).astype(np.int32)
+    for scale in (0.5, 1.0, 2.0):
+        assert lmrefine.find_charts(uvs, tris, tolerance * scale).tolist() == \
+            _charts_by_every_pair(uvs, tris, tolerance * scale)
+
+
+@pytest.mark.parametrize("scale, tolerance", [
+    (1.0, 1e-200),  # the tolerance's square underflows
+    (1e12, 1e-5),   # coordinates beyond 2^30 cells
+    (1e12, 5e4),
+    (1e-30, 1e-31),
+])
+def test_find_charts_at_extreme_scales_keeps_the_rule(scale, tolerance):
+    rng = np.random.default_rng(7)
+    uvs = (np.repeat(rng.random((40, 2)), 3, axis=0) * scale).astype(np.float32)
+    uvs[::7] += (rng.normal(0, tolerance, (len(uvs[::7]), 2))).astype(np.float32)
+    tris = rng.integers(0, len(uvs), (60, 3)).astype(np.int32)
+    assert lmrefine.find_charts(uvs, tris, tolerance).tolist() == _charts_by_every_pair(uvs, tris, tolerance)
+
+
+@pytest.mark.parametrize("spread", [0.0, 1e-7, 3e-6])
+def test_find_charts_is_fast_on_corners_crowded_at_one_point(spread):
+    # All-zero UVs (or corners within a fraction of the tolerance): every
+    # pair was tested, 11 s for 20,000 triangles (found by a crash hunt).
+    count = 60000
+    uvs = (0.5 + np.random.default_rng(1).normal(0.0, spread, (3 * count, 2))).astype(np.float32)
+    tris = np.arange(3 * count, dtype=np.int32).reshape(-1, 3)
+    start = time.process_time()
+    charts = lmrefine.find_charts(uvs, tris, tolerance=1e-5)
+    assert time.process_time() - start < 3.0
+    assert charts.tolist() == [0] * count
 
 
 def _overlaps_texel(p, col, row, touch=1e-7):

@@ -1,6 +1,8 @@
 """check_layout: flips, degenerate and overlapping triangles, out-of-bounds
 UVs and the gutter between charts, at a lightmap resolution."""
 
+import time
+
 import numpy as np
 import pytest
 
@@ -83,6 +85,44 @@ def test_stacked_faces_all_overlap_whatever_the_stack_depth():
     report = lmrefine.check_layout(uvs, tris, R)
     assert report["overlapping"] == 60 + 60 and not report["valid"]
     assert lmrefine.check_layout(*apart, R)["overlapping"] == 0
+
+
+def _stack(count):
+    """`count` quads over the whole square with UV indices of their own (a texture map's faces)."""
+    uvs = np.tile(np.array([[0, 0], [1, 0], [1, 1], [0, 1]], np.float32), (count, 1))
+    quads = np.arange(count)[:, None] * 4
+    return uvs, np.concatenate([quads + [0, 1, 2], quads + [0, 2, 3]]).astype(np.int32)
+
+
+def test_a_deep_stack_at_a_high_resolution_is_refused_before_allocating():
+    # A (texel, triangle) pair per stacked face and texel: 1,000 quads at 16384^2 need terabytes,
+    # and failed with a bare MemoryError (or the OOM killer) part way (found by a crash hunt).
+    uvs, tris = _stack(1000)
+    start = time.process_time()
+    message = (r"checking the layout at 16384x16384 \(its faces are stacked, at least 99\d deep on average\) needs "
+               r"about \d+\.\d\d GiB of memory, more than half of this machine's \d+\.\d\d GiB; give the faces their "
+               r"own places in the map \(a lightmap layout: Lightmap Pack or Smart UV Project\), fewer stacked "
+               r"faces, or a lower resolution")
+    with pytest.raises(MemoryError, match=message):
+        lmrefine.check_layout(uvs, tris, 16384)
+    checker = lmrefine.LayoutChecker(uvs, tris, 16384, 2.0)
+    with pytest.raises(MemoryError, match=message):
+        checker.check()
+    with pytest.raises(MemoryError, match=message):
+        checker.check(uvs * np.float32(0.999))
+    assert time.process_time() - start < 5.0  # refused from the estimate, nothing rasterized
+    # The estimate is a floor, measured without the raster: a shallow stack is still checked.
+    assert lmrefine.check_layout(*_stack(3), 512)["overlapping"] == 6
+
+
+def test_a_raster_of_stacked_rows_past_memory_is_refused_before_allocating():
+    # A span per triangle and row: 500,000 triangles over 16384 rows.
+    uvs = np.array([[0, 0], [1, 0], [0, 1]], np.float32)
+    tris = np.zeros((500000, 3), np.int32) + [0, 1, 2]
+    with pytest.raises(MemoryError, match=r"rasterizing 500000 triangles at 16384x16384 \(8192000000 triangle rows\) "
+                                          r"needs about \d+\.\d\d GiB of memory, .*; give stacked faces their own "
+                                          r"places in the map, use fewer triangles, or a lower resolution"):
+        lmrefine.coverage_mask(uvs, tris, 16384)
 
 
 def test_flips_against_the_chart_majority_and_against_a_reference():

@@ -523,6 +523,35 @@ def test_bad_settings_raise_a_clear_error(kwargs, error, words):
     assert words in str(caught.value)
 
 
+@pytest.mark.parametrize("scale, weld_tolerance, message", [
+    # A weld tolerance given for a tiny mesh: the size was printed as 0.000000 (std::to_string).
+    (1e-10, 1e-6, "weld_tolerance 1e-06 is more than 1% of the mesh's size (1.73e-10 across): it would merge "
+                  "distinct vertices; give a distance far below the smallest modelled detail, or None (1e-6 of "
+                  "the mesh's size)"),
+    # Every corner at one point: the weld tolerance was blamed.
+    (0.0, 1e-6, "every one of the 12 triangles is degenerate, all corners at one position: the mesh has no "
+                "extent (give the object a non-zero scale), so there is no surface to chart"),
+    (0.0, None, "every one of the 12 triangles is degenerate, all corners at one position"),
+    # A mesh too small for the packer to scale up: the padding, the resolution and the scales were blamed.
+    (1e-13, None, "the mesh is too small to lay out: its 12 triangles hold 6e-26 square units of surface, its "
+                  "widest chart is 1e-13 units across, and charts keep their world size until the packer scales "
+                  "them up, by at most 1e+12; scale the mesh up (apply its object scale, or model in larger units)"),
+    (1e-20, None, "the mesh is too small to lay out"),
+])
+def test_a_mesh_too_small_or_without_extent_is_named(scale, weld_tolerance, message):
+    positions, triangles = cube()
+    with pytest.raises(ValueError) as caught:
+        lmrefine.rechart(positions * scale, triangles, 66.0, 64, weld_tolerance=weld_tolerance)
+    assert str(caught.value).startswith(message)
+
+
+@pytest.mark.parametrize("scale", [1e-12, 5e-13, 1e30])
+def test_a_small_or_large_mesh_the_packer_can_scale_is_laid_out(scale):
+    positions, triangles = cube()
+    uvs, report = lmrefine.rechart(positions * scale, triangles, 66.0, 64)
+    assert report["layout"]["valid"] and report["utilisation"] > 0.3
+
+
 def test_progress_reports_and_cancels():
     positions, triangles = cylinder(32, rings=4)
     stages = []

@@ -805,10 +805,27 @@ def test_route_bad_positions(lightmap_pack_case, positions, error, match):
         lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, positions=positions)
 
 
-def test_route_bad_switch(lightmap_pack_case):
+def test_route_names_a_mesh_too_small_to_re_chart(lightmap_pack_case):
+    # The reason blamed the padding, the resolution and the scales (found by a crash hunt).
     corners, uvs, triangles, lightmap = lightmap_pack_case
-    with pytest.raises(TypeError, match="rechart must be True, False or 'always'"):
-        lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, positions=corners, rechart="yes")
+    result = lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, padding=2, positions=corners * 1e-20)
+    info = result.report["rechart"]
+    assert not info["used"]
+    assert info["reason"].startswith("the mesh could not be re-charted: the mesh is too small to lay out: its 288 "
+                                     "triangles hold 4e-40 square units of surface")
+    assert info["reason"].endswith("scale the mesh up (apply its object scale, or model in larger units)")
+
+
+@pytest.mark.parametrize("rechart, error", [
+    # A str is the right type with a value the switch does not know (a TypeError until a crash hunt).
+    ("yes", ValueError), ("sometimes", ValueError), ("Always", ValueError),
+    (1, TypeError), (None, TypeError), (0.5, TypeError),
+])
+def test_route_bad_switch(lightmap_pack_case, rechart, error):
+    corners, uvs, triangles, lightmap = lightmap_pack_case
+    with pytest.raises(error) as raised:
+        lmrefine.refine_uvs(lightmap, uvs, triangles, RESOLUTION, positions=corners, rechart=rechart)
+    assert str(raised.value) == f"rechart must be True, False or 'always', got {rechart!r}"
 
 
 def _texel_points_reference(uvs, triangles, shape):

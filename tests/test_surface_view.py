@@ -46,6 +46,38 @@ def test_trace_rays_refuses_rays_embree_would_abort_on(bad, words):
         lmrefine.trace_rays(scene, *bad)
 
 
+@pytest.mark.parametrize("direction, message", [
+    # Called "zero length" until a crash hunt (with a length whose float32 square overflowed).
+    ([0, 0, -1e300], "directions[0] is NaN or Inf (a float32 beyond 3.4e38 is Inf); give every ray a finite "
+                     "direction, of any length"),
+    ([0, 0, 0], "directions[0] has zero length; give every ray a direction"),
+    ([0, -0.0, 0], "directions[0] has zero length; give every ray a direction"),
+    ([0, 0, -1e-30], "directions[0] has length 1e-30, too short: a hit's distance, in units of the length, "
+                     "would pass float32's 3.4e38; scale it towards length 1 (only the direction counts)"),
+])
+def test_trace_rays_names_a_direction_it_cannot_trace(direction, message):
+    scene = plane_scene().to_scene(plane_scene().uvs["smart"])
+    with np.errstate(over="ignore"), pytest.raises(ValueError) as raised:
+        lmrefine.trace_rays(scene, np.array([[0, 0, 1.0]]), np.array([direction], np.float64))
+    assert str(raised.value).startswith(message)
+
+
+@pytest.mark.parametrize("length", [1e-28, 1e-22, 1e-12, 1e-6, 1.0, 1e6, 1e18, 1e20, 1e35])
+@pytest.mark.parametrize("height", [1e-3, 2.0, 2e6])
+def test_trace_rays_takes_any_finite_direction(length, height):
+    # A direction of 1e20 was refused as "zero length", one of 1e18 to 1.8e19 missed
+    # everything (Embree takes components up to 1e18) and a tiny one missed far hits
+    # (Embree takes components below 1e-18 as 1e-18): traced scaled towards length 1.
+    scene = plane_scene().to_scene(plane_scene().uvs["smart"])
+    direction = (np.array([[0.5 / height, 0.0, -1.0]]) * length).astype(np.float32)  # to (0.6, 0.2, 0)
+    mesh, _, bary, distance = lmrefine.trace_rays(scene, np.array([[0.1, 0.2, height]], np.float32), direction)
+    assert mesh.tolist() == [0]
+    # The distance in units of the direction's length, as float32 holds it.
+    np.testing.assert_allclose(np.float64(distance[0]) * np.float64(direction[0, 2]), -height, rtol=1e-5)
+    unit = lmrefine.trace_rays(scene, np.array([[0.1, 0.2, height]], np.float32), direction / direction[0, 2] * -1)
+    np.testing.assert_allclose(bary, unit[2], atol=1e-5)
+
+
 def test_a_constant_lightmap_renders_its_constant_on_every_receiver_pixel():
     sample = plane_scene()
     uvs = sample.uvs["smart"]

@@ -4,7 +4,7 @@ where it splits, and that the surface and every UV map keep their mapping."""
 import numpy as np
 import pytest
 
-from lmrefine.tessellation import coarse_transitions, peak_strength, tessellate, transition_strength_of
+from lmrefine.tessellation import UV_SLACK, coarse_transitions, peak_strength, tessellate, transition_strength_of
 
 R = 64
 
@@ -228,6 +228,28 @@ def test_bad_input_is_named(change, message):
     change(args)
     with pytest.raises(ValueError, match=message):
         tessellate(**args)
+
+
+@pytest.mark.parametrize("far", [3.5e38, 1e300, -4e38])
+def test_uvs_past_float32_are_refused_before_they_turn_inf(far):
+    # float64 UVs finite here and inf as the split's float32 output (found by a crash hunt): the
+    # [0, 1] check (UV_SLACK) refuses them, naming their span.
+    positions, triangles, uvs = bent_grid(n=2)
+    uvs = uvs.astype(np.float64)
+    uvs[4, 1] = far
+    with pytest.raises(ValueError) as raised:
+        tessellate(positions, triangles, uvs, np.ones((R, R)), budget=1.0)
+    low, high = (0.05, far) if far > 0 else (far, 0.95)
+    assert str(raised.value) == (f"uvs must lie in [0, 1], a lightmap layout (they span {low:.6g} to {high:.6g}): "
+                                 "pass the lightmap's UVs, packed into the unit square")
+
+
+def test_uvs_within_the_rounding_slack_come_back_finite():
+    positions, triangles, uvs = bent_grid(n=2)
+    uvs = uvs.astype(np.float64)
+    uvs[4] = (1.0 + UV_SLACK, -UV_SLACK)
+    result = tessellate(positions, triangles, uvs, np.ones((R, R)), budget=1.0, min_texels=0.0)
+    assert result.report["vertices_after"] > result.report["vertices_before"] and np.isfinite(result.uvs).all()
 
 
 def test_a_triangle_that_repeats_a_vertex_is_left_alone_with_its_edges():

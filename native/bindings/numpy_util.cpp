@@ -206,15 +206,30 @@ IndexArray require_indices(const py::handle& object, const char* name, int colum
     require_columns(array, name, columns, allow_empty);
     if (array.dtype().equal(py::dtype::of<int32_t>())) return contiguous<int32_t>(array, name);
     // Range-check before narrowing so a huge index is reported, not wrapped.
-    auto wide = contiguous<int64_t>(array, name);
+    auto wide = wide_integers(array, name);
     const int64_t* p = wide.data();
     for (py::ssize_t i = 0; i < wide.size(); ++i) {
         if (p[i] < 0 || p[i] > std::numeric_limits<int32_t>::max()) {
             throw py::value_error(std::string(name) + "[" + std::to_string(i / columns) + "] holds index " +
-                                  std::to_string(p[i]) + ", outside the int32 range of valid indices");
+                                  element_text(array, i) + ", outside the int32 range of valid indices");
         }
     }
     return contiguous<int32_t>(array, name);
+}
+
+py::array_t<int64_t, py::array::c_style> wide_integers(const py::array& array, const char* name) {
+    auto wide = contiguous<int64_t>(array, name);
+    if (array.dtype().kind() == 'u' && array.dtype().itemsize() == 8) {  // a copy: the dtype differs
+        int64_t* p = wide.mutable_data();
+        for (py::ssize_t i = 0; i < wide.size(); ++i) {
+            if (p[i] < 0) p[i] = std::numeric_limits<int64_t>::max();
+        }
+    }
+    return wide;
+}
+
+std::string element_text(const py::array& array, py::ssize_t flat_index) {
+    return py::str(array.attr("flat")[py::int_(flat_index)]).cast<std::string>();
 }
 
 std::pair<std::vector<int32_t>, int32_t> require_chart_ids(const py::handle& charts, int64_t triangle_count) {
@@ -226,13 +241,13 @@ std::pair<std::vector<int32_t>, int32_t> require_chart_ids(const py::handle& cha
         throw py::value_error("charts must have shape (" + std::to_string(triangle_count) +
                               ",): one chart id per triangle, got " + shape_string(array));
     }
-    py::array_t<int64_t, py::array::c_style | py::array::forcecast> wide(array);
+    const auto wide = wide_integers(array, "charts");
     std::vector<int32_t> ids(static_cast<size_t>(triangle_count));
     int32_t count = 0;
     for (py::ssize_t t = 0; t < wide.size(); ++t) {
         const int64_t c = wide.data()[t];
         if (c < 0 || c >= triangle_count) {
-            throw py::value_error("charts[" + std::to_string(t) + "] is " + std::to_string(c) +
+            throw py::value_error("charts[" + std::to_string(t) + "] is " + element_text(array, t) +
                                   "; chart ids must be in [0, " + std::to_string(triangle_count) +
                                   "), one below the triangle count: number the charts 0..C-1 (find_charts does)");
         }

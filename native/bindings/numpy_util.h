@@ -55,6 +55,14 @@ py::array_t<T, py::array::c_style> contiguous(const py::handle& object, const ch
         contiguous_array(object, name, py::dtype::of<T>()));
 }
 
+// The integers of `array` (any integer dtype) as int64 in C order, for a
+// range check. A uint64 value past int64's range would wrap to a negative
+// (2**64 - 1 read as -1); it saturates to int64's largest instead, past every
+// caller's range: print a refused value with element_text.
+py::array_t<int64_t, py::array::c_style> wide_integers(const py::array& array, const char* name);
+// Element `flat_index` (C order) of `array`, as numpy prints it.
+std::string element_text(const py::array& array, py::ssize_t flat_index);
+
 // Chart ids, one per triangle (an integer array of shape (triangle_count,)),
 // each in [0, triangle_count): below the triangle count, so every per-chart
 // array is bounded by the input's size. Returns the ids and the chart count

@@ -62,12 +62,12 @@ py::tuple rechart_mesh(const py::handle& positions_in, const py::handle& triangl
             throw py::value_error("polygons must have shape (" + std::to_string(triangles.shape(0)) +
                                   ",): one polygon id per triangle, got " + py_util::shape_string(array));
         }
-        py::array_t<int64_t, py::array::c_style | py::array::forcecast> wide(array);
+        const auto wide = py_util::wide_integers(array, "polygons");
         polygons.resize(size_t(triangles.shape(0)));
         for (py::ssize_t t = 0; t < wide.size(); ++t) {
             const int64_t id = wide.data()[t];
             if (id < std::numeric_limits<int32_t>::min() || id > std::numeric_limits<int32_t>::max()) {
-                throw py::value_error("polygons[" + std::to_string(t) + "] is " + std::to_string(id) +
+                throw py::value_error("polygons[" + std::to_string(t) + "] is " + py_util::element_text(array, t) +
                                       ", outside the int32 range: number the polygons 0..P-1");
             }
             polygons[size_t(t)] = int32_t(id);

@@ -151,7 +151,8 @@ def trace_rays(scene, origins, directions, progress=None):
 
     Args:
         origins (numpy.ndarray): (N, 3) ray origins, inside +-1e9.
-        directions (numpy.ndarray): (N, 3) ray directions, any non-zero length.
+        directions (numpy.ndarray): (N, 3) ray directions, any finite
+            length from 1e-28 up.
         progress (callable | None): as for bake.
 
     Returns:
@@ -162,7 +163,8 @@ def trace_rays(scene, origins, directions, progress=None):
         (inf: no hit).
 
     Raises:
-        ValueError: NaN/Inf or out-of-scene origins, zero or NaN directions,
+        ValueError: NaN/Inf or out-of-scene origins, zero, shorter, NaN or
+            Inf directions (a float64 beyond float32's range is Inf),
             mismatched shapes.
     """
     _check_scene(scene)

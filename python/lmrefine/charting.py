@@ -27,6 +27,12 @@ DEFAULT_ANGLE = 10.0
 # curvature (a cylinder's charts span up to twice this arc). Chosen a priori
 # (docs/refiner.md, "Smooth-shaded meshes").
 SMOOTH_ANGLE = 45.0
+# The packer scales charts up by at most this (native/src/pack/packer.cpp's
+# bound on the global scale). Charts come from the unwrap at their world
+# size, so a mesh under 1e-24 square units of surface whose charts are all
+# under 1e-12 units across was packed shrunken, or collapsed with advice
+# about the padding and the resolution (found by a crash hunt).
+MAX_PACK_SCALE = 1e12
 
 
 class RechartResult(NamedTuple):
@@ -126,6 +132,7 @@ def rechart(positions, triangles, angle=DEFAULT_ANGLE, resolution=256, padding=2
                                                      weld_tolerance=weld_tolerance, progress=progress,
                                                      normals=normals, smooth_angle=smooth_angle,
                                                      polygons=polygons)
+    _check_world_size(world_uvs, charts)
     layout_triangles = corner_triangles(len(charts))
     packed, pack_report = pack_charts(world_uvs, layout_triangles, charts, None, resolution, padding,
                                       rotations=rotations, progress=progress)
@@ -142,6 +149,20 @@ def rechart(positions, triangles, angle=DEFAULT_ANGLE, resolution=256, padding=2
     report["layout"] = check
     report["seconds"] = time.perf_counter() - start
     return RechartResult(packed, report)
+
+
+def _check_world_size(world_uvs, charts):
+    """ValueError naming the mesh's size when its charts (rechart_mesh's, at world size, each
+    from the origin) are too small for the packer to scale up into the atlas."""
+    uv = np.asarray(world_uvs, np.float64).reshape(-1, 3, 2)
+    e1, e2 = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
+    area = float(0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]).sum())
+    widest = float(uv.max(initial=0.0))
+    if min(1.0 / np.sqrt(max(area, 1e-300)), 1.0 / max(widest, 1e-300)) > MAX_PACK_SCALE:
+        raise ValueError(f"the mesh is too small to lay out: its {len(charts)} triangles hold {area:.3g} square "
+                         f"units of surface, its widest chart is {widest:.3g} units across, and charts keep their "
+                         f"world size until the packer scales them up, by at most {MAX_PACK_SCALE:g}; scale the mesh "
+                         "up (apply its object scale, or model in larger units)")
 
 
 def _distortion(corners_3d, uvs):

@@ -4,6 +4,8 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
+#include <numeric>
 #include <string>
 #include <vector>
 
@@ -17,6 +19,7 @@
 #include "lmrefine/core/memory.h"
 #include "lmrefine/core/parallel.h"
 #include "lmrefine/core/progress.h"
+#include "lmrefine/layout/coverage.h"
 #include "ray_tracer.h"
 #include "sampler.h"
 #include "texel_table.h"
@@ -35,6 +38,29 @@ std::vector<std::vector<int>> map_meshes(const Scene& scene, bool atlas) {
         }
     }
     return maps;
+}
+
+// The texel table's candidates past one per texel, for the map that has most
+// (maps are baked one at a time), from below: a map whose faces are stacked
+// (a texture map taken for a lightmap) needs a (texel, triangle) candidate per
+// face and texel; 0 for one whose faces lie side by side.
+double stacked_candidates(const Scene& scene, const BakeOptions& options) {
+    const double pixels = double(std::max(options.width, 0)) * double(std::max(options.height, 0));
+    double most = 0.0;
+    for (const auto& map : map_meshes(scene, options.atlas)) {
+        double pairs = 0.0;
+        for (int id : map) {
+            const Mesh& mesh = scene.meshes()[size_t(id)];
+            const int64_t count = mesh.triangle_count();
+            if (count == 0 || mesh.uvs.size() != size_t(3 * count)) continue;
+            std::vector<int32_t> corners(size_t(3 * count));
+            std::iota(corners.begin(), corners.end(), 0);
+            pairs += texel_pairs_at_least({&mesh.uvs[0].x, 3 * count, corners.data(), count}, options.width,
+                                          options.height);
+        }
+        most = std::max(most, pairs - pixels);
+    }
+    return most;
 }
 
 // Per-texel results of one map while it is baked.
@@ -209,14 +235,25 @@ uint64_t bake_memory_estimate(const Scene& scene, const BakeOptions& options) {
     // dilation copies, denoise buffers: ~60).
     const uint64_t returned = maps * uint64_t(options.passes.size()) * pixels * 16;
     const uint64_t working = pixels * (40 + 4 + 8 + 20 * transports + 28 + 60);
-    return returned + working;
+    // Stacked faces: ~40 bytes per further candidate (its entry, the table's
+    // copy and the stable sort's buffer; 36 measured at 40 quads deep).
+    const uint64_t stacked = uint64_t(std::min(40.0 * stacked_candidates(scene, options), 1e19));
+    return returned + working + stacked;  // stacked is at most 1e19, the rest far below 2^63
 }
 
 BakeResult bake(const Scene& scene, const BakeOptions& options, Progress& progress) {
     const auto started = Clock::now();
     validate_bake_options(scene, options, /*texels=*/true);
-    require_memory("baking at " + std::to_string(options.height) + "x" + std::to_string(options.width),
-                   bake_memory_estimate(scene, options), "lower the resolution or bake fewer passes or meshes at once");
+    std::string what = "baking at " + std::to_string(options.height) + "x" + std::to_string(options.width);
+    std::string advice = "lower the resolution or bake fewer passes or meshes at once";
+    if (const double stacked = stacked_candidates(scene, options); stacked > 0.0) {
+        char depth[32];
+        std::snprintf(depth, sizeof depth, "%.3g", 1.0 + stacked / (double(options.width) * options.height));
+        what += std::string(" (a lightmap's faces are stacked, at least ") + depth + " deep on average)";
+        advice = "give the faces their own places in the lightmap (Lightmap Pack or Smart UV Project), fewer "
+                 "stacked faces, or a lower resolution";
+    }
+    require_memory(what, bake_memory_estimate(scene, options), advice);
     BakeResult result;
     const RayTracer tracer(scene);
     const IntegratorSettings settings{options.bounces, options.ao_distance};

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <string>
 #include <unordered_map>
 #include <utility>
@@ -81,14 +82,21 @@ RechartResult rechart(const SurfaceMesh& mesh, const RechartOptions& options, Pr
         lo = glm::min(lo, glm::dvec3(p[0], p[1], p[2])), hi = glm::max(hi, glm::dvec3(p[0], p[1], p[2]));
     }
     const double size = glm::length(hi - lo);
+    // Every corner at one point (a mesh scaled to zero) was blamed on any weld tolerance given.
+    LMREFINE_REQUIRE(size > 0.0, "every one of the " + std::to_string(mesh.triangle_count) +
+                                     " triangles is degenerate, all corners at one position: the mesh has no "
+                                     "extent (give the object a non-zero scale), so there is no surface to chart");
     double tolerance = options.weld_tolerance;
     if (tolerance < 0.0) tolerance = kRelativeWeld * size;
     // A tolerance near the mesh's size would merge distinct vertices (and
     // make the weld's grid one cell, quadratic in the vertices).
-    LMREFINE_REQUIRE(tolerance <= kMaxRelativeWeld * size,
-                     "weld_tolerance " + std::to_string(tolerance) + " is more than 1% of the mesh's size (" +
-                         std::to_string(size) + "): it would merge distinct vertices; give a distance far "
-                         "below the smallest modelled detail, or None");
+    if (!(tolerance <= kMaxRelativeWeld * size)) {
+        char text[160];
+        std::snprintf(text, sizeof text, "weld_tolerance %.3g is more than 1%% of the mesh's size (%.3g across)",
+                      tolerance, size);
+        LMREFINE_THROW(InvalidArgument, std::string(text) + ": it would merge distinct vertices; give a distance "
+                                        "far below the smallest modelled detail, or None (1e-6 of the mesh's size)");
+    }
     const std::vector<int32_t> welded = weld_positions(mesh, tolerance);
     const SurfaceFaces faces = surface_faces(mesh, welded);
 

@@ -132,6 +132,27 @@ void validate_layout(const UvLayout& layout) {
     }
 }
 
+double texel_pairs_at_least(const UvLayout& layout, int width, int height) {
+    // A texel crossing the triangle's border lies within sqrt(2) of it: those
+    // cover at most sqrt(2) x perimeter of its area, texels wholly inside the rest.
+    double pairs = 0.0;
+    for (int64_t t = 0; t < layout.triangle_count; ++t) {
+        glm::dvec2 p[3];
+        bool inside = true;
+        for (int k = 0; k < 3; ++k) {
+            const float* uv = layout.uvs + 2 * int64_t(layout.triangles[3 * t + k]);
+            inside = inside && uv[0] >= 0.0f && uv[0] <= 1.0f && uv[1] >= 0.0f && uv[1] <= 1.0f;
+            p[k] = glm::dvec2(double(uv[0]) * width, double(uv[1]) * height);
+        }
+        if (!inside) continue;
+        const glm::dvec2 e1 = p[1] - p[0], e2 = p[2] - p[0];
+        const double area = 0.5 * std::abs(e1.x * e2.y - e1.y * e2.x);
+        const double perimeter = glm::length(p[1] - p[0]) + glm::length(p[2] - p[1]) + glm::length(p[0] - p[2]);
+        pairs += std::max(0.0, area - std::sqrt(2.0) * perimeter);
+    }
+    return pairs;
+}
+
 std::vector<uint8_t> coverage_mask(const UvLayout& layout, int width, int height) {
     LMREFINE_REQUIRE(width > 0 && height > 0, "resolution must be positive, got " + std::to_string(width) +
                                                   "x" + std::to_string(height));

@@ -1,6 +1,7 @@
 #include "lmrefine/layout/layout_raster.h"
 
 #include <algorithm>
+#include <string>
 
 #include "lmrefine/core/memory.h"
 #include "lmrefine/core/parallel.h"
@@ -21,6 +22,11 @@ LayoutRaster::LayoutRaster(const UvLayout& layout, int width, int height)
         }
     });
     for (int64_t t = 0; t < T; ++t) offsets_[size_t(t) + 1] += offsets_[size_t(t)];
+    // A span per triangle and row: rows x depth for faces stacked over the map.
+    require_memory("rasterizing " + std::to_string(T) + " triangles at " + std::to_string(height) + "x" +
+                       std::to_string(width) + " (" + std::to_string(offsets_.back()) + " triangle rows)",
+                   saturating_product({uint64_t(offsets_.back()), sizeof(columns_[0]) + sizeof(band_triangles_[0])}),
+                   "give stacked faces their own places in the map, use fewer triangles, or a lower resolution");
     columns_.resize(size_t(offsets_.back()));
     // Triangles per row band (counted, then listed in triangle order).
     const int bands = (height + kBandRows - 1) / kBandRows;

@@ -20,9 +20,10 @@ struct PrimaryHits {
 };
 
 // Traces `count` rays (origins and directions: (count, 3) each) through the
-// scene's meshes, receivers and occluders alike. Throws InvalidArgument for a
-// NaN/Inf or out-of-scene origin (beyond kMaxCoordinate) or a zero, NaN or
-// Inf direction, naming the ray; Cancelled when `progress` is cancelled.
+// scene's meshes, receivers and occluders alike; a direction may have any
+// finite length from 1e-28 up. Throws InvalidArgument for a NaN/Inf or
+// out-of-scene origin (beyond kMaxCoordinate) or a zero, shorter, NaN or Inf
+// direction, naming the ray; Cancelled when `progress` is cancelled.
 PrimaryHits trace_primary_rays(const Scene& scene, const float* origins, const float* directions, int64_t count,
                                Progress& progress);
 

@@ -72,4 +72,12 @@ void for_each_covered_texel(const UvLayout& layout, int width, int height, Visit
 // (height * width) bytes, 1 where some triangle covers the texel.
 std::vector<uint8_t> coverage_mask(const UvLayout& layout, int width, int height);
 
+// A lower bound on the (texel, triangle) pairs whose texel centre lies in
+// the triangle, summed over the (validated) layout's triangles: one wholly
+// inside [0, 1]^2 holds at least its area less sqrt(2) times its perimeter
+// (in texels: the texels wholly inside it), others count 0. O(triangles), for
+// a memory estimate before pairs are gathered: a stack of faces (a texture map
+// taken for a lightmap) makes them texels x depth.
+double texel_pairs_at_least(const UvLayout& layout, int width, int height);
+
 }  // namespace lmrefine
