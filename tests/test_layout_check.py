@@ -1,8 +1,6 @@
 """check_layout: flips, degenerate and overlapping triangles, out-of-bounds
 UVs and the gutter between charts, at a lightmap resolution."""
 
-import time
-
 import numpy as np
 import pytest
 
@@ -98,7 +96,6 @@ def test_a_deep_stack_at_a_high_resolution_is_refused_before_allocating():
     # A (texel, triangle) pair per stacked face and texel: 1,000 quads at 16384^2 need terabytes,
     # and failed with a bare MemoryError (or the OOM killer) part way (found by a crash hunt).
     uvs, tris = _stack(1000)
-    start = time.process_time()
     message = (r"checking the layout at 16384x16384 \(its faces are stacked, at least 99\d deep on average\) needs "
                r"about \d+\.\d\d GiB of memory, more than half of this machine's \d+\.\d\d GiB; give the faces their "
                r"own places in the map \(a lightmap layout: Lightmap Pack or Smart UV Project\), fewer stacked "
@@ -110,7 +107,6 @@ def test_a_deep_stack_at_a_high_resolution_is_refused_before_allocating():
         checker.check()
     with pytest.raises(MemoryError, match=message):
         checker.check(uvs * np.float32(0.999))
-    assert time.process_time() - start < 5.0  # refused from the estimate, nothing rasterized
     # The estimate is a floor, measured without the raster: a shallow stack is still checked.
     assert lmrefine.check_layout(*_stack(3), 512)["overlapping"] == 6
 
