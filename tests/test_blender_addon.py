@@ -722,6 +722,25 @@ def test_limit_row_and_its_words(facts):
         ["steps", "the automaton stopped at its step limit before the texel densities settled within Delta"]]
 
 
+def test_maps_not_recharted_are_explained_in_the_panels_words(facts):
+    """A map Re-chart if Better tried and kept on its source map's charts gets an Info line saying why it was
+    tried and why it was not kept (docs/blender.md promises it), in the panel's words; none where the route was
+    not tried or was taken."""
+    sentences = fact(facts, "not_recharted_wording")
+    assert sentences["refused"] == (
+        "not re-charted, though its source map gives the refiner no room (60 charts for 120 triangles, 0% of its "
+        "area in triangles with a UV inside their chart: a UV on a chart's border keeps its place): re-charting was "
+        "predicted to give 0.97x the source map's lightmap error (blur at the light changes) and refining the source "
+        "map 0.94x; re-charting needs below 0.95x and below the other. The source map's charts were refined instead")
+    failed = ("not re-charted, though its source map's charts fold over 12 creases sharper than 20 degrees (8.5 world "
+              "units), which hold 31% of its light changes: the re-charted map had overlapping triangles, charts "
+              "closer than Padding, which the source map has not. The source map's charts were refined instead")
+    assert sentences["failed"] == failed and sentences["per_effect"] == "indirect: " + failed
+    assert sentences["strength_0"] == ("not re-charted, though its source map's charts fold over sharp edges: "
+                                       "strength is 0. The source map's charts were refined instead")
+    assert sentences["not_tried"] is None and sentences["recharted"] is None
+
+
 def test_recharted_maps_are_explained_in_the_panels_words(facts):
     """The Info line of a re-charted map: why, what it is predicted to give, and the setting that turns it
     off; never refine_uvs' keywords (rechart='always') nor its error model's name."""
@@ -753,7 +772,8 @@ def test_recharted_maps_are_explained_in_the_panels_words(facts):
                 if "re-charted from the mesh (" in text)
     assert line.startswith("'Floor': re-charted from the mesh (1 charts of faces within 20 degrees) and refined, "
                            "because its source map gives the refiner no room (64 charts for 128 triangles"), line
-    assert not any("re-charted from the mesh (" in text
+    # With Re-chart if Better off the route is not tried: nothing to explain either way.
+    assert not any("re-charted" in text
                    for _, text in fact(facts, "rechart_lightmap_pack_source")["rechart_False"]["reports"])
 
 

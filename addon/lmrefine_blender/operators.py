@@ -81,8 +81,10 @@ def _report_outcome(operator, context, outcome, seconds):
                                                          ", stages 2+ refined inside the charts (no room in the source map)")
                         for name, entry in outcome.stages.items())
         result.message += f"; stages kept: {summary['stages_kept']} of {result.stages} ({why})"
-    for name in recharted_maps:
-        operator.report({'INFO'}, f"'{name}': " + rechart_sentence(outcome.reports[name]))
+    for name, report in outcome.reports.items():
+        sentence = rechart_sentence(report) if name in recharted_maps else not_recharted_sentence(report)
+        if sentence:
+            operator.report({'INFO'}, f"'{name}': {sentence}")
     for warning in outcome.warnings:
         operator.report({'WARNING'}, warning)
     operator.report({'INFO'}, result.message)
@@ -110,19 +112,6 @@ def rechart_sentence(report):
                          if (own.get("rechart") or {}).get("used"))
         return f"{name}: " + rechart_sentence(own)
     info = report["rechart"]
-    room = info["room"]
-    if room["no_room"]:
-        why = (f"its source map gives the refiner no room ({room['charts']} charts for {room['triangles']} "
-               f"triangles, {room['room_fraction']:.0%} of its area in triangles with a UV inside their chart: a "
-               "UV on a chart's border keeps its place)")
-    elif info.get("always"):  # the layout had no room before Tessellate split its triangles
-        why = f"its source map's {room['charts']} charts were one face each before Tessellate split their triangles"
-    else:
-        folds = info["folds"]
-        smooth = f", {folds['smooth']} of them smooth-shaded" if folds.get("smooth") else ""
-        why = (f"its source map's charts fold over {folds['count']} creases sharper than {info['angle']:g} degrees "
-               f"({folds['length']:.3g} world units{smooth}), which hold {folds['energy_fraction']:.0%} of its "
-               "light changes")
     roomier = (", packed half a texel farther apart than Padding so that their edge texels could shrink"
                if info.get("edge_room") else "")
     source = info.get("predicted_error_source_route")
@@ -130,9 +119,59 @@ def rechart_sentence(report):
                f"refining the source map instead: at least {info['source_route_bound']:.2f}x, so it was not "
                "finished")
     return (f"re-charted from the mesh ({info['charts']} charts of faces within {info['angle']:g} "
-            f"degrees{roomier}) and refined, because {why}. Predicted lightmap error (blur at the light "
-            f"changes): {info['predicted_error']:.2f}x the source map's ({instead}). To keep the source map's "
-            "charts, turn off Re-chart if Better (Refinement)")
+            f"degrees{roomier}) and refined, because {_rechart_cause(info)}. Predicted lightmap error (blur at "
+            f"the light changes): {info['predicted_error']:.2f}x the source map's ({instead}). To keep the source "
+            "map's charts, turn off Re-chart if Better (Refinement)")
+
+
+# refine_uvs' names of the checks a re-charted map can fail against its source map, in the panel's words.
+CHECK_WORDS = {"flipped": "flipped triangles", "degenerate": "triangles without area",
+               "overlapping": "overlapping triangles", "out_of_bounds": "UVs outside the map",
+               "gutter": "charts closer than Padding"}
+
+
+def not_recharted_sentence(report):
+    """Why a map that Re-chart if Better tried to re-chart kept its source map's charts, from its refine_uvs
+    report, in the panel's words; None where it was not tried (a source map with room whose charts fold
+    over no sharp edge) or was re-charted."""
+    if "effects" in report:  # Layouts: Per Effect: the first effect tried and not re-charted
+        sentences = ((name, not_recharted_sentence(own)) for name, own in report["effects"].items())
+        return next((f"{name}: {sentence}" for name, sentence in sentences if sentence), None)
+    info = report.get("rechart") or {}
+    if info.get("used") or not any(note.startswith("not re-charted:") for note in report.get("notes", [])):
+        return None
+    from lmrefine.rechart_route import REQUIRED_GAIN
+    reason = info["reason"]
+    source = info.get("predicted_error_source_route")
+    if reason.startswith("the error model predicts") and source is not None:
+        reason = (f"re-charting was predicted to give {info['predicted_error']:.2f}x the source map's lightmap "
+                  f"error (blur at the light changes) and refining the source map {source:.2f}x; re-charting "
+                  f"needs below {REQUIRED_GAIN:g}x and below the other")
+    elif reason.startswith("the re-charted layout failed "):
+        failed = reason[len("the re-charted layout failed "):].split(" against")[0].split(", ")
+        reason = ("the re-charted map had " + ", ".join(CHECK_WORDS.get(name, name.replace("_", " "))
+                                                         for name in failed) + ", which the source map has not")
+    return (f"not re-charted, though {_rechart_cause(info)}: {reason}. The source map's charts were refined instead")
+
+
+def _rechart_cause(info):
+    """Why the re-chart route was tried on a map (its refine_uvs report's rechart entry)."""
+    room = info["room"]
+    if room["no_room"]:
+        why = (f"its source map gives the refiner no room ({room['charts']} charts for {room['triangles']} "
+               f"triangles, {room['room_fraction']:.0%} of its area in triangles with a UV inside their chart: a "
+               "UV on a chart's border keeps its place)")
+    elif info.get("always"):  # the layout had no room before Tessellate split its triangles
+        why = f"its source map's {room['charts']} charts were one face each before Tessellate split their triangles"
+    elif info.get("folds"):
+        folds = info["folds"]
+        smooth = f", {folds['smooth']} of them smooth-shaded" if folds.get("smooth") else ""
+        why = (f"its source map's charts fold over {folds['count']} creases sharper than {info['angle']:g} degrees "
+               f"({folds['length']:.3g} world units{smooth}), which hold {folds['energy_fraction']:.0%} of its "
+               "light changes")
+    else:  # a route refused before it looked for folds (Strength 0)
+        why = "its source map's charts fold over sharp edges"
+    return why
 
 
 def _stage_stop(name, entry):

@@ -1610,6 +1610,32 @@ def rechart_wording():
 
 
 @check()
+def not_recharted_wording():
+    """The Info line of a map Re-chart if Better tried and did not re-chart, from made-up reports."""
+    register()
+    room = {"charts": 60, "triangles": 120, "room_fraction": 0.0, "no_room": True}
+    folds = {"count": 12, "length": 8.5, "smooth": 0, "energy_fraction": 0.31}
+    refused = {"used": False, "room": room, "angle": 20.0, "folds": None, "predicted_error": 0.9712,
+               "predicted_error_source_route": 0.9403,
+               "reason": "the error model predicts 0.971 of the source layout's error re-charted and 0.940 refining "
+                         "the source layout (re-charting needs below 0.95 and below the other)"}
+    failed = dict(refused, room=dict(room, no_room=False), folds=folds, predicted_error=0.62,
+                  predicted_error_source_route=0.8,
+                  reason="the re-charted layout failed overlapping, gutter against the source layout")
+    note = ["not re-charted: ..."]
+    reports = {
+        "refused": {"rechart": refused, "notes": note},
+        "failed": {"rechart": failed, "notes": note},
+        "strength_0": {"rechart": {"used": False, "room": dict(room, no_room=False), "reason": "strength is 0"},
+                       "notes": ["not re-charted: strength is 0"]},
+        "not_tried": {"rechart": dict(refused, reason="the source layout has room"), "notes": []},
+        "recharted": {"rechart": dict(refused, used=True), "notes": note},
+    }
+    reports["per_effect"] = {"effects": {"direct": reports["not_tried"], "indirect": reports["failed"]}}
+    return {key: operators.not_recharted_sentence(report) for key, report in reports.items()}
+
+
+@check()
 def setting_wording():
     """A message names a setting as its reader sets it: by its panel label, or (the batch) by its flag."""
     register()
