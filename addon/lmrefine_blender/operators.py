@@ -141,16 +141,15 @@ def not_recharted_sentence(report):
     if info.get("used") or not any(note.startswith("not re-charted:") for note in report.get("notes", [])):
         return None
     from lmrefine.rechart_route import REQUIRED_GAIN
-    reason = info["reason"]
+    reason = info["reason"]  # the core's words, where neither case below applies
     source = info.get("predicted_error_source_route")
-    if reason.startswith("the error model predicts") and source is not None:
+    if info.get("failed"):  # chosen by the model, then failed the source map's checks
+        reason = ("the re-charted map had " + ", ".join(CHECK_WORDS.get(name, name.replace("_", " "))
+                                                         for name in info["failed"]) + ", which the source map has not")
+    elif "predicted_error" in info and source is not None:  # the model preferred the source map's refinement
         reason = (f"re-charting was predicted to give {info['predicted_error']:.2f}x the source map's lightmap "
                   f"error (blur at the light changes) and refining the source map {source:.2f}x; re-charting "
                   f"needs below {REQUIRED_GAIN:g}x and below the other")
-    elif reason.startswith("the re-charted layout failed "):
-        failed = reason[len("the re-charted layout failed "):].split(" against")[0].split(", ")
-        reason = ("the re-charted map had " + ", ".join(CHECK_WORDS.get(name, name.replace("_", " "))
-                                                         for name in failed) + ", which the source map has not")
     return (f"not re-charted, though {_rechart_cause(info)}: {reason}. The source map's charts were refined instead")
 
 

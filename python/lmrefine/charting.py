@@ -13,6 +13,7 @@ from typing import NamedTuple
 import numpy as np
 
 from . import _native
+from .metrics import uv_areas
 from .packer import pack_charts
 
 # Largest angle between a chart's face normals and its first (largest)
@@ -132,8 +133,8 @@ def rechart(positions, triangles, angle=DEFAULT_ANGLE, resolution=256, padding=2
                                                      weld_tolerance=weld_tolerance, progress=progress,
                                                      normals=normals, smooth_angle=smooth_angle,
                                                      polygons=polygons)
-    _check_world_size(world_uvs, charts)
     layout_triangles = corner_triangles(len(charts))
+    _check_world_size(world_uvs, layout_triangles)
     packed, pack_report = pack_charts(world_uvs, layout_triangles, charts, None, resolution, padding,
                                       rotations=rotations, progress=progress)
     check = _native.check_layout(packed, layout_triangles, resolution, padding)
@@ -151,15 +152,13 @@ def rechart(positions, triangles, angle=DEFAULT_ANGLE, resolution=256, padding=2
     return RechartResult(packed, report)
 
 
-def _check_world_size(world_uvs, charts):
+def _check_world_size(world_uvs, triangles):
     """ValueError naming the mesh's size when its charts (rechart_mesh's, at world size, each
     from the origin) are too small for the packer to scale up into the atlas."""
-    uv = np.asarray(world_uvs, np.float64).reshape(-1, 3, 2)
-    e1, e2 = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
-    area = float(0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]).sum())
-    widest = float(uv.max(initial=0.0))
+    area = float(uv_areas(world_uvs, triangles).sum())
+    widest = float(np.asarray(world_uvs, np.float64).max(initial=0.0))
     if min(1.0 / np.sqrt(max(area, 1e-300)), 1.0 / max(widest, 1e-300)) > MAX_PACK_SCALE:
-        raise ValueError(f"the mesh is too small to lay out: its {len(charts)} triangles hold {area:.3g} square "
+        raise ValueError(f"the mesh is too small to lay out: its {len(triangles)} triangles hold {area:.3g} square "
                          f"units of surface, its widest chart is {widest:.3g} units across, and charts keep their "
                          f"world size until the packer scales them up, by at most {MAX_PACK_SCALE:g}; scale the mesh "
                          "up (apply its object scale, or model in larger units)")

@@ -512,6 +512,7 @@ def refine_recharted(refine, lightmap, uvs, triangles, shape, padding, positions
         info.update({key: recharted[key] for key in ("charts", "split_charts", "degenerate_triangles",
                                                      "utilisation", "area_utilisation")})
         info["predicted_error"] = predicted
+        info.pop("failed", None)  # an earlier candidate's checks
         if info["edge_room"] is not None:
             info["edge_room"] = edge_room
         if bound is not None and predicted < REQUIRED_GAIN and predicted <= bound * (1.0 - _BOUND_MARGIN):
@@ -537,6 +538,7 @@ def refine_recharted(refine, lightmap, uvs, triangles, shape, padding, positions
             info["used"] = True
             result.report["check"] = check
             return result, info
+        info["failed"] = worse
         info["reason"] = f"the re-charted layout failed {', '.join(worse)} against the source layout"
     return None, info
 

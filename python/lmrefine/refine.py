@@ -427,10 +427,10 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
                "repack": repack, "min_chart_scale": min_chart_scale, "max_chart_scale": max_chart_scale,
                "world_areas": world_areas, "max_stretch": max_stretch, "triangle_stretch": triangle_stretch,
                "finest_block": finest_block}
+    if not isinstance(rechart, (bool, np.bool_, str)):
+        raise TypeError(f"rechart must be True, False or 'always', got {rechart!r}")
     if isinstance(rechart, str) and rechart != "always":  # the right type, a value it does not know
         raise ValueError(f"rechart must be True, False or 'always', got {rechart!r}")
-    if not (isinstance(rechart, (bool, np.bool_)) or isinstance(rechart, str)):
-        raise TypeError(f"rechart must be True, False or 'always', got {rechart!r}")
     if isinstance(triangle_stretch, (bool, np.bool_)) or not isinstance(triangle_stretch, (int, float, np.number)) \
             or not 1.0 <= float(triangle_stretch) <= MAX_TRIANGLE_STRETCH:
         raise ValueError(f"triangle_stretch must be a number in [1, {MAX_TRIANGLE_STRETCH:g}] (1 = none), got "

@@ -1621,6 +1621,7 @@ def not_recharted_wording():
                          "the source layout (re-charting needs below 0.95 and below the other)"}
     failed = dict(refused, room=dict(room, no_room=False), folds=folds, predicted_error=0.62,
                   predicted_error_source_route=0.8,
+                  failed=["overlapping", "gutter"],
                   reason="the re-charted layout failed overlapping, gutter against the source layout")
     note = ["not re-charted: ..."]
     reports = {
