@@ -26,6 +26,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .packer import CHART_TOLERANCE, pack_charts
+from .progressbar import cancels
 from ._native import coverage_mask, find_charts
 from .rows import group_rows
 
@@ -882,7 +883,7 @@ def _pack_both(uvs, stretched_uvs, triangles, charts, scales, resolution, paddin
 
     def first_progress(fraction, stage):
         keep_going = True if progress is None else progress(fraction, stage)
-        if keep_going is not None and not keep_going:  # any false value but None cancels
+        if cancels(keep_going):
             cancelled.set()
         return keep_going
 
