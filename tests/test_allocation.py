@@ -317,6 +317,38 @@ def test_the_charts_grow_into_the_space_the_triangle_stretchs_packing_left(monke
     assert check["valid"] and check["min_gutter_texels"] >= 2.0, check
 
 
+def test_the_fill_after_the_triangle_stretch_takes_the_repacks_chart_errors(monkeypatch):
+    """The repack's signal_scales measured the chart errors the fill after the triangle stretch needs
+    (the same source layout, charts and light): refine_uvs hands them on instead of measuring again,
+    and the fill grows the same with them as without."""
+    uvs, tris, lightmap = _checkered_corner()
+    grow, measure = allocation.grow_finished_packing, allocation.chart_errors
+    calls, measured = [], []
+
+    def recorded(*args, **kwargs):
+        calls.append((args, kwargs))
+        return grow(*args, **kwargs)
+
+    def counted(*args, **kwargs):
+        measured.append(args[2])
+        return measure(*args, **kwargs)
+
+    monkeypatch.setattr(allocation, "grow_finished_packing", recorded)
+    monkeypatch.setattr(allocation, "chart_errors", counted)
+    result = lmrefine.refine_uvs(lightmap, uvs, tris, 64, padding=2, max_stretch=1.0, **SCALES_WITHIN_2)
+    monkeypatch.setattr(allocation, "chart_errors", measure)
+    assert result.report["triangle_stretch"]["fill"]["used"]
+    (args, kwargs), = calls
+    assert len(measured) == 1  # the repack's, none for the fill
+    packed, source_uvs, triangles, charts, energy, resolution, padding, lightmap_given, mask, world_areas, _ = args
+    edge, smooth, _ = measure(source_uvs, triangles, charts, energy, lightmap_given, mask, world_areas=world_areas)
+    assert np.array_equal(kwargs["errors"][0], edge) and np.array_equal(kwargs["errors"][1], smooth)
+    given, again = grow(*args, **kwargs), grow(*args)
+    assert np.array_equal(given[0], again[0]) and given[0] is not None
+    assert given[1].keys() == again[1].keys()
+    assert all(np.array_equal(given[1][key], again[1][key]) for key in given[1])
+
+
 def test_a_layout_the_library_packed_itself_is_repacked_on_the_models_word_alone():
     """The re-chart route's charts were packed by the library at one scale (own_packing): no caller's
     packing to hold the repack to. The checkered corner at the model's scales, which the density rule

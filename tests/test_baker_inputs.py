@@ -1,5 +1,7 @@
 """Bad input to the baker: clear errors naming the problem, never a crash."""
 
+import re
+
 import numpy as np
 import pytest
 
@@ -149,8 +151,14 @@ def test_a_deep_stack_at_a_high_resolution_is_refused_before_allocating():
                                           r"deep on average\) needs about \d+\.\d\d GiB of memory, more than half "
                                           r"of this machine's \d+\.\d\d GiB; give the faces their own places in the "
                                           r"lightmap \(Lightmap Pack or Smart UV Project\), fewer stacked faces, or a "
-                                          r"lower resolution"):
+                                          r"lower resolution") as refused:
         lmrefine.bake(scene, 4096, passes=("direct",))
+    # The size asked for counts the same stacked candidates as the depth in its wording: one map,
+    # one pass, 16 bytes returned and 160 working per texel, 40 per candidate past one per texel.
+    figures = re.search(r"at least (\S+) deep.*needs about (\S+) GiB", str(refused.value)).groups()
+    depth, gib = (float(x) for x in figures)
+    texels = 4096 * 4096
+    assert gib * 2**30 == pytest.approx(texels * (16 + 160 + 40 * (depth - 1)), rel=1e-3)
     # A shallow stack at a low resolution still bakes.
     few = triangles[:, 0] < 12
     shallow = lmrefine.Scene()

@@ -498,7 +498,8 @@ def test_tight_source_gutters_the_refined_map_fixes_are_reported_as_fixed(facts)
     value = fact(facts, "tight_source_gutters_fixed_by_the_refined_map")
     assert value["error"] is None and value["source_gutter"] < 8 and value["refined_check"]["valid"]
     gutter = [w for w in value["warnings"] if "UV map 'Lightmap'" in w]
-    assert len(gutter) == 1 and "was invalid at 64 texels" in gutter[0] and "padding is 8" in gutter[0]
+    assert len(gutter) == 1 and "was invalid at 64 texels (charts " in gutter[0]
+    assert " texels apart where the padding asks for 8)" in gutter[0]
     assert "the refined map is valid" in gutter[0] and "only the first lightmap" in gutter[0]
     assert "no worse, but" not in gutter[0]
 
@@ -553,7 +554,7 @@ def test_a_texture_map_as_source_is_named_with_the_fix(facts):
     # Gutters under the padding are said per effect too (judged at the user's padding, not the lowered one).
     tight = [w for w in value["per_effect_tight_warnings"] if "was already invalid" in w]
     assert [w.split(":")[0] for w in tight] == ["'Blocker' (direct)", "'Blocker' (indirect)"]
-    assert all("padding is 8" in w for w in tight)
+    assert all(" texels apart where the padding asks for 8)" in w for w in tight)
     # Charts closer than the padding: the repack's Margin is what to raise.
     assert all(w.endswith("repack the source map (UV > Lightmap Pack) with a larger Margin (in the operator's "
                           "Adjust Last Operation panel), so that its charts lie at least Padding (8 texels) apart")
@@ -568,12 +569,12 @@ def test_a_texture_map_as_source_is_named_with_the_fix(facts):
 def test_repack_advice_names_the_margin_only_where_charts_are_too_close(facts):
     warnings = fact(facts, "repack_wording")
     assert warnings["tight"] == (
-        "'Box': UV map 'Lightmap' was already invalid at 64 texels (charts 1.50 texels apart, padding is 2); the "
-        "refined map is no worse, but lightmap bleeding may show: repack the source map (UV > Lightmap Pack) with a "
-        "larger Margin (in the operator's Adjust Last Operation panel), so that its charts lie at least Padding "
-        "(2 texels) apart")
-    assert warnings["flipped"].endswith("(2 flipped); the refined map is no worse, but lightmap bleeding may show: "
-                                        "repack the source map (UV > Lightmap Pack)")
+        "'Box': UV map 'Lightmap' was already invalid at 64 texels (charts 1.50 texels apart where the padding asks "
+        "for 2); the refined map is no worse, but lightmap bleeding may show: repack the source map (UV > Lightmap "
+        "Pack) with a larger Margin (in the operator's Adjust Last Operation panel), so that its charts lie at least "
+        "Padding (2 texels) apart")
+    assert warnings["flipped"].endswith("(2 flipped triangles); the refined map is no worse, but lightmap bleeding "
+                                        "may show: repack the source map (UV > Lightmap Pack)")
 
 
 def test_progress_moves_per_map_and_per_stage(facts):

@@ -62,9 +62,17 @@ def test_geometry_problems_counts_flat_triangles_zero_uv_triangles_and_broken_ve
 
 def test_describe_problems_in_words():
     check = {"flipped": 2, "degenerate": 0, "overlapping": 1, "out_of_bounds": 0, "min_gutter_texels": 1.5}
-    assert layout_input.describe_problems(check, 2) == ("2 flipped, 1 overlapping, "
-                                                        "charts 1.50 texels apart, padding is 2")
+    assert layout_input.describe_problems(check, 2) == ("2 flipped triangles, 1 overlapping triangle, "
+                                                        "charts 1.50 texels apart where the padding asks for 2")
+    every = dict(check, flipped=1, degenerate=3, overlapping=2, out_of_bounds=1, min_gutter_texels=0.0)
+    assert layout_input.describe_problems(every, 2.5) == (
+        "1 flipped triangle, 3 triangles without area, 2 overlapping triangles, 1 UV outside the map, "
+        "charts 0.00 texels apart where the padding asks for 2.5")
+    assert layout_input.describe_problems(dict(every, degenerate=1, out_of_bounds=4), 8.0).startswith(
+        "1 flipped triangle, 1 triangle without area, 2 overlapping triangles, 4 UVs outside the map, charts 0.00 "
+        "texels apart where the padding asks for 8")
     assert layout_input.describe_problems(dict(check, flipped=0, overlapping=0), 1) == ""
+    assert layout_input.describe_problems(dict(check, flipped=0, overlapping=0, min_gutter_texels=np.inf), 2) == ""
 
 
 ORIGINAL = {"flipped": 0, "degenerate": 1, "overlapping": 0, "out_of_bounds": 0, "min_gutter_texels": 1.5}

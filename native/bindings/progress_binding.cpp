@@ -19,7 +19,8 @@ bool PythonProgress::report(double fraction, const std::string& stage) {
     if (callback_.is_none()) return true;
     try {
         py::object answer = callback_(fraction, stage);
-        // None (a plain print callback) goes on; any other false value cancels.
+        // None (a plain print callback) goes on; any other false value cancels
+        // (Python code reading an answer itself uses lmrefine.progressbar.cancels).
         if (answer.is_none()) return true;
         const int truth = PyObject_IsTrue(answer.ptr());
         if (truth < 0) throw py::error_already_set();

@@ -26,6 +26,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .packer import CHART_TOLERANCE, pack_charts
+from .progressbar import cancels
 from ._native import coverage_mask, find_charts
 from .rows import group_rows
 
@@ -776,14 +777,22 @@ def grow_into_free_space(packed, triangles, charts, edge, smooth, scales, resolu
 
 
 def grow_finished_packing(packed, source_uvs, triangles, charts, energy, resolution, padding, lightmap=None,
-                          mask=None, world_areas=None, progress=None):
+                          mask=None, world_areas=None, progress=None, errors=None):
     """The charts of `packed`, a packing made after the repack (the triangle
     stretch packs its charts again, at a scale of its own), grown evenly into
     the space it left (grow_into_free_space), the model's terms measured per
     chart on `source_uvs` (where `energy` and `lightmap` were baked, `mask`
     its coverage) and its scales read from the charts' areas: (uvs or None,
-    report, as grow_into_free_space's with its texel_area)."""
-    edge, smooth, area = chart_errors(source_uvs, triangles, charts, energy, lightmap, mask, world_areas=world_areas)
+    report, as grow_into_free_space's with its texel_area). `errors`: the
+    (edge, smooth) of chart_errors for these arguments, when the caller has
+    them (signal_scales made them for the repack)."""
+    if errors is None:
+        edge, smooth, area = chart_errors(source_uvs, triangles, charts, energy, lightmap, mask,
+                                          world_areas=world_areas)
+    else:
+        edge, smooth = errors
+        # As chart_errors measures it.
+        area = np.bincount(charts, weights=np.abs(signed_areas(source_uvs, triangles)), minlength=len(edge))
     before = np.bincount(charts, weights=np.abs(signed_areas(packed, triangles)), minlength=len(edge))
     scales = np.sqrt(before / np.maximum(np.asarray(area, np.float64), 1e-300))
     # Evenly only: a growth along one axis would stretch the triangles past the stretch's bound.
@@ -882,7 +891,7 @@ def _pack_both(uvs, stretched_uvs, triangles, charts, scales, resolution, paddin
 
     def first_progress(fraction, stage):
         keep_going = True if progress is None else progress(fraction, stage)
-        if keep_going is not None and not keep_going:  # any false value but None cancels
+        if cancels(keep_going):
             cancelled.set()
         return keep_going
 

@@ -94,13 +94,22 @@ def geometry_problems(positions, corner_vertex, uvs, triangles, resolution):
     return int(np.count_nonzero(flat)), zero_uv, bad_vertices
 
 
+# check_layout's counts in a user's words, (one, more); out_of_bounds counts
+# UV corners, the others triangles. The add-on's CHECK_WORDS use the same.
+PROBLEM_WORDS = {"flipped": ("flipped triangle", "flipped triangles"),
+                 "degenerate": ("triangle without area", "triangles without area"),
+                 "overlapping": ("overlapping triangle", "overlapping triangles"),
+                 "out_of_bounds": ("UV outside the map", "UVs outside the map")}
+
+
 def describe_problems(check, padding):
-    """The problems of a check_layout report in words ("2 flipped, charts
-    1.50 texels apart, padding is 2"); empty when there are none."""
-    problems = [f"{check[key]} {key}" for key in ("flipped", "degenerate", "overlapping", "out_of_bounds")
-                if check[key]]
+    """The problems of a check_layout report in words read inside a warning
+    ("2 flipped triangles, charts 1.50 texels apart where the padding asks
+    for 2"); empty when there are none."""
+    problems = [f"{check[key]} {words[check[key] != 1]}" for key, words in PROBLEM_WORDS.items() if check[key]]
     if check["min_gutter_texels"] < padding:
-        problems.append(f"charts {check['min_gutter_texels']:.2f} texels apart, padding is {padding}")
+        problems.append(f"charts {check['min_gutter_texels']:.2f} texels apart where the padding asks for "
+                        f"{padding:g}")
     return ", ".join(problems)
 
 

@@ -1,7 +1,17 @@
-"""A terminal progress bar usable as any lmrefine ``progress`` callback."""
+"""Progress callbacks: what their answer means, and a terminal progress bar
+usable as any lmrefine ``progress`` callback."""
 
 import sys
 import time
+
+
+def cancels(answer):
+    """True when a ``progress(fraction, stage)`` callback's return value asks
+    to cancel: any false value but None (a plain print callback returns None
+    and must not stop the work). The native calls read it the same way
+    (native/bindings/progress_binding.cpp); Python code that reads an answer
+    itself asks here."""
+    return answer is not None and not answer
 
 
 class ProgressBar:

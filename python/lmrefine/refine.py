@@ -100,6 +100,19 @@ def _source_tensors(stage):
     return stage.tensors
 
 
+def _signal(stage):
+    """allocation.signal_scales of the stage's source layout (its charts,
+    scales and the model's edge and smooth terms), made once for the
+    re-chart route's bound, the repack and the triangle stretch's fill."""
+    if stage.signal is None:
+        options = stage.options
+        stage.signal = allocation.signal_scales(
+            stage.uvs, stage.triangles, stage.energy, float(options["min_chart_scale"]),
+            float(options["max_chart_scale"]), stage.lightmap if stage.gradient_given is None else None,
+            stage.mask, stage.world_areas)
+    return stage.signal
+
+
 def _resolution_side(value, name):
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
         raise TypeError(f"{name} must be an int, got {type(value).__name__}")
@@ -518,11 +531,7 @@ def _source_lowest(stage):
         unpacked = model.relative(stage.new_uvs)
         if not repacks:
             return unpacked
-        stage.signal = allocation.signal_scales(
-            stage.uvs, stage.triangles, stage.energy, float(options["min_chart_scale"]),
-            float(options["max_chart_scale"]), stage.lightmap if stage.gradient_given is None else None,
-            stage.mask, stage.world_areas)
-        scales = stage.signal[1]
+        scales = _signal(stage)[1]
         padding = _pack_padding(stage.padding, stage.original)
         stretch = max(1.0, float(options["max_stretch"]))
         bounds = [model.lowest_packed(stage.shape, padding, variant, stage.new_uvs, stretch)
@@ -783,9 +792,12 @@ def _triangle_stretched(stage, new_uvs, check, analysed=None):
         return new_uvs, check, report
     report["used"] = True
     report["charts_stretched"] = int((kept > 0).sum())
+    # The repack's signal holds the fill's chart errors, when its charts are the checker's.
+    signal_charts, _, edge, smooth = _signal(stage)
     grown, report["fill"] = allocation.grow_finished_packing(
         packed, stage.uvs, triangles, charts, stage.energy, shape, padding, stage.lightmap, stage.mask,
-        stage.world_areas, allocation._reports_done(stage.progress))
+        stage.world_areas, allocation._reports_done(stage.progress),
+        errors=(edge, smooth) if np.array_equal(signal_charts, charts) else None)
     report["fill"]["used"] = False
     if grown is not None:
         grown_check, worse, _ = _checked(stage, checker, failing_before, grown)
@@ -946,7 +958,7 @@ def _repack_stage(stage, own_packing=False):
                                                   lightmap=stage.lightmap if stage.gradient_given is None else None,
                                                   mask=mask,
                                                   world_areas=stage.world_areas, max_stretch=float(max_stretch),
-                                                  signal=stage.signal, source_tensors=_source_tensors(stage),
+                                                  signal=_signal(stage), source_tensors=_source_tensors(stage),
                                                   own_packing=own_packing)
         if packed is not None:
             # Analysed once: the triangle stretch packs this layout's charts again.

@@ -32,6 +32,7 @@ import numpy as np
 from . import _native
 from ._native import coverage_mask, gradient_map
 from .allocation import texel_luminance
+from .progressbar import cancels
 from .rechart_route import layout_room
 from .refine import transition_strength
 
@@ -265,7 +266,7 @@ def tessellate(positions, triangles, uvs, strength, *, budget=DEFAULT_BUDGET, mi
 
     def report_progress():
         answer = None if progress is None else progress(min(len(splits) / max(allowed, 1), 1.0), "tessellate")
-        if answer is not None and not answer:  # any false value but None cancels, as for every call
+        if cancels(answer):
             raise _native.CancelledError("tessellation cancelled")
     # Copies: the caller's arrays are never modified.
     corner = {"uv": uvs.reshape(-1, 3, 2).copy()}

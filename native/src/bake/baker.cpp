@@ -221,9 +221,9 @@ std::vector<float> finish_map(const TexelTable& table, const MapAccumulator& acc
     return image;
 }
 
-}  // namespace
-
-uint64_t bake_memory_estimate(const Scene& scene, const BakeOptions& options) {
+// bake_memory_estimate with stacked_candidates(scene, options) already counted:
+// bake words its refusal with them too, and counting rasterises every map.
+uint64_t memory_estimate(const Scene& scene, const BakeOptions& options, double stacked) {
     const uint64_t pixels = uint64_t(std::max(options.width, 0)) * uint64_t(std::max(options.height, 0));
     const uint64_t maps = map_meshes(scene, options.atlas).size();
     const uint64_t transports = uint64_t(needed(options.passes, kDirect)) + needed(options.passes, kAo) +
@@ -237,8 +237,14 @@ uint64_t bake_memory_estimate(const Scene& scene, const BakeOptions& options) {
     const uint64_t working = pixels * (40 + 4 + 8 + 20 * transports + 28 + 60);
     // Stacked faces: ~40 bytes per further candidate (its entry, the table's
     // copy and the stable sort's buffer; 36 measured at 40 quads deep).
-    const uint64_t stacked = uint64_t(std::min(40.0 * stacked_candidates(scene, options), 1e19));
-    return returned + working + stacked;  // stacked is at most 1e19, the rest far below 2^63
+    const uint64_t stacked_bytes = uint64_t(std::min(40.0 * stacked, 1e19));
+    return returned + working + stacked_bytes;  // stacked_bytes is at most 1e19, the rest far below 2^63
+}
+
+}  // namespace
+
+uint64_t bake_memory_estimate(const Scene& scene, const BakeOptions& options) {
+    return memory_estimate(scene, options, stacked_candidates(scene, options));
 }
 
 BakeResult bake(const Scene& scene, const BakeOptions& options, Progress& progress) {
@@ -246,14 +252,15 @@ BakeResult bake(const Scene& scene, const BakeOptions& options, Progress& progre
     validate_bake_options(scene, options, /*texels=*/true);
     std::string what = "baking at " + std::to_string(options.height) + "x" + std::to_string(options.width);
     std::string advice = "lower the resolution or bake fewer passes or meshes at once";
-    if (const double stacked = stacked_candidates(scene, options); stacked > 0.0) {
+    const double stacked = stacked_candidates(scene, options);
+    if (stacked > 0.0) {
         char depth[32];
         std::snprintf(depth, sizeof depth, "%.3g", 1.0 + stacked / (double(options.width) * options.height));
         what += std::string(" (a lightmap's faces are stacked, at least ") + depth + " deep on average)";
         advice = "give the faces their own places in the lightmap (Lightmap Pack or Smart UV Project), fewer "
                  "stacked faces, or a lower resolution";
     }
-    require_memory(what, bake_memory_estimate(scene, options), advice);
+    require_memory(what, memory_estimate(scene, options, stacked), advice);
     BakeResult result;
     const RayTracer tracer(scene);
     const IntegratorSettings settings{options.bounces, options.ao_distance};
