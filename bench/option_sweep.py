@@ -104,9 +104,7 @@ def measure(sample, options, parts, refine_options):
     """(equal-error ratio, transition ratio, refine report) of one option set."""
     uvs, triangles = sample.layout(options.variant)
     resolution = options.resolution
-    padding = min(float(options.padding),
-                  float(lmrefine.check_layout(uvs, triangles, resolution, options.padding)["min_gutter_texels"]))
-    result = lmrefine.refine_uvs(parts["baseline"], uvs, triangles, resolution, padding=padding,
+    result = lmrefine.refine_uvs(parts["baseline"], uvs, triangles, resolution, padding=options.padding,
                                  **_route_mesh(sample, options), **refine_options)
     refined = _bake_map(sample, result.uvs, resolution, options, None)
     lookup = metrics.bilinear_lookup(refined, metrics.interpolate_corners(result.uvs, parts["triangle"],

@@ -498,3 +498,39 @@ def test_a_note_names_the_objects_the_refined_map_serves_worse():
                            "0.0031, 0.31x its texels);")
     assert "Shell" not in note and "Lamp" not in note and "Vase" not in note and "Cup" not in note
     assert _objects_served_worse(objects[:1], truth_noise=0.0004) is None
+
+
+def test_a_tight_input_is_refined_at_the_users_padding_as_the_add_on_refines_it(monkeypatch):
+    """The input's charts touch (the west and east halves of the floor, no
+    gutter): evaluate still asks refine_uvs for the padding, as the add-on
+    does (it keeps the touching pair's own distance and packs no closer
+    than a texel), and the uniform repack packs as refine_uvs's repack does."""
+    from lmrefine import evaluation
+    from lmrefine.evaluation import EvaluationOptions, evaluate_sample
+    from lmrefine.refine import pack_padding
+
+    scene = tiny_scene(6)
+    uvs = scene.uvs["smart"].reshape(-1, 3, 2).copy()
+    east = scene.object_id == 1
+    uvs[east, :, 0] -= 0.02  # the east half slides onto the west one's border: a gutter of 0
+    scene.uvs = {"smart": uvs.reshape(-1, 2), "lightmap": uvs.reshape(-1, 2).copy()}
+    assert lmrefine.check_layout(scene.uvs["smart"], scene.layout("smart")[1], 48, 2.0)["min_gutter_texels"] == 0.0
+    seen = {}
+
+    def refine_spy(*args, **kwargs):
+        seen["refine"] = kwargs["padding"]
+        return lmrefine.refine_uvs(*args, **kwargs)
+
+    def pack_spy(uvs, triangles, charts, scales, resolution, padding, **kwargs):
+        seen["pack"] = padding
+        return lmrefine.pack_charts(uvs, triangles, charts, scales, resolution, padding, **kwargs)
+
+    monkeypatch.setattr(evaluation, "refine_uvs", refine_spy)
+    monkeypatch.setattr(evaluation, "pack_charts", pack_spy)
+    evaluate_sample(scene, EvaluationOptions(resolution=48, points=500, samples=2, truth_samples=8,
+                                             multipliers=(1.0, 2.0), view_width=0))
+    assert seen == {"refine": 2.0, "pack": 1.0}
+    assert pack_padding(2.0, {"min_gutter_texels": 0.0}) == 1.0
+    assert pack_padding(2.0, {"min_gutter_texels": 1.03}) == 1.03
+    assert pack_padding(2.0, {"min_gutter_texels": 5.0}) == 2.0
+    assert pack_padding(0.5, {"min_gutter_texels": 0.0}) == 0.5

@@ -94,14 +94,14 @@ def run(context, targets, options, journal, image_dir=None):
         refined_uvs[name] = {}
         for group in groups:
             label = f"{group.label()} ({name})"
-            # The source's own gutter at this side: a smaller map may not hold the full padding.
+            # The user's padding, as a One run passes it: where the source is tighter at this side,
+            # refine_uvs keeps those pairs at their own distance and packs no closer than a texel.
             source_at_padding = lmrefine.check_layout(group.uvs, group.triangles, side, padding=padding)
-            pad = max(0.0, min(float(padding), float(source_at_padding["min_gutter_texels"])))
             try:
                 result = yield pipeline.NativeWork(
                     f"Refining {group.name} ({name})",
-                    lambda progress, lightmap=firsts[name][group.name], group=group, side=side, pad=pad:
-                        lmrefine.refine_uvs(lightmap, group.uvs, group.triangles, side, padding=pad,
+                    lambda progress, lightmap=firsts[name][group.name], group=group, side=side:
+                        lmrefine.refine_uvs(lightmap, group.uvs, group.triangles, side, padding=padding,
                                             progress=progress, positions=group.positions, normals=group.normals,
                                             **options["refine_options"]),
                     done * span, span, parts=pipeline.refine_parts(group, options))
@@ -111,8 +111,7 @@ def run(context, targets, options, journal, image_dir=None):
             done += 1
             check, source_check = pipeline._check_refined(lmrefine, label, result.uvs,
                                                           bridge.Layout(group.uvs, group.triangles), group.uvs, side,
-                                                          pad)
-            # Judged at the user's padding, as a One run does: the lowered `pad` would hide the bleeding.
+                                                          padding)
             warning = pipeline.source_warning(label, group, source_at_padding, padding, side)
             if warning is not None:
                 outcome.warnings.append(warning)

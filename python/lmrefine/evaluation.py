@@ -20,6 +20,7 @@ from . import bake, check_layout, coverage_mask, find_charts, metrics, pack_char
 from . import evaluate as evaluate_light
 from .charting import rechart
 from .per_effect import EFFECTS, gradient_energy, parse_rules, split_fractions, split_resolutions
+from .refine import pack_padding
 from .tessellation import (COARSE_CONTRAST, COARSE_TRIANGLE_TEXELS, MAX_BUDGET, TRIAL_BUDGET, budget_to_end,
                            light_contrast, tessellated_refine_options)
 
@@ -433,11 +434,13 @@ def _per_effect(sample, uvs, triangles, resolution, options, stages, points, tru
         effects, plain_sum, refined_sum = {}, 0.0, 0.0
         for name in EFFECTS:
             side = sides[name]
+            # Valid: as the input at this side where that is tighter than the padding (refine_uvs keeps it).
             gutter = check_layout(uvs, triangles, side, options.padding)["min_gutter_texels"]
             padding = min(float(options.padding), float(gutter))
             first, plain = lookup(name, uvs, side, "input", keep_map=True)
             refined = stages.run("per-effect refine", lambda p: refine_uvs(
-                first, uvs, triangles, side, padding=padding, progress=p, **route, **options.refine_options))
+                first, uvs, triangles, side, padding=options.padding, progress=p, **route,
+                **options.refine_options))
             _, refined_lookup = lookup(name, refined.uvs, side, f"{rule} refined")
             layouts[(rule, name)] = refined.uvs
             # The effect's own uniform bakes at side x multipliers, against its own truth.
@@ -654,8 +657,10 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
         sample, tessellation, to_unsplit = stages.run("tessellate", lambda p: _tessellated(
             sample, variant, first_map, options.tessellate))
         uvs, triangles = sample.layout(variant)
-    original_check = check_layout(uvs, triangles, resolution, options.padding)
-    padding = min(float(options.padding), float(original_check["min_gutter_texels"]))
+    # The user's padding, as the add-on passes it: refine_uvs keeps a tighter
+    # input's pairs at their own distance and packs no closer than a texel.
+    padding = float(options.padding)
+    original_check = check_layout(uvs, triangles, resolution, padding)
     route = _route_mesh(sample, options)
     refined = stages.run("refine", lambda p: refine_uvs(first_map, uvs, triangles, resolution, padding=padding,
                                                         progress=p, **route, **refine_options))
@@ -740,7 +745,8 @@ def evaluate_sample(sample, options, out_dir=None, progress=None):
                                                "bake comparison layouts")))
     # The second baseline: the input's charts packed at one common scale, no
     # signal. What it gains is packing; what the refined map gains beyond it, signal.
-    uniform = stages.run("uniform repack", lambda p: _uniform_repack(sample, uvs, triangles, resolution, padding,
+    uniform = stages.run("uniform repack", lambda p: _uniform_repack(sample, uvs, triangles, resolution,
+                                                                     pack_padding(padding, original_check),
                                                                      options, points, p))
 
     start = time.perf_counter()

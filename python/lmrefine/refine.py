@@ -532,7 +532,7 @@ def _source_lowest(stage):
         if not repacks:
             return unpacked
         scales = _signal(stage)[1]
-        padding = _pack_padding(stage.padding, stage.original)
+        padding = pack_padding(stage.padding, stage.original)
         stretch = max(1.0, float(options["max_stretch"]))
         bounds = [model.lowest_packed(stage.shape, padding, variant, stage.new_uvs, stretch)
                   for variant in (scales, np.sqrt(scales))]
@@ -728,7 +728,7 @@ def _triangle_stretched(stage, new_uvs, check, analysed=None):
     if stage.gradient_given is not None:
         report["reason"] = "a gradient map was given instead of a lightmap"
         return new_uvs, check, report
-    triangles, shape, padding = stage.triangles, stage.shape, _pack_padding(stage.padding, stage.original)
+    triangles, shape, padding = stage.triangles, stage.shape, pack_padding(stage.padding, stage.original)
     if analysed is None:
         checker = _native.LayoutChecker(new_uvs, triangles, shape, stage.padding)
         analysed = checker, set(checker.check(failing_charts=True)["failing_charts"].tolist())
@@ -871,11 +871,12 @@ def _with_charts(base_uvs, chart_uvs, triangles, charts, selected):
     return np.where(corners[:, None], chart_uvs, base_uvs)
 
 
-def _pack_padding(padding, original):
+def pack_padding(padding, original):
     """The gutter the repack packs at: the padding, or the input's gutter
     (`original`, its check_layout report) where that is narrower
     (backoff.allowed_gutter), never below a texel unless the padding is
-    (dilation needs a texel between charts)."""
+    (dilation needs a texel between charts). evaluate's uniform repack packs
+    at it too."""
     return min(float(padding), max(float(original["min_gutter_texels"]), min(float(padding), 1.0)))
 
 
@@ -953,7 +954,7 @@ def _repack_stage(stage, own_packing=False):
                 or not 1.0 <= float(max_stretch) < np.inf:
             raise ValueError(f"max_stretch must be a finite number >= 1 (1 = no stretch), got {max_stretch!r}")
         packed, repack_report = allocation.repack(uvs, new_uvs, triangles, scalar_energy, shape,
-                                                  _pack_padding(padding, original),
+                                                  pack_padding(padding, original),
                                                   float(min_chart_scale), float(max_chart_scale), progress,
                                                   lightmap=stage.lightmap if stage.gradient_given is None else None,
                                                   mask=mask,
