@@ -133,7 +133,7 @@ def test_refine_uvs_triangle_stretch_report_and_validity():
     assert check["valid"], check
     assert all(np.array_equal(result.report["check"][k], check[k]) for k in check)
     if report["used"]:
-        assert report["predicted_edge_error"] < 1.0
+        assert report["predicted_edge_error"] < 1.0 and report["predicted_error"] < 1.0
     else:
         assert report["reason"]
     assert report["used"], "the stripe is the stretch's own case"
@@ -348,3 +348,47 @@ def test_a_flip_costs_the_stretch_around_it_not_the_whole_chart(monkeypatch):
     first.clear()
     _, whole, whole_report, _ = stretch.triangle_stretch(lightmap, mask, uvs, uvs, tris, charts, shape, 2.0)
     assert whole.tolist() == [0.25] and whole_report["triangles_backed_off"] == 0
+
+
+def test_smooth_share_is_the_smooth_terms_part_of_the_model():
+    resolution = 128
+    uvs, tris = plane(32, margin=0.05)
+    mask = lmrefine.coverage_mask(uvs, tris, resolution)
+    charts = np.zeros(len(tris), np.int32)
+    x = (np.arange(resolution) + 0.5) / resolution
+    ramp = np.ascontiguousarray(np.broadcast_to((0.2 + 0.8 * x).astype(np.float32), (resolution, resolution)))
+    shares = {}
+    for name, lightmap in (("ramp", ramp), ("stripe", stripe_lightmap(resolution))):
+        energy = lmrefine.gradient_map(lightmap, mask).sum(axis=2)
+        shares[name] = allocation.smooth_share(uvs, tris, charts, energy, lightmap, mask)
+        edge, smooth, _ = allocation.chart_errors(uvs, tris, charts, energy, lightmap, mask, smooth_term=True)
+        assert shares[name] == pytest.approx(smooth.sum() / (edge.sum() + smooth.sum()))
+    # Linear light is all slope (the gradient map does not see it); a one-texel-wide stripe is all edge.
+    assert shares["ramp"] > 0.99 and shares["stripe"] == 0.0
+    energy = lmrefine.gradient_map(ramp, mask).sum(axis=2)
+    assert allocation.smooth_share(uvs, tris, charts, energy, None, mask) == 0.0  # no lightmap: no slope term
+
+
+def test_triangle_stretch_error_prices_lost_texels_in_smooth_light():
+    from lmrefine.refine import triangle_stretch_error
+
+    assert triangle_stretch_error(0.9, 0.8, 0.0) == pytest.approx(0.9)
+    assert triangle_stretch_error(0.9, 0.8, 1.0) == pytest.approx(1.25)
+    assert triangle_stretch_error(0.9, 0.8, 0.5) == pytest.approx(0.5 * 0.9 + 0.5 / 0.8)
+    assert triangle_stretch_error(1.0, 1.0, 0.3) == pytest.approx(1.0)
+
+
+@pytest.mark.parametrize("share", [0.0, 0.5])
+def test_a_stretch_losing_texels_is_refused_where_smooth_light_weighs(monkeypatch, share):
+    resolution = 128
+    uvs, tris = plane(32, margin=0.05)
+    monkeypatch.setattr(allocation, "smooth_share", lambda *args: share)
+    report = lmrefine.refine_uvs(stripe_lightmap(resolution), uvs, tris, resolution).report["triangle_stretch"]
+    # The stripe's stretch gains across it and packs into less of the atlas (the case above).
+    assert report["predicted_edge_error"] < 1.0 and report["texel_area"] < 0.9
+    assert report["smooth_share"] == share
+    expected = (1 - share) * report["predicted_edge_error"] + share / report["texel_area"]
+    assert report["predicted_error"] == pytest.approx(expected)
+    assert report["used"] == (expected < 1.0)
+    if share:
+        assert not report["used"] and "smooth light (50% of the error)" in report["reason"]

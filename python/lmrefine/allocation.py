@@ -232,6 +232,18 @@ def chart_errors(uvs, triangles, charts, energy, lightmap=None, mask=None, smoot
     return edge, SMOOTH_WEIGHT * smooth, area
 
 
+def smooth_share(uvs, triangles, charts, energy, lightmap, mask, world_areas=None):
+    """The share of a layout's predicted error in its smooth light: the
+    chart model with its smooth term (chart_errors, smooth_term=True), whose
+    border slope term the gradient energy does not see, over the model's
+    whole error. That part falls with the texel area (1/s^2), whatever a
+    stretch does across the light changes. 0 without a lightmap."""
+    edge, smooth, _ = chart_errors(uvs, triangles, charts, energy, lightmap, mask, smooth_term=True,
+                                   world_areas=world_areas)
+    total = float(edge.sum() + smooth.sum())
+    return float(smooth.sum()) / total if total > 0 else 0.0
+
+
 def _scales_at(edge, smooth, area, lam):
     """Each chart's minimiser of edge / s + smooth / s^2 + lam area s^2: the
     root of g(s) = 2 lam area s^4 - edge s - 2 smooth. g is convex on s > 0

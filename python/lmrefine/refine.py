@@ -703,9 +703,20 @@ def _in_charts(lightmap, uvs, triangles, resolution, padding, mask, gradient, pr
 # The largest triangle_stretch refine_uvs takes: a triangle 16 times wider
 # across its light changes is 1/16 as long along them.
 MAX_TRIANGLE_STRETCH = 16.0
-# The triangle stretch is kept when the chart model's edge term of its
-# packed layout is below this share of the refined layout's.
+# The triangle stretch is kept when the chart model's error of its packed
+# layout is below this share of the refined layout's.
 TRIANGLE_STRETCH_REQUIRED_GAIN = 1.0
+
+
+def triangle_stretch_error(edge_error, texel_area, smooth_share):
+    """The chart model's error of a triangle-stretched layout packed again,
+    relative to the refined layout's: its edge term's prediction
+    (stretch.triangle_edge_error, the stretch against the packing's loss of
+    scale) for the share of the error across light changes, and the texel
+    area's inverse for the share in smooth light (allocation.smooth_share),
+    which a stretch does not serve and a lost texel costs (docs/refiner.md,
+    "Smooth light priced")."""
+    return (1.0 - smooth_share) * edge_error + smooth_share / max(texel_area, 1e-12)
 
 
 def _triangle_stretched(stage, new_uvs, check, analysed=None):
@@ -789,6 +800,15 @@ def _triangle_stretched(stage, new_uvs, check, analysed=None):
         report["reason"] = (f"the error model predicts {report['every_chart_edge_error']:.3f} of the refined "
                             f"layout's edge error once packed again{fewer} (needed: below "
                             f"{TRIANGLE_STRETCH_REQUIRED_GAIN:g})")
+        return new_uvs, check, report
+    report["smooth_share"] = allocation.smooth_share(stage.uvs, triangles, charts, stage.energy,
+                                                     stage.lightmap, stage.mask, stage.world_areas)
+    report["predicted_error"] = triangle_stretch_error(predicted, report["texel_area"], report["smooth_share"])
+    if report["predicted_error"] >= TRIANGLE_STRETCH_REQUIRED_GAIN:
+        report["reason"] = (f"the error model predicts {report['predicted_error']:.3f} of the refined layout's "
+                            f"error once packed again: {predicted:.3f} of its edge error, and its smooth light "
+                            f"({report['smooth_share']:.0%} of the error) on {report['texel_area']:.0%} of the "
+                            f"texels (needed: below {TRIANGLE_STRETCH_REQUIRED_GAIN:g})")
         return new_uvs, check, report
     report["used"] = True
     report["charts_stretched"] = int((kept > 0).sum())
