@@ -125,9 +125,14 @@ def rechart_sentence(report):
 
 
 # refine_uvs' names of the checks a re-charted map can fail against its source map, in the panel's words.
-CHECK_WORDS = {"flipped": "flipped triangles", "degenerate": "triangles without area",
-               "overlapping": "overlapping triangles", "out_of_bounds": "UVs outside the map",
-               "gutter": "charts closer than Padding"}
+def _check_words(name):
+    """A check_layout failure (a key of its report, or 'gutter') in the panel's words, as the core's
+    warnings name it (lmrefine.layout_input.PROBLEM_WORDS)."""
+    from lmrefine.layout_input import PROBLEM_WORDS
+
+    if name == "gutter":
+        return "charts closer than Padding"
+    return PROBLEM_WORDS[name][1] if name in PROBLEM_WORDS else name.replace("_", " ")
 
 
 def not_recharted_sentence(report):
@@ -144,8 +149,8 @@ def not_recharted_sentence(report):
     reason = info["reason"]  # the core's words, where neither case below applies
     source = info.get("predicted_error_source_route")
     if info.get("failed"):  # chosen by the model, then failed the source map's checks
-        reason = ("the re-charted map had " + ", ".join(CHECK_WORDS.get(name, name.replace("_", " "))
-                                                         for name in info["failed"]) + ", which the source map has not")
+        reason = ("the re-charted map had " + ", ".join(_check_words(name) for name in info["failed"])
+                  + ", which the source map has not")
     elif "predicted_error" in info and source is not None:  # the model preferred the source map's refinement
         reason = (f"re-charting was predicted to give {info['predicted_error']:.2f}x the source map's lightmap "
                   f"error (blur at the light changes) and refining the source map {source:.2f}x; re-charting "

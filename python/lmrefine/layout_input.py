@@ -95,7 +95,7 @@ def geometry_problems(positions, corner_vertex, uvs, triangles, resolution):
 
 
 # check_layout's counts in a user's words, (one, more); out_of_bounds counts
-# UV corners, the others triangles. The add-on's CHECK_WORDS use the same.
+# UV corners, the others triangles. The add-on names failed checks with them (operators._check_words).
 PROBLEM_WORDS = {"flipped": ("flipped triangle", "flipped triangles"),
                  "degenerate": ("triangle without area", "triangles without area"),
                  "overlapping": ("overlapping triangle", "overlapping triangles"),
