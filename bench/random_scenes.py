@@ -16,7 +16,11 @@ and "LightmapPack" (UV > Lightmap Pack).
         --uv-map Lightmap|LightmapPack [--resolution 512]
 
 Each scene's draw is written beside it (random_SEED.json): what was built,
-so a row can be read without opening the file.
+so a row can be read without opening the file. Blender does not always
+order a UV sphere's triangles the same way from run to run (the same
+vertices, another triangle order), so a seed built again may measure a
+little differently: the figures in docs/evaluation.md are of the files
+built then.
 """
 
 import json
@@ -27,45 +31,16 @@ import sys
 import bpy
 import numpy as np
 
-
-def added(name):
-    obj = bpy.context.active_object
-    obj.name = name
-    return obj
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from rotunda_scene import added, edit, unwrap_together  # noqa: E402  (the same user steps)
 
 
 def subdivide(obj, cuts):
     """Edit > Subdivide with `cuts` cuts on every face, as a user does it."""
-    bpy.ops.object.select_all(action='DESELECT')
-    obj.select_set(True)
-    bpy.context.view_layer.objects.active = obj
-    bpy.ops.object.mode_set(mode='EDIT')
+    edit(obj)
     bpy.ops.mesh.select_all(action='SELECT')
     bpy.ops.mesh.subdivide(number_cuts=cuts)
     bpy.ops.object.mode_set(mode='OBJECT')
-
-
-def unwrap_together(objects):
-    """Both lightmap maps on every object, unwrapped in one multi-object edit: one atlas."""
-    for obj in objects:
-        for name in ("Lightmap", "LightmapPack"):
-            obj.data.uv_layers.new(name=name)
-    bpy.ops.object.select_all(action='DESELECT')
-    for obj in objects:
-        obj.select_set(True)
-    bpy.context.view_layer.objects.active = objects[0]
-    for name, unwrap in (("Lightmap", lambda: bpy.ops.uv.smart_project(island_margin=0.01)),
-                         ("LightmapPack", lambda: bpy.ops.uv.lightmap_pack(PREF_CONTEXT='ALL_FACES',
-                                                                          PREF_PACK_IN_ONE=True,
-                                                                          PREF_MARGIN_DIV=0.2))):
-        for obj in objects:
-            obj.data.uv_layers.active = obj.data.uv_layers[name]
-        bpy.ops.object.mode_set(mode='EDIT')
-        bpy.ops.mesh.select_all(action='SELECT')
-        unwrap()
-        bpy.ops.object.mode_set(mode='OBJECT')
-    for obj in objects:
-        obj.data.uv_layers.active = obj.data.uv_layers["Lightmap"]
 
 
 def material(obj, rng):
