@@ -501,8 +501,9 @@ def test_a_note_names_the_objects_the_refined_map_serves_worse():
 
 
 def test_a_tight_input_is_refined_at_the_users_padding_as_the_add_on_refines_it(monkeypatch):
-    """The input's charts touch (the west and east halves of the floor, no
-    gutter): evaluate still asks refine_uvs for the padding, as the add-on
+    """The input's charts overlap (the east half of the floor slid onto the
+    west half: a gutter of 0, as a Subdivision Surface modifier leaves
+    Suzanne's islands): evaluate still asks refine_uvs for the padding, as the add-on
     does (it keeps the touching pair's own distance and packs no closer
     than a texel), and the uniform repack packs as refine_uvs's repack does."""
     from lmrefine import evaluation
@@ -512,7 +513,7 @@ def test_a_tight_input_is_refined_at_the_users_padding_as_the_add_on_refines_it(
     scene = tiny_scene(6)
     uvs = scene.uvs["smart"].reshape(-1, 3, 2).copy()
     east = scene.object_id == 1
-    uvs[east, :, 0] -= 0.02  # the east half slides onto the west one's border: a gutter of 0
+    uvs[east, :, 0] -= 0.02
     scene.uvs = {"smart": uvs.reshape(-1, 2), "lightmap": uvs.reshape(-1, 2).copy()}
     assert lmrefine.check_layout(scene.uvs["smart"], scene.layout("smart")[1], 48, 2.0)["min_gutter_texels"] == 0.0
     seen = {}
