@@ -723,6 +723,21 @@ def test_limit_row_and_its_words(facts):
         ["steps", "the automaton stopped at its step limit before the texel densities settled within Delta"]]
 
 
+def test_a_few_overlapping_faces_are_no_texture_map(facts):
+    """Smart UV Project leaves a few overlapping triangles where an island folds over itself (two on Suzanne):
+    the map is named as a lightmap with a flaw, with the way to find them, not as a texture map; a map whose
+    triangles overlap widely still is one, and charts that only touch get the gutter warning."""
+    value = fact(facts, "few_overlaps_wording")
+    assert not value["few"]["texture_like"] and value["many"]["texture_like"] and not value["touching"]["texture_like"]
+    assert value["few"]["warning"] == (
+        "'Floor_atlas': UV map 'Lightmap' has faces that share texels (2 overlapping triangles, charts 1.62 texels "
+        "apart where the padding asks for 2): light bleeds between them whatever the refinement does; in the UV "
+        "Editor, Select > Select Overlap finds them: move them apart, or unwrap the map again")
+    assert "looks like a texture map" in value["many"]["warning"]
+    assert "looks like a texture map" not in value["touching"]["warning"]
+    assert "the refined map is valid" in value["touching"]["warning"]
+
+
 def test_maps_not_recharted_are_explained_in_the_panels_words(facts):
     """A map Re-chart if Better tried and kept on its source map's charts gets an Info line saying why it was
     tried and why it was not kept (docs/blender.md promises it), in the panel's words; none where the route was
@@ -1482,6 +1497,8 @@ def test_addon_says_tessellate_when_large_triangles_hold_the_light_changes(facts
     assert off["error"] is None and on["error"] is None
     hint = [w for w in off["warnings"] if "turn on Tessellate" in w]
     assert len(hint) == 1 and hint[0].startswith("'Floor': light changes cross ")
+    # The size given is that of the triangles the warning counts (more than 8 texels each).
+    assert float(re.search(r"those triangles cover (\d+) texels each on average", hint[0]).group(1)) > 8
     assert off["widening"] < 1.25
     assert not any("turn on Tessellate" in w for w in on["warnings"])
     # A floor of 9 vertices: the default budget adds 2, and the hint gives the budget at which the split

@@ -492,9 +492,10 @@ def run(context, targets, options, journal, image_dir=None):
             outcome.warnings.append(f"{label}: {why}")
         # Strength 0 moves nothing whatever the triangles, nor does a layout held for its light steps on
         # texel boundaries: the nothing-moved warning says why, Tessellate is no fix.
-        # A source map whose faces overlap or touch got the texture-map warning: Tessellate is no fix.
+        # A texture map's layout got its warning: Tessellate is no fix. A few overlapping faces are no
+        # reason to keep quiet about the triangles a split would serve.
         if (options.get("tessellate") is None and options["refine_options"]["strength"] > 0
-                and not (source_check["overlapping"] or source_check["min_gutter_texels"] <= 0.0)
+                and not texture_like(source_check, len(group.triangles))
                 and "aligned_steps" not in result.report["limited_by"]
                 and lmrefine.tessellation.coarse_refinement(result.report)):
             _coarse_warning(lmrefine, label, lightmaps[name], group, result.report, outcome,
@@ -599,6 +600,18 @@ def _black_warnings(group, lightmap, resolution, warnings):
                         f"refine for: {fix}")
 
 
+# A source map is a texture map's layout (mirrored or stacked islands) when more than this share of
+# its triangles overlap others; fewer are a lightmap layout with a flaw (Smart UV Project leaves a few
+# where an island folds over itself, as on Suzanne).
+TEXTURE_OVERLAP_SHARE = 0.01
+
+
+def texture_like(source_check, triangles):
+    """Whether a source map's check_layout report (of a map of `triangles` triangles) reads as a
+    texture map's layout: more than TEXTURE_OVERLAP_SHARE of its triangles overlap."""
+    return source_check["overlapping"] > TEXTURE_OVERLAP_SHARE * max(int(triangles), 1)
+
+
 def source_warning(label, group, source_check, padding, resolution, refined_check=None):
     """What the user should know about a group's source map that fails check_layout at `resolution`
     (`source_check`), or None when it passes; `refined_check`, the refined map's check at `padding`,
@@ -607,12 +620,18 @@ def source_warning(label, group, source_check, padding, resolution, refined_chec
     if source_check["valid"]:
         return None
     source = "', '".join(sorted({target.source for target in group.targets}))
-    if source_check["overlapping"] or source_check["min_gutter_texels"] <= 0.0:
-        # Charts that overlap or touch share texels: the layout of a texture, not of a lightmap.
+    if texture_like(source_check, len(group.triangles)):
+        # Charts that overlap widely share texels: the layout of a texture, not of a lightmap.
         return (f"{label}: UV map '{source}' looks like a texture map, not a lightmap layout "
                 f"({describe_problems(source_check, padding)}): faces share texels, so light bleeds between "
                 "them whatever the refinement does; add a UV map for the lightmap (Object Data > UV Maps > +, "
                 "then UV > Lightmap Pack) and pick it as Source")
+    if source_check["overlapping"]:
+        # A few faces overlap: the refined map keeps them where they were (it never makes a map worse).
+        return (f"{label}: UV map '{source}' has faces that share texels "
+                f"({describe_problems(source_check, padding)}): light bleeds between them whatever the "
+                "refinement does; in the UV Editor, Select > Select Overlap finds them: move them apart, or "
+                "unwrap the map again")
     if refined_check is not None and refined_check["valid"]:
         # Repacked or re-charted at the padding: only the source map's own bake (Before) bleeds.
         gutter = refined_check["min_gutter_texels"]
@@ -711,8 +730,8 @@ def _coarse_warning(lmrefine, label, lightmap, group, report, outcome, budget):
     outcome.warnings.append(
         f"{label}: light changes cross {coarse['triangles']} triangle(s) of more than "
         f"{COARSE_MIN_TEXELS:g} texels, and moving UVs cannot put more texels inside a triangle "
-        f"(edges {report['transition_widening']:.2f}x, the median triangle there "
-        f"{report.get('transition_triangle_texels', 0.0):.0f} texels): turn on Tessellate (Stages and "
+        f"(edges {report['transition_widening']:.2f}x; those triangles cover "
+        f"{coarse['texels'] / coarse['triangles']:.0f} texels each on average): turn on Tessellate (Stages and "
         "Tessellation)"
         f"{raise_budget} to split them in the mesh, as one undo step")
 

@@ -1637,6 +1637,23 @@ def not_recharted_wording():
 
 
 @check()
+def few_overlaps_wording():
+    """A source map with a few overlapping triangles is a lightmap layout with a flaw, one whose triangles
+    overlap widely a texture map's layout (pipeline.texture_like): the warnings, from made-up checks."""
+    register()
+    from types import SimpleNamespace
+    group = SimpleNamespace(targets=[SimpleNamespace(source="Lightmap")], triangles=np.zeros((994, 3), np.int32))
+    clean = {"flipped": 0, "degenerate": 0, "overlapping": 0, "out_of_bounds": 0, "min_gutter_texels": 3.0,
+             "valid": True}
+    checks = {"few": dict(clean, overlapping=2, min_gutter_texels=1.62, valid=False),
+              "many": dict(clean, overlapping=300, min_gutter_texels=0.0, valid=False),
+              "touching": dict(clean, min_gutter_texels=0.0, valid=False)}
+    return {key: {"texture_like": pipeline.texture_like(check, len(group.triangles)),
+                  "warning": pipeline.source_warning("'Floor_atlas'", group, check, 2, 256, dict(clean))}
+            for key, check in checks.items()}
+
+
+@check()
 def setting_wording():
     """A message names a setting as its reader sets it: by its panel label, or (the batch) by its flag."""
     register()
@@ -1666,7 +1683,7 @@ def repack_wording():
     """The repack advice for a source map that was already invalid: the Margin only where charts are too close."""
     register()
     from types import SimpleNamespace
-    group = SimpleNamespace(targets=[SimpleNamespace(source="Lightmap")])
+    group = SimpleNamespace(targets=[SimpleNamespace(source="Lightmap")], triangles=np.zeros((12, 3), np.int32))
     tight = {"valid": False, "flipped": 0, "degenerate": 0, "overlapping": 0, "out_of_bounds": 0,
              "min_gutter_texels": 1.5}
     flipped = dict(tight, flipped=2, min_gutter_texels=4.0)
