@@ -32,7 +32,7 @@ import bpy
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from rotunda_scene import added, edit, unwrap_together  # noqa: E402  (the same user steps)
+from rotunda_scene import added, edit, joined, unwrap_together  # noqa: E402  (the same user steps)
 
 
 def subdivide(obj, cuts):
@@ -112,12 +112,7 @@ def caster(kind, rng, size, draw):
             bpy.ops.mesh.primitive_cube_add(size=1, location=(x + (k - beams / 2) * gap, y, height))
             made.append(bpy.context.active_object)
             made[-1].scale = (0.08, span, 0.15)
-        bpy.ops.object.select_all(action='DESELECT')
-        for obj in made:
-            obj.select_set(True)
-        bpy.context.view_layer.objects.active = made[0]
-        bpy.ops.object.join()
-        obj = added("Pergola")
+        obj = joined(made, "Pergola")
         entry = {"beams": beams, "height": round(height, 2), "gap": round(gap, 2)}
     while obj.data.uv_layers:
         obj.data.uv_layers.remove(obj.data.uv_layers[0])

@@ -48,6 +48,16 @@ def added(name):
     return obj
 
 
+def joined(objects, name):
+    """Object > Join of `objects` into the first of them, named `name`."""
+    bpy.ops.object.select_all(action='DESELECT')
+    for obj in objects:
+        obj.select_set(True)
+    bpy.context.view_layer.objects.active = objects[0]
+    bpy.ops.object.join()
+    return added(name)
+
+
 def unwrap_together(objects):
     """Both lightmap maps on every object, unwrapped in one multi-object edit: one atlas."""
     for obj in objects:
@@ -112,12 +122,7 @@ def main(path):
         bpy.ops.mesh.primitive_cylinder_add(vertices=16, radius=0.25, depth=4.2,
                                             location=(4.2 * math.cos(angle), 4.2 * math.sin(angle), 2.1))
         columns.append(bpy.context.active_object)
-    bpy.ops.object.select_all(action='DESELECT')
-    for obj in columns:
-        obj.select_set(True)
-    bpy.context.view_layer.objects.active = columns[0]
-    bpy.ops.object.join()
-    colonnade = added("Colonnade")
+    colonnade = joined(columns, "Colonnade")
     bpy.ops.object.shade_smooth()
 
     bpy.ops.mesh.primitive_cube_add(size=1, location=(0.0, 0.0, 0.3))
