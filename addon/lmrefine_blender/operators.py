@@ -104,14 +104,22 @@ def images_sentence(summary):
     return text
 
 
+def _first_effect(report, sentence):
+    """With Layouts: Per Effect (a report of "effects"), `sentence` of the first effect that has one, named;
+    None when none has."""
+    sentences = ((name, sentence(own)) for name, own in report["effects"].items())
+    return next((f"{name}: {text}" for name, text in sentences if text), None)
+
+
 def rechart_sentence(report):
     """Why a map was re-charted and what that is predicted to give, from its refine_uvs report, in the
-    panel's words: the core's own note (report["notes"][0]) names its keywords and its error model."""
-    if "effects" in report:  # Layouts: Per Effect: the first effect whose map was re-charted
-        name, own = next((name, own) for name, own in report["effects"].items()
-                         if (own.get("rechart") or {}).get("used"))
-        return f"{name}: " + rechart_sentence(own)
-    info = report["rechart"]
+    panel's words: the core's own note (report["notes"][0]) names its keywords and its error model.
+    None where it was not re-charted."""
+    if "effects" in report:
+        return _first_effect(report, rechart_sentence)
+    info = report.get("rechart") or {}
+    if not info.get("used"):
+        return None
     roomier = (", packed half a texel farther apart than Padding so that their edge texels could shrink"
                if info.get("edge_room") else "")
     source = info.get("predicted_error_source_route")
@@ -124,10 +132,10 @@ def rechart_sentence(report):
             "map's charts, turn off Re-chart if Better (Refinement)")
 
 
-# refine_uvs' names of the checks a re-charted map can fail against its source map, in the panel's words.
 def _check_words(name):
-    """A check_layout failure (a key of its report, or 'gutter') in the panel's words, as the core's
-    warnings name it (lmrefine.layout_input.PROBLEM_WORDS)."""
+    """A check refine_uvs says a re-charted map failed against its source map (a key of check_layout's
+    report, or 'gutter') in the panel's words, as the core's warnings name it
+    (lmrefine.layout_input.PROBLEM_WORDS)."""
     from lmrefine.layout_input import PROBLEM_WORDS
 
     if name == "gutter":
@@ -139,9 +147,8 @@ def not_recharted_sentence(report):
     """Why a map that Re-chart if Better tried to re-chart kept its source map's charts, from its refine_uvs
     report, in the panel's words; None where it was not tried (a source map with room whose charts fold
     over no sharp edge) or was re-charted."""
-    if "effects" in report:  # Layouts: Per Effect: the first effect tried and not re-charted
-        sentences = ((name, not_recharted_sentence(own)) for name, own in report["effects"].items())
-        return next((f"{name}: {sentence}" for name, sentence in sentences if sentence), None)
+    if "effects" in report:
+        return _first_effect(report, not_recharted_sentence)
     info = report.get("rechart") or {}
     if info.get("used") or not any(note.startswith("not re-charted:") for note in report.get("notes", [])):
         return None

@@ -114,6 +114,11 @@ def signed_areas(uvs, triangles):
     return 0.5 * ((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
 
 
+def chart_areas(uvs, triangles, charts, count):
+    """(count,) each chart's UV area: its triangles' |signed_areas| summed."""
+    return np.bincount(charts, weights=np.abs(signed_areas(uvs, triangles)), minlength=count)
+
+
 def triangle_samples(uvs, triangles, field):
     """A texel field (H, W[, ...]) read at each triangle's four points
     (triangle_texels): (T, 4[, ...]), and each triangle's area in texels (T,)."""
@@ -208,7 +213,7 @@ def chart_errors(uvs, triangles, charts, energy, lightmap=None, mask=None, smoot
     as uniform (as Smart UV Project and Lightmap Pack make it)."""
     shape = energy.shape
     count = int(charts.max()) + 1 if len(charts) else 0
-    area = np.bincount(charts, weights=np.abs(signed_areas(uvs, triangles)), minlength=count)
+    area = chart_areas(uvs, triangles, charts, count)
     weight = None if world_areas is None else texel_weights(uvs, triangles, world_areas)
 
     def per_chart(field):
@@ -390,7 +395,7 @@ def repack(source_uvs, refined_uvs, triangles, energy, resolution, padding, min_
     # No packing can scale the charts beyond filling the whole atlas, gutters
     # aside: when the model's error at that scale is no clear gain, the
     # packer need not run (a single chart filling its atlas, for example).
-    area_refined = np.bincount(charts, weights=np.abs(signed_areas(refined_uvs, triangles)), minlength=len(scales))
+    area_refined = chart_areas(refined_uvs, triangles, charts, len(scales))
     largest = 1.0 / np.sqrt(max(float((area_refined * scales ** 2).sum()), 1e-300))
     best = predicted_error(edge, smooth, largest * scales)
     rule = OWN_PACKING_RULE if own_packing else callers_rule()
@@ -803,9 +808,8 @@ def grow_finished_packing(packed, source_uvs, triangles, charts, energy, resolut
                                           world_areas=world_areas)
     else:
         edge, smooth = errors
-        # As chart_errors measures it.
-        area = np.bincount(charts, weights=np.abs(signed_areas(source_uvs, triangles)), minlength=len(edge))
-    before = np.bincount(charts, weights=np.abs(signed_areas(packed, triangles)), minlength=len(edge))
+        area = chart_areas(source_uvs, triangles, charts, len(edge))  # as chart_errors measures it
+    before = chart_areas(packed, triangles, charts, len(edge))
     scales = np.sqrt(before / np.maximum(np.asarray(area, np.float64), 1e-300))
     # Evenly only: a growth along one axis would stretch the triangles past the stretch's bound.
     grown, _, _, _, report = grow_into_free_space(packed, triangles, charts, edge, smooth, scales, resolution,
