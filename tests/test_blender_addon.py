@@ -494,6 +494,21 @@ def test_copies_made_by_modifiers_skip_the_object_and_inside_out_meshes_are_name
     assert not any(w.startswith("'Floor'") for w in value["warnings"])
 
 
+def test_a_modifier_that_folds_the_map_the_bake_reads_is_named_with_its_fix(facts):
+    """A Subdivision Surface smooths the refined map's UVs inside the islands and folds them where the bake
+    reads it, though the map on the mesh is clean: the run says so, with the setting that stops it."""
+    value = fact(facts, "modifier_folds_are_named")
+    assert value["error"] is None and value["objects"] == ["Monkey"]
+    folds = [w for w in value["warnings"] if "where the bake reads" in w]
+    assert len(folds) == 1 and folds[0].startswith(
+        "'Monkey': its Subdivision Surface modifier 'Subdivision' smooths the UVs (UV Smooth: Keep Boundaries), so "
+        "where the bake reads UV map 'Lightmap_refined', ")
+    assert "set its UV Smooth to None (Modifier Properties > Subdivision > Advanced)" in folds[0]
+    assert value["smoothed"].startswith("'Monkey': its Subdivision Surface modifier")
+    assert " 10 of its 3936 triangles overlap and 9 flip (the map on the mesh: 0 and 0 of 968)" in value["smoothed"]
+    assert value["none"] is None and value["off"] is None
+
+
 def test_tight_source_gutters_the_refined_map_fixes_are_reported_as_fixed(facts):
     value = fact(facts, "tight_source_gutters_fixed_by_the_refined_map")
     assert value["error"] is None and value["source_gutter"] < 8 and value["refined_check"]["valid"]

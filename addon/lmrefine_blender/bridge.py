@@ -305,6 +305,56 @@ def copied_faces_problem(obj, uv_name, layout, export, resolution):
             "copy has texels of its own")
 
 
+# Modifiers that can move a UV map's UVs without copying faces, and the setting that stops it where
+# there is one: a subdivision smooths UVs inside the islands unless its UV Smooth is None.
+UV_SMOOTHING = {'SUBSURF': "Subdivision Surface", 'MULTIRES': "Multiresolution"}
+# The share of a map's triangles folded (flipped or overlapping) where the bake reads it that is worth a
+# warning: a subdivision flips a piece or two of a quad whose UVs are not convex even without smoothing
+# (2 of Suzanne's 3,936 at UV Smooth None), and only applying it helps there.
+FOLDED_SHARE = 0.001
+
+
+def modifier_folds_problem(depsgraph, obj, uv_name, resolution):
+    """A message naming the fix when `obj`'s modifiers fold UV map `uv_name` where the bake reads it,
+    else None: more than FOLDED_SHARE of its evaluated triangles flip or overlap (check_layout at
+    `resolution`), and more than twice the share of the map's own on the mesh, which is what was
+    refined (a Subdivision Surface's UV smoothing draws the UVs inside an island together, and a
+    warp's small triangles fold over)."""
+    import lmrefine
+    if not any(m.show_render and m.show_viewport for m in obj.modifiers):
+        return None
+    layout = read_layout(obj.data, uv_name)
+    obj_eval = obj.evaluated_get(depsgraph)
+    try:
+        export = export_mesh(obj_eval, obj_eval.matrix_world, uv_name=uv_name, name=obj.name)
+    except UserError:  # a map the modifiers drop: the bake says so
+        return None
+    if export is None or len(layout.triangles) == 0:
+        return None
+    if export.uvs.shape == layout.uvs.shape and np.allclose(export.uvs, layout.uvs, rtol=0.0, atol=1e-4):
+        return None
+    own = lmrefine.check_layout(layout.uvs, layout.triangles, resolution)
+    baked = lmrefine.check_layout(export.uvs, export.triangles, resolution)
+    folded, own_folded = baked["flipped"] + baked["overlapping"], own["flipped"] + own["overlapping"]
+    if (folded <= FOLDED_SHARE * len(export.triangles)
+            or folded * len(layout.triangles) <= 2 * own_folded * len(export.triangles)):
+        return None
+    found = (f"where the bake reads UV map '{uv_name}', {baked['overlapping']} of its {len(export.triangles)} "
+             f"triangles overlap and {baked['flipped']} flip (the map on the mesh: {own['overlapping']} and "
+             f"{own['flipped']} of {len(layout.triangles)}): light bleeds there")
+    smoothing = [m for m in obj.modifiers if m.type in UV_SMOOTHING and m.show_render and m.uv_smooth != 'NONE']
+    if smoothing:
+        modifier = smoothing[0]
+        kind = UV_SMOOTHING[modifier.type]
+        label = modifier.bl_rna.properties["uv_smooth"].enum_items[modifier.uv_smooth].name
+        return (f"'{obj.name}': its {kind} modifier '{modifier.name}' smooths the UVs (UV Smooth: {label}), so "
+                f"{found}; set its UV Smooth to None (Modifier Properties > {modifier.name} > Advanced), so that "
+                "the bake reads the map as it was refined, and run again")
+    names = ", ".join(m.name for m in obj.modifiers if m.show_render)
+    return (f"'{obj.name}': its modifiers ({names}) move the UVs, so {found}; apply them (Object > Apply > Visual "
+            "Geometry to Mesh) and run again")
+
+
 def renders(obj):
     """Whether a (non-instanced) object takes part in a bake: visible and enabled for render."""
     return obj.visible_get() and not obj.hide_render

@@ -134,6 +134,7 @@ def run(context, targets, options, journal, image_dir=None):
     for name in EFFECTS:
         side = sides[name]
         refined_of = {t.obj.name: _effect_target(t, name).refined for t in targets}
+        pipeline.modifier_warnings(context, targets, refined_of, side, outcome.warnings)
         baked = yield from bake(options["backend"], refined_of, (name,), side, f"Second bake ({name} at {side})")
         done += len(groups)
         merged = pipeline._group_maps(groups, baked[name], side, refined_uvs[name])

@@ -535,6 +535,7 @@ def run(context, targets, options, journal, image_dir=None):
     clock = time.perf_counter()
     targets = [target for group in groups for target in group.targets]
     refined_of = {t.obj.name: t.refined for t in targets}
+    modifier_warnings(context, targets, refined_of, resolution, outcome.warnings)
     passes = tuple(options["bake_passes"])
     if options["backend"] == 'EMBREE':
         baked = yield from _bake_embree(context, lmrefine, targets, refined_of, passes, options, "Second bake",
@@ -571,6 +572,17 @@ def run(context, targets, options, journal, image_dir=None):
             outcome.image_files[image_name] = _save_image(lmrefine, image, image_dir,
                                                           "float" if options["exr_float32"] else "half")
     return outcome
+
+
+def modifier_warnings(context, targets, uv_name_of, resolution, warnings):
+    """A warning for each target whose modifiers fold its UV map `uv_name_of[name]` where the bake reads
+    it (bridge.modifier_folds_problem), once per object."""
+    depsgraph = context.evaluated_depsgraph_get()
+    for target in targets:
+        problem = bridge.modifier_folds_problem(depsgraph, target.obj, uv_name_of[target.obj.name], resolution)
+        if problem is not None and problem not in warnings and not any(
+                w.startswith(f"'{target.obj.name}': its ") and "where the bake reads" in w for w in warnings):
+            warnings.append(problem)
 
 
 def _black_warnings(group, lightmap, resolution, warnings):

@@ -387,6 +387,27 @@ def copies_and_inside_out_meshes_are_named():
 
 
 @check("refine", "bake")
+def modifier_folds_are_named():
+    """Suzanne under a Subdivision Surface whose UV smoothing folds her Smart UV map where the bake reads
+    it: the run warns, naming the modifier and its UV Smooth; with UV Smooth None, or the modifier off
+    for render, there is nothing to say (bridge.modifier_folds_problem)."""
+    fresh_shadow_scene(**EMBREE_DIRECT)
+    monkey = scenes.smoothed_suzanne()
+    scenes.select_only(monkey)
+    outcome, warnings, error = _run_pipeline([monkey])
+    modifier = monkey.modifiers["Subdivision"]
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    found = {"smoothed": bridge.modifier_folds_problem(depsgraph, monkey, "Lightmap", RESOLUTION)}
+    modifier.uv_smooth = 'NONE'
+    found["none"] = bridge.modifier_folds_problem(bpy.context.evaluated_depsgraph_get(), monkey, "Lightmap",
+                                                  RESOLUTION)
+    modifier.uv_smooth, modifier.show_render = 'PRESERVE_BOUNDARIES', False
+    found["off"] = bridge.modifier_folds_problem(bpy.context.evaluated_depsgraph_get(), monkey, "Lightmap",
+                                                 RESOLUTION)
+    return {"error": error, "objects": outcome and outcome.objects, "warnings": warnings, **found}
+
+
+@check("refine", "bake")
 def tight_source_gutters_fixed_by_the_refined_map():
     """A coarse floor of one chart per face, its gutters under the padding: the route re-charts it at the
     padding, and the warning says the refined map is valid (only the source map's bake bleeds)."""
