@@ -23,6 +23,17 @@ def grid_chart(n, lo=(0.0, 0.0), hi=(1.0, 1.0)):
     return uvs, np.arange(len(uvs), dtype=np.int32).reshape(-1, 3)
 
 
+def fan_chart(centre, radius, span_degrees, pieces=5):
+    """One chart: `pieces` counter-clockwise triangles around `centre`, together spanning `span_degrees`
+    (past 360 the last ones lie over the first: a chart that overlaps itself with no triangle flipped, as
+    Smart UV Project leaves one where an island folds, on Suzanne)."""
+    angles = np.radians(np.linspace(0.0, span_degrees, pieces + 1))
+    rim = np.stack([np.cos(angles), np.sin(angles)], -1) * radius * np.linspace(1.0, 0.9, pieces + 1)[:, None]
+    points = np.vstack([centre, np.asarray(centre) + rim]).astype(np.float32)
+    uvs = points[[(0, k + 1, k + 2) for k in range(pieces)]].reshape(-1, 2)  # per corner, as grid_chart
+    return uvs, np.arange(len(uvs), dtype=np.int32).reshape(-1, 3)
+
+
 def merge(*layouts):
     uvs, triangles, offset = [], [], 0
     for u, t in layouts:

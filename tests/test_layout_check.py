@@ -174,9 +174,11 @@ def test_failing_charts_names_the_charts_to_fix():
                       square(0.7, 0.7, 0.2), square(0.75, 0.75, 0.1))        # overlapping
     report = lmrefine.check_layout(uvs, tris, R, padding=2, failing_charts=True)
     np.testing.assert_array_equal(report["failing_charts"], [0, 1, 2, 3])
+    np.testing.assert_array_equal(report["overlapping_charts"], [2, 3])  # the close pair fails on its gutter only
     report = lmrefine.check_layout(uvs, tris, R, padding=0.5, failing_charts=True)
     np.testing.assert_array_equal(report["failing_charts"], [2, 3])
     assert "failing_charts" not in lmrefine.check_layout(uvs, tris, R)
+    assert "overlapping_charts" not in lmrefine.check_layout(uvs, tris, R)
 
 
 def test_relative_gutter_judges_each_chart_pair_against_its_original_distance():
@@ -216,7 +218,7 @@ def test_gutter_texels_mark_the_texels_between_charts():
 def _same_report(a, b):
     assert a.keys() == b.keys()
     for key in a:
-        if key == "failing_charts":
+        if key in ("failing_charts", "overlapping_charts"):
             np.testing.assert_array_equal(a[key], b[key])
         else:
             assert a[key] == b[key], key

@@ -7,7 +7,7 @@ import pytest
 import lmrefine
 from lmrefine import allocation
 from lmrefine import refine as refine_module
-from layouts import (finite_difference_gradient, grid_chart, lightmap_pack, merge, plane, shadow_edge_lightmap,
+from layouts import (fan_chart, finite_difference_gradient, grid_chart, lightmap_pack, merge, plane, shadow_edge_lightmap,
                      smart_uv)
 
 R = 128
@@ -538,6 +538,30 @@ def test_worse_than_source_holds_moved_charts_to_their_gaps_and_repacked_ones_to
     assert worse == [] and "gutter_violations" not in check
     assert check["min_gutter_texels"] == pytest.approx(4.0, abs=0.01)
     assert worse_than_source(touching, uvs, tris, 64, 2.0, recharted=True)[0] == ["gutter"]
+
+
+def test_a_chart_that_overlaps_itself_may_count_more_but_no_chart_may_begin_to_overlap():
+    """The overlap rule of refine_uvs' promise (backoff.overlaps_grew), checked from the outside: a chart that
+    overlapped itself in the source may count more overlapping triangles (overlaps are found in texels, and a
+    scaled or stretched chart counts others), while a chart that did not may not begin to, even when the
+    count falls elsewhere. Found on a scene drawn at random: the chart stretch folded one of Suzanne's
+    islands while it unfolded two others, 8 -> 7 overlapping triangles, and the add-on's check of the
+    promise stopped the run as a bug."""
+    from lmrefine.backoff import worse_than_source
+
+    folded, flat = fan_chart((0.25, 0.25), 0.15, 450.0), fan_chart((0.75, 0.75), 0.15, 300.0)
+    uvs, tris = merge(folded, flat)
+    source = lmrefine.check_layout(uvs, tris, 64, 2.0, failing_charts=True)
+    assert source["overlapping"] == 2 and list(source["overlapping_charts"]) == [0] and source["flipped"] == 0
+    deeper, _ = merge(fan_chart((0.25, 0.25), 0.15, 520.0), flat)  # the fold grows: more of its triangles overlap
+    check = lmrefine.check_layout(deeper, tris, 64, 2.0, failing_charts=True)
+    assert check["overlapping"] > source["overlapping"] and list(check["overlapping_charts"]) == [0]
+    assert worse_than_source(deeper, uvs, tris, 64, 2.0)[0] == []
+    swapped, _ = merge(fan_chart((0.25, 0.25), 0.15, 300.0), fan_chart((0.75, 0.75), 0.15, 400.0))  # unfolded, and folded
+    check = lmrefine.check_layout(swapped, tris, 64, 2.0, failing_charts=True)
+    assert check["overlapping"] <= source["overlapping"] and list(check["overlapping_charts"]) == [1]
+    worse, report = worse_than_source(swapped, uvs, tris, 64, 2.0)
+    assert worse == ["overlapping"] and "overlapping_charts" not in report and "failing_charts" not in report
 
 
 def test_the_packer_is_not_run_when_even_a_full_atlas_would_not_pay():

@@ -29,6 +29,8 @@ py::dict report_dict(LayoutReport& r, bool relative_gutter, bool failing_charts)
     if (failing_charts) {
         const py::ssize_t n = py::ssize_t(r.failing_charts.size());
         out["failing_charts"] = py_util::to_numpy(std::move(r.failing_charts), {n});
+        const py::ssize_t m = py::ssize_t(r.overlapping_charts.size());
+        out["overlapping_charts"] = py_util::to_numpy(std::move(r.overlapping_charts), {m});
     }
     return out;
 }

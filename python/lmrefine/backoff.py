@@ -59,7 +59,7 @@ def failures(report, original, padding):
         failed.append("flipped")
     if report["degenerate"] > original["degenerate"]:
         failed.append("degenerate")
-    if report["overlapping"] > original["overlapping"]:
+    if overlaps_grew(report, original):
         failed.append("overlapping")
     if report["out_of_bounds"]:
         failed.append("out_of_bounds")
@@ -69,6 +69,27 @@ def failures(report, original, padding):
     elif report["min_gutter_texels"] < allowed_gutter(padding, original):
         failed.append("gutter")
     return failed
+
+
+def overlaps_grew(report, original):
+    """Whether the layout of check_layout report `report` overlaps where the
+    original's did not: a chart overlaps now that did not before, when both
+    reports list their overlapping charts (failing_charts=True; the charts
+    are the same, numbered alike), else more triangles overlap. A chart that
+    overlapped itself before may count more of its triangles once scaled or
+    stretched (overlaps are found in texels) without being worse, and one
+    that overlaps now is worse even when the count fell elsewhere."""
+    if "overlapping_charts" in report and "overlapping_charts" in original:
+        now = set(np.asarray(report["overlapping_charts"]).tolist())
+        return bool(now - set(np.asarray(original["overlapping_charts"]).tolist()))
+    return report["overlapping"] > original["overlapping"]
+
+
+def without_chart_lists(check):
+    """check_layout report `check` without its chart lists (failing_charts=True
+    adds them): the set of failing charts."""
+    check.pop("overlapping_charts", None)
+    return set(check.pop("failing_charts").tolist())
 
 
 def worse_than_source(uvs, source_uvs, triangles, resolution, padding, source=None, recharted=False):
@@ -82,20 +103,21 @@ def worse_than_source(uvs, source_uvs, triangles, resolution, padding, source=No
     `source`: the source layout's check_layout report, if the caller has it.
     `recharted`: the caller knows the charts sit anew (the re-chart route),
     so the check against the source's chart positions is not made."""
-    if source is None:
-        source = _native.check_layout(source_uvs, triangles, resolution, padding)
-    if recharted:
+    if source is None or "overlapping_charts" not in source:
+        source = _native.check_layout(source_uvs, triangles, resolution, padding, failing_charts=True)
+    if recharted:  # other charts: overlaps counted
         check = _native.check_layout(uvs, triangles, resolution, padding)
         return failures(check, source, padding), check
     check = _native.check_layout(uvs, triangles, resolution, padding, reference_uvs=source_uvs,
-                                 relative_gutter=True)
+                                 relative_gutter=True, failing_charts=True)
     worse = failures(check, source, padding)
     if worse and set(worse) <= {"gutter", "flipped"}:
         # Repacked or re-charted (refine_uvs(positions=)), charts sit anew and
         # a re-charted one may be mirrored against the source: flips then
         # count against the chart's own orientation.
-        check = _native.check_layout(uvs, triangles, resolution, padding)
+        check = _native.check_layout(uvs, triangles, resolution, padding, failing_charts=True)
         worse = failures(check, source, padding)
+    without_chart_lists(check)
     return worse, check
 
 
@@ -240,7 +262,7 @@ def flipped_triangles(uvs, new_uvs, triangles):
 
 def _passed(check, threshold):
     """check (a passing relative-gutter report) with `valid` at the gutter required of the whole layout."""
-    check.pop("failing_charts")
+    without_chart_lists(check)
     check["valid"] = bool(check["flipped"] == check["degenerate"] == check["overlapping"]
                           == check["out_of_bounds"] == 0 and check["min_gutter_texels"] >= threshold)
     return check

@@ -634,7 +634,9 @@ def _in_charts(lightmap, uvs, triangles, resolution, padding, mask, gradient, pr
     # Texels between charts only shift, chart edges facing the gutter shrink to
     # edge_shrink at most (if the gutter is wide): chart pairs keep their distance.
     rigid = checker.gutter_texels()
-    original = checker.check()
+    original = checker.check(failing_charts=True)  # its overlapping charts: what a refinement must not add to
+    original.pop("failing_charts")
+    original["overlapping_charts"] = original["overlapping_charts"].tolist()
     edge_shrink_used = (float(edge_shrink) if original["min_gutter_texels"] >= padding + backoff.EDGE_SHRINK_GUTTER_MARGIN
                         else 1.0)
     timings = {"setup": time.perf_counter() - start}
@@ -848,11 +850,8 @@ def _checked(stage, checker, failing_before, packed):
     (its check_layout report, the checks it fails that the refined layout
     passed, the charts failing that did not before)."""
     packed_check = checker.check(packed, failing_charts=True)
-    failing = set(packed_check.pop("failing_charts").tolist()) - failing_before
     worse = backoff.failures(packed_check, stage.original, stage.padding)
-    if worse == ["overlapping"] and not failing:
-        worse = []  # counted in texels: a chart that overlapped itself before may count a few more
-    return packed_check, worse, failing
+    return packed_check, worse, backoff.without_chart_lists(packed_check) - failing_before
 
 
 # When the stretch of every chart is refused, the stretch of the charts it
@@ -985,13 +984,8 @@ def _repack_stage(stage, own_packing=False):
             # Analysed once: the triangle stretch packs this layout's charts again.
             packed_checker = _native.LayoutChecker(packed, triangles, shape, padding)
             packed_check = packed_checker.check(failing_charts=True)
-            failing = set(packed_check.pop("failing_charts").tolist())
             worse = backoff.failures(packed_check, original, padding)
-            if worse == ["overlapping"]:
-                # Overlaps are counted in texels, so a scaled chart that overlapped itself in the
-                # input may count a few more: acceptable when no other chart overlaps.
-                if failing <= set(stage.checker.check(failing_charts=True)["failing_charts"].tolist()):
-                    worse = []
+            failing = backoff.without_chart_lists(packed_check)
             if worse:
                 repack_report["used"] = False
                 notes.append(f"repack not used: the packed layout failed {', '.join(worse)}")

@@ -42,10 +42,16 @@ class Case:
 # ----------------------------------------------------------------- inputs
 
 def random_layout(rng, resolution):
-    """A small valid-ish layout: a few grid charts apart, or random triangles."""
-    from layouts import grid_chart, merge
+    """A small valid-ish layout: a few grid charts apart, or random triangles, or grid charts beside a
+    chart that overlaps itself (a fold, as on Suzanne)."""
+    from layouts import fan_chart, grid_chart, merge
 
-    kind = rng.integers(3)
+    kind = rng.integers(4)
+    if kind == 3:
+        folded = fan_chart((0.25, 0.75), 0.2, float(rng.uniform(370.0, 600.0)), int(rng.integers(5, 9)))
+        uvs, triangles = merge(folded, grid_chart(int(rng.integers(1, 6)), (0.5, 0.05), (0.95, 0.5)),
+                               grid_chart(int(rng.integers(1, 4)), (0.05, 0.05), (0.4, 0.4)))
+        return uvs.astype(np.float32), triangles.astype(np.int32)
     if kind == 0:
         n = int(rng.integers(1, 4))
         margin = 3.0 / resolution

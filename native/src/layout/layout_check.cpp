@@ -447,9 +447,12 @@ LayoutReport LayoutChecker::check_against(const UvLayout& layout, const LayoutRa
         begin = end;
     }
     mark_overlaps_inside_charts(layout, raster, charts, skip, overlapping);
+    std::vector<uint8_t> chart_overlaps(size_t(charts.count), 0);
     for (size_t t = 0; t < T; ++t) {
         report.overlapping += overlapping[t];
-        if (overlapping[t]) failing[size_t(charts.triangle_chart[t])] = 1;
+        if (!overlapping[t]) continue;
+        const size_t chart = size_t(charts.triangle_chart[t]);
+        failing[chart] = chart_overlaps[chart] = 1;
     }
 
     if (charts.count < 2) {
@@ -489,6 +492,7 @@ LayoutReport LayoutChecker::check_against(const UvLayout& layout, const LayoutRa
     if (list_failing_charts) {
         for (int32_t c = 0; c < charts.count; ++c) {
             if (failing[size_t(c)]) report.failing_charts.push_back(c);
+            if (chart_overlaps[size_t(c)]) report.overlapping_charts.push_back(c);
         }
     }
     report.valid = report.flipped == 0 && report.degenerate == 0 && report.overlapping == 0 &&

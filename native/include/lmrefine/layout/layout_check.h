@@ -29,6 +29,11 @@ struct LayoutReport {
     // Charts with a flipped, overlapping or (newly) degenerate triangle, or
     // closer than `padding` to another chart; sorted. Only filled on request.
     std::vector<int32_t> failing_charts;
+    // Charts with an overlapping triangle (of failing_charts); sorted. Filled
+    // with failing_charts: a refinement may not make a chart overlap that did
+    // not, while the count of a chart that overlapped itself may grow with its
+    // scale (it is counted in texels).
+    std::vector<int32_t> overlapping_charts;
 };
 
 // Orientation: with `reference_uvs` (the original layout, same shape as
