@@ -1528,6 +1528,14 @@ def test_addon_says_tessellate_when_large_triangles_hold_the_light_changes(facts
     # On a map too large to try the split, the rough figure from the count of crossed triangles.
     rough = fact(value, "too_large_to_try")
     assert rough["error"] is None
+    # In an atlas of two objects, how many of the triangles counted lie on the one holding the most.
+    both = value["with_the_box"]
+    assert both["error"] is None and [sorted(a) for a in both["atlases"].values()] == [["Blocker", "Floor"]], both
+    hint = [w for w in both["warnings"] if "turn on Tessellate" in w]
+    assert len(hint) == 1, both["warnings"]
+    counted = re.search(r"light changes cross (\d+) triangle\(s\) of more than 8 texels, (\d+) of them on 'Floor',",
+                        hint[0])
+    assert counted and 0 < int(counted.group(2)) <= int(counted.group(1)), hint[0]
     assert any("with a Vertex Budget well above 0.25 (at 0.25 it adds at most 2 to its 9 vertices)" in w
                for w in rough["warnings"]), rough["warnings"]
     # With Tessellate on at the default budget, the run says the budget ran out with triangles left to split.

@@ -719,9 +719,15 @@ def _coarse_warning(lmrefine, label, lightmap, group, report, outcome, budget):
     if not (coarse["triangles"] and hard >= COARSE_CONTRAST):
         return
     needs = _split_needs(lmrefine, lightmap, group)
-    if needs is not None and not any(added for _, added, _ in needs):
+    if needs is not None and not any(added for _, added, _, _ in needs):
         return  # the split would add nothing (its thresholds are its own): Tessellate is no fix here
-    raise_budget = ""
+    raise_budget = where = ""
+    if needs is not None and len(needs) > 1:
+        # The budget below names the object whose split needs the most per vertex, which need not be the one
+        # holding most of these triangles (a one-quad floor beside cubes): name that one too.
+        holder, _, _, held = max(needs, key=lambda need: need[3])
+        if held:
+            where = f", {held} of them on '{holder}'"
     if needs is None:
         # Too large to try the split here. The default budget is a fraction of the vertices: on a mesh of
         # few it adds next to nothing.
@@ -731,7 +737,7 @@ def _coarse_warning(lmrefine, label, lightmap, group, report, outcome, budget):
             raise_budget = (f" with a Vertex Budget well above {budget:g} (at {budget:g} it adds at most {allowed} "
                             f"to its {vertices} vertices)")
     else:
-        name, added, vertices = max(needs, key=lambda need: need[1] / max(need[2], 1))
+        name, added, vertices, _ = max(needs, key=lambda need: need[1] / max(need[2], 1))
         needed = budget_to_end(added, vertices)
         if needed >= TRIAL_BUDGET:
             raise_budget = (f" with a Vertex Budget of {TRIAL_BUDGET:g} or more ('{name}' takes +{added} "
@@ -741,7 +747,7 @@ def _coarse_warning(lmrefine, label, lightmap, group, report, outcome, budget):
                             f"ends by itself at +{added} to its {vertices} vertices; at {budget:g} it stops short)")
     outcome.warnings.append(
         f"{label}: light changes cross {coarse['triangles']} triangle(s) of more than "
-        f"{COARSE_MIN_TEXELS:g} texels, and moving UVs cannot put more texels inside a triangle "
+        f"{COARSE_MIN_TEXELS:g} texels{where}, and moving UVs cannot put more texels inside a triangle "
         f"(edges {report['transition_widening']:.2f}x; those triangles cover "
         f"{coarse['texels'] / coarse['triangles']:.0f} texels each on average): turn on Tessellate (Stages and "
         "Tessellation)"
@@ -756,11 +762,12 @@ SPLIT_TRIAL_OBJECTS = 16
 
 
 def _split_needs(lmrefine, lightmap, group):
-    """[(object name, vertices its split adds when it runs to its own end, its vertices)] for the
-    objects of `group`, from a trial of the split Tessellate makes (_tessellate's, at a budget of
-    lmrefine.tessellation.TRIAL_BUDGET; nothing is written; a split that needs more counts as needing
-    that budget), or None for a map too large to try (SPLIT_TRIAL_TRIANGLES, SPLIT_TRIAL_OBJECTS)."""
-    from lmrefine.tessellation import TRIAL_BUDGET
+    """[(object name, vertices its split adds when it runs to its own end, its vertices, its triangles
+    that _coarse_warning counts)] for the objects of `group`, from a trial of the split Tessellate makes
+    (_tessellate's, at a budget of lmrefine.tessellation.TRIAL_BUDGET; nothing is written; a split that
+    needs more counts as needing that budget), or None for a map too large to try
+    (SPLIT_TRIAL_TRIANGLES, SPLIT_TRIAL_OBJECTS)."""
+    from lmrefine.tessellation import TRIAL_BUDGET, coarse_transitions
     if (len(group.targets) > SPLIT_TRIAL_OBJECTS
             or sum(len(target.layout.triangles) for target in group.targets) > SPLIT_TRIAL_TRIANGLES):
         return None
@@ -769,7 +776,8 @@ def _split_needs(lmrefine, lightmap, group):
         positions, triangles, corner_uvs = tessellation.mesh_arrays(target.obj.data, target.layout)
         strength = lmrefine.transition_strength_of(lightmap, target.layout.uvs, target.layout.triangles)
         trial = lmrefine.tessellate(positions, triangles, corner_uvs, strength, budget=TRIAL_BUDGET)
-        needs.append((target.obj.name, int(trial.report["vertices_added"]), len(positions)))
+        coarse = coarse_transitions(lightmap, target.layout.uvs, target.layout.triangles, strength=strength)
+        needs.append((target.obj.name, int(trial.report["vertices_added"]), len(positions), coarse["triangles"]))
     return needs
 
 

@@ -152,12 +152,14 @@ def coarse_refinement(report):
 
 
 def coarse_transitions(lightmap, uvs, triangles, *, min_texels=COARSE_MIN_TEXELS, threshold=COARSE_THRESHOLD,
-                       wavelet="d4"):
+                       wavelet="d4", strength=None):
     """What a refinement without tessellation cannot reach: the triangles larger than `min_texels`
     that a transition of at least `threshold` crosses, given `lightmap` baked on (uvs, triangles);
     `tessellate` splits them first. Returns {"triangles": how many, "texels": the texels they cover}.
-    A warp moves vertices; inside such a triangle the mapping stays affine."""
-    strength = transition_strength_of(lightmap, uvs, triangles, wavelet=wavelet)
+    A warp moves vertices; inside such a triangle the mapping stays affine. `strength`: the
+    lightmap's transition_strength_of for this layout, when the caller has it."""
+    if strength is None:
+        strength = transition_strength_of(lightmap, uvs, triangles, wavelet=wavelet)
     corner_uvs = np.asarray(uvs, dtype=np.float64)[np.asarray(triangles, dtype=np.int64)]
     candidates, _, texels = _candidates(corner_uvs, strength, min_texels, threshold)
     return {"triangles": int(candidates.size), "texels": float(texels[candidates].sum())}

@@ -2319,6 +2319,14 @@ def coarse_floor_suggests_tessellation():
     finally:
         pipeline.SPLIT_TRIAL_TRIANGLES = limit
     facts["too_large_to_try"] = {"error": error, "warnings": warnings}
+    # The floor and the box in one atlas (the floor's map in the left half, the box's on the right): the
+    # advice says how many of the triangles it counts lie on the object holding the most.
+    floor = coarse_floor(tessellate=False)
+    blocker = bpy.data.objects["Blocker"]
+    scenes._fit_layer(floor.data, (0.03, 0.03, 0.5, 0.97))
+    scenes._fit_layer(blocker.data, (0.55, 0.03, 0.97, 0.97))
+    outcome, warnings, error = _run_pipeline([floor, blocker])
+    facts["with_the_box"] = {"error": error, "warnings": warnings, "atlases": outcome and outcome.atlases}
     return facts
 
 
