@@ -751,6 +751,11 @@ def test_a_few_overlapping_faces_are_no_texture_map(facts):
     assert "looks like a texture map" in value["many"]["warning"]
     assert "looks like a texture map" not in value["touching"]["warning"]
     assert "the refined map is valid" in value["touching"]["warning"]
+    # A refined map that is valid (re-charted from the mesh): only the first lightmap bleeds.
+    assert value["recharted"] == (
+        "'Floor_atlas': UV map 'Lightmap' has faces that share texels (2 overlapping triangles, charts 1.62 texels "
+        "apart where the padding asks for 2); the refined map, re-charted from the mesh, has none, so only the "
+        "first lightmap, baked with the source map, may show bleeding")
 
 
 def test_maps_not_recharted_are_explained_in_the_panels_words(facts):

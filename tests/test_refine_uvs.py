@@ -564,6 +564,24 @@ def test_a_chart_that_overlaps_itself_may_count_more_but_no_chart_may_begin_to_o
     assert worse == ["overlapping"] and "overlapping_charts" not in report and "failing_charts" not in report
 
 
+def test_worse_than_source_judges_a_layout_of_other_charts_as_re_charted():
+    """The re-chart route joins faces of several source charts into one chart: judged with the source's
+    charts, its triangles from two of them that a fold lays over each other (no texel centre inside both)
+    overlap and touch, judged with its own it is valid. worse_than_source takes a layout whose charts are
+    not the source's as re-charted, whether or not the caller says so (the add-on did not, and stopped a
+    run on a valid re-charted map as a bug: a scene drawn at random, seed 303)."""
+    from lmrefine.backoff import worse_than_source
+
+    recharted, tris = fan_chart((0.5, 0.5), 5 / 64, 365.0)  # centre on a texel corner, the fold within 5 degrees
+    source = recharted.copy()
+    for t in range(5):  # each triangle a chart of its own, apart
+        source[3 * t:3 * t + 3] += np.array([0.05 + 0.18 * t, 0.1], np.float32) - recharted[3 * t]
+    assert lmrefine.check_layout(recharted, tris, 64, 2.0)["valid"]
+    against_source = lmrefine.check_layout(recharted, tris, 64, 2.0, reference_uvs=source)
+    assert against_source["overlapping"] == 2 and against_source["min_gutter_texels"] == 0.0
+    assert worse_than_source(recharted, source, tris, 64, 2.0) == ([], lmrefine.check_layout(recharted, tris, 64, 2.0))
+
+
 def test_the_packer_is_not_run_when_even_a_full_atlas_would_not_pay():
     # One chart covering 92% of the atlas: scaled to fill all of it, the model's
     # error would be 0.96 of the unpacked one, short of the 0.95 a repack needs.

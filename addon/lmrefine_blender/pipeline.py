@@ -638,6 +638,11 @@ def source_warning(label, group, source_check, padding, resolution, refined_chec
                 f"({describe_problems(source_check, padding)}): faces share texels, so light bleeds between "
                 "them whatever the refinement does; add a UV map for the lightmap (Object Data > UV Maps > +, "
                 "then UV > Lightmap Pack) and pick it as Source")
+    if source_check["overlapping"] and refined_check is not None and refined_check["valid"]:
+        # Re-charted from the mesh: the refined map has faces of its own.
+        return (f"{label}: UV map '{source}' has faces that share texels "
+                f"({describe_problems(source_check, padding)}); the refined map, re-charted from the mesh, has "
+                "none, so only the first lightmap, baked with the source map, may show bleeding")
     if source_check["overlapping"]:
         # A few faces overlap: the refined map keeps them where they were (it never makes a map worse).
         return (f"{label}: UV map '{source}' has faces that share texels "

@@ -101,10 +101,14 @@ def worse_than_source(uvs, source_uvs, triangles, resolution, padding, source=No
     mirrored against the source), the gutter is held to the padding or the
     source's narrowest and flips are counted within each chart.
     `source`: the source layout's check_layout report, if the caller has it.
-    `recharted`: the caller knows the charts sit anew (the re-chart route),
-    so the check against the source's chart positions is not made."""
+    `recharted`: the charts sit anew (the re-chart route), so the check
+    against the source's chart positions is not made; a layout whose charts
+    (find_charts) are not the source's is taken as re-charted whatever the
+    caller says (the add-on checks every map the same way)."""
     if source is None or "overlapping_charts" not in source:
         source = _native.check_layout(source_uvs, triangles, resolution, padding, failing_charts=True)
+    recharted = recharted or not np.array_equal(_native.find_charts(uvs, triangles),
+                                                _native.find_charts(source_uvs, triangles))
     if recharted:  # other charts: overlaps counted
         check = _native.check_layout(uvs, triangles, resolution, padding)
         return failures(check, source, padding), check
