@@ -95,6 +95,23 @@ def test_the_report_gives_the_texels_of_a_triangle_at_the_light_changes(quads):
     assert not coarse_refinement({"transition_widening": 1.3})
 
 
+def test_many_fine_triangles_at_a_light_change_do_not_hide_the_large_ones_beside_them():
+    """The figure is the size of the triangle under a typical light-change texel (the median weighted by
+    area): a finely cut object at the light change beside a coarse floor (Suzanne under a Subdivision
+    Surface beside a plane cut 16 times) has most of the triangles there, the floor most of the texels."""
+    from lmrefine.tessellation import coarse_refinement
+
+    floor, floor_tris = grid_chart(4, (0.02, 0.02), (0.6, 0.98))  # 32 triangles of 285 texels at 128^2
+    fine, fine_tris = grid_chart(24, (0.65, 0.3), (0.98, 0.7))  # 1,152 triangles of 1.9 texels
+    uvs, tris = merge((floor, floor_tris), (fine, fine_tris))
+    mask = lmrefine.coverage_mask(uvs, tris, R)
+    gradient = finite_difference_gradient(shadow_edge_lightmap(R, angle=1.2), mask)  # crosses both charts
+    report = lmrefine.refine_uvs(None, uvs, tris, R, gradient=gradient).report
+    areas = np.abs(allocation.signed_areas(uvs, tris)) * R * R
+    assert report["transition_triangle_texels"] == pytest.approx(areas[0], rel=1e-5)
+    assert coarse_refinement(report)
+
+
 def test_input_arrays_are_never_modified():
     uvs, tris, gradient = edge_scene(64, 16)
     copies = uvs.copy(), tris.copy(), gradient.copy()

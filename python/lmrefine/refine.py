@@ -407,8 +407,8 @@ def refine_uvs(lightmap, uvs, triangles, resolution, padding=2, mask=None, *, gr
         when the output equals the input; notes then say why),
         transition_widening (summed new / old UV area of the triangles on
         the top decile of gradient energy; 1.0 when nothing moved),
-        transition_triangle_texels (the median texel area of those
-        triangles in the input layout: far above a few texels, only
+        transition_triangle_texels (the texel area, in the input layout,
+        of the triangle under the median of their texels: far above a few texels, only
         tessellation puts more texels at their light changes),
         density_min, density_max (smallest and largest new / old UV area
         of a triangle), triangle_density (T,) new / old UV area, steps,
@@ -1150,10 +1150,14 @@ def _transition_figures(old, new, triangles, energy, at_change):
     the covered texels. The widening is their summed new UV area over their
     summed old area, on the output layout (1.0 when no covered texel has
     gradient energy or no triangle lies on one); the second figure is the
-    median of their texel areas in the input layout (0.0 then): a triangle's
-    texels stay evenly spread, so one of many texels keeps a light change
-    at the input's texel density whatever the warp does. `at_change`:
-    _at_light_changes' triangles."""
+    texel area, in the input layout, of the triangle under the median of
+    their texels (their areas' median weighted by area; 0.0 then): a
+    triangle's texels stay evenly spread, so one of many texels keeps a
+    light change at the input's texel density whatever the warp does.
+    Weighted, so that a finely cut object at a light change (Suzanne under
+    a Subdivision Surface: thousands of triangles under a texel) does not
+    hide a floor of large ones beside it. `at_change`: _at_light_changes'
+    triangles."""
     if at_change is None:
         return 1.0, 0.0
     # Unsigned: a layout may wind a chart either way (the re-chart route's
@@ -1163,8 +1167,16 @@ def _transition_figures(old, new, triangles, energy, at_change):
     keep = before > 0
     if not keep.any():
         return 1.0, 0.0
-    texels = float(np.median(before[keep])) * energy.shape[0] * energy.shape[1]
+    texels = _weighted_median(before[keep]) * energy.shape[0] * energy.shape[1]
     return float(after[keep].sum() / before[keep].sum()), texels
+
+
+def _weighted_median(areas):
+    """The value of `areas` (K,) > 0 at half their sum, each weighted by itself: the area of the
+    triangle under the median point of their union."""
+    ordered = np.sort(areas)
+    total = np.cumsum(ordered)
+    return float(ordered[min(int(np.searchsorted(total, 0.5 * total[-1])), len(ordered) - 1)])
 
 
 def _at_light_changes(old, triangles, energy, mask):
