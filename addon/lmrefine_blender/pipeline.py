@@ -580,7 +580,7 @@ def modifier_warnings(context, targets, uv_name_of, resolution, warnings):
     depsgraph = context.evaluated_depsgraph_get()
     for target in targets:
         problem = bridge.modifier_folds_problem(depsgraph, target.obj, uv_name_of[target.obj.name], resolution)
-        if problem is not None and problem not in warnings and not any(
+        if problem is not None and not any(
                 w.startswith(f"'{target.obj.name}': its ") and "where the bake reads" in w for w in warnings):
             warnings.append(problem)
 
@@ -700,10 +700,13 @@ def _check_refined(lmrefine, label, uvs, layout, reference_uvs, resolution, padd
     """An independent check of the promise refine_uvs makes: never worse than the layout it started
     from (the joined layout of an atlas group, `label` naming it). Returns (check of `uvs`, check of
     `reference_uvs`); a worse layout is a bug, raised."""
-    from lmrefine.backoff import worse_than_source
-    reference_check = lmrefine.check_layout(reference_uvs, layout.triangles, resolution, padding=padding)
+    from lmrefine.backoff import without_chart_lists, worse_than_source
+    # With its chart lists, which worse_than_source's overlap rule reads (without them it checks the map again).
+    reference_check = lmrefine.check_layout(reference_uvs, layout.triangles, resolution, padding=padding,
+                                            failing_charts=True)
     worse, check = worse_than_source(uvs, reference_uvs, layout.triangles, resolution, padding,
                                      source=reference_check)
+    without_chart_lists(reference_check)
     if worse:
         raise RuntimeError(f"refine_uvs returned a layout for {label} that is worse than the one it started from "
                            f"({', '.join(worse)}: {dict(check)}); this is a bug in lmrefine, please report "

@@ -81,7 +81,8 @@ def _judge_layout(lm, case, result):
         return f"uvs shape {out.shape} for input {uvs.shape}"
     if not np.isfinite(out).all():
         return "non-finite uvs"
-    source = lm.check_layout(uvs, triangles, resolution, padding=padding)
+    # With its chart lists, which worse_than_source's overlap rule reads (without them it checks the input again).
+    source = lm.check_layout(uvs, triangles, resolution, padding=padding, failing_charts=True)
     if case.packed:  # pack_charts moves charts rigidly: it adds no fault, leaves none out of bounds, keeps the gutter
         check = lm.check_layout(out, triangles, resolution, padding=padding)
         worse = [key for key in ("flipped", "degenerate", "overlapping") if check[key] > source[key]]
