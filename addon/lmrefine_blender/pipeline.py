@@ -99,6 +99,7 @@ class Target:
     layout: bridge.Layout
     image: object = None  # first lightmap, when it comes from an existing image
     zero_area: int = 0  # triangles of zero area in 3-D: they need no texels, the baker skips them
+    unsplit: str = None  # with Tessellate on: why its mesh is refined without splitting (tessellation.problem)
 
 
 def grown_charts(report):
@@ -356,11 +357,9 @@ def _validate_object(obj, options, owners, resolution, depsgraph):
     problem = bridge.evaluated_problem(depsgraph, obj, source, layout, resolution)
     if problem:
         raise UserError(problem)
-    if options.get("tessellate") is not None:
-        problem = tessellation.problem(obj)
-        if problem:
-            raise UserError(problem)
     target = Target(obj, source, refined, layout, zero_area=zero_3d)
+    if options.get("tessellate") is not None:
+        target.unsplit = tessellation.problem(obj)
     if options["first_lightmap"] == 'IMAGE':
         target.image = _first_image(obj, source, options)
     return target
@@ -451,8 +450,12 @@ def run(context, targets, options, journal, image_dir=None):
             refine_options[group.name] = lmrefine.tessellated_refine_options(options["refine_options"],
                                                                              group.uvs, group.triangles)
         for target in targets:
-            yield from _tessellate(lmrefine, target, lightmaps[group_of[target.obj.name].name],
-                                   options["tessellate"], journal, outcome, done * span, span)
+            if target.unsplit:  # a split would change more than this object: it is refined as it is
+                outcome.tessellation[target.obj.name] = {"vertices_added": 0, "not_split": target.unsplit}
+                outcome.warnings.append(f"Not tessellated, refined without splitting: {target.unsplit}")
+            else:
+                yield from _tessellate(lmrefine, target, lightmaps[group_of[target.obj.name].name],
+                                       options["tessellate"], journal, outcome, done * span, span)
             done += 1
         for group in groups:
             group.join()  # the tessellated meshes' layouts (the same charts, more triangles)
@@ -721,12 +724,15 @@ def _coarse_warning(lmrefine, label, lightmap, group, report, outcome, budget):
     stays affine), and the Vertex Budget its split needs to run to its own end (_split_needs)."""
     from lmrefine.tessellation import (COARSE_CONTRAST, COARSE_MIN_TEXELS, TRIAL_BUDGET, budget_to_end,
                                        coarse_transitions, light_contrast)
-    coarse = coarse_transitions(lightmap, group.uvs, group.triangles)
+    # The map's transition strength: each object's share below is counted with it too, so the shares
+    # are parts of this count (an object's own strength is scaled to its own strongest light change).
+    strength = lmrefine.transition_strength_of(lightmap, group.uvs, group.triangles)
+    coarse = coarse_transitions(lightmap, group.uvs, group.triangles, strength=strength)
     # Nearly flat light (a point light's falloff, bake noise) has a top decile too: no reason to split.
     hard = light_contrast(lightmap, lmrefine.coverage_mask(group.uvs, group.triangles, lightmap.shape[:2]))
     if not (coarse["triangles"] and hard >= COARSE_CONTRAST):
         return
-    needs = _split_needs(lmrefine, lightmap, group)
+    needs = _split_needs(lmrefine, lightmap, group, strength)
     if needs is not None and not any(added for _, added, _, _ in needs):
         return  # the split would add nothing (its thresholds are its own): Tessellate is no fix here
     raise_budget = where = ""
@@ -769,12 +775,13 @@ SPLIT_TRIAL_TRIANGLES = 100_000
 SPLIT_TRIAL_OBJECTS = 16
 
 
-def _split_needs(lmrefine, lightmap, group):
+def _split_needs(lmrefine, lightmap, group, strength):
     """[(object name, vertices its split adds when it runs to its own end, its vertices, its triangles
     that _coarse_warning counts)] for the objects of `group`, from a trial of the split Tessellate makes
     (_tessellate's, at a budget of lmrefine.tessellation.TRIAL_BUDGET; nothing is written; a split that
     needs more counts as needing that budget), or None for a map too large to try
-    (SPLIT_TRIAL_TRIANGLES, SPLIT_TRIAL_OBJECTS)."""
+    (SPLIT_TRIAL_TRIANGLES, SPLIT_TRIAL_OBJECTS). The triangles are counted with `strength`, the
+    group's map's (transition_strength_of of its joined layout), as _coarse_warning counts them."""
     from lmrefine.tessellation import TRIAL_BUDGET, coarse_transitions
     if (len(group.targets) > SPLIT_TRIAL_OBJECTS
             or sum(len(target.layout.triangles) for target in group.targets) > SPLIT_TRIAL_TRIANGLES):
@@ -782,10 +789,10 @@ def _split_needs(lmrefine, lightmap, group):
     needs = []
     for target in group.targets:
         positions, triangles, corner_uvs = tessellation.mesh_arrays(target.obj.data, target.layout)
-        strength = lmrefine.transition_strength_of(lightmap, target.layout.uvs, target.layout.triangles)
-        trial = lmrefine.tessellate(positions, triangles, corner_uvs, strength, budget=TRIAL_BUDGET)
-        coarse = coarse_transitions(lightmap, target.layout.uvs, target.layout.triangles, strength=strength)
-        needs.append((target.obj.name, int(trial.report["vertices_added"]), len(positions), coarse["triangles"]))
+        own = lmrefine.transition_strength_of(lightmap, target.layout.uvs, target.layout.triangles)
+        trial = lmrefine.tessellate(positions, triangles, corner_uvs, own, budget=TRIAL_BUDGET)
+        counted = coarse_transitions(lightmap, target.layout.uvs, target.layout.triangles, strength=strength)
+        needs.append((target.obj.name, int(trial.report["vertices_added"]), len(positions), counted["triangles"]))
     return needs
 
 

@@ -22,32 +22,27 @@ import bmesh
 import bpy
 import numpy as np
 
-from .errors import UserError, setting
-
-
-def _turn_off():
-    """The other fix for every problem below: no tessellation, as the reader sets it."""
-    return setting("turn off Tessellate (Stages and Tessellation)", "pass --no-tessellate")
 
 
 def problem(obj):
-    """Why the object's mesh cannot be tessellated (a message naming the fix), or None."""
+    """Why the object's mesh is not tessellated (the run refines it without splitting; a sentence naming
+    what would let it be split), or None."""
     mesh = obj.data
     if len(obj.modifiers):
         names = ", ".join(modifier.name for modifier in obj.modifiers)
-        return (f"'{obj.name}' has modifiers ({names}): tessellation writes into the mesh under them, which they "
-                "would then change again; apply or remove the modifiers (Object > Apply), or " + _turn_off())
+        return (f"'{obj.name}' has modifiers ({names}), which would change the split mesh again: to split it, "
+                "apply or remove them (Object > Apply)")
     if obj.instance_type != 'NONE':
-        return (f"'{obj.name}' instances objects on its {obj.instance_type.lower()}: new vertices would add "
-                f"instances; set Object Properties > Instancing to None, or " + _turn_off())
+        return (f"'{obj.name}' instances objects on its {obj.instance_type.lower()}, and new vertices would add "
+                "instances: to split it, set Object Properties > Instancing to None")
     users = mesh.users - int(mesh.use_fake_user)
     if users > 1:
         return (f"'{obj.name}' shares mesh '{mesh.name}' with {users - 1} other object(s) (or a library "
-                "override): tessellation would change all of them; make it single-user (Object > Relations > "
-                "Make Single User > Object & Data), or " + _turn_off())
+                "override), which a split would change too: to split it, make it single-user (Object > "
+                "Relations > Make Single User > Object & Data)")
     if mesh.shape_keys is not None:
-        return (f"'{obj.name}' has shape keys: tessellation writes the basis mesh only; apply or remove them "
-                "(Object Data > Shape Keys), or " + _turn_off())
+        return (f"'{obj.name}' has shape keys, and a split writes the basis mesh only: to split it, apply or "
+                "remove them (Object Data > Shape Keys)")
     return None
 
 

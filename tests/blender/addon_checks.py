@@ -1515,8 +1515,9 @@ def tessellation_rolls_back_exactly():
 
 
 @check()
-def tessellation_refused_where_it_would_change_more():
-    """A mesh shared with another object, or under modifiers: the object is refused, the message names the fix."""
+def tessellation_leaves_meshes_it_would_change_more():
+    """A mesh shared with another object, or under modifiers: with Tessellate on the object is refined
+    without splitting (its mesh untouched), and a warning says why and what would let it be split."""
     facts = {}
     for case in ("shared", "modifier"):
         scenes.coarse_shadow_scene()
@@ -1528,9 +1529,14 @@ def tessellation_refused_where_it_would_change_more():
             bpy.context.scene.collection.objects.link(twin)
         else:
             floor.modifiers.new("Bevel", 'BEVEL')
-        before = fingerprint()
-        outcome, message = refine()
-        facts[case] = {"outcome": outcome, "message": message, "changed": changed(before, fingerprint())}
+        before = _array(floor.data.vertices, "co", 3)
+        outcome, message, reports = refine_with_reports()
+        after = _array(floor.data.vertices, "co", 3)
+        facts[case] = {"outcome": outcome, "message": message,
+                       "mesh_unchanged": before.shape == after.shape and bool(np.array_equal(before, after)),
+                       "refined": "Lightmap_refined" in floor.data.uv_layers,
+                       "warnings": [text for kind, text in reports if kind == 'WARNING'],
+                       "tessellated": bpy.context.scene.lmrefine.result.tessellated}
     return facts
 
 
@@ -1682,15 +1688,18 @@ def few_overlaps_wording():
 def setting_wording():
     """A message names a setting as its reader sets it: by its panel label, or (the batch) by its flag."""
     register()
-    from lmrefine_blender import errors, tessellation
-    shared = bpy.data.objects.new("Twin", bpy.data.meshes.new("TwinMesh"))
-    bpy.context.scene.collection.objects.link(shared)
-    bpy.context.scene.collection.objects.link(bpy.data.objects.new("Twin2", shared.data))
+    from lmrefine_blender import errors
+    mesh = bpy.data.meshes.new("OnlyRefinedMesh")
+    mesh.uv_layers.new(name="Lightmap_refined")
+    obj = bpy.data.objects.new("OnlyRefined", mesh)
+    bpy.context.scene.collection.objects.link(obj)
     by_reader = {}
     for batch in (False, True):
         errors.BATCH = batch
         try:
-            by_reader["batch" if batch else "panel"] = tessellation.problem(shared)
+            pipeline._validate_object(obj, {"source_layer": None}, {}, 64, None)
+        except pipeline.UserError as error:
+            by_reader["batch" if batch else "panel"] = str(error)
         finally:
             errors.BATCH = False
     return by_reader
@@ -2329,8 +2338,14 @@ def coarse_floor_suggests_tessellation():
     blocker = bpy.data.objects["Blocker"]
     scenes._fit_layer(floor.data, (0.03, 0.03, 0.5, 0.97))
     scenes._fit_layer(blocker.data, (0.55, 0.03, 0.97, 0.97))
-    outcome, warnings, error = _run_pipeline([floor, blocker])
-    facts["with_the_box"] = {"error": error, "warnings": warnings, "atlases": outcome and outcome.atlases}
+    split_needs, needs = pipeline._split_needs, []
+    pipeline._split_needs = lambda *args: needs.append(split_needs(*args)) or needs[-1]
+    try:
+        outcome, warnings, error = _run_pipeline([floor, blocker])
+    finally:
+        pipeline._split_needs = split_needs
+    facts["with_the_box"] = {"error": error, "warnings": warnings, "atlases": outcome and outcome.atlases,
+                             "counted": [{name: held for name, _, _, held in need} for need in needs]}
     return facts
 
 
