@@ -146,6 +146,26 @@ def test_messages_name_settings_as_their_reader_sets_them(facts):
     assert refusal["batch"].endswith("pass the one to refine with --source-layer")
 
 
+def test_a_noisy_first_lightmap_is_named_with_the_samples_it_needs(facts):
+    """Noise the refiner would take for light changes (seed 317 from Lightmap Pack with First Map Cycles at
+    the default 16 samples: noise 9.9% of the median light, texels at light changes 1.09x where Embree's
+    first map, 1.0%, gave 6.98x): the warning gives the noise and the Samples that bring it under 2%."""
+    from lmrefine.metrics import NOISY_FIRST_MAP
+    value = fact(facts, "noisy_first_map_is_named")
+    for key, samples, cycles in (("cycles_1", 1, True), ("embree_16", 16, False)):
+        assert value[key]["error"] is None
+        noisy = [w for w in value[key]["warnings"] if "the first lightmap is noisy" in w]
+        assert len(noisy) == 1 and noisy[0].startswith("'Floor': the first lightmap is noisy (noise "), value[key]
+        noise = float(re.search(r"noise ([\d.]+)% of its median light", noisy[0]).group(1)) / 100
+        assert noise > NOISY_FIRST_MAP
+        needed = int(re.search(r"raise Samples to (\d+) or more", noisy[0]).group(1))
+        assert needed >= samples * (noise / NOISY_FIRST_MAP) ** 2 * 0.9 and needed & (needed - 1) == 0
+        assert needed < 2 * samples * (noise / NOISY_FIRST_MAP) ** 2 * 1.1
+        assert ("set First Map to Embree" in noisy[0]) == cycles and "--" not in noisy[0]
+    assert value["cycles_64"]["error"] is None
+    assert not any("noisy" in w for w in value["cycles_64"]["warnings"]), value["cycles_64"]
+
+
 def test_bad_objects_are_skipped_with_their_fix_and_the_others_refined(facts):
     value = fact(facts, "skip_bad_objects_refines_the_others")
     assert value["error"] is None and value["objects"] == ["Floor"]

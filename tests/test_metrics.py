@@ -336,3 +336,27 @@ def test_texels_per_metre_on_messy_faces():
     flat_uvs = uvs.copy()
     flat_uvs[:4] = 0.5
     assert metrics.texels_per_metre(flat_uvs, triangles[:2], areas[:2], 256) == pytest.approx([0.0, 0.0])
+
+
+def test_noise_level_finds_the_noise_and_not_the_light_changes(rng):
+    """Shadow edges, a smooth falloff and chart borders are not noise; added Gaussian noise is found
+    (its luminance deviation over the median light) within a tenth."""
+    size = 128
+    y, x = np.mgrid[0:size, 0:size] / size
+    light = 0.6 + 0.3 * x  # smooth falloff
+    light = np.where((x > 0.3) & (x < 0.45), 0.05, light)  # a hard shadow band
+    light = np.where((x - 0.7) ** 2 + (y - 0.6) ** 2 < 0.02, 0.1, light)  # a disc's shadow
+    lightmap = np.repeat(light[..., None], 3, axis=2).astype(np.float32)
+    mask = np.zeros((size, size), bool)
+    mask[4:60, 4:124] = mask[66:124, 4:124] = True  # two charts, black gutter between
+    lightmap[~mask] = 0.0
+    clean = metrics.noise_level(lightmap, mask)
+    assert clean < 0.002
+    median = float(np.median(light[mask]))
+    for sigma in (0.01, 0.03, 0.1):
+        noisy = lightmap + np.where(mask[..., None], rng.normal(0.0, sigma * median, lightmap.shape), 0.0)
+        found = metrics.noise_level(noisy.astype(np.float32), mask)
+        luminance_sigma = sigma * float(np.linalg.norm(metrics.LUMINANCE))  # independent channels
+        assert abs(found - luminance_sigma) < 0.1 * luminance_sigma, (sigma, found, luminance_sigma)
+    assert metrics.noise_level(lightmap, np.zeros((size, size), bool)) == 0.0
+    assert metrics.noise_level(np.zeros_like(lightmap), mask) == 0.0

@@ -441,6 +441,7 @@ def run(context, targets, options, journal, image_dir=None):
 
     for group in groups:
         _black_warnings(group, lightmaps[group.name], resolution, outcome.warnings)
+        _noise_warning(lmrefine, group, lightmaps[group.name], options, outcome.warnings)
 
     # 1b. Opt-in: split the triangles that strong transitions of the first lightmap cross, in the mesh.
     refine_options = {group.name: options["refine_options"] for group in groups}
@@ -586,6 +587,31 @@ def modifier_warnings(context, targets, uv_name_of, resolution, warnings):
         if problem is not None and not any(
                 w.startswith(f"'{target.obj.name}': its ") and "where the bake reads" in w for w in warnings):
             warnings.append(problem)
+
+
+def _noise_warning(lmrefine, group, lightmap, options, warnings):
+    """A warning when the first `lightmap` of `group` is noisy (lmrefine.metrics.noise_level above
+    NOISY_FIRST_MAP): the refiner takes noise for light changes and spreads texels over it. Noise falls
+    as 1/sqrt(samples), so a baked map's warning gives the Samples that bring it under the bound."""
+    from lmrefine.metrics import NOISY_FIRST_MAP, noise_level
+    mask = lmrefine.coverage_mask(group.uvs, group.triangles, lightmap.shape[:2]).astype(bool)
+    noise = noise_level(lightmap, mask)
+    if not noise > NOISY_FIRST_MAP:
+        return
+    what = (f"the first lightmap is noisy (noise {noise:.1%} of its median light; above "
+            f"{NOISY_FIRST_MAP:.0%} the refiner takes much of it for light changes and gives its texels less "
+            "of their gain)")
+    if options["first_lightmap"] == 'IMAGE':
+        fix = "bake that image with more samples or denoise it, or " + setting(
+            "set First Map to Embree or Cycles", "pass --first-lightmap embree or cycles")
+    else:
+        samples = options["samples"]
+        needed = 2 ** int(np.ceil(np.log2(samples * (noise / NOISY_FIRST_MAP) ** 2)))
+        fix = setting(f"raise Samples to {needed} or more", f"pass --samples {needed} or more")
+        if options["first_lightmap"] == 'CYCLES':
+            fix += setting(", or set First Map to Embree (its direct light is less noisy per sample)",
+                           ", or pass --first-lightmap embree (its direct light is less noisy per sample)")
+    warnings.append(f"{group.label()}: {what}: {fix}")
 
 
 def _black_warnings(group, lightmap, resolution, warnings):
