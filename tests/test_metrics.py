@@ -358,5 +358,7 @@ def test_noise_level_finds_the_noise_and_not_the_light_changes(rng):
         found = metrics.noise_level(noisy.astype(np.float32), mask)
         luminance_sigma = sigma * float(np.linalg.norm(metrics.LUMINANCE))  # independent channels
         assert abs(found - luminance_sigma) < 0.1 * luminance_sigma, (sigma, found, luminance_sigma)
+    one_channel = metrics.noise_level(noisy[..., :1].astype(np.float32), mask)  # the last one, sigma 0.1
+    assert abs(one_channel - 0.1) < 0.01 and metrics.noise_level(noisy[..., 0], mask) == one_channel
     assert metrics.noise_level(lightmap, np.zeros((size, size), bool)) == 0.0
     assert metrics.noise_level(np.zeros_like(lightmap), mask) == 0.0

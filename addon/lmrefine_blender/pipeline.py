@@ -441,7 +441,7 @@ def run(context, targets, options, journal, image_dir=None):
 
     for group in groups:
         _black_warnings(group, lightmaps[group.name], resolution, outcome.warnings)
-        _noise_warning(lmrefine, group, lightmaps[group.name], options, outcome.warnings)
+        _noise_warning(lmrefine, group.label(), group, lightmaps[group.name], options, outcome.warnings)
 
     # 1b. Opt-in: split the triangles that strong transitions of the first lightmap cross, in the mesh.
     refine_options = {group.name: options["refine_options"] for group in groups}
@@ -589,8 +589,8 @@ def modifier_warnings(context, targets, uv_name_of, resolution, warnings):
             warnings.append(problem)
 
 
-def _noise_warning(lmrefine, group, lightmap, options, warnings):
-    """A warning when the first `lightmap` of `group` is noisy (lmrefine.metrics.noise_level above
+def _noise_warning(lmrefine, label, group, lightmap, options, warnings):
+    """A warning (naming `label`) when the first `lightmap` of `group` is noisy (lmrefine.metrics.noise_level above
     NOISY_FIRST_MAP): the refiner takes noise for light changes and spreads texels over it. Noise falls
     as 1/sqrt(samples), so a baked map's warning gives the Samples that bring it under the bound."""
     from lmrefine.metrics import NOISY_FIRST_MAP, noise_level
@@ -611,7 +611,7 @@ def _noise_warning(lmrefine, group, lightmap, options, warnings):
         if options["first_lightmap"] == 'CYCLES':
             fix += setting(", or set First Map to Embree (its direct light is less noisy per sample)",
                            ", or pass --first-lightmap embree (its direct light is less noisy per sample)")
-    warnings.append(f"{group.label()}: {what}: {fix}")
+    warnings.append(f"{label}: {what}: {fix}")
 
 
 def _black_warnings(group, lightmap, resolution, warnings):

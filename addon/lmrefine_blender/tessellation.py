@@ -23,7 +23,6 @@ import bpy
 import numpy as np
 
 
-
 def problem(obj):
     """Why the object's mesh is not tessellated (the run refines it without splitting; a sentence naming
     what would let it be split), or None."""

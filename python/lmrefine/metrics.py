@@ -221,10 +221,10 @@ def truth_noise(first, second):
 
 
 # The relative noise (noise_level) above which a first lightmap is called noisy. Gaussian noise added
-# to a clean 64-sample bake of each tuning scene's Smart UV map at 256^2 takes this share of their
-# refinement's gain at the light changes (the texel area of the triangles under the clean map's top 5%
-# of gradient energy) at an estimated 1.7-1.8%: courtyard 36%, game_level 26%, fence_and_tree 5%;
-# at 2.5%: 45%, 34%, 14% (docs/refiner.md, "A noisy first lightmap").
+# to a clean 64-sample bake of each tuning scene's Smart UV map at 256^2, read as 1.7-1.8%, takes off
+# this share of their refinement's gain at the light changes (the texel area of the triangles under
+# the clean map's top 5% of gradient energy): courtyard 36%, game_level 26%, fence_and_tree 5%; read
+# as 2.5%: 45%, 34%, 14% (docs/refiner.md, "A noisy first lightmap").
 NOISY_FIRST_MAP = 0.02
 
 
@@ -235,7 +235,10 @@ def noise_level(lightmap, mask):
     its variance; light changes are few texels, so the median does not see them), over the median
     luminance of the covered texels (`mask` (H, W) bool). 0 for a map with no interior texel or no light."""
     image = np.asarray(lightmap, np.float32)
-    lum = image[..., :3] @ LUMINANCE if image.ndim == 3 else image
+    if image.ndim == 3:  # RGB(A) weighted as luminance; fewer channels averaged
+        lum = image[..., :3] @ LUMINANCE if image.shape[2] >= 3 else image.mean(axis=2)
+    else:
+        lum = image
     covered = np.asarray(mask, bool)
     inner = np.zeros_like(covered)
     inner[1:-1, 1:-1] = (covered[1:-1, 1:-1] & covered[:-2, 1:-1] & covered[2:, 1:-1]
