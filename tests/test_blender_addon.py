@@ -907,8 +907,8 @@ def test_tessellation_rolls_back_exactly(facts):
 
 
 @pytest.mark.parametrize("case, reason, fix", [
-    ("shared", "'Floor' shares mesh 'FloorMesh' with 1 other object(s)", "make it single-user"),
-    ("modifier", "'Floor' has modifiers (Bevel)", "apply or remove them (Object > Apply)"),
+    ("shared", "'Floor' (its mesh 'FloorMesh', shared with 1 other object(s)", "to split it, make it single-user"),
+    ("modifier", "'Floor' (its modifiers (Bevel), which would", "to split it, apply or remove them (Object > Apply)"),
 ])
 def test_tessellation_refines_without_splitting_where_a_split_would_change_more(facts, case, reason, fix):
     """Such an object used to be skipped, so turning Tessellate on left every object under a modifier
@@ -919,6 +919,17 @@ def test_tessellation_refines_without_splitting_where_a_split_would_change_more(
     prefix = "Not tessellated, refined without splitting: "
     warnings = [text for text in value["warnings"] if text.startswith(prefix)]
     assert len(warnings) == 1 and reason in warnings[0] and fix in warnings[0], value["warnings"]
+
+
+def test_objects_refined_without_splitting_for_one_reason_share_one_warning(facts):
+    value = fact(facts, "tessellation_leaves_meshes_it_would_change_more")["both"]
+    assert value["error"] is None
+    warnings = [text for text in value["warnings"] if text.startswith("Not tessellated")]
+    assert warnings == ["Not tessellated, refined without splitting: 'Floor' and 'Blocker' (their modifiers "
+                        "(Bevel), which would change the split mesh again): to split them, apply or remove them "
+                        "(Object > Apply)"], value["warnings"]
+    reason = "modifiers (Bevel), which would change the split mesh again"
+    assert value["not_split"] == {"Blocker": reason, "Floor": reason}
 
 
 def test_charts_stretched_across_stripes_are_reported_and_in_the_map(facts):

@@ -99,7 +99,7 @@ class Target:
     layout: bridge.Layout
     image: object = None  # first lightmap, when it comes from an existing image
     zero_area: int = 0  # triangles of zero area in 3-D: they need no texels, the baker skips them
-    unsplit: str = None  # with Tessellate on: why its mesh is refined without splitting (tessellation.problem)
+    unsplit: tuple = None  # with Tessellate on: why its mesh is refined without splitting (tessellation.problem)
 
 
 def grown_charts(report):
@@ -450,10 +450,11 @@ def run(context, targets, options, journal, image_dir=None):
         for group in groups:  # from the layouts before the split: a one-face-per-chart map keeps its route
             refine_options[group.name] = lmrefine.tessellated_refine_options(options["refine_options"],
                                                                              group.uvs, group.triangles)
+        unsplit = [(target.obj.name, target.unsplit) for target in targets if target.unsplit]
+        outcome.warnings.extend(tessellation.unsplit_warnings(unsplit))
         for target in targets:
             if target.unsplit:  # a split would change more than this object: it is refined as it is
-                outcome.tessellation[target.obj.name] = {"vertices_added": 0, "not_split": target.unsplit}
-                outcome.warnings.append(f"Not tessellated, refined without splitting: {target.unsplit}")
+                outcome.tessellation[target.obj.name] = {"vertices_added": 0, "not_split": target.unsplit[0]}
             else:
                 yield from _tessellate(lmrefine, target, lightmaps[group_of[target.obj.name].name],
                                        options["tessellate"], journal, outcome, done * span, span)

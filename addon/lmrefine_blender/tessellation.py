@@ -24,25 +24,41 @@ import numpy as np
 
 
 def problem(obj):
-    """Why the object's mesh is not tessellated (the run refines it without splitting; a sentence naming
-    what would let it be split), or None."""
+    """Why the object's mesh is not tessellated (the run refines it without splitting), as (reason, fix):
+    the reason reads after "its" or "their" (no object named), the fix after "to split it, ". None when
+    it can be split."""
     mesh = obj.data
     if len(obj.modifiers):
         names = ", ".join(modifier.name for modifier in obj.modifiers)
-        return (f"'{obj.name}' has modifiers ({names}), which would change the split mesh again: to split it, "
+        return (f"modifiers ({names}), which would change the split mesh again",
                 "apply or remove them (Object > Apply)")
     if obj.instance_type != 'NONE':
-        return (f"'{obj.name}' instances objects on its {obj.instance_type.lower()}, and new vertices would add "
-                "instances: to split it, set Object Properties > Instancing to None")
+        return (f"instancing on its {obj.instance_type.lower()}, which would add instances at new vertices",
+                "set Object Properties > Instancing to None")
     users = mesh.users - int(mesh.use_fake_user)
     if users > 1:
-        return (f"'{obj.name}' shares mesh '{mesh.name}' with {users - 1} other object(s) (or a library "
-                "override), which a split would change too: to split it, make it single-user (Object > "
-                "Relations > Make Single User > Object & Data)")
+        return (f"mesh '{mesh.name}', shared with {users - 1} other object(s) (or a library override), which a "
+                "split would change too", "make it single-user (Object > Relations > Make Single User > Object & "
+                "Data)")
     if mesh.shape_keys is not None:
-        return (f"'{obj.name}' has shape keys, and a split writes the basis mesh only: to split it, apply or "
-                "remove them (Object Data > Shape Keys)")
+        return ("shape keys, of which a split would change the basis only",
+                "apply or remove them (Object Data > Shape Keys)")
     return None
+
+
+def unsplit_warnings(unsplit):
+    """One warning per reason for the objects refined without splitting: `unsplit` [(object name, (reason,
+    fix))], in run order."""
+    by_reason = {}
+    for name, why in unsplit:
+        by_reason.setdefault(why, []).append(f"'{name}'")
+    warnings = []
+    for (reason, fix), names in by_reason.items():
+        whose, them = ("its", "it") if len(names) == 1 else ("their", "them")
+        listed = names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]
+        warnings.append(f"Not tessellated, refined without splitting: {listed} ({whose} {reason}): "
+                        f"to split {them}, {fix}")
+    return warnings
 
 
 def mesh_arrays(mesh, layout):

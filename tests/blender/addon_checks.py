@@ -1555,6 +1555,19 @@ def tessellation_leaves_meshes_it_would_change_more():
                        "refined": "Lightmap_refined" in floor.data.uv_layers,
                        "warnings": [text for kind, text in reports if kind == 'WARNING'],
                        "tessellated": bpy.context.scene.lmrefine.result.tessellated}
+    # Two objects under the same modifier: one warning names both.
+    scenes.coarse_shadow_scene()
+    register()
+    settings(resolution=RESOLUTION, padding=2, samples=4, first_lightmap='EMBREE', tessellate=True)
+    floor, blocker = bpy.data.objects["Floor"], bpy.data.objects["Blocker"]
+    scenes._fit_layer(floor.data, (0.03, 0.03, 0.5, 0.97))
+    scenes._fit_layer(blocker.data, (0.55, 0.03, 0.97, 0.97))
+    for obj in (floor, blocker):
+        obj.modifiers.new("Bevel", 'BEVEL')
+    outcome, warnings, error = _run_pipeline([floor, blocker])
+    facts["both"] = {"error": error, "warnings": warnings,
+                     "not_split": outcome and {name: report.get("not_split")
+                                               for name, report in outcome.tessellation.items()}}
     return facts
 
 
