@@ -234,11 +234,9 @@ def noise_level(lightmap, mask):
     covered neighbours (median absolute value / 0.6745, the residual of white noise having 1.25 times
     its variance; light changes are few texels, so the median does not see them), over the median
     luminance of the covered texels (`mask` (H, W) bool). 0 for a map with no interior texel or no light."""
-    image = np.asarray(lightmap, np.float32)
-    if image.ndim == 3:  # RGB(A) weighted as luminance; fewer channels averaged
-        lum = image[..., :3] @ LUMINANCE if image.shape[2] >= 3 else image.mean(axis=2)
-    else:
-        lum = image
+    from .allocation import texel_luminance
+
+    lum = texel_luminance(lightmap)
     covered = np.asarray(mask, bool)
     inner = np.zeros_like(covered)
     inner[1:-1, 1:-1] = (covered[1:-1, 1:-1] & covered[:-2, 1:-1] & covered[2:, 1:-1]

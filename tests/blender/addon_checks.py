@@ -113,10 +113,11 @@ def settings(**values):
 
 
 def fresh_scene(build, **values):
-    """build() a test scene, register the add-on and set the checks' settings (and `values`)."""
+    """build() a test scene, register the add-on and set the checks' settings (`values` add to or
+    replace them)."""
     build()
     register()
-    settings(resolution=RESOLUTION, padding=2, samples=4, **values)
+    settings(**{"resolution": RESOLUTION, "padding": 2, "samples": 4, **values})
 
 
 def fresh_shadow_scene(**values):
@@ -323,14 +324,15 @@ def noisy_first_map_is_named():
     """The shadow scene under a large area light. A first lightmap from Cycles at 1 sample is noisy: the
     warning says how noisy and the Samples that would bring it under lmrefine.metrics.NOISY_FIRST_MAP;
     Embree's at 16 samples a little (about 2.3%); Cycles' at 64 samples is not (about 1.6%)."""
-    facts = {}
-    for key, first, samples in (("cycles_1", 'CYCLES', 1), ("cycles_64", 'CYCLES', 64), ("embree_16", 'EMBREE', 16)):
+    def under_an_area_light():
         scenes.shadow_scene()
         bpy.ops.object.light_add(type='AREA', location=(1.0, -1.0, 3.0))  # soft light: noise per sample
         bpy.context.active_object.data.size, bpy.context.active_object.data.energy = 4.0, 300.0
-        register()
-        settings(resolution=RESOLUTION, padding=2, samples=samples, first_lightmap=first, backend='EMBREE',
-                 bake_passes={'DIRECT'})
+
+    facts = {}
+    for key, first, samples in (("cycles_1", 'CYCLES', 1), ("cycles_64", 'CYCLES', 64), ("embree_16", 'EMBREE', 16)):
+        fresh_scene(under_an_area_light, samples=samples, first_lightmap=first, backend='EMBREE',
+                    bake_passes={'DIRECT'})
         outcome, warnings, error = _run_pipeline([bpy.data.objects["Floor"]])
         facts[key] = {"error": error, "warnings": warnings}
     return facts
@@ -1559,9 +1561,7 @@ def tessellation_leaves_meshes_it_would_change_more():
     scenes.coarse_shadow_scene()
     register()
     settings(resolution=RESOLUTION, padding=2, samples=4, first_lightmap='EMBREE', tessellate=True)
-    floor, blocker = bpy.data.objects["Floor"], bpy.data.objects["Blocker"]
-    scenes._fit_layer(floor.data, (0.03, 0.03, 0.5, 0.97))
-    scenes._fit_layer(blocker.data, (0.55, 0.03, 0.97, 0.97))
+    floor, blocker = scenes.floor_and_blocker_atlas()
     for obj in (floor, blocker):
         obj.modifiers.new("Bevel", 'BEVEL')
     outcome, warnings, error = _run_pipeline([floor, blocker])
@@ -2365,10 +2365,8 @@ def coarse_floor_suggests_tessellation():
     facts["too_large_to_try"] = {"error": error, "warnings": warnings}
     # The floor and the box in one atlas (the floor's map in the left half, the box's on the right): the
     # advice says how many of the triangles it counts lie on the object holding the most.
-    floor = coarse_floor(tessellate=False)
-    blocker = bpy.data.objects["Blocker"]
-    scenes._fit_layer(floor.data, (0.03, 0.03, 0.5, 0.97))
-    scenes._fit_layer(blocker.data, (0.55, 0.03, 0.97, 0.97))
+    coarse_floor(tessellate=False)
+    floor, blocker = scenes.floor_and_blocker_atlas()
     split_needs, needs = pipeline._split_needs, []
     pipeline._split_needs = lambda *args: needs.append(split_needs(*args)) or needs[-1]
     try:

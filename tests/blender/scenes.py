@@ -195,6 +195,15 @@ def _fit_layer(mesh, box, name="Lightmap"):
     layer.data.foreach_set("uv", (corner + (uvs - low) / (high - low) * size).ravel())
 
 
+def floor_and_blocker_atlas():
+    """coarse_shadow_scene's Floor and Blocker laid out in one atlas: the floor's map in the left half,
+    the blocker's on the right. Returns (floor, blocker)."""
+    floor, blocker = bpy.data.objects["Floor"], bpy.data.objects["Blocker"]
+    _fit_layer(floor.data, (0.03, 0.03, 0.5, 0.97))
+    _fit_layer(blocker.data, (0.55, 0.03, 0.97, 0.97))
+    return floor, blocker
+
+
 def atlas_scene():
     """shadow_scene plus a post 'Post' and a plate 'Lonely', all four with a 'Lightmap' map. Floor,
     Blocker and Post share one atlas, as one Lightmap Pack of the three would lay them out: the floor
